@@ -1,0 +1,7 @@
+//! Per-sensor facts as data: channels, distance units, firing-time tables.
+//!
+//! Knows nothing of bytes or I/O.
+
+pub mod velodyne;
+
+pub use velodyne::{ReturnMode, VelodyneModel};

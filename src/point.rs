@@ -1,0 +1,98 @@
+//! The one point record every decoder emits and every sink writes.
+//!
+//! Layout (24 bytes, little-endian on the wire, `#[repr(C)]`):
+//!
+//! | offset | field       | type | meaning |
+//! |--------|-------------|------|---------|
+//! | 0      | `x`         | f32  | metres, sensor frame (REP 103: x forward, y left, z up) |
+//! | 4      | `y`         | f32  | metres |
+//! | 8      | `z`         | f32  | metres |
+//! | 12     | `intensity` | f32  | raw reflectivity the sensor sent (Velodyne byte, Ouster REFLECTIVITY) |
+//! | 16     | `t`         | u32  | ns since the sweep's timestamp (its first firing); never negative |
+//! | 20     | `ring`      | u16  | rank of the channel's elevation angle, 0 = lowest |
+//! | 22     | `ret`       | u8   | return index: 0 = strongest / only / first, 1 = last / second |
+//! | 23     | padding     | u8   | always 0 |
+//!
+//! The MCAP sink writes a `&[Point]` as bytes without per-point conversion, so the field
+//! order here is the order of the `foxglove.PointCloud` fields.
+
+use bytemuck::{Pod, Zeroable};
+
+/// One measured point. See the module documentation for units and conventions.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct Point {
+    /// Metres, forward.
+    pub x: f32,
+    /// Metres, left.
+    pub y: f32,
+    /// Metres, up.
+    pub z: f32,
+    /// Raw reflectivity as sent by the sensor (0..=255 for Velodyne).
+    pub intensity: f32,
+    /// Nanoseconds since the sweep's timestamp.
+    pub t: u32,
+    /// Rank of the channel's elevation angle, 0 = lowest.
+    pub ring: u16,
+    /// Return index: 0 = strongest / only / first, 1 = last / second.
+    pub ret: u8,
+    /// Padding, always 0.
+    pub pad: u8,
+}
+
+/// Size of one [`Point`] in bytes (the point stride in every sink).
+pub const POINT_STRIDE: usize = core::mem::size_of::<Point>();
+
+const _: () = assert!(POINT_STRIDE == 24);
+
+#[cfg(target_endian = "big")]
+compile_error!("ringscan writes point buffers as little-endian bytes; big-endian targets are not supported");
+
+/// Byte offsets and types of the point fields, in record order, for sinks that describe them.
+pub const POINT_FIELDS: [(&str, usize, FieldType); 7] = [
+    ("x", 0, FieldType::F32),
+    ("y", 4, FieldType::F32),
+    ("z", 8, FieldType::F32),
+    ("intensity", 12, FieldType::F32),
+    ("t", 16, FieldType::U32),
+    ("ring", 20, FieldType::U16),
+    ("return", 22, FieldType::U8),
+];
+
+/// Scalar type of a point field.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FieldType {
+    /// 8-bit unsigned integer.
+    U8,
+    /// 16-bit unsigned integer.
+    U16,
+    /// 32-bit unsigned integer.
+    U32,
+    /// 32-bit IEEE float.
+    F32,
+}
+
+/// Views a point slice as the bytes a sink writes (no copy).
+pub fn as_bytes(points: &[Point]) -> &[u8] {
+    bytemuck::cast_slice(points)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn layout_matches_the_documented_offsets() {
+        let p = Point { x: 1.0, y: 2.0, z: 3.0, intensity: 4.0, t: 0x0102_0304, ring: 0x0506, ret: 7, pad: 0 };
+        let b = as_bytes(core::slice::from_ref(&p));
+        assert_eq!(b.len(), 24);
+        assert_eq!(&b[0..4], &1.0f32.to_le_bytes());
+        assert_eq!(&b[12..16], &4.0f32.to_le_bytes());
+        assert_eq!(&b[16..20], &0x0102_0304u32.to_le_bytes());
+        assert_eq!(&b[20..22], &0x0506u16.to_le_bytes());
+        assert_eq!(b[22], 7);
+        for (name, off, _) in POINT_FIELDS {
+            assert!(off < POINT_STRIDE, "{name}");
+        }
+    }
+}

@@ -1,0 +1,22 @@
+//! Edge: where datagrams come from (pcap / pcapng captures; live UDP later).
+//!
+//! Knows nothing of packet formats: it yields [`Datagram`]s.
+
+use std::net::SocketAddrV4;
+
+#[cfg(feature = "pcap")]
+pub mod pcap;
+pub mod reassembly;
+
+/// One UDP datagram as it arrived: capture (host) time, addresses, payload.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Datagram<'a> {
+    /// Host receive time (the capture time for pcap), ns since the Unix epoch.
+    pub time_ns: i64,
+    /// Source address and port.
+    pub src: SocketAddrV4,
+    /// Destination address and port.
+    pub dst: SocketAddrV4,
+    /// UDP payload.
+    pub payload: &'a [u8],
+}
