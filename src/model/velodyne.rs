@@ -269,18 +269,25 @@ impl VelodyneModel {
         }
     }
 
-    /// Firing columns per packet.
+    /// Firing columns per packet (the largest column index of any slot, plus one).
     pub fn columns_per_packet(self, mode: ReturnMode) -> usize {
-        self.firing(mode, BLOCKS - 1, 0).1 + 1
+        (0..SLOTS).map(|s| self.firing(mode, BLOCKS - 1, s).1).max().unwrap_or(0) + 1
+    }
+
+    /// Time between the first firings of two consecutive columns, ns (datasheet constants).
+    pub fn column_period_ns(self) -> f64 {
+        match self {
+            Self::Vlp16 | Self::PuckHiRes | Self::Vlp32c => 55_296.0,
+            Self::Hdl32e => 46_080.0,
+            Self::Hdl64eS2 => 48_000.0,
+            Self::Hdl64eS3 => 57_600.0,
+            Self::Vls128 => 53_300.0,
+        }
     }
 
     /// Nominal time between two packets' stamps, ns (columns × column period).
     pub fn packet_period_ns(self, mode: ReturnMode) -> f64 {
-        let (t_last, col) = self.firing(mode, BLOCKS - 1, 0);
-        let (t_first, _) = self.firing(mode, 0, 0);
-        // One column period = time between consecutive columns' first firings.
-        let per_column = if col == 0 { 0.0 } else { (t_last - t_first) / col as f64 };
-        per_column * (col + 1) as f64
+        self.column_period_ns() * self.columns_per_packet(mode) as f64
     }
 }
 

@@ -1,1 +1,118 @@
-//! (in progress)
+//! Cutting the point stream into sweeps, with loss and gap accounting.
+//!
+//! Knows nothing of how bytes arrived: callers push datagrams with their host receive time.
+//! A sweep's timestamp is its first firing, so every point's `t` ≥ 0. Missing packets between
+//! two consecutive packets = round(Δ device time / packet period) − 1.
+
+pub mod velodyne;
+
+use crate::point::Point;
+use crate::time::ClockSource;
+
+pub use velodyne::{StreamConfig, StreamError, StreamStats, VelodyneStream};
+
+/// One sweep: the points of one revolution (or of the sensor's frame), with its times and
+/// its packet accounting. Buffers are reused from sweep to sweep.
+#[derive(Clone, Debug, Default)]
+pub struct Sweep {
+    /// Sequence number of the sweep in its stream, from 0.
+    pub index: u64,
+    /// The points, in the order the sensor measured them.
+    pub points: Vec<Point>,
+    /// Firing column of each point within the sweep (only when the stream keeps columns).
+    pub columns: Vec<u32>,
+    /// The sweep's timestamp (its first firing) in the clock named by `clock`, ns since the
+    /// Unix epoch.
+    pub timestamp_ns: i64,
+    /// Which clock `timestamp_ns` is in.
+    pub clock: ClockSource,
+    /// The first firing in the sensor's own clock (top-of-hour completed), ns since the epoch.
+    pub device_time_ns: i64,
+    /// Host receive time of the first packet of the sweep, ns.
+    pub first_host_ns: i64,
+    /// Host receive time of the last packet of the sweep, ns (the MCAP log time).
+    pub last_host_ns: i64,
+    /// Packets that contributed points.
+    pub packets: u32,
+    /// Packets missing inside the sweep (device-time gaps).
+    pub missing_packets: u64,
+    /// Firing columns in the sweep (including those of missing packets is not attempted).
+    pub columns_count: u32,
+    /// Azimuth of the first firing, 0.01°.
+    pub first_azimuth: u16,
+    /// Azimuth of the last firing, 0.01°.
+    pub last_azimuth: u16,
+}
+
+impl Sweep {
+    /// Empties the sweep, keeping its buffers.
+    pub fn clear(&mut self) {
+        self.points.clear();
+        self.columns.clear();
+        self.packets = 0;
+        self.missing_packets = 0;
+        self.columns_count = 0;
+    }
+
+    /// Whether the sweep holds no packet.
+    pub fn is_empty(&self) -> bool {
+        self.packets == 0
+    }
+
+    /// Duration from the first firing to the last point's firing, ns.
+    pub fn span_ns(&self) -> u32 {
+        self.points.iter().map(|p| p.t).max().unwrap_or(0)
+    }
+}
+
+/// A sweep laid out as channel (ring) × column, with a validity mask.
+///
+/// Row `r` is ring `r` (0 = lowest elevation, the ROS convention); column `c` is the firing
+/// column within the sweep. Dual-return sweeps have two layers: `layer 0` = return 0
+/// (strongest / only), `layer 1` = return 1 (last).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Organized {
+    /// Rings (rows).
+    pub rows: usize,
+    /// Firing columns.
+    pub cols: usize,
+    /// Layers (1, or 2 for dual return).
+    pub layers: usize,
+    /// `layers × rows × cols` points, index `(layer · rows + row) · cols + col`.
+    pub points: Vec<Point>,
+    /// Whether each cell holds a measured point.
+    pub valid: Vec<bool>,
+}
+
+impl Organized {
+    /// Builds the image of a sweep that kept its columns; `rows` = the sensor's channel count.
+    /// Returns `None` when the sweep has no column indices.
+    pub fn from_sweep(sweep: &Sweep, rows: usize) -> Option<Self> {
+        if sweep.columns.len() != sweep.points.len() {
+            return None;
+        }
+        let cols = sweep.columns.iter().map(|&c| c as usize + 1).max().unwrap_or(0);
+        let layers = if sweep.points.iter().any(|p| p.ret > 0) { 2 } else { 1 };
+        let n = layers * rows * cols;
+        let mut out = Self { rows, cols, layers, points: vec![Point::default(); n], valid: vec![false; n] };
+        for (p, &c) in sweep.points.iter().zip(&sweep.columns) {
+            let (layer, row) = (usize::from(p.ret.min(1)), usize::from(p.ring));
+            if row >= rows || layer >= layers {
+                continue;
+            }
+            let i = (layer * rows + row) * cols + c as usize;
+            out.points[i] = *p;
+            out.valid[i] = true;
+        }
+        Some(out)
+    }
+
+    /// The cell at (layer, row, col), if valid.
+    pub fn get(&self, layer: usize, row: usize, col: usize) -> Option<&Point> {
+        if layer >= self.layers || row >= self.rows || col >= self.cols {
+            return None;
+        }
+        let i = (layer * self.rows + row) * self.cols + col;
+        self.valid[i].then(|| &self.points[i])
+    }
+}
