@@ -1,1 +1,9 @@
-//! (in progress)
+//! Packet encoders: points → byte-exact packets, for tests, the demo fixture and the simulator.
+//!
+//! Knows nothing of decoding: it writes the wire formats from their specification, so a
+//! round trip through the decoder checks both against the scene's ground truth.
+
+pub mod scene;
+pub mod velodyne;
+
+pub use scene::{Scene, Hit};

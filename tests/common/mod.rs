@@ -1,0 +1,36 @@
+//! Helpers shared by the integration tests: where the real captures are, reading goldens.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+
+/// `../shared/captures` beside the repository, if present.
+pub fn captures() -> Option<PathBuf> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/captures");
+    if p.join("golden").is_dir() {
+        Some(p)
+    } else {
+        eprintln!("SKIP: {} is absent: real-capture checks not run", p.display());
+        None
+    }
+}
+
+/// Reads a little-endian f32 dump of records of `fields` values.
+pub fn read_f32_records(path: &Path, fields: usize) -> Vec<Vec<f32>> {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    assert_eq!(bytes.len() % (4 * fields), 0, "{}: size not a multiple of the record", path.display());
+    bytes
+        .chunks_exact(4 * fields)
+        .map(|r| r.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect())
+        .collect()
+}
+
+/// Every UDP payload of a pcap with its capture time and destination port, in file order.
+pub fn datagrams(path: &Path) -> Vec<(i64, u16, Vec<u8>)> {
+    let mut src = ringscan::source::pcap::PcapSource::open(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut out = Vec::new();
+    while let Some(d) = src.next_datagram().unwrap_or_else(|e| panic!("{}: {e}", path.display())) {
+        out.push((d.time_ns, d.dst.port(), d.payload.to_vec()));
+    }
+    out
+}
