@@ -4,12 +4,14 @@
 //! A sweep's timestamp is its first firing, so every point's `t` ≥ 0. Missing packets between
 //! two consecutive packets = round(Δ device time / packet period) − 1.
 
+pub mod demux;
 pub mod velodyne;
 
 use crate::point::Point;
 use crate::time::ClockSource;
 
-pub use velodyne::{StreamConfig, StreamError, StreamStats, VelodyneStream};
+pub use demux::{Demux, DemuxStats, SensorKey};
+pub use velodyne::{SensorFacts, StreamConfig, StreamError, StreamStats, VelodyneStream};
 
 /// One sweep: the points of one revolution (or of the sensor's frame), with its times and
 /// its packet accounting. Buffers are reused from sweep to sweep.

@@ -193,12 +193,13 @@ impl VelodyneStream {
         self.decoder.as_ref()
     }
 
-    /// Pushes one UDP payload from this sensor. Finished sweeps are handed to `on_sweep`.
+    /// Pushes one UDP payload from this sensor. Finished sweeps are handed to `on_sweep` with
+    /// what is known of the sensor.
     pub fn push(
         &mut self,
         host_ns: i64,
         payload: &[u8],
-        on_sweep: &mut dyn FnMut(&Sweep),
+        on_sweep: &mut dyn FnMut(&Sweep, &SensorFacts),
     ) -> Result<(), StreamError> {
         match payload.len() {
             DATA_PACKET_LEN => self.push_data(host_ns, payload, on_sweep),
@@ -214,7 +215,7 @@ impl VelodyneStream {
     }
 
     /// Ends the stream: decodes packets still held for detection and emits the last sweep.
-    pub fn finish(&mut self, on_sweep: &mut dyn FnMut(&Sweep)) -> Result<(), StreamError> {
+    pub fn finish(&mut self, on_sweep: &mut dyn FnMut(&Sweep, &SensorFacts)) -> Result<(), StreamError> {
         if self.decoder.is_none() && !self.pending.is_empty() {
             self.detect()?;
             self.replay_pending(on_sweep);
@@ -254,7 +255,7 @@ impl VelodyneStream {
         &mut self,
         host_ns: i64,
         payload: &[u8],
-        on_sweep: &mut dyn FnMut(&Sweep),
+        on_sweep: &mut dyn FnMut(&Sweep, &SensorFacts),
     ) -> Result<(), StreamError> {
         let Ok(packet) = DataPacket::new(payload) else {
             self.stats.malformed += 1;
@@ -279,7 +280,7 @@ impl VelodyneStream {
         Ok(())
     }
 
-    fn replay_pending(&mut self, on_sweep: &mut dyn FnMut(&Sweep)) {
+    fn replay_pending(&mut self, on_sweep: &mut dyn FnMut(&Sweep, &SensorFacts)) {
         let pending = core::mem::take(&mut self.pending);
         for (host, bytes) in &pending {
             if let Ok(p) = DataPacket::new(&bytes[..]) {
@@ -355,7 +356,7 @@ impl VelodyneStream {
         }
     }
 
-    fn decode_packet(&mut self, host_ns: i64, p: &DataPacket<'_>, on_sweep: &mut dyn FnMut(&Sweep)) {
+    fn decode_packet(&mut self, host_ns: i64, p: &DataPacket<'_>, on_sweep: &mut dyn FnMut(&Sweep, &SensorFacts)) {
         let Some(dec) = self.decoder.as_ref() else { return };
         let model = dec.model();
         // A return-mode change (factory byte) rebuilds the decoder.
@@ -483,7 +484,7 @@ impl VelodyneStream {
         self.cur.last_host_ns = host_ns;
     }
 
-    fn emit(&mut self, on_sweep: &mut dyn FnMut(&Sweep)) {
+    fn emit(&mut self, on_sweep: &mut dyn FnMut(&Sweep, &SensorFacts)) {
         if !self.sweep_open {
             return;
         }
@@ -491,7 +492,7 @@ impl VelodyneStream {
         if self.cur.packets > 0 {
             self.stats.sweeps += 1;
             self.next_index += 1;
-            on_sweep(&self.cur);
+            on_sweep(&self.cur, &self.facts);
         }
     }
 }

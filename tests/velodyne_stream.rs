@@ -1,0 +1,177 @@
+//! The stream layer on simulated sensors: sweep cuts, loss accounting, model detection,
+//! hour roll-over and the GPS clock — each against numbers derived from the simulation's
+//! set-up, not from the decoder.
+
+use ringscan::calib::builtin::builtin;
+use ringscan::model::{ReturnMode, VelodyneModel};
+use ringscan::sim::scene::Shapes;
+use ringscan::sim::velodyne::{encode_position_packet, VelodyneSim};
+use ringscan::sweep::{Organized, SensorFacts, StreamConfig, Sweep, VelodyneStream};
+use ringscan::time::ClockSource;
+
+struct Out {
+    sweeps: Vec<Sweep>,
+    facts: Option<SensorFacts>,
+}
+
+fn run(
+    sim: &mut VelodyneSim,
+    packets: usize,
+    cfg: StreamConfig,
+    drop: &dyn Fn(usize) -> bool,
+    position: Option<&dyn Fn(usize) -> Option<[u8; 512]>>,
+) -> (Out, VelodyneStream) {
+    let scene = Shapes::room(15.0, 10.0, 1.7, 5.0);
+    let mut stream = VelodyneStream::new(cfg);
+    let mut out = Out { sweeps: Vec::new(), facts: None };
+    let mut truth = Vec::new();
+    for i in 0..packets {
+        truth.clear();
+        let (host, bytes) = sim.next_packet(&scene, &mut truth);
+        if let Some(pos) = position {
+            if let Some(pp) = pos(i) {
+                stream.push(host, &pp, &mut |_, _| {}).unwrap();
+            }
+        }
+        if drop(i) {
+            continue;
+        }
+        stream
+            .push(host, &bytes, &mut |s, f| {
+                out.sweeps.push(s.clone());
+                out.facts = Some(f.clone());
+            })
+            .unwrap();
+    }
+    stream
+        .finish(&mut |s, f| {
+            out.sweeps.push(s.clone());
+            out.facts = Some(f.clone());
+        })
+        .unwrap();
+    (out, stream)
+}
+
+fn vlp16_sim() -> VelodyneSim {
+    let calib = builtin(VelodyneModel::Vlp16).unwrap();
+    let mut sim = VelodyneSim::new(VelodyneModel::Vlp16, ReturnMode::Strongest, calib, 1_700_000_000_000_000_000);
+    sim.azimuth0_deg = 123.4;
+    sim
+}
+
+#[test]
+fn sweeps_are_cut_at_the_cut_angle_and_times_are_relative_to_the_first_firing() {
+    let mut sim = vlp16_sim();
+    // 2.5 s at 10 Hz: 1884 packets of 1327.104 µs.
+    let n = (2.5e9 / sim.period_ns()).floor() as usize;
+    let (out, stream) = run(&mut sim, n, StreamConfig::default(), &|_| false, None);
+    // The head passes 0° at (360 − 123.4)/3600 s and every 0.1 s after: 25 crossings in
+    // 2.5 s, so 26 sweeps (a partial one at each end).
+    assert_eq!(out.sweeps.len(), 26);
+    assert_eq!(stream.stats().missing, 0);
+    assert_eq!(stream.stats().data_packets as usize, n);
+    for s in &out.sweeps[1..25] {
+        // A full turn: 100 ms, give or take one block (110.592 µs): both ends fall on a block.
+        let span = s.span_ns();
+        assert!((i64::from(span) - 100_000_000).abs() <= 110_592, "sweep {} spans {span} ns", s.index);
+        // Sweeps are cut between blocks; a VLP-16 block holds two firing sequences
+        // (110.6 µs, 0.4° at 10 Hz): it starts within one block after the cut.
+        assert!(s.first_azimuth < 40, "sweep {} starts at {}", s.index, s.first_azimuth);
+        assert_eq!(s.missing_packets, 0);
+        assert_eq!(s.clock, ClockSource::Host);
+        // 754 columns … 24 per packet, 37.7 packets per turn.
+        assert!((1800..=1812).contains(&s.columns_count), "columns {}", s.columns_count);
+        assert!(s.points.iter().all(|p| p.t <= span));
+    }
+    // Consecutive sweeps start 100 ms apart in device time.
+    for w in out.sweeps[1..25].windows(2) {
+        let d = w[1].device_time_ns - w[0].device_time_ns;
+        assert!((d - 100_000_000).abs() <= 60_000, "{d}");
+    }
+}
+
+#[test]
+fn missing_packets_are_counted_in_the_sweep_they_fall_in() {
+    let mut sim = vlp16_sim();
+    let (out, stream) = run(&mut sim, 400, StreamConfig::default(), &|i| (200..203).contains(&i) || i == 350, None);
+    assert_eq!(stream.stats().missing, 4);
+    let total: u64 = out.sweeps.iter().map(|s| s.missing_packets).sum();
+    assert_eq!(total, 4);
+    // Packet 200 is 265 ms in: the third sweep boundary is at 265.7 ms, so the loss straddles
+    // it; the three missing packets are booked on the sweep the next received packet opens.
+    assert_eq!(out.sweeps.iter().filter(|s| s.missing_packets > 0).count(), 2);
+}
+
+#[test]
+fn a_wrong_product_id_is_overridden_by_the_cadence() {
+    let mut sim = vlp16_sim();
+    sim.product_id = Some(0x21); // the HDL-32E id, as two real VLP-16 captures send
+    let (out, stream) = run(&mut sim, 100, StreamConfig::default(), &|_| false, None);
+    let facts = out.facts.unwrap();
+    assert_eq!(facts.model, Some(VelodyneModel::Vlp16));
+    assert!(facts.detection.contains("1327"), "{}", facts.detection);
+    assert_eq!(stream.stats().malformed, 0);
+}
+
+#[test]
+fn the_hour_roll_over_is_seamless() {
+    let mut sim = vlp16_sim();
+    sim.toh0_us = 3_600_000_000 - 150_000; // 150 ms before the hour
+    let (out, stream) = run(&mut sim, 400, StreamConfig::default(), &|_| false, None);
+    assert_eq!(stream.stats().discontinuities, 0);
+    assert_eq!(stream.stats().missing, 0);
+    for w in out.sweeps[1..out.sweeps.len() - 1].windows(2) {
+        let d = w[1].device_time_ns - w[0].device_time_ns;
+        assert!((d - 100_000_000).abs() <= 60_000, "{d}");
+    }
+}
+
+#[test]
+fn gps_time_with_pps_locked_gives_absolute_sensor_timestamps() {
+    let mut sim = vlp16_sim();
+    sim.toh0_us = 0; // first firing exactly at 12:00:00.000000 UTC
+    // 2024-05-01 12:00:00 UTC = 1714564800 s since the epoch (19844 days · 86400 + 12 h).
+    let rmc = "$GPRMC,120000,A,3707.8324,N,12139.2864,W,000.0,144.7,010524,013.8,E,D";
+    let cs = rmc[1..].bytes().fold(0u8, |a, c| a ^ c);
+    let sentence = format!("{rmc}*{cs:02X}\r\n");
+    let pos = move |i: usize| (i == 0).then(|| encode_position_packet(0, 2, &sentence));
+    let (out, _) = run(&mut sim, 200, StreamConfig::default(), &|_| false, Some(&pos));
+    let s = &out.sweeps[1];
+    assert_eq!(s.clock, ClockSource::SensorGps);
+    assert_eq!(s.timestamp_ns, s.device_time_ns);
+    // Sweep 1 starts at the first firing after 0°: (360 − 123.4)/3600 s after 12:00:00,
+    // rounded up to the next block (two firing sequences, 110.592 µs).
+    let t0 = 1_714_564_800_000_000_000i64;
+    let expected = t0 + 65_722_222; // 236.6° / 3600 °/s
+    assert!((0..=110_592).contains(&(s.timestamp_ns - expected)), "{} vs {expected}", s.timestamp_ns);
+    // Without PPS lock, the host clock is used.
+    let mut sim = vlp16_sim();
+    let sentence2 = format!("{rmc}*{cs:02X}\r\n");
+    let pos2 = move |i: usize| (i == 0).then(|| encode_position_packet(0, 0, &sentence2));
+    let (out, _) = run(&mut sim, 200, StreamConfig::default(), &|_| false, Some(&pos2));
+    assert_eq!(out.sweeps[1].clock, ClockSource::Host);
+}
+
+#[test]
+fn organized_image_has_one_cell_per_ring_and_column() {
+    let mut sim = vlp16_sim();
+    let cfg = StreamConfig { keep_columns: true, ..StreamConfig::default() };
+    let (out, _) = run(&mut sim, 120, cfg, &|_| false, None);
+    let s = &out.sweeps[1];
+    let img = Organized::from_sweep(s, 16).unwrap();
+    assert_eq!(img.rows, 16);
+    assert_eq!(img.layers, 1);
+    assert_eq!(img.cols as u32, s.columns_count);
+    // The room is closed: every beam returns, so every cell is valid.
+    assert_eq!(img.valid.iter().filter(|v| **v).count(), s.points.len());
+    assert_eq!(s.points.len(), 16 * img.cols);
+    // Within a column, rings go up in elevation: z/range increases with the row.
+    let col = img.cols / 2;
+    let elev = |r: usize| {
+        let p = img.get(0, r, col).unwrap();
+        (p.z / (p.x * p.x + p.y * p.y).sqrt()).atan()
+    };
+    for r in 1..16 {
+        assert!(elev(r) > elev(r - 1));
+    }
+}
