@@ -31,8 +31,8 @@ pub enum WireError {
         /// Second byte found.
         found2: u8,
     },
-    /// A block azimuth is out of range (0..36000 hundredths of a degree).
-    #[error("block {block} (offset {offset}): azimuth {found} is not below 36000")]
+    /// A block azimuth is out of range (0..=36000 hundredths of a degree; 36000 means 0).
+    #[error("block {block} (offset {offset}): azimuth {found} is above 36000")]
     Azimuth {
         /// Block index.
         block: usize,

@@ -39,8 +39,8 @@ impl<'a> DataPacket<'a> {
             if p.bank(block).is_none() {
                 return Err(WireError::BlockFlag { block, offset: off, found: b[off], found2: b[off + 1] });
             }
-            let az = p.azimuth(block);
-            if az >= 36_000 {
+            let az = p.u16_at(off + 2);
+            if az > 36_000 {
                 return Err(WireError::Azimuth { block, offset: off + 2, found: az });
             }
         }
@@ -75,10 +75,18 @@ impl<'a> DataPacket<'a> {
         }
     }
 
-    /// Block azimuth, hundredths of a degree (checked < 36000).
+    /// Block azimuth, hundredths of a degree, in 0..36000.
+    ///
+    /// Real sensors sometimes send 36000 for a firing at 360.00° (seen in two captures, an
+    /// HDL-32E and a VLP-16): it is read as 0. Values above 36000 are rejected by [`Self::new`].
     #[inline]
     pub fn azimuth(&self, block: usize) -> u16 {
-        self.u16_at(block * BLOCK_LEN + 2)
+        let az = self.u16_at(block * BLOCK_LEN + 2);
+        if az >= 36_000 {
+            az - 36_000
+        } else {
+            az
+        }
     }
 
     /// Raw distance of one measurement (units per model / calibration; 0 = no return).

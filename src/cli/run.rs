@@ -1,0 +1,667 @@
+//! `decode`, `info` and `demo`: capture → demultiplexer → streams → sink, and the summary.
+
+use std::collections::BTreeMap;
+use std::io::{IsTerminal, Read, Write};
+use std::net::Ipv4Addr;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+use ringscan::calib::{parse_velodyne, VelodyneCalibration, MAX_CALIB_BYTES};
+use ringscan::decode::DecodeOptions;
+use ringscan::model::VelodyneModel;
+use ringscan::sink::mcap::{create_file, Compression, Format, SensorId, SensorInfo, SinkOptions, SweepMsg};
+use ringscan::sink::{McapSink, SinkError};
+use ringscan::source::pcap::{PcapSource, SourceError, SourceStats};
+use ringscan::sweep::{Demux, SensorFacts, StreamConfig, StreamError, Sweep};
+use serde_json::{json, Value};
+
+use super::FormatArg;
+
+/// The example capture `ringscan demo` decodes: a simulated VLP-16 made by
+/// `cargo run --release --example simulate -- --model vlp16 --seconds 1 --out fixtures/demo-vlp16.pcap`.
+const DEMO_PCAP: &[u8] = include_bytes!("../../fixtures/demo-vlp16.pcap");
+
+/// Datagrams read ahead to count the sensors (for topic names) before decoding.
+const PRESCAN_DATAGRAMS: usize = 20_000;
+/// Raw datagrams held per sensor until its model is known (for `--raw`).
+const RAW_HOLD: usize = 256;
+
+/// Everything `decode` needs.
+#[derive(Debug, Clone)]
+pub struct DecodeArgs {
+    pub input: PathBuf,
+    pub out: Option<PathBuf>,
+    pub model: Option<String>,
+    pub calib: Vec<String>,
+    pub name: Option<String>,
+    pub port: Option<u16>,
+    pub cut_angle_deg: f64,
+    pub min_range: Option<f32>,
+    pub max_range: Option<f32>,
+    pub fields_all: bool,
+    pub format: FormatArg,
+    pub raw: bool,
+    pub strict: bool,
+    pub json: bool,
+    /// Decode these bytes instead of reading `input` (the demo).
+    pub input_bytes: Option<&'static [u8]>,
+}
+
+/// Why a run failed.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// Bad command-line usage (exit code 2).
+    #[error("{0}")]
+    Usage(String),
+    /// The capture could not be read.
+    #[error("{path}: {err}")]
+    Source { path: String, err: SourceError },
+    /// A calibration file could not be used.
+    #[error("calibration {path}: {msg}")]
+    Calib { path: String, msg: String },
+    /// A sensor's stream could not be decoded.
+    #[error("sensor {addr}: {err}")]
+    Stream { addr: Ipv4Addr, err: StreamError },
+    /// Writing the output failed.
+    #[error("{0}")]
+    Sink(#[from] SinkError),
+    /// `--strict` and something was lost.
+    #[error("{0}")]
+    Strict(String),
+}
+
+struct CalibSpec {
+    addr: Option<Ipv4Addr>,
+    file_name: String,
+    bytes: Vec<u8>,
+    calib: VelodyneCalibration,
+}
+
+fn load_calibs(list: &[String]) -> Result<Vec<CalibSpec>, RunError> {
+    let mut out = Vec::new();
+    for item in list {
+        let (addr, path) = match item.split_once('=') {
+            Some((a, p)) => match a.parse::<Ipv4Addr>() {
+                Ok(ip) => (Some(ip), p),
+                Err(_) => return Err(RunError::Usage(format!("--calib {item}: `{a}` is not an IPv4 address"))),
+            },
+            None => (None, item.as_str()),
+        };
+        let cerr = |msg: String| RunError::Calib { path: path.to_string(), msg };
+        let meta = std::fs::metadata(path).map_err(|e| cerr(e.to_string()))?;
+        if meta.len() > MAX_CALIB_BYTES as u64 {
+            return Err(cerr(format!("{} bytes; refusing anything over {MAX_CALIB_BYTES} bytes", meta.len())));
+        }
+        let bytes = std::fs::read(path).map_err(|e| cerr(e.to_string()))?;
+        let text = std::str::from_utf8(&bytes).map_err(|e| cerr(format!("not UTF-8 text (byte {})", e.valid_up_to())))?;
+        let file_name = Path::new(path).file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        let calib = parse_velodyne(text, &file_name).map_err(|e| cerr(e.to_string()))?;
+        out.push(CalibSpec { addr, file_name, bytes, calib });
+    }
+    Ok(out)
+}
+
+fn parse_model(m: Option<&str>) -> Result<Option<VelodyneModel>, RunError> {
+    match m {
+        None => Ok(None),
+        Some(s) => VelodyneModel::from_id(s).map(Some).ok_or_else(|| {
+            RunError::Usage(format!(
+                "--model {s}: expected one of vlp16, puck-hires, hdl32e, vlp32c, hdl64e-s2, hdl64e-s3, vls128"
+            ))
+        }),
+    }
+}
+
+/// Per-sensor output state.
+struct SensorOut {
+    addr: Ipv4Addr,
+    registered: bool,
+    id: Option<SensorId>,
+    name: String,
+    topic: String,
+    calib_file: Option<String>,
+    raw_hold: Vec<(i64, u16, u16, Vec<u8>)>,
+    raw_dropped: u64,
+}
+
+struct Output {
+    sink: Option<McapSink<std::io::BufWriter<std::fs::File>>>,
+    sensors: Vec<SensorOut>,
+    n_sensors_hint: usize,
+    name: Option<String>,
+    raw: bool,
+    calibs: Vec<(Option<Ipv4Addr>, String, Vec<u8>)>,
+    error: Option<SinkError>,
+    sweeps: u64,
+    points: u64,
+}
+
+impl Output {
+    fn sensor(&mut self, idx: usize, addr: Ipv4Addr) -> &mut SensorOut {
+        while self.sensors.len() <= idx {
+            self.sensors.push(SensorOut {
+                addr,
+                registered: false,
+                id: None,
+                name: String::new(),
+                topic: String::new(),
+                calib_file: None,
+                raw_hold: Vec::new(),
+                raw_dropped: 0,
+            });
+        }
+        &mut self.sensors[idx]
+    }
+
+    /// Registers a sensor in the sink once its model is known.
+    fn register(&mut self, idx: usize, addr: Ipv4Addr, facts: &SensorFacts, ports: &[u16]) -> Result<(), SinkError> {
+        let single = self.n_sensors_hint <= 1 && idx == 0;
+        let name = match (&self.name, facts.model) {
+            (Some(n), _) => n.clone(),
+            (None, Some(m)) => format!("{}-{}", m.id(), addr.octets()[3]),
+            (None, None) => format!("velodyne-{}", addr.octets()[3]),
+        };
+        let calib = self
+            .calibs
+            .iter()
+            .find(|(a, n, _)| (a.is_none() || *a == Some(addr)) && facts.calibration == *n)
+            .map(|(_, n, b)| (n.clone(), b.clone()));
+        let mut md = BTreeMap::new();
+        md.insert("source_address".to_string(), addr.to_string());
+        md.insert("ports".to_string(), ports.iter().map(|p| p.to_string()).collect::<Vec<_>>().join(","));
+        if let Some(m) = facts.model {
+            md.insert("model".to_string(), m.name().to_string());
+        }
+        if let Some(m) = facts.mode {
+            md.insert("return_mode".to_string(), m.name().to_string());
+        }
+        if let Some(p) = facts.product_id {
+            md.insert("product_id".to_string(), format!("{p:#04x}"));
+        }
+        md.insert("model_detection".to_string(), facts.detection.clone());
+        md.insert("clock".to_string(), facts.clock.name().to_string());
+        md.insert("calibration".to_string(), facts.calibration.clone());
+        md.insert("serial".to_string(), String::new());
+        md.insert("firmware".to_string(), String::new());
+        md.insert("driver".to_string(), format!("ringscan {}", env!("CARGO_PKG_VERSION")));
+        let topic_prefix = if single { String::new() } else { format!("/{name}") };
+        let s = self.sensor(idx, addr);
+        s.name = name.clone();
+        s.topic = format!("{topic_prefix}/points");
+        s.calib_file = calib.as_ref().map(|(n, _)| n.clone());
+        if let Some(sink) = self.sink.as_mut() {
+            let id = sink.add_sensor(&SensorInfo { name, topic_prefix, metadata: md, calibration: calib })?;
+            let hold = std::mem::take(&mut self.sensors[idx].raw_hold);
+            for (t, port, src_port, payload) in hold {
+                sink.write_raw(id, t.max(0) as u64, std::net::SocketAddrV4::new(addr, src_port), port, &payload)?;
+            }
+            self.sensors[idx].id = Some(id);
+        }
+        self.sensors[idx].registered = true;
+        Ok(())
+    }
+
+    fn on_sweep(&mut self, idx: usize, addr: Ipv4Addr, sweep: &Sweep, facts: &SensorFacts, ports: &[u16]) {
+        if self.error.is_some() {
+            return;
+        }
+        self.sweeps += 1;
+        self.points += sweep.points.len() as u64;
+        if !self.sensors.get(idx).is_some_and(|s| s.registered) {
+            if let Err(e) = self.register(idx, addr, facts, ports) {
+                self.error = Some(e);
+                return;
+            }
+        }
+        let (Some(sink), Some(id)) = (self.sink.as_mut(), self.sensors[idx].id) else { return };
+        let msg = SweepMsg {
+            log_time_ns: sweep.last_host_ns.max(0) as u64,
+            timestamp_ns: sweep.timestamp_ns.max(0) as u64,
+            points: &sweep.points,
+        };
+        if let Err(e) = sink.write_sweep(id, &msg) {
+            self.error = Some(e);
+            return;
+        }
+        let diag = json!({
+            "sweep": sweep.index,
+            "packets": sweep.packets,
+            "missing_packets": sweep.missing_packets,
+            "points": sweep.points.len(),
+            "columns": sweep.columns_count,
+            "span_ns": sweep.span_ns(),
+            "clock": sweep.clock.name(),
+            "device_time_ns": sweep.device_time_ns,
+            "first_azimuth_deg": f64::from(sweep.first_azimuth) / 100.0,
+            "pps": facts.pps.map(|p| p.name()),
+        });
+        if let Err(e) = sink.write_diagnostics(id, sweep.last_host_ns.max(0) as u64, &diag) {
+            self.error = Some(e);
+        }
+    }
+}
+
+/// Summary of a decode run, the `--json` object.
+pub struct Summary {
+    pub json: Value,
+    pub lost: u64,
+}
+
+fn prescan<R: Read>(mut src: PcapSource<R>, port: Option<u16>) -> usize {
+    let mut addrs: Vec<Ipv4Addr> = Vec::new();
+    for _ in 0..PRESCAN_DATAGRAMS {
+        match src.next_datagram() {
+            Ok(Some(d)) => {
+                if d.payload.len() == 1206 && port.is_none_or(|p| p == d.dst.port()) && !addrs.contains(d.src.ip()) {
+                    addrs.push(*d.src.ip());
+                }
+            }
+            _ => break,
+        }
+    }
+    addrs.len()
+}
+
+/// Runs a decode: the library entry of `ringscan decode` (and of `info` with no output).
+pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
+    let started = Instant::now();
+    let path_s = args.input.display().to_string();
+    let serr = |err: SourceError| RunError::Source { path: path_s.clone(), err };
+    let model = parse_model(args.model.as_deref())?;
+    if !(0.0..360.0).contains(&args.cut_angle_deg) {
+        return Err(RunError::Usage(format!("--cut-angle {}: expected [0, 360) degrees", args.cut_angle_deg)));
+    }
+    let decode = DecodeOptions {
+        min_range: args.min_range.unwrap_or(0.0),
+        max_range: args.max_range.unwrap_or(f32::INFINITY),
+    };
+    if decode.min_range.is_nan() || decode.max_range.is_nan() || decode.min_range > decode.max_range || decode.min_range < 0.0 {
+        return Err(RunError::Usage(format!("--min-range {} / --max-range {}: empty range", decode.min_range, decode.max_range)));
+    }
+    let calibs = load_calibs(&args.calib)?;
+    let n_sensors_hint = match args.input_bytes {
+        Some(b) => prescan(PcapSource::new(b).map_err(serr)?, args.port),
+        None => prescan(PcapSource::open(&args.input).map_err(serr)?, args.port),
+    };
+    if args.name.is_some() && n_sensors_hint > 1 {
+        return Err(RunError::Usage(format!("--name: the capture holds {n_sensors_hint} sensors; names are given per sensor automatically")));
+    }
+    let cut = (args.cut_angle_deg * 100.0).round() as u16 % 36_000;
+    let stream_calibs: Vec<(Option<Ipv4Addr>, VelodyneCalibration)> =
+        calibs.iter().map(|c| (c.addr, c.calib.clone())).collect();
+    let config_for = move |addr: Ipv4Addr| StreamConfig {
+        model,
+        calibrations: stream_calibs
+            .iter()
+            .filter(|(a, _)| a.is_none() || *a == Some(addr))
+            .map(|(_, c)| c.clone())
+            .collect(),
+        decode,
+        cut_angle: cut,
+        ..StreamConfig::default()
+    };
+    let mut demux = Demux::new(Box::new(config_for), args.port);
+    let sink = match &args.out {
+        Some(p) => {
+            let opts = SinkOptions {
+                format: if args.format == FormatArg::Ros2 { Format::Ros2 } else { Format::Foxglove },
+                compression: Compression::Zstd,
+                ..SinkOptions::default()
+            };
+            Some(create_file(p, opts)?)
+        }
+        None => None,
+    };
+    let mut out = Output {
+        sink,
+        sensors: Vec::new(),
+        n_sensors_hint,
+        name: args.name.clone(),
+        raw: args.raw,
+        calibs: calibs.into_iter().map(|c| (c.addr, c.file_name, c.bytes)).collect(),
+        error: None,
+        sweeps: 0,
+        points: 0,
+    };
+    let result = match args.input_bytes {
+        Some(b) => pump(PcapSource::new(b).map_err(serr)?, &mut demux, &mut out, None),
+        None => {
+            let total = std::fs::metadata(&args.input).map(|m| m.len()).ok();
+            pump(PcapSource::open(&args.input).map_err(serr)?, &mut demux, &mut out, total)
+        }
+    };
+    // Finalise the output on success and on error alike: the file is always a valid MCAP.
+    let source_stats = match result {
+        Ok(stats) => stats,
+        Err(e) => {
+            if let Some(sink) = out.sink.take() {
+                let _ = sink.finish();
+            }
+            return Err(match e {
+                PumpError::Source(err) => serr(err),
+                PumpError::Stream(idx, err) => RunError::Stream {
+                    addr: demux.stream(idx).map(|(a, _)| a).unwrap_or(Ipv4Addr::UNSPECIFIED),
+                    err,
+                },
+                PumpError::Sink(e) => RunError::Sink(e),
+            });
+        }
+    };
+    let sink_summary = match out.sink.take() {
+        Some(s) => Some(s.finish()?),
+        None => None,
+    };
+    let elapsed = started.elapsed().as_secs_f64();
+
+    // Summary.
+    let dstats = demux.stats().clone();
+    let mut sensors = Vec::new();
+    let (mut decoded, mut malformed, mut missing, mut position) = (0u64, 0u64, 0u64, 0u64);
+    for (idx, (addr, stream, ports)) in demux.sensors().enumerate() {
+        let st = stream.stats();
+        let f = stream.facts();
+        decoded += st.data_packets;
+        malformed += st.malformed;
+        missing += st.missing;
+        position += st.position_packets;
+        let so = out.sensors.get(idx);
+        sensors.push(json!({
+            "name": so.map(|s| s.name.clone()),
+            "address": addr.to_string(),
+            "ports": ports,
+            "model": f.model.map(|m| m.name()),
+            "model_id": f.model.map(|m| m.id()),
+            "return_mode": f.mode.map(|m| m.name()),
+            "product_id": f.product_id.map(|p| format!("{p:#04x}")),
+            "detection": f.detection,
+            "packet_period_us": f.period_us,
+            "calibration": f.calibration,
+            "calibration_file": so.and_then(|s| s.calib_file.clone()),
+            "clock": f.clock.name(),
+            "pps": f.pps.map(|p| p.name()),
+            "gps": f.last_rmc.map(|r| json!({"utc_ns": r.utc_ns, "valid": r.valid, "lat_deg": r.lat_deg, "lon_deg": r.lon_deg})),
+            "nmea_empty": f.empty_nmea,
+            "nmea_bad": f.bad_nmea,
+            "data_packets": st.data_packets,
+            "position_packets": st.position_packets,
+            "malformed": st.malformed,
+            "missing": st.missing,
+            "discontinuities": st.discontinuities,
+            "sweeps": st.sweeps,
+            "points": st.points,
+            "topic": so.map(|s| s.topic.clone()),
+            "raw_dropped": so.map(|s| s.raw_dropped),
+        }));
+    }
+    let dropped = dstats.other_port + dstats.dropped_sensor_limit;
+    let cap = &source_stats;
+    let duration_s = match (cap.first_time_ns, cap.last_time_ns) {
+        (Some(a), Some(b)) => (b - a) as f64 * 1e-9,
+        _ => 0.0,
+    };
+    let json = json!({
+        "input": path_s,
+        "sweeps": out.sweeps,
+        "points": out.points,
+        "packets": {
+            "decoded": decoded,
+            "dropped": dropped,
+            "malformed": malformed,
+            "missing": missing,
+            "position": position,
+            "ignored": dstats.ignored,
+        },
+        "capture": {
+            "records": cap.records,
+            "bytes": cap.bytes,
+            "datagrams": cap.datagrams,
+            "non_udp": cap.non_udp,
+            "malformed_records": cap.malformed,
+            "fragments": cap.fragments,
+            "reassembled": cap.reassembled,
+            "fragments_expired": cap.fragments_expired,
+            "truncated_records": cap.truncated_records,
+            "truncated_tail_offset": cap.truncated_tail,
+            "duration_s": duration_s,
+        },
+        "sensors": sensors,
+        "output": sink_summary.as_ref().map(|s| json!({
+            "path": args.out.as_ref().map(|p| p.display().to_string()),
+            "format": if args.format == FormatArg::Ros2 { "ros2" } else { "foxglove" },
+            "topics": s.messages,
+            "attachments": s.attachments.iter().map(|a| json!({"name": a.name, "media_type": a.media_type, "size": a.size})).collect::<Vec<_>>(),
+            "chunks": s.chunks,
+        })),
+        "elapsed_s": elapsed,
+    });
+    Ok(Summary { json, lost: dropped + malformed + missing })
+}
+
+enum PumpError {
+    Source(SourceError),
+    Stream(usize, StreamError),
+    Sink(SinkError),
+}
+
+fn pump<R: Read>(
+    mut src: PcapSource<R>,
+    demux: &mut Demux,
+    out: &mut Output,
+    total_bytes: Option<u64>,
+) -> Result<SourceStats, PumpError> {
+    let progress = total_bytes.is_some() && std::io::stderr().is_terminal();
+    let mut last_progress = Instant::now();
+    loop {
+        let d = match src.next_datagram() {
+            Ok(Some(d)) => d,
+            Ok(None) => break,
+            Err(e) => return Err(PumpError::Source(e)),
+        };
+        let (time, addr, port, src_port) = (d.time_ns, *d.src.ip(), d.dst.port(), d.src.port());
+        let routed = demux.push(time, addr, port, d.payload, &mut |idx, sweep, facts| {
+            out.on_sweep(idx, addr, sweep, facts, &[port]);
+        });
+        let idx = match routed {
+            Ok(Some(idx)) => idx,
+            Ok(None) => continue,
+            Err((idx, e)) => return Err(PumpError::Stream(idx, e)),
+        };
+        if let Some(e) = out.error.take() {
+            return Err(PumpError::Sink(e));
+        }
+        let registered = out.sensors.get(idx).is_some_and(|s| s.registered);
+        if !registered {
+            if let Some((_, stream)) = demux.stream(idx) {
+                if stream.decoder().is_some() {
+                    let ports: Vec<u16> =
+                        demux.sensors().nth(idx).map(|(_, _, p)| p.to_vec()).unwrap_or_default();
+                    let facts = stream.facts().clone();
+                    out.register(idx, addr, &facts, &ports).map_err(PumpError::Sink)?;
+                }
+            }
+        }
+        if out.raw && out.sink.is_some() {
+            let id = out.sensor(idx, addr).id;
+            match (id, out.sink.as_mut()) {
+                (Some(id), Some(sink)) => {
+                    sink.write_raw(id, time.max(0) as u64, std::net::SocketAddrV4::new(addr, src_port), port, d.payload)
+                        .map_err(PumpError::Sink)?;
+                }
+                _ => {
+                    let s = &mut out.sensors[idx];
+                    if s.raw_hold.len() < RAW_HOLD {
+                        s.raw_hold.push((time, port, src_port, d.payload.to_vec()));
+                    } else {
+                        s.raw_dropped += 1;
+                    }
+                }
+            }
+        }
+        if progress && last_progress.elapsed().as_millis() >= 500 {
+            last_progress = Instant::now();
+            let done = src.stats().bytes;
+            let total = total_bytes.unwrap_or(1).max(1);
+            eprint!("\r{:5.1} % · {} sweeps · {} points", 100.0 * done as f64 / total as f64, out.sweeps, out.points);
+            let _ = std::io::stderr().flush();
+        }
+    }
+    let mut addrs: Vec<Ipv4Addr> = demux.sensors().map(|(a, _, _)| a).collect();
+    let ports: Vec<Vec<u16>> = demux.sensors().map(|(_, _, p)| p.to_vec()).collect();
+    let r = demux.finish(&mut |idx, sweep, facts| {
+        let addr = addrs.get(idx).copied().unwrap_or(Ipv4Addr::UNSPECIFIED);
+        out.on_sweep(idx, addr, sweep, facts, ports.get(idx).map(|p| p.as_slice()).unwrap_or(&[]));
+    });
+    if let Err((idx, e)) = r {
+        return Err(PumpError::Stream(idx, e));
+    }
+    if let Some(e) = out.error.take() {
+        return Err(PumpError::Sink(e));
+    }
+    // Sensors whose raw packets are still held (model never known): write them anyway.
+    if out.raw {
+        for idx in 0..out.sensors.len() {
+            if !out.sensors[idx].registered && !out.sensors[idx].raw_hold.is_empty() {
+                let addr = out.sensors[idx].addr;
+                let facts = demux.stream(idx).map(|(_, s)| s.facts().clone()).unwrap_or_default();
+                out.register(idx, addr, &facts, ports.get(idx).map(|p| p.as_slice()).unwrap_or(&[])).map_err(PumpError::Sink)?;
+            }
+        }
+    }
+    addrs.clear();
+    if progress {
+        eprintln!();
+    }
+    Ok(src.stats().clone())
+}
+
+/// `ringscan decode`.
+pub fn decode_command(args: &DecodeArgs) -> Result<ExitCode, RunError> {
+    let s = decode_capture(args)?;
+    if args.json {
+        println!("{}", s.json);
+    } else {
+        print_text(&s.json);
+    }
+    if args.strict && s.lost > 0 {
+        return Err(RunError::Strict(format!("--strict: {} packets missing, dropped or malformed", s.lost)));
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `ringscan info`.
+pub fn info_command(input: &Path, model: Option<&str>, calib: &[String], json_out: bool) -> Result<ExitCode, RunError> {
+    let args = DecodeArgs {
+        input: input.to_path_buf(),
+        out: None,
+        model: model.map(str::to_string),
+        calib: calib.to_vec(),
+        name: None,
+        port: None,
+        cut_angle_deg: 0.0,
+        min_range: None,
+        max_range: None,
+        fields_all: false,
+        format: FormatArg::Foxglove,
+        raw: false,
+        strict: false,
+        json: json_out,
+        input_bytes: None,
+    };
+    let s = decode_capture(&args)?;
+    if json_out {
+        println!("{}", s.json);
+    } else {
+        print_text(&s.json);
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `ringscan demo`.
+pub fn demo_command(out: &Path, json_out: bool) -> Result<ExitCode, RunError> {
+    let args = DecodeArgs {
+        input: PathBuf::from("fixtures/demo-vlp16.pcap (built in)"),
+        out: Some(out.to_path_buf()),
+        model: None,
+        calib: Vec::new(),
+        name: None,
+        port: None,
+        cut_angle_deg: 0.0,
+        min_range: None,
+        max_range: None,
+        fields_all: false,
+        format: FormatArg::Foxglove,
+        raw: false,
+        strict: false,
+        json: json_out,
+        input_bytes: Some(DEMO_PCAP),
+    };
+    let s = decode_capture(&args)?;
+    if json_out {
+        println!("{}", s.json);
+    } else {
+        print_text(&s.json);
+        println!("Open {} in Foxglove (https://app.foxglove.dev) to see the point clouds.", out.display());
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn print_text(j: &Value) {
+    let g = |v: &Value| v.as_u64().unwrap_or(0);
+    let c = &j["capture"];
+    println!("{}", j["input"].as_str().unwrap_or(""));
+    println!(
+        "  capture: {} records, {} UDP datagrams ({} reassembled from fragments), {:.3} s{}",
+        g(&c["records"]),
+        g(&c["datagrams"]),
+        g(&c["reassembled"]),
+        c["duration_s"].as_f64().unwrap_or(0.0),
+        match c["truncated_tail_offset"].as_u64() {
+            Some(o) => format!(", last record truncated at byte {o}"),
+            None => String::new(),
+        }
+    );
+    for s in j["sensors"].as_array().into_iter().flatten() {
+        println!(
+            "  sensor {} ({}), ports {}: {} {}, {}",
+            s["name"].as_str().unwrap_or("-"),
+            s["address"].as_str().unwrap_or(""),
+            s["ports"],
+            s["model"].as_str().unwrap_or("unknown model"),
+            s["return_mode"].as_str().unwrap_or(""),
+            s["detection"].as_str().unwrap_or("")
+        );
+        println!(
+            "    {} data + {} position packets, {} sweeps, {} points; missing {}, malformed {}, discontinuities {}",
+            g(&s["data_packets"]),
+            g(&s["position_packets"]),
+            g(&s["sweeps"]),
+            g(&s["points"]),
+            g(&s["missing"]),
+            g(&s["malformed"]),
+            g(&s["discontinuities"])
+        );
+        println!(
+            "    calibration: {}; clock: {}; PPS: {}; GPS: {}",
+            s["calibration"].as_str().unwrap_or("-"),
+            s["clock"].as_str().unwrap_or("-"),
+            s["pps"].as_str().unwrap_or("no position packets"),
+            if s["gps"].is_null() { "no NMEA time".to_string() } else { format!("RMC valid={}", s["gps"]["valid"]) }
+        );
+    }
+    let p = &j["packets"];
+    println!(
+        "  total: {} sweeps, {} points; packets decoded {}, dropped {}, malformed {}, missing {}, ignored {}",
+        g(&j["sweeps"]),
+        g(&j["points"]),
+        g(&p["decoded"]),
+        g(&p["dropped"]),
+        g(&p["malformed"]),
+        g(&p["missing"]),
+        g(&p["ignored"])
+    );
+    if let Some(o) = j["output"].as_object() {
+        println!("  wrote {} ({}): {}", o["path"].as_str().unwrap_or(""), o["format"].as_str().unwrap_or(""), o["topics"]);
+    }
+    println!("  {:.3} s", j["elapsed_s"].as_f64().unwrap_or(0.0));
+}
