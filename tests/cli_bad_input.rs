@@ -1,0 +1,222 @@
+//! Bad input through the whole `ringscan decode` path: a clear message naming the position,
+//! a counted drop where the stream can go on, never a panic, never a corrupt output file.
+
+use std::net::{Ipv4Addr, SocketAddrV4};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use ringscan::calib::builtin::builtin;
+use ringscan::model::{ReturnMode, VelodyneModel};
+use ringscan::sim::net::{udp_frame, PcapWriter};
+use ringscan::sim::scene::Shapes;
+use ringscan::sim::velodyne::VelodyneSim;
+
+fn bin() -> &'static str {
+    env!("CARGO_BIN_EXE_ringscan")
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("ringscan-bad-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d.join(name)
+}
+
+/// A valid VLP-16 capture of `n` packets, with `edit(i, payload)` applied to each payload.
+fn capture(n: usize, edit: &dyn Fn(usize, &mut Vec<u8>)) -> Vec<u8> {
+    let calib = builtin(VelodyneModel::Vlp16).unwrap();
+    let mut sim = VelodyneSim::new(VelodyneModel::Vlp16, ReturnMode::Strongest, calib, 1_700_000_000_000_000_000);
+    let scene = Shapes::room(10.0, 8.0, 1.5, 3.0);
+    let mut w = PcapWriter::new(Vec::new()).unwrap();
+    let src = SocketAddrV4::new(Ipv4Addr::new(192, 168, 1, 201), 2368);
+    let dst = SocketAddrV4::new(Ipv4Addr::new(192, 168, 1, 100), 2368);
+    let mut truth = Vec::new();
+    for i in 0..n {
+        let (t, p) = sim.next_packet(&scene, &mut truth);
+        let mut payload = p.to_vec();
+        edit(i, &mut payload);
+        w.write(t, &udp_frame(src, dst, i as u16, &payload)).unwrap();
+    }
+    w.into_inner().unwrap()
+}
+
+struct Run {
+    code: i32,
+    stdout: String,
+    stderr: String,
+}
+
+fn decode(input: &Path, extra: &[&str]) -> Run {
+    let out = Command::new(bin()).arg("decode").arg(input).args(extra).output().unwrap();
+    Run {
+        code: out.status.code().unwrap_or(-1),
+        stdout: String::from_utf8_lossy(&out.stdout).into_owned(),
+        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
+    }
+}
+
+fn json(r: &Run) -> serde_json::Value {
+    serde_json::from_str(r.stdout.trim()).unwrap_or_else(|e| panic!("not JSON ({e}): {}", r.stdout))
+}
+
+/// The output is absent or a complete MCAP (magic at both ends, summary readable).
+fn assert_not_corrupt(path: &Path) {
+    if !path.exists() {
+        return;
+    }
+    let bytes = std::fs::read(path).unwrap();
+    assert!(bytes.starts_with(b"\x89MCAP0\r\n"), "{}: no MCAP magic", path.display());
+    assert!(bytes.ends_with(b"\x89MCAP0\r\n"), "{}: not finalised", path.display());
+    mcap::Summary::read(&bytes).unwrap().expect("summary");
+}
+
+fn write(name: &str, bytes: &[u8]) -> PathBuf {
+    let p = tmp(name);
+    std::fs::write(&p, bytes).unwrap();
+    p
+}
+
+#[test]
+fn empty_file_is_a_clear_error() {
+    let p = write("empty.pcap", b"");
+    let out = tmp("empty.mcap");
+    let r = decode(&p, &["--out", out.to_str().unwrap()]);
+    assert_eq!(r.code, 1, "{}", r.stderr);
+    assert!(r.stderr.to_lowercase().contains("empty"), "{}", r.stderr);
+    assert!(!r.stderr.contains("panicked"));
+    assert_not_corrupt(&out);
+}
+
+#[test]
+fn wrong_magic_names_the_bytes_found() {
+    let p = write("magic.pcap", b"GIF89a this is not a capture at all, not even close.......");
+    let r = decode(&p, &[]);
+    assert_eq!(r.code, 1, "{}", r.stderr);
+    let e = r.stderr.to_lowercase();
+    assert!(e.contains("magic"), "{}", r.stderr);
+    assert!(e.contains("47 49 46 38") || e.contains("47494638") || e.contains("0x38464947") || e.contains("0x47494638"), "{}", r.stderr);
+}
+
+#[test]
+fn truncated_last_record_is_reported_not_fatal() {
+    let mut bytes = capture(50, &|_, _| {});
+    let full = bytes.len();
+    bytes.truncate(full - 500);
+    let p = write("trunc.pcap", &bytes);
+    let out = tmp("trunc.mcap");
+    let r = decode(&p, &["--json", "--out", out.to_str().unwrap()]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let j = json(&r);
+    assert_eq!(j["packets"]["decoded"], 49);
+    // The last record starts 16 + 1248 bytes before the original end.
+    assert_eq!(j["capture"]["truncated_tail_offset"].as_u64(), Some((full - 1248 - 16) as u64));
+    assert_not_corrupt(&out);
+}
+
+#[test]
+fn a_record_claiming_a_gigabyte_is_an_error_with_its_offset() {
+    let mut bytes = capture(5, &|_, _| {});
+    // Record 3's header: 24 + 2 × (16 + 1248).
+    let off = 24 + 2 * (16 + 1248);
+    bytes[off + 8..off + 12].copy_from_slice(&1_000_000_000u32.to_le_bytes());
+    bytes[off + 12..off + 16].copy_from_slice(&1_000_000_000u32.to_le_bytes());
+    let p = write("huge.pcap", &bytes);
+    let out = tmp("huge.mcap");
+    let r = decode(&p, &["--out", out.to_str().unwrap()]);
+    assert_eq!(r.code, 1, "{}", r.stderr);
+    assert!(r.stderr.contains(&off.to_string()), "offset {off} not named: {}", r.stderr);
+    assert_not_corrupt(&out);
+}
+
+#[test]
+fn a_record_longer_than_its_snaplen_is_caught() {
+    let mut bytes = capture(5, &|_, _| {});
+    // Snaplen 1000 < the 1248-byte frames.
+    bytes[16..20].copy_from_slice(&1000u32.to_le_bytes());
+    let p = write("snap.pcap", &bytes);
+    let r = decode(&p, &["--json"]);
+    assert!(!r.stderr.contains("panicked"), "{}", r.stderr);
+    if r.code == 0 {
+        // Accepted as a lenient reader would, but then it must say so in the counters.
+        let j = json(&r);
+        let c = &j["capture"];
+        assert!(c["malformed_records"].as_u64().unwrap() + c["truncated_records"].as_u64().unwrap() > 0 || j["packets"]["decoded"] == 5, "{j}");
+    } else {
+        assert_eq!(r.code, 1);
+        assert!(r.stderr.contains("snaplen") || r.stderr.contains("1000"), "{}", r.stderr);
+    }
+}
+
+#[test]
+fn wrong_sizes_and_bad_flags_are_counted_and_skipped() {
+    let bytes = capture(60, &|i, p| match i {
+        10 => p.truncate(1205),          // wrong size
+        20 => p.extend_from_slice(&[0; 6]), // 1212 bytes, like the VLI-16 packet
+        30 => p[500] = 0x00,              // block 5 flag FF EE → 00 EE
+        40 => p[302..304].copy_from_slice(&40_000u16.to_le_bytes()), // azimuth out of range
+        _ => {}
+    });
+    let p = write("sizes.pcap", &bytes);
+    let out = tmp("sizes.mcap");
+    let r = decode(&p, &["--json", "--out", out.to_str().unwrap()]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let j = json(&r);
+    assert_eq!(j["packets"]["decoded"], 56);
+    assert_eq!(j["packets"]["malformed"], 4);
+    assert_not_corrupt(&out);
+    // --strict turns the loss into an error, and the file is still complete.
+    let r = decode(&p, &["--strict", "--out", out.to_str().unwrap()]);
+    assert_eq!(r.code, 1);
+    assert!(r.stderr.contains("strict"), "{}", r.stderr);
+    assert_not_corrupt(&out);
+}
+
+#[test]
+fn garbage_calibration_files_are_errors_naming_the_file_and_place() {
+    let cap = write("ok.pcap", &capture(10, &|_, _| {}));
+    let cases: [(&str, &[u8]); 4] = [
+        ("garbage.yaml", b"lasers: [ {laser_id: 0, rot_correction: 0.0, vert_correction: oops"),
+        ("binary.xml", &[0xff, 0xfe, 0x00, 0x01, 0x80]),
+        ("empty.yaml", b""),
+        ("wrong.xml", b"<boost_serialization><DB><points_><count>1</count></points_></DB></boost_serialization>"),
+    ];
+    for (name, body) in cases {
+        let c = write(name, body);
+        let out = tmp("calib.mcap");
+        let _ = std::fs::remove_file(&out);
+        let r = decode(&cap, &["--calib", c.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+        assert_eq!(r.code, 1, "{name}: {}", r.stderr);
+        assert!(r.stderr.contains(name), "{name}: file not named: {}", r.stderr);
+        assert!(!r.stderr.contains("panicked"), "{}", r.stderr);
+        assert!(!out.exists(), "{name}: an output was created before the calibration was checked");
+    }
+}
+
+#[test]
+fn bad_usage_exits_with_2() {
+    let cap = write("ok2.pcap", &capture(5, &|_, _| {}));
+    let r = decode(&cap, &["--model", "vlp99"]);
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    let out = Command::new(bin()).args(["decode"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let out = Command::new(bin()).args(["frobnicate"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+}
+
+#[test]
+fn random_bytes_after_a_valid_header_never_panic() {
+    // A valid header, then pseudo-random bytes (xorshift): an error or a clean end, no panic.
+    let mut bytes = capture(3, &|_, _| {});
+    let mut x: u64 = 0x9E37_79B9_7F4A_7C15;
+    for _ in 0..200_000 {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        bytes.push(x as u8);
+    }
+    let p = write("random.pcap", &bytes);
+    let out = tmp("random.mcap");
+    let r = decode(&p, &["--out", out.to_str().unwrap()]);
+    assert!(r.code == 0 || r.code == 1, "{}", r.stderr);
+    assert!(!r.stderr.contains("panicked"), "{}", r.stderr);
+    assert_not_corrupt(&out);
+}
