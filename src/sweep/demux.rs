@@ -64,7 +64,8 @@ impl Demux {
         self.sensors.iter().map(|(k, s, p)| (*k, s, p.as_slice()))
     }
 
-    /// Routes one datagram. Finished sweeps go to `on_sweep(sensor index, sweep, facts)`.
+    /// Routes one datagram; returns the index of the sensor it went to, if any. Finished sweeps
+    /// go to `on_sweep(sensor index, sweep, facts)`.
     pub fn push(
         &mut self,
         host_ns: i64,
@@ -72,13 +73,13 @@ impl Demux {
         dst_port: u16,
         payload: &[u8],
         on_sweep: &mut dyn FnMut(usize, &Sweep, &SensorFacts),
-    ) -> Result<(), (usize, StreamError)> {
+    ) -> Result<Option<usize>, (usize, StreamError)> {
         let is_data = payload.len() == DATA_PACKET_LEN;
         if is_data {
             if let Some(p) = self.data_port {
                 if p != dst_port {
                     self.stats.other_port += 1;
-                    return Ok(());
+                    return Ok(None);
                 }
             }
         }
@@ -87,11 +88,11 @@ impl Demux {
             None => {
                 if !is_data && payload.len() != POSITION_PACKET_LEN {
                     self.stats.ignored += 1;
-                    return Ok(());
+                    return Ok(None);
                 }
                 if self.sensors.len() >= MAX_SENSORS {
                     self.stats.dropped_sensor_limit += 1;
-                    return Ok(());
+                    return Ok(None);
                 }
                 let cfg = (self.config_for)(src);
                 self.sensors.push((src, VelodyneStream::new(cfg), Vec::new()));
@@ -103,7 +104,13 @@ impl Demux {
         if !ports.contains(&dst_port) && ports.len() < 16 {
             ports.push(dst_port);
         }
-        stream.push(host_ns, payload, &mut |s, f| on_sweep(idx, s, f)).map_err(|e| (idx, e))
+        stream.push(host_ns, payload, &mut |s, f| on_sweep(idx, s, f)).map_err(|e| (idx, e))?;
+        Ok(Some(idx))
+    }
+
+    /// The stream of sensor `idx`.
+    pub fn stream(&self, idx: usize) -> Option<(SensorKey, &VelodyneStream)> {
+        self.sensors.get(idx).map(|(k, s, _)| (*k, s))
     }
 
     /// Ends every stream, emitting their last sweeps.

@@ -32,8 +32,9 @@ pub const DETECT_PACKETS: usize = 4;
 pub struct StreamConfig {
     /// The model, when the user names it (wins over detection).
     pub model: Option<VelodyneModel>,
-    /// The calibration, when the user gives one (wins over the built-in table).
-    pub calibration: Option<VelodyneCalibration>,
+    /// Calibrations the user gave: the first whose laser count fits the model is used (it
+    /// wins over the built-in table).
+    pub calibrations: Vec<VelodyneCalibration>,
     /// Range filter.
     pub decode: DecodeOptions,
     /// Cut angle, 0.01° (0..36000).
@@ -50,7 +51,7 @@ impl Default for StreamConfig {
     fn default() -> Self {
         Self {
             model: None,
-            calibration: None,
+            calibrations: Vec::new(),
             decode: DecodeOptions::default(),
             cut_angle: 0,
             max_gap_ns: 1_000_000_000,
@@ -331,9 +332,18 @@ impl VelodyneStream {
     }
 
     fn build_decoder(&mut self, model: VelodyneModel, mode: ReturnMode) -> Result<(), StreamError> {
-        let calib = match &self.cfg.calibration {
+        let calib = match self.cfg.calibrations.iter().find(|c| c.num_lasers() == model.lasers()) {
             Some(c) => c.clone(),
-            None => builtin::builtin(model).ok_or(StreamError::NeedsCalibration(model.name()))?,
+            None => match self.cfg.calibrations.first() {
+                Some(c) => {
+                    return Err(StreamError::Decode(DecodeError::LaserCount {
+                        model: model.name(),
+                        expected: model.lasers(),
+                        found: c.num_lasers(),
+                    }))
+                }
+                None => builtin::builtin(model).ok_or(StreamError::NeedsCalibration(model.name()))?,
+            },
         };
         self.facts.calibration = calib.source.clone();
         let dec = VelodyneDecoder::new(model, mode, &calib, self.cfg.decode)?;
