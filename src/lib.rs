@@ -6,6 +6,46 @@
 //! The core (`wire`, `model`, `calib`, `decode`, `sweep`) performs no I/O, reads no clock and
 //! allocates nothing per packet; it builds with `--no-default-features`. Sources (pcap), sinks
 //! (MCAP) and the command line are features on top.
+//!
+//! ## Decoding one packet
+//!
+//! The sans-IO core: give it the bytes of one UDP payload, get points. The caller names the
+//! model (stream-level detection lives in [`sweep::VelodyneStream`]).
+//!
+//! ```
+//! use ringscan::calib::builtin::builtin;
+//! use ringscan::decode::{DecodeOptions, VelodyneDecoder};
+//! use ringscan::model::{ReturnMode, VelodyneModel};
+//! use ringscan::wire::velodyne::DataPacket;
+//!
+//! // A VLP-16 data packet: 12 blocks `FF EE`, azimuths 0.00°, 0.20°, …, one return.
+//! let mut bytes = [0u8; 1206];
+//! for b in 0..12 {
+//!     bytes[b * 100] = 0xFF;
+//!     bytes[b * 100 + 1] = 0xEE;
+//!     bytes[b * 100 + 2..b * 100 + 4].copy_from_slice(&(20 * b as u16).to_le_bytes());
+//! }
+//! // Block 0, slot 1 = laser 1 (elevation +1°): 2500 × 2 mm = 5 m, reflectivity 77.
+//! bytes[7..9].copy_from_slice(&2500u16.to_le_bytes());
+//! bytes[9] = 77;
+//! bytes[1204] = 0x37; // strongest return
+//! bytes[1205] = 0x22; // VLP-16
+//!
+//! let calib = builtin(VelodyneModel::Vlp16).unwrap();
+//! let decoder =
+//!     VelodyneDecoder::new(VelodyneModel::Vlp16, ReturnMode::Strongest, &calib, DecodeOptions::default())?;
+//! let packet = DataPacket::new(&bytes)?;
+//! let mut points = Vec::new(); // reuse it from packet to packet: no allocation per packet
+//! decoder.decode(&packet, 0, &mut points);
+//!
+//! assert_eq!(points.len(), 1);
+//! let p = points[0];
+//! assert_eq!((p.ring, p.intensity, p.t), (8, 77.0, 2_304)); // ring 8 of 16; fired 2.304 µs in
+//! assert!((p.x - 5.0 * 1f32.to_radians().cos()).abs() < 1e-3); // straight ahead
+//! assert!(p.y.abs() < 1e-3);
+//! assert!((p.z - 5.0 * 1f32.to_radians().sin()).abs() < 2e-3); // + the beam's vertical offset
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
