@@ -1,1 +1,28 @@
-//! (in progress)
+//! Sinks: where decoded sweeps go.
+//!
+//! [`McapSink`] writes an [MCAP](https://mcap.dev) file that Foxglove, the `mcap` CLI and the
+//! official MCAP readers open directly:
+//!
+//! | topic | schema | message encoding |
+//! | --- | --- | --- |
+//! | `<prefix>/points` | `foxglove.PointCloud` (protobuf) or `sensor_msgs/msg/PointCloud2` (`ros2msg`) | `protobuf` / `cdr` |
+//! | `<prefix>/diagnostics` | `ringscan.Diagnostics` (`jsonschema`) | `json` |
+//! | `<prefix>/raw` | `ringscan.RawPacket` (protobuf, see [`foxglove::RAW_PACKET_SCHEMA`]) | `protobuf` |
+//!
+//! `<prefix>` is [`SensorInfo::topic_prefix`]: empty for a single sensor, `/<name>` when there are
+//! several. Calibration files are stored as MCAP attachments. The file is chunked, compressed
+//! (zstd by default) and ends with a summary section (schemas, channels, statistics, chunk and
+//! attachment indexes), so readers seek instead of scanning.
+//!
+//! [`create_file`] writes to `<path>.tmp-ringscan` and renames it into place only when
+//! [`McapSink::finish`] succeeds; a sink that is dropped or aborted removes its temporary file, so
+//! a half-written MCAP never appears at the target path.
+
+pub mod foxglove;
+pub mod mcap;
+pub mod ros2;
+
+pub use self::mcap::{
+    create_file, temp_path, AttachmentSummary, Compression, Format, McapSink, SensorChannels,
+    SensorId, SensorInfo, SinkError, SinkOptions, SinkSummary, SweepMsg, DEFAULT_CHUNK_SIZE,
+};

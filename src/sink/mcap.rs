@@ -1,0 +1,913 @@
+//! The MCAP writer: channels per sensor, sweeps, raw packets, diagnostics, attachments, and the
+//! atomic file commit of [`create_file`].
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::{self, BufWriter, Seek, Write};
+use std::net::SocketAddrV4;
+use std::path::{Path, PathBuf};
+
+use ::mcap::records::MessageHeader;
+use ::mcap::{McapError, WriteOptions, Writer};
+
+use super::foxglove::{self, PointCloudPrefix};
+use super::ros2::{self, Ros2EncodeError};
+use crate::point::{Point, POINT_STRIDE};
+
+/// Default target size of an uncompressed chunk (4 MiB: a few sweeps of a 64-beam sensor).
+pub const DEFAULT_CHUNK_SIZE: u64 = 4 * 1024 * 1024;
+
+/// Suffix of the temporary file [`create_file`] writes before renaming it into place.
+const TEMP_SUFFIX: &str = ".tmp-ringscan";
+
+/// Schema name of the diagnostics channels.
+const DIAGNOSTICS_SCHEMA: &str = "ringscan.Diagnostics";
+
+/// JSON schema of the diagnostics messages: an object whose members the caller chooses.
+const DIAGNOSTICS_JSON_SCHEMA: &str = r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"ringscan.Diagnostics","description":"Per-sweep packet, loss, timing and sensor-health counters of one sensor, as written by ringscan","type":"object","additionalProperties":true}"#;
+
+/// Longest sensor name (frame id) accepted.
+const MAX_NAME_LEN: usize = 256;
+
+/// Message layout of the points channels.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Format {
+    /// `foxglove.PointCloud`, protobuf, schema embedded as a `FileDescriptorSet`.
+    #[default]
+    Foxglove,
+    /// `sensor_msgs/msg/PointCloud2`, CDR, `ros2msg` schema.
+    Ros2,
+}
+
+/// Chunk compression.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Compression {
+    /// Zstandard (the default: best ratio at disk speed).
+    #[default]
+    Zstd,
+    /// LZ4 (faster, larger).
+    Lz4,
+    /// Chunks stored uncompressed.
+    None,
+}
+
+/// How the file is written.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct SinkOptions {
+    /// Message layout of the points channels.
+    pub format: Format,
+    /// Chunk compression.
+    pub compression: Compression,
+    /// Target uncompressed chunk size in bytes: a chunk is closed once it has grown past this.
+    /// 0 means [`DEFAULT_CHUNK_SIZE`].
+    pub chunk_size: u64,
+}
+
+impl Default for SinkOptions {
+    fn default() -> Self {
+        Self {
+            format: Format::Foxglove,
+            compression: Compression::Zstd,
+            chunk_size: DEFAULT_CHUNK_SIZE,
+        }
+    }
+}
+
+/// What the sink needs to know about one sensor.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct SensorInfo {
+    /// Sensor name; also the `frame_id` of its point clouds.
+    pub name: String,
+    /// `""` for a single sensor (topics `/points`, …), `"/<name>"` when there are several.
+    pub topic_prefix: String,
+    /// Channel metadata: source address, ports, model, serial, firmware, profile, return mode,
+    /// clock, calibration file name.
+    pub metadata: BTreeMap<String, String>,
+    /// The calibration or metadata file (file name, bytes), stored as an MCAP attachment.
+    pub calibration: Option<(String, Vec<u8>)>,
+}
+
+/// One sweep to write.
+#[derive(Clone, Copy, Debug)]
+pub struct SweepMsg<'a> {
+    /// Host receive time (ns since the Unix epoch): the MCAP `log_time` and `publish_time`.
+    pub log_time_ns: u64,
+    /// The sweep's first firing (sensor clock where absolute, else host), ns since the epoch:
+    /// the message's own timestamp.
+    pub timestamp_ns: u64,
+    /// The points, in [`Point`] layout.
+    pub points: &'a [Point],
+}
+
+/// Handle of a sensor added with [`McapSink::add_sensor`]. (`Default` is the first sensor's
+/// handle, for callers that need a placeholder.)
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct SensorId(usize);
+
+impl SensorId {
+    /// Position of the sensor in the order it was added (0-based).
+    pub fn index(self) -> usize {
+        self.0
+    }
+}
+
+/// The channels of one sensor.
+#[derive(Debug)]
+pub struct SensorChannels {
+    name: String,
+    prefix: String,
+    metadata: BTreeMap<String, String>,
+    points: Channel,
+    diagnostics: Channel,
+    raw: Option<Channel>,
+    /// Constant fields of this sensor's `foxglove.PointCloud` messages.
+    point_cloud_prefix: PointCloudPrefix,
+}
+
+#[derive(Debug)]
+struct Channel {
+    id: u16,
+    sequence: u32,
+}
+
+impl Channel {
+    fn next_header(&mut self, log_time: u64) -> MessageHeader {
+        let sequence = self.sequence;
+        self.sequence = self.sequence.wrapping_add(1);
+        MessageHeader {
+            channel_id: self.id,
+            sequence,
+            log_time,
+            publish_time: log_time,
+        }
+    }
+}
+
+impl SensorChannels {
+    /// Sensor name (the frame id).
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+    /// Topic of the point clouds: `<prefix>/points`.
+    pub fn points_topic(&self) -> String {
+        format!("{}/points", self.prefix)
+    }
+    /// Topic of the diagnostics: `<prefix>/diagnostics`.
+    pub fn diagnostics_topic(&self) -> String {
+        format!("{}/diagnostics", self.prefix)
+    }
+    /// Topic of the raw packets: `<prefix>/raw` (created on the first raw packet).
+    pub fn raw_topic(&self) -> String {
+        format!("{}/raw", self.prefix)
+    }
+}
+
+/// One attachment written to the file.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct AttachmentSummary {
+    /// File name.
+    pub name: String,
+    /// Media type.
+    pub media_type: String,
+    /// Size in bytes.
+    pub size: u64,
+}
+
+/// What a finished file holds.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct SinkSummary {
+    /// Messages per topic, every channel listed (0 when it got none).
+    pub messages: BTreeMap<String, u64>,
+    /// Attachments in file order.
+    pub attachments: Vec<AttachmentSummary>,
+    /// Number of chunks.
+    pub chunks: usize,
+    /// Where the file was committed, when created with [`create_file`].
+    pub path: Option<PathBuf>,
+}
+
+/// Errors of the MCAP sink. Each says what was being done and with what.
+#[derive(Debug, thiserror::Error)]
+pub enum SinkError {
+    /// An I/O operation on the output failed.
+    #[error("{context}: {source}")]
+    Io {
+        /// What was being done, with the path.
+        context: String,
+        /// The underlying error.
+        #[source]
+        source: io::Error,
+    },
+    /// The MCAP writer failed (usually an I/O error underneath).
+    #[error("MCAP writer failed while {context}: {source}")]
+    Mcap {
+        /// What was being written.
+        context: String,
+        /// The underlying error.
+        #[source]
+        source: McapError,
+    },
+    /// A [`SensorId`] that this sink did not hand out.
+    #[error("unknown sensor id {id}: this sink has {registered} sensor(s)")]
+    UnknownSensor {
+        /// The id passed.
+        id: usize,
+        /// Number of sensors added.
+        registered: usize,
+    },
+    /// A sensor's name or topic prefix is not usable.
+    #[error("sensor {name:?}: {reason}")]
+    InvalidSensor {
+        /// The sensor name.
+        name: String,
+        /// What is wrong, with the value found.
+        reason: String,
+    },
+    /// A message would be too large for readers (protobuf and CDR lengths are 32-bit).
+    #[error("{topic}: message too large ({what}: {found} bytes, at most {max} allowed)")]
+    TooLarge {
+        /// Topic of the message.
+        topic: String,
+        /// What is too large.
+        what: &'static str,
+        /// Size found.
+        found: usize,
+        /// Largest size accepted.
+        max: usize,
+    },
+    /// A timestamp that the message format cannot represent.
+    #[error("{topic}: timestamp {timestamp_ns} ns cannot be written as {format} (int32 seconds end in 2038)")]
+    TimestampOutOfRange {
+        /// Topic of the message.
+        topic: String,
+        /// The timestamp.
+        timestamp_ns: u64,
+        /// The message type.
+        format: &'static str,
+    },
+    /// Diagnostics could not be serialised as JSON.
+    #[error("{topic}: serialising diagnostics as JSON failed: {source}")]
+    Json {
+        /// Topic of the message.
+        topic: String,
+        /// The underlying error.
+        #[source]
+        source: serde_json::Error,
+    },
+}
+
+fn mcap_err(context: impl Into<String>) -> impl FnOnce(McapError) -> SinkError {
+    let context = context.into();
+    move |source| SinkError::Mcap { context, source }
+}
+
+fn io_err(context: impl Into<String>) -> impl FnOnce(io::Error) -> SinkError {
+    let context = context.into();
+    move |source| SinkError::Io { context, source }
+}
+
+/// An attachment waiting for the first message (so it gets a meaningful `log_time`) or
+/// [`McapSink::finish`].
+#[derive(Debug)]
+struct PendingAttachment {
+    name: String,
+    media_type: &'static str,
+    data: Vec<u8>,
+}
+
+/// For a sink made by [`create_file`]: the temporary file and where it goes on success.
+#[derive(Debug)]
+struct FileCommit<W> {
+    temp: PathBuf,
+    target: PathBuf,
+    /// Flushes `W`, syncs it to disk and closes it.
+    sync: fn(W) -> io::Result<()>,
+}
+
+/// Writes sweeps and everything around them into one MCAP file.
+///
+/// Only [`finish`](Self::finish) completes the file. A sink dropped unfinished (or
+/// [`abort`](Self::abort)ed) leaves an incomplete stream in a plain writer, and no file at all
+/// when it was made by [`create_file`].
+pub struct McapSink<W: Write + Seek> {
+    /// `None` once finished or aborted.
+    writer: Option<Writer<W>>,
+    format: Format,
+    points_schema: u16,
+    diagnostics_schema: u16,
+    raw_schema: Option<u16>,
+    sensors: Vec<SensorChannels>,
+    /// The one message buffer, reused for every message.
+    buf: Vec<u8>,
+    pending_attachments: Vec<PendingAttachment>,
+    attachments: Vec<AttachmentSummary>,
+    /// Every (name, bytes) attached or pending, so a file shared by sensors is stored once.
+    attached: Vec<(String, Vec<u8>)>,
+    first_log_time: Option<u64>,
+    commit: Option<FileCommit<W>>,
+}
+
+impl<W: Write + Seek> std::fmt::Debug for McapSink<W> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("McapSink")
+            .field("format", &self.format)
+            .field("sensors", &self.sensors)
+            .field("finished", &self.writer.is_none())
+            .field("temp", &self.commit.as_ref().map(|c| &c.temp))
+            .finish_non_exhaustive()
+    }
+}
+
+impl<W: Write + Seek> McapSink<W> {
+    /// Starts an MCAP stream on `w` and registers the points and diagnostics schemas.
+    pub fn new(w: W, opts: SinkOptions) -> Result<Self, SinkError> {
+        let compression = match opts.compression {
+            Compression::Zstd => Some(::mcap::Compression::Zstd),
+            Compression::Lz4 => Some(::mcap::Compression::Lz4),
+            Compression::None => None,
+        };
+        let chunk_size = if opts.chunk_size == 0 {
+            DEFAULT_CHUNK_SIZE
+        } else {
+            opts.chunk_size
+        };
+        let mut writer = WriteOptions::new()
+            .compression(compression)
+            .chunk_size(Some(chunk_size))
+            .library(format!("ringscan {}", env!("CARGO_PKG_VERSION")))
+            .create(w)
+            .map_err(mcap_err("writing the MCAP header"))?;
+        let points_schema = match opts.format {
+            Format::Foxglove => writer.add_schema(
+                foxglove::POINT_CLOUD_SCHEMA,
+                "protobuf",
+                &foxglove::point_cloud_descriptor_set(),
+            ),
+            Format::Ros2 => writer.add_schema(
+                ros2::POINT_CLOUD2_SCHEMA,
+                "ros2msg",
+                ros2::point_cloud2_schema_text().as_bytes(),
+            ),
+        }
+        .map_err(mcap_err("writing the points schema"))?;
+        let diagnostics_schema = writer
+            .add_schema(
+                DIAGNOSTICS_SCHEMA,
+                "jsonschema",
+                DIAGNOSTICS_JSON_SCHEMA.as_bytes(),
+            )
+            .map_err(mcap_err("writing the diagnostics schema"))?;
+        Ok(Self {
+            writer: Some(writer),
+            format: opts.format,
+            points_schema,
+            diagnostics_schema,
+            raw_schema: None,
+            sensors: Vec::new(),
+            buf: Vec::new(),
+            pending_attachments: Vec::new(),
+            attachments: Vec::new(),
+            attached: Vec::new(),
+            first_log_time: None,
+            commit: None,
+        })
+    }
+
+    /// The channels of a sensor.
+    pub fn channels(&self, s: SensorId) -> Option<&SensorChannels> {
+        self.sensors.get(s.0)
+    }
+
+    /// Registers a sensor: its `<prefix>/points` and `<prefix>/diagnostics` channels (with
+    /// `info.metadata` as channel metadata) and its calibration file as an attachment.
+    ///
+    /// The prefix must be empty or `/`-separated ROS-style name segments (letters, digits, `_`,
+    /// `-`, `.`) without a trailing `/`, and differ from every other sensor's.
+    pub fn add_sensor(&mut self, info: &SensorInfo) -> Result<SensorId, SinkError> {
+        validate_sensor(info)?;
+        if self.sensors.iter().any(|s| s.prefix == info.topic_prefix) {
+            return Err(SinkError::InvalidSensor {
+                name: info.name.clone(),
+                reason: format!(
+                    "topic prefix {:?} is already used by another sensor; give each sensor its own \"/<name>\"",
+                    info.topic_prefix
+                ),
+            });
+        }
+        let writer = self.writer.as_mut().ok_or_else(finished_error)?;
+        let points_topic = format!("{}/points", info.topic_prefix);
+        let encoding = match self.format {
+            Format::Foxglove => "protobuf",
+            Format::Ros2 => "cdr",
+        };
+        let points = writer
+            .add_channel(self.points_schema, &points_topic, encoding, &info.metadata)
+            .map_err(mcap_err(format!("adding channel {points_topic}")))?;
+        let diagnostics_topic = format!("{}/diagnostics", info.topic_prefix);
+        let diagnostics = writer
+            .add_channel(
+                self.diagnostics_schema,
+                &diagnostics_topic,
+                "json",
+                &info.metadata,
+            )
+            .map_err(mcap_err(format!("adding channel {diagnostics_topic}")))?;
+        if let Some((file_name, data)) = &info.calibration {
+            let already = self
+                .attached
+                .iter()
+                .any(|(n, d)| n == file_name && d == data);
+            if !already {
+                self.attached.push((file_name.clone(), data.clone()));
+                self.pending_attachments.push(PendingAttachment {
+                    name: file_name.clone(),
+                    media_type: media_type_for(file_name, data),
+                    data: data.clone(),
+                });
+            }
+        }
+        self.sensors.push(SensorChannels {
+            name: info.name.clone(),
+            prefix: info.topic_prefix.clone(),
+            metadata: info.metadata.clone(),
+            points: Channel {
+                id: points,
+                sequence: 0,
+            },
+            diagnostics: Channel {
+                id: diagnostics,
+                sequence: 0,
+            },
+            raw: None,
+            point_cloud_prefix: PointCloudPrefix::new(&info.name),
+        });
+        Ok(SensorId(self.sensors.len() - 1))
+    }
+
+    /// Writes one sweep to `<prefix>/points`: `log_time` = `publish_time` = host receive time,
+    /// the message's own timestamp = the sweep's first firing.
+    pub fn write_sweep(&mut self, s: SensorId, sweep: &SweepMsg) -> Result<(), SinkError> {
+        self.before_message(sweep.log_time_ns)?;
+        let registered = self.sensors.len();
+        let sensor = self.sensors.get_mut(s.0).ok_or(SinkError::UnknownSensor {
+            id: s.0,
+            registered,
+        })?;
+        let buf = &mut self.buf;
+        match self.format {
+            Format::Foxglove => foxglove::encode_point_cloud(
+                buf,
+                sweep.timestamp_ns,
+                &sensor.point_cloud_prefix,
+                sweep.points,
+            )
+            .ok_or_else(|| SinkError::TooLarge {
+                topic: sensor.points_topic(),
+                what: "point data",
+                found: sweep.points.len().saturating_mul(POINT_STRIDE),
+                max: foxglove::MAX_MESSAGE_LEN - 1024,
+            })?,
+            Format::Ros2 => {
+                ros2::encode_point_cloud2(buf, sweep.timestamp_ns, &sensor.name, sweep.points)
+                    .map_err(|e| match e {
+                        Ros2EncodeError::TimestampOutOfRange => SinkError::TimestampOutOfRange {
+                            topic: sensor.points_topic(),
+                            timestamp_ns: sweep.timestamp_ns,
+                            format: ros2::POINT_CLOUD2_SCHEMA,
+                        },
+                        Ros2EncodeError::TooLarge => SinkError::TooLarge {
+                            topic: sensor.points_topic(),
+                            what: "point data",
+                            found: sweep.points.len().saturating_mul(POINT_STRIDE),
+                            max: ros2::MAX_DATA_LEN,
+                        },
+                    })?
+            }
+        }
+        let header = sensor.points.next_header(sweep.log_time_ns);
+        let writer = self.writer.as_mut().ok_or_else(finished_error)?;
+        writer
+            .write_to_known_channel(&header, &self.buf)
+            .map_err(mcap_err(format!(
+                "writing a sweep to {}",
+                sensor.points_topic()
+            )))
+    }
+
+    /// Writes one UDP payload to `<prefix>/raw` as a `ringscan.RawPacket` (protobuf; see
+    /// [`foxglove::RAW_PACKET_SCHEMA`]), creating the channel on first use.
+    pub fn write_raw(
+        &mut self,
+        s: SensorId,
+        log_time_ns: u64,
+        src: SocketAddrV4,
+        dst_port: u16,
+        payload: &[u8],
+    ) -> Result<(), SinkError> {
+        self.before_message(log_time_ns)?;
+        let registered = self.sensors.len();
+        let sensor = self.sensors.get_mut(s.0).ok_or(SinkError::UnknownSensor {
+            id: s.0,
+            registered,
+        })?;
+        let writer = self.writer.as_mut().ok_or_else(finished_error)?;
+        if sensor.raw.is_none() {
+            let schema = match self.raw_schema {
+                Some(id) => id,
+                None => {
+                    let id = writer
+                        .add_schema(
+                            foxglove::RAW_PACKET_SCHEMA,
+                            "protobuf",
+                            &foxglove::raw_packet_descriptor_set(),
+                        )
+                        .map_err(mcap_err("writing the raw packet schema"))?;
+                    self.raw_schema = Some(id);
+                    id
+                }
+            };
+            let topic = sensor.raw_topic();
+            let id = writer
+                .add_channel(schema, &topic, "protobuf", &sensor.metadata)
+                .map_err(mcap_err(format!("adding channel {topic}")))?;
+            sensor.raw = Some(Channel { id, sequence: 0 });
+        }
+        foxglove::encode_raw_packet(&mut self.buf, log_time_ns, src, dst_port, payload)
+            .ok_or_else(|| SinkError::TooLarge {
+                topic: sensor.raw_topic(),
+                what: "payload",
+                found: payload.len(),
+                max: foxglove::MAX_MESSAGE_LEN - 1024,
+            })?;
+        let Some(channel) = sensor.raw.as_mut() else {
+            return Err(finished_error());
+        };
+        let header = channel.next_header(log_time_ns);
+        writer
+            .write_to_known_channel(&header, &self.buf)
+            .map_err(mcap_err(format!(
+                "writing a packet to {}",
+                sensor.raw_topic()
+            )))
+    }
+
+    /// Writes one diagnostics object to `<prefix>/diagnostics` (JSON).
+    pub fn write_diagnostics(
+        &mut self,
+        s: SensorId,
+        log_time_ns: u64,
+        json: &serde_json::Value,
+    ) -> Result<(), SinkError> {
+        self.before_message(log_time_ns)?;
+        let registered = self.sensors.len();
+        let sensor = self.sensors.get_mut(s.0).ok_or(SinkError::UnknownSensor {
+            id: s.0,
+            registered,
+        })?;
+        self.buf.clear();
+        serde_json::to_writer(&mut self.buf, json).map_err(|source| SinkError::Json {
+            topic: sensor.diagnostics_topic(),
+            source,
+        })?;
+        let header = sensor.diagnostics.next_header(log_time_ns);
+        let writer = self.writer.as_mut().ok_or_else(finished_error)?;
+        writer
+            .write_to_known_channel(&header, &self.buf)
+            .map_err(mcap_err(format!(
+                "writing diagnostics to {}",
+                sensor.diagnostics_topic()
+            )))
+    }
+
+    /// Writes the summary section and footer. For a sink made by [`create_file`], then flushes,
+    /// syncs and renames the file into place; on any error the temporary file is removed.
+    pub fn finish(mut self) -> Result<SinkSummary, SinkError> {
+        let result = self.finish_inner();
+        if result.is_err() {
+            self.discard();
+        }
+        result
+    }
+
+    fn finish_inner(&mut self) -> Result<SinkSummary, SinkError> {
+        let log_time = self.first_log_time.unwrap_or(0);
+        self.write_pending_attachments(log_time)?;
+        let mut writer = self.writer.take().ok_or_else(finished_error)?;
+        let summary = match writer.finish() {
+            Ok(summary) => summary,
+            Err(source) => {
+                // Keep the writer so `discard` can close it and remove a temporary file.
+                self.writer = Some(writer);
+                return Err(SinkError::Mcap {
+                    context: "writing the summary section".into(),
+                    source,
+                });
+            }
+        };
+        let counts = summary
+            .stats
+            .as_ref()
+            .map(|s| s.channel_message_counts.clone())
+            .unwrap_or_default();
+        let mut messages = BTreeMap::new();
+        for (id, channel) in &summary.channels {
+            *messages.entry(channel.topic.clone()).or_insert(0) +=
+                counts.get(id).copied().unwrap_or(0);
+        }
+        let mut out = SinkSummary {
+            messages,
+            attachments: std::mem::take(&mut self.attachments),
+            chunks: summary.chunk_indexes.len(),
+            path: None,
+        };
+        let inner = writer.into_inner();
+        match self.commit.take() {
+            None => {
+                let mut inner = inner;
+                inner.flush().map_err(io_err("flushing the MCAP output"))?;
+            }
+            Some(commit) => {
+                let synced = (commit.sync)(inner);
+                let renamed = synced
+                    .map_err(io_err(format!("writing {}", commit.temp.display())))
+                    .and_then(|()| {
+                        std::fs::rename(&commit.temp, &commit.target).map_err(io_err(format!(
+                            "renaming {} to {}",
+                            commit.temp.display(),
+                            commit.target.display()
+                        )))
+                    });
+                if let Err(e) = renamed {
+                    let _ = std::fs::remove_file(&commit.temp);
+                    return Err(e);
+                }
+                sync_parent_dir(&commit.target);
+                out.path = Some(commit.target);
+            }
+        }
+        Ok(out)
+    }
+
+    /// Gives up on the output: nothing more is written, and a temporary file made by
+    /// [`create_file`] is removed (dropping the sink does the same).
+    pub fn abort(mut self) {
+        self.discard();
+    }
+
+    /// Closes the output without a summary and removes the temporary file, if any.
+    fn discard(&mut self) {
+        if let Some(writer) = self.writer.take() {
+            // `into_inner` hands back the stream without writing a summary (dropping a `Writer`
+            // would finish the file).
+            drop(writer.into_inner());
+        }
+        if let Some(commit) = self.commit.take() {
+            let _ = std::fs::remove_file(&commit.temp);
+        }
+    }
+
+    /// Bookkeeping before every message: remember the first log time and write pending
+    /// attachments with it.
+    fn before_message(&mut self, log_time: u64) -> Result<(), SinkError> {
+        if self.first_log_time.is_none() {
+            self.first_log_time = Some(log_time);
+        }
+        if !self.pending_attachments.is_empty() {
+            self.write_pending_attachments(log_time)?;
+        }
+        Ok(())
+    }
+
+    fn write_pending_attachments(&mut self, log_time: u64) -> Result<(), SinkError> {
+        let pending = std::mem::take(&mut self.pending_attachments);
+        let writer = self.writer.as_mut().ok_or_else(finished_error)?;
+        for a in pending {
+            let attachment = ::mcap::Attachment {
+                log_time,
+                create_time: log_time,
+                name: a.name,
+                media_type: a.media_type.to_owned(),
+                data: std::borrow::Cow::Owned(a.data),
+            };
+            writer
+                .attach(&attachment)
+                .map_err(mcap_err(format!("attaching {}", attachment.name)))?;
+            self.attachments.push(AttachmentSummary {
+                name: attachment.name,
+                media_type: attachment.media_type,
+                size: attachment.data.len() as u64,
+            });
+        }
+        Ok(())
+    }
+}
+
+impl<W: Write + Seek> Drop for McapSink<W> {
+    fn drop(&mut self) {
+        self.discard();
+    }
+}
+
+fn finished_error() -> SinkError {
+    // Only reachable after a failed `finish`, which consumed the sink; kept as an error rather
+    // than a panic all the same.
+    SinkError::Io {
+        context: "writing to an MCAP sink that is already closed".into(),
+        source: io::Error::other("sink closed"),
+    }
+}
+
+fn validate_sensor(info: &SensorInfo) -> Result<(), SinkError> {
+    let invalid = |reason: String| SinkError::InvalidSensor {
+        name: info.name.clone(),
+        reason,
+    };
+    if info.name.len() > MAX_NAME_LEN {
+        return Err(invalid(format!(
+            "name is {} bytes long, at most {MAX_NAME_LEN} allowed",
+            info.name.len()
+        )));
+    }
+    if info.name.chars().any(char::is_control) {
+        return Err(invalid("name contains a control character".into()));
+    }
+    let prefix = &info.topic_prefix;
+    if prefix.is_empty() {
+        return Ok(());
+    }
+    if prefix.len() > MAX_NAME_LEN {
+        return Err(invalid(format!(
+            "topic prefix is {} bytes long, at most {MAX_NAME_LEN} allowed",
+            prefix.len()
+        )));
+    }
+    let Some(rest) = prefix.strip_prefix('/') else {
+        return Err(invalid(format!(
+            "topic prefix {prefix:?} must be empty or start with '/'"
+        )));
+    };
+    for segment in rest.split('/') {
+        let ok = !segment.is_empty()
+            && segment
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.'));
+        if !ok {
+            return Err(invalid(format!(
+                "topic prefix {prefix:?}: segment {segment:?} must be non-empty ASCII letters, digits, '_', '-' or '.'"
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Media type of an attachment, by file extension.
+fn media_type_for(name: &str, data: &[u8]) -> &'static str {
+    let ext = Path::new(name)
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    match ext.as_str() {
+        "xml" => "application/xml",
+        "json" => "application/json",
+        _ if std::str::from_utf8(data).is_ok() => "text/plain",
+        _ => "application/octet-stream",
+    }
+}
+
+/// The temporary path [`create_file`] writes to: `<path>.tmp-ringscan`.
+pub fn temp_path(path: &Path) -> PathBuf {
+    let mut os = path.as_os_str().to_owned();
+    os.push(TEMP_SUFFIX);
+    PathBuf::from(os)
+}
+
+fn sync_buf_file(w: BufWriter<File>) -> io::Result<()> {
+    let file = w.into_inner().map_err(io::IntoInnerError::into_error)?;
+    file.sync_all()
+}
+
+/// Best effort: make the rename durable (POSIX needs the directory synced; elsewhere a no-op).
+fn sync_parent_dir(path: &Path) {
+    #[cfg(unix)]
+    if let Some(dir) = path.parent() {
+        let dir = if dir.as_os_str().is_empty() {
+            Path::new(".")
+        } else {
+            dir
+        };
+        if let Ok(d) = File::open(dir) {
+            let _ = d.sync_all();
+        }
+    }
+    #[cfg(not(unix))]
+    let _ = path;
+}
+
+/// Creates the output at `path` atomically: the sink writes `<path>.tmp-ringscan`, and
+/// [`McapSink::finish`] syncs it and renames it to `path`. If the sink is dropped or
+/// [`abort`](McapSink::abort)ed before that, or finishing fails, the temporary file is removed, so
+/// a partial MCAP never appears at `path`. An existing file at `path` is replaced only on
+/// success.
+pub fn create_file(path: &Path, opts: SinkOptions) -> Result<McapSink<BufWriter<File>>, SinkError> {
+    let temp = temp_path(path);
+    let file = File::create(&temp).map_err(io_err(format!("creating {}", temp.display())))?;
+    let commit = FileCommit {
+        temp: temp.clone(),
+        target: path.to_path_buf(),
+        sync: sync_buf_file,
+    };
+    match McapSink::new(BufWriter::with_capacity(1 << 20, file), opts) {
+        Ok(mut sink) => {
+            sink.commit = Some(commit);
+            Ok(sink)
+        }
+        Err(e) => {
+            let _ = std::fs::remove_file(&temp);
+            Err(e)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Cursor;
+
+    fn info(name: &str, prefix: &str) -> SensorInfo {
+        SensorInfo {
+            name: name.into(),
+            topic_prefix: prefix.into(),
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn prefixes_are_checked() {
+        let mut sink = McapSink::new(Cursor::new(Vec::new()), SinkOptions::default()).unwrap();
+        for bad in ["points", "/", "/a/", "//a", "/a b", "/é"] {
+            assert!(sink.add_sensor(&info("a", bad)).is_err(), "{bad:?}");
+        }
+        assert!(sink.add_sensor(&info("bad\0name", "")).is_err());
+        let a = sink.add_sensor(&info("a", "/vlp16-201")).unwrap();
+        assert_eq!(
+            sink.channels(a).unwrap().points_topic(),
+            "/vlp16-201/points"
+        );
+        let err = sink.add_sensor(&info("b", "/vlp16-201")).unwrap_err();
+        assert!(err.to_string().contains("already used"), "{err}");
+        let b = sink.add_sensor(&info("b", "")).unwrap();
+        assert_eq!(
+            sink.channels(b).unwrap().diagnostics_topic(),
+            "/diagnostics"
+        );
+    }
+
+    #[test]
+    fn unknown_sensor_is_an_error() {
+        let mut sink = McapSink::new(Cursor::new(Vec::new()), SinkOptions::default()).unwrap();
+        let sweep = SweepMsg {
+            log_time_ns: 1,
+            timestamp_ns: 1,
+            points: &[],
+        };
+        let err = sink.write_sweep(SensorId(3), &sweep).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                SinkError::UnknownSensor {
+                    id: 3,
+                    registered: 0
+                }
+            ),
+            "{err}"
+        );
+        let summary = sink.finish().unwrap();
+        assert!(summary.messages.is_empty());
+    }
+
+    #[test]
+    fn media_types_follow_the_extension() {
+        assert_eq!(media_type_for("db.XML", b"<x/>"), "application/xml");
+        assert_eq!(media_type_for("meta.json", b"{}"), "application/json");
+        assert_eq!(media_type_for("VLP16.yaml", b"lasers: []"), "text/plain");
+        assert_eq!(
+            media_type_for("blob", &[0xff, 0xfe]),
+            "application/octet-stream"
+        );
+    }
+
+    #[test]
+    fn a_file_sink_can_move_to_another_thread() {
+        fn assert_send<T: Send>() {}
+        assert_send::<McapSink<BufWriter<File>>>();
+    }
+
+    #[test]
+    fn temp_path_appends_the_suffix() {
+        assert_eq!(
+            temp_path(Path::new("/x/run.mcap")),
+            PathBuf::from("/x/run.mcap.tmp-ringscan")
+        );
+    }
+}
