@@ -25,7 +25,8 @@ and prints one JSON object on stdout:
 sweep); pipeline outputs (`/ground`, `/map`, ...) are listed under `point_clouds` but not summed.
 
 --expect takes ringscan's `--json` output (or any JSON object) and compares `sweeps`, `points`
-and, when present, `topics` ({topic: count} or [{"topic", "messages"}]) with the file.
+and, when present, `topics` or `output.topics` ({topic: count} or [{"topic", "messages"}]) with
+the file.
 
 Exit status: 0 when the file is valid and matches, 1 on any error or mismatch (each printed on
 stderr), 2 on bad usage.
@@ -396,6 +397,9 @@ def compare_expect(check, out, expect):
         else:
             check.fail(f"--expect file has no {key!r}")
     topics = expect.get("topics")
+    if topics is None and isinstance(expect.get("output"), dict):
+        # ringscan --json nests the per-topic counts under "output".
+        topics = expect["output"].get("topics")
     if topics is None:
         return
     if isinstance(topics, list):
