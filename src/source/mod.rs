@@ -4,6 +4,7 @@
 
 use std::net::SocketAddrV4;
 
+pub mod link;
 #[cfg(feature = "pcap")]
 pub mod pcap;
 pub mod reassembly;
