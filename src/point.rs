@@ -46,7 +46,9 @@ pub const POINT_STRIDE: usize = core::mem::size_of::<Point>();
 const _: () = assert!(POINT_STRIDE == 24);
 
 #[cfg(target_endian = "big")]
-compile_error!("ringscan writes point buffers as little-endian bytes; big-endian targets are not supported");
+compile_error!(
+    "ringscan writes point buffers as little-endian bytes; big-endian targets are not supported"
+);
 
 /// Byte offsets and types of the point fields, in record order, for sinks that describe them.
 pub const POINT_FIELDS: [(&str, usize, FieldType); 7] = [
@@ -83,7 +85,16 @@ mod tests {
 
     #[test]
     fn layout_matches_the_documented_offsets() {
-        let p = Point { x: 1.0, y: 2.0, z: 3.0, intensity: 4.0, t: 0x0102_0304, ring: 0x0506, ret: 7, pad: 0 };
+        let p = Point {
+            x: 1.0,
+            y: 2.0,
+            z: 3.0,
+            intensity: 4.0,
+            t: 0x0102_0304,
+            ring: 0x0506,
+            ret: 7,
+            pad: 0,
+        };
         let b = as_bytes(core::slice::from_ref(&p));
         assert_eq!(b.len(), 24);
         assert_eq!(&b[0..4], &1.0f32.to_le_bytes());

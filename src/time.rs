@@ -75,7 +75,10 @@ mod tests {
     fn hour_roll_over_both_ways() {
         // Reference 11:00:01 (just after the hour), counter 59:59.5 → 10:59:59.5.
         let ref_ns = 11 * HOUR_NS + 1_000_000_000;
-        assert_eq!(complete_toh(3_599_500_000, ref_ns), 11 * HOUR_NS - 500_000_000);
+        assert_eq!(
+            complete_toh(3_599_500_000, ref_ns),
+            11 * HOUR_NS - 500_000_000
+        );
         // Reference 10:59:59 (host late), counter 0:00.2 → 11:00:00.2.
         let ref_ns = 11 * HOUR_NS - 1_000_000_000;
         assert_eq!(complete_toh(200_000, ref_ns), 11 * HOUR_NS + 200_000_000);
@@ -87,6 +90,9 @@ mod tests {
         assert_eq!(toh_delta_us(1_000, 3_599_999_000), -2_000);
         assert_eq!(toh_delta_us(5, 5), 0);
         // Out-of-range counters are taken modulo one hour, never panic.
-        assert_eq!(toh_delta_us(u32::MAX, 0), toh_delta_us(u32::MAX % HOUR_US, 0));
+        assert_eq!(
+            toh_delta_us(u32::MAX, 0),
+            toh_delta_us(u32::MAX % HOUR_US, 0)
+        );
     }
 }

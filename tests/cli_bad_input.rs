@@ -24,7 +24,12 @@ fn tmp(name: &str) -> PathBuf {
 /// A valid VLP-16 capture of `n` packets, with `edit(i, payload)` applied to each payload.
 fn capture(n: usize, edit: &dyn Fn(usize, &mut Vec<u8>)) -> Vec<u8> {
     let calib = builtin(VelodyneModel::Vlp16).unwrap();
-    let mut sim = VelodyneSim::new(VelodyneModel::Vlp16, ReturnMode::Strongest, calib, 1_700_000_000_000_000_000);
+    let mut sim = VelodyneSim::new(
+        VelodyneModel::Vlp16,
+        ReturnMode::Strongest,
+        calib,
+        1_700_000_000_000_000_000,
+    );
     let scene = Shapes::room(10.0, 8.0, 1.5, 3.0);
     let mut w = PcapWriter::new(Vec::new()).unwrap();
     let src = SocketAddrV4::new(Ipv4Addr::new(192, 168, 1, 201), 2368);
@@ -34,7 +39,8 @@ fn capture(n: usize, edit: &dyn Fn(usize, &mut Vec<u8>)) -> Vec<u8> {
         let (t, p) = sim.next_packet(&scene, &mut truth);
         let mut payload = p.to_vec();
         edit(i, &mut payload);
-        w.write(t, &udp_frame(src, dst, i as u16, &payload)).unwrap();
+        w.write(t, &udp_frame(src, dst, i as u16, &payload))
+            .unwrap();
     }
     w.into_inner().unwrap()
 }
@@ -46,7 +52,12 @@ struct Run {
 }
 
 fn decode(input: &Path, extra: &[&str]) -> Run {
-    let out = Command::new(bin()).arg("decode").arg(input).args(extra).output().unwrap();
+    let out = Command::new(bin())
+        .arg("decode")
+        .arg(input)
+        .args(extra)
+        .output()
+        .unwrap();
     Run {
         code: out.status.code().unwrap_or(-1),
         stdout: String::from_utf8_lossy(&out.stdout).into_owned(),
@@ -64,8 +75,16 @@ fn assert_not_corrupt(path: &Path) {
         return;
     }
     let bytes = std::fs::read(path).unwrap();
-    assert!(bytes.starts_with(b"\x89MCAP0\r\n"), "{}: no MCAP magic", path.display());
-    assert!(bytes.ends_with(b"\x89MCAP0\r\n"), "{}: not finalised", path.display());
+    assert!(
+        bytes.starts_with(b"\x89MCAP0\r\n"),
+        "{}: no MCAP magic",
+        path.display()
+    );
+    assert!(
+        bytes.ends_with(b"\x89MCAP0\r\n"),
+        "{}: not finalised",
+        path.display()
+    );
     mcap::Summary::read(&bytes).unwrap().expect("summary");
 }
 
@@ -88,12 +107,22 @@ fn empty_file_is_a_clear_error() {
 
 #[test]
 fn wrong_magic_names_the_bytes_found() {
-    let p = write("magic.pcap", b"GIF89a this is not a capture at all, not even close.......");
+    let p = write(
+        "magic.pcap",
+        b"GIF89a this is not a capture at all, not even close.......",
+    );
     let r = decode(&p, &[]);
     assert_eq!(r.code, 1, "{}", r.stderr);
     let e = r.stderr.to_lowercase();
     assert!(e.contains("magic"), "{}", r.stderr);
-    assert!(e.contains("47 49 46 38") || e.contains("47494638") || e.contains("0x38464947") || e.contains("0x47494638"), "{}", r.stderr);
+    assert!(
+        e.contains("47 49 46 38")
+            || e.contains("47494638")
+            || e.contains("0x38464947")
+            || e.contains("0x47494638"),
+        "{}",
+        r.stderr
+    );
 }
 
 #[test]
@@ -108,7 +137,10 @@ fn truncated_last_record_is_reported_not_fatal() {
     let j = json(&r);
     assert_eq!(j["packets"]["decoded"], 49);
     // The last record starts 16 + 1248 bytes before the original end.
-    assert_eq!(j["capture"]["truncated_tail_offset"].as_u64(), Some((full - 1248 - 16) as u64));
+    assert_eq!(
+        j["capture"]["truncated_tail_offset"].as_u64(),
+        Some((full - 1248 - 16) as u64)
+    );
     assert_not_corrupt(&out);
 }
 
@@ -123,7 +155,11 @@ fn a_record_claiming_a_gigabyte_is_an_error_with_its_offset() {
     let out = tmp("huge.mcap");
     let r = decode(&p, &["--out", out.to_str().unwrap()]);
     assert_eq!(r.code, 1, "{}", r.stderr);
-    assert!(r.stderr.contains(&off.to_string()), "offset {off} not named: {}", r.stderr);
+    assert!(
+        r.stderr.contains(&off.to_string()),
+        "offset {off} not named: {}",
+        r.stderr
+    );
     assert_not_corrupt(&out);
 }
 
@@ -139,19 +175,27 @@ fn a_record_longer_than_its_snaplen_is_caught() {
         // Accepted as a lenient reader would, but then it must say so in the counters.
         let j = json(&r);
         let c = &j["capture"];
-        assert!(c["malformed_records"].as_u64().unwrap() + c["truncated_records"].as_u64().unwrap() > 0 || j["packets"]["decoded"] == 5, "{j}");
+        assert!(
+            c["malformed_records"].as_u64().unwrap() + c["truncated_records"].as_u64().unwrap() > 0
+                || j["packets"]["decoded"] == 5,
+            "{j}"
+        );
     } else {
         assert_eq!(r.code, 1);
-        assert!(r.stderr.contains("snaplen") || r.stderr.contains("1000"), "{}", r.stderr);
+        assert!(
+            r.stderr.contains("snaplen") || r.stderr.contains("1000"),
+            "{}",
+            r.stderr
+        );
     }
 }
 
 #[test]
 fn wrong_sizes_and_bad_flags_are_counted_and_skipped() {
     let bytes = capture(60, &|i, p| match i {
-        10 => p.truncate(1205),          // wrong size
+        10 => p.truncate(1205),                                      // wrong size
         20 => p.extend_from_slice(&[0; 6]), // 1212 bytes, like the VLI-16 packet
-        30 => p[500] = 0x00,              // block 5 flag FF EE → 00 EE
+        30 => p[500] = 0x00,                // block 5 flag FF EE → 00 EE
         40 => p[302..304].copy_from_slice(&40_000u16.to_le_bytes()), // azimuth out of range
         _ => {}
     });
@@ -183,11 +227,26 @@ fn garbage_calibration_files_are_errors_naming_the_file_and_place() {
         let c = write(name, body);
         let out = tmp("calib.mcap");
         let _ = std::fs::remove_file(&out);
-        let r = decode(&cap, &["--calib", c.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+        let r = decode(
+            &cap,
+            &[
+                "--calib",
+                c.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+            ],
+        );
         assert_eq!(r.code, 1, "{name}: {}", r.stderr);
-        assert!(r.stderr.contains(name), "{name}: file not named: {}", r.stderr);
+        assert!(
+            r.stderr.contains(name),
+            "{name}: file not named: {}",
+            r.stderr
+        );
         assert!(!r.stderr.contains("panicked"), "{}", r.stderr);
-        assert!(!out.exists(), "{name}: an output was created before the calibration was checked");
+        assert!(
+            !out.exists(),
+            "{name}: an output was created before the calibration was checked"
+        );
     }
 }
 

@@ -24,12 +24,21 @@ fn spread(n: usize) -> VelodyneCalibration {
         .map(|i| {
             let k = if i % 2 == 0 { i / 2 } else { n / 2 + i / 2 };
             let deg = -24.9 + 26.9 * k as f64 / (n - 1) as f64;
-            LaserCalibration::angles(i as u16, deg.to_radians(), ((i % 4) as f64 - 1.5).to_radians() * 0.5)
+            LaserCalibration::angles(
+                i as u16,
+                deg.to_radians(),
+                ((i % 4) as f64 - 1.5).to_radians() * 0.5,
+            )
         })
         .collect();
-    VelodyneCalibration { lasers, distance_resolution: None, advanced: false, source: "test spread".into() }
-        .validate()
-        .unwrap()
+    VelodyneCalibration {
+        lasers,
+        distance_resolution: None,
+        advanced: false,
+        source: "test spread".into(),
+    }
+    .validate()
+    .unwrap()
 }
 
 fn calibration(model: VelodyneModel) -> VelodyneCalibration {
@@ -53,10 +62,16 @@ fn roundtrip(model: VelodyneModel, mode: ReturnMode, packets: usize) -> (usize, 
         dec.check_layout(&p).unwrap();
         let mut pts = Vec::new();
         let n = dec.decode(&p, 0, &mut pts);
-        assert_eq!(n.points, truth.len(), "{model} {mode}: every measurement decodes to one point");
+        assert_eq!(
+            n.points,
+            truth.len(),
+            "{model} {mode}: every measurement decodes to one point"
+        );
         // Key by (firing time, ring, return): unique per measurement.
-        let by_key: HashMap<(u32, u16, u8), &Truth> =
-            truth.iter().map(|t| ((t.t_ns.round() as u32, rings[t.laser], t.ret), t)).collect();
+        let by_key: HashMap<(u32, u16, u8), &Truth> = truth
+            .iter()
+            .map(|t| ((t.t_ns.round() as u32, rings[t.laser], t.ret), t))
+            .collect();
         for pt in &pts {
             let t = by_key
                 .get(&(pt.t, pt.ring, pt.ret))
@@ -66,7 +81,11 @@ fn roundtrip(model: VelodyneModel, mode: ReturnMode, packets: usize) -> (usize, 
                 + (f64::from(pt.z) - t.xyz[2]).powi(2))
             .sqrt();
             let allowed = 0.01 + t.range * SIN_0005_DEG;
-            assert!(d <= allowed, "{model} {mode}: point off by {d} m (allowed {allowed}) at range {}", t.range);
+            assert!(
+                d <= allowed,
+                "{model} {mode}: point off by {d} m (allowed {allowed}) at range {}",
+                t.range
+            );
             assert_eq!(pt.intensity, f32::from(t.reflectivity));
             worst_excess = worst_excess.max(d - allowed);
             checked += 1;

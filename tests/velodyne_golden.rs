@@ -33,9 +33,14 @@ struct Figures {
 }
 
 fn golden_files(root: &std::path::Path) -> Vec<std::path::PathBuf> {
-    let idx: Value = serde_json::from_slice(&std::fs::read(root.join("golden/index.json")).unwrap()).unwrap();
+    let idx: Value =
+        serde_json::from_slice(&std::fs::read(root.join("golden/index.json")).unwrap()).unwrap();
     let mut out = Vec::new();
-    let list = idx.get("goldens").and_then(Value::as_array).cloned().unwrap_or_default();
+    let list = idx
+        .get("goldens")
+        .and_then(Value::as_array)
+        .cloned()
+        .unwrap_or_default();
     for g in list {
         if g.get("reference").and_then(Value::as_str) != Some("velodyne_decoder") {
             continue;
@@ -52,14 +57,23 @@ fn check_capture(root: &std::path::Path, golden_path: &std::path::Path) -> Figur
     let cfg = &g["config"];
     let model = VelodyneModel::from_id(cfg["model"].as_str().unwrap()).expect("model name");
     let calib_path = root.join(cfg["calibration"].as_str().unwrap());
-    let calib = parse_velodyne(&std::fs::read_to_string(&calib_path).unwrap(), "golden calibration").unwrap();
+    let calib = parse_velodyne(
+        &std::fs::read_to_string(&calib_path).unwrap(),
+        "golden calibration",
+    )
+    .unwrap();
 
     let packets: Vec<(i64, Vec<u8>)> = common::datagrams(&capture)
         .into_iter()
         .filter(|(_, _, p)| p.len() == 1206)
         .map(|(t, _, p)| (t, p))
         .collect();
-    assert_eq!(packets.len() as u64, g["input"]["data_packets"].as_u64().unwrap(), "{}", capture.display());
+    assert_eq!(
+        packets.len() as u64,
+        g["input"]["data_packets"].as_u64().unwrap(),
+        "{}",
+        capture.display()
+    );
 
     let mode = ReturnMode::from_byte(packets[0].1[1204]).unwrap_or(ReturnMode::Strongest);
     let dec = VelodyneDecoder::new(model, mode, &calib, DecodeOptions::default()).unwrap();
@@ -82,35 +96,70 @@ fn check_capture(root: &std::path::Path, golden_path: &std::path::Path) -> Figur
         let rel_time = |t: u32| f64::from(t) * 1e-9 + shift_s;
         let idx = f["index"].as_u64().unwrap();
         let n = f["points"].as_u64().unwrap() as usize;
-        assert_eq!(points.len(), n, "{} frame {idx}: point count", capture.display());
+        assert_eq!(
+            points.len(),
+            n,
+            "{} frame {idx}: point count",
+            capture.display()
+        );
         fig.frames += 1;
         fig.points += n;
 
         let mut rings = vec![0u64; calib.num_lasers()];
         let (mut ret0, mut ret1) = (0u64, 0u64);
-        let (mut sx, mut sy, mut sz, mut si, mut st, mut tol) = (0f64, 0f64, 0f64, 0f64, 0f64, 0f64);
+        let (mut sx, mut sy, mut sz, mut si, mut st, mut tol) =
+            (0f64, 0f64, 0f64, 0f64, 0f64, 0f64);
         for p in &points {
             rings[usize::from(p.ring)] += 1;
-            if p.ret == 0 { ret0 += 1 } else { ret1 += 1 }
+            if p.ret == 0 {
+                ret0 += 1
+            } else {
+                ret1 += 1
+            }
             sx += f64::from(p.x);
             sy += f64::from(p.y);
             sz += f64::from(p.z);
             si += f64::from(p.intensity);
             st += rel_time(p.t);
-            let r = (f64::from(p.x).powi(2) + f64::from(p.y).powi(2) + f64::from(p.z).powi(2)).sqrt();
+            let r =
+                (f64::from(p.x).powi(2) + f64::from(p.y).powi(2) + f64::from(p.z).powi(2)).sqrt();
             tol += 1e-3 + r * SIN_001_DEG;
         }
-        let gr: Vec<u64> = f["ring_counts"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap()).collect();
+        let gr: Vec<u64> = f["ring_counts"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_u64().unwrap())
+            .collect();
         assert_eq!(rings, gr, "{} frame {idx}: ring_counts", capture.display());
         let rtc = &f["return_type_counts"];
         let c = |k: &str| rtc.get(k).and_then(Value::as_u64).unwrap_or(0);
-        assert_eq!((ret0, ret1), (c("1") + c("3"), c("2")), "{} frame {idx}: returns", capture.display());
+        assert_eq!(
+            (ret0, ret1),
+            (c("1") + c("3"), c("2")),
+            "{} frame {idx}: returns",
+            capture.display()
+        );
         let sum = &f["sum"];
-        for (name, ours, t) in [("x", sx, tol), ("y", sy, tol), ("z", sz, tol), ("time", st, n as f64 * 1e-6)] {
+        for (name, ours, t) in [
+            ("x", sx, tol),
+            ("y", sy, tol),
+            ("z", sz, tol),
+            ("time", st, n as f64 * 1e-6),
+        ] {
             let theirs = sum[name].as_f64().unwrap();
-            assert!((ours - theirs).abs() <= t, "{} frame {idx}: sum {name} {ours} vs {theirs} (tol {t})", capture.display());
+            assert!(
+                (ours - theirs).abs() <= t,
+                "{} frame {idx}: sum {name} {ours} vs {theirs} (tol {t})",
+                capture.display()
+            );
         }
-        assert_eq!(si, sum["intensity"].as_f64().unwrap(), "{} frame {idx}: intensity sum", capture.display());
+        assert_eq!(
+            si,
+            sum["intensity"].as_f64().unwrap(),
+            "{} frame {idx}: intensity sum",
+            capture.display()
+        );
 
         if let Some(bin) = f.get("binary").and_then(Value::as_str) {
             let recs = common::read_f32_records(&golden_dir.join(bin), 8);
@@ -121,10 +170,15 @@ fn check_capture(root: &std::path::Path, golden_path: &std::path::Path) -> Figur
                     + (f64::from(p.y) - f64::from(r[1])).powi(2)
                     + (f64::from(p.z) - f64::from(r[2])).powi(2))
                 .sqrt();
-                let range = (f64::from(r[0]).powi(2) + f64::from(r[1]).powi(2) + f64::from(r[2]).powi(2)).sqrt();
+                let range =
+                    (f64::from(r[0]).powi(2) + f64::from(r[1]).powi(2) + f64::from(r[2]).powi(2))
+                        .sqrt();
                 let allowed = 1e-3 + range * SIN_001_DEG;
                 let dt_us = (rel_time(p.t) - f64::from(r[4])).abs() * 1e6;
-                let ret = match r[7] as i32 { 2 => 1, _ => 0 };
+                let ret = match r[7] as i32 {
+                    2 => 1,
+                    _ => 0,
+                };
                 fig.max_xyz_err_m = fig.max_xyz_err_m.max(d);
                 fig.max_xyz_err_excess_m = fig.max_xyz_err_excess_m.max(d - allowed);
                 fig.max_t_err_us = fig.max_t_err_us.max(dt_us);
@@ -144,20 +198,38 @@ fn check_capture(root: &std::path::Path, golden_path: &std::path::Path) -> Figur
 
 #[test]
 fn every_velodyne_capture_matches_velodyne_decoder() {
-    let Some(root) = common::captures() else { return };
+    let Some(root) = common::captures() else {
+        return;
+    };
     let files = golden_files(&root);
-    assert!(files.len() >= 7, "expected the 7 Velodyne goldens, found {}", files.len());
+    assert!(
+        files.len() >= 7,
+        "expected the 7 Velodyne goldens, found {}",
+        files.len()
+    );
     println!("| capture | frames | points | dumped points | matched | max |Δxyz| mm | max Δt µs |");
     println!("|---|---|---|---|---|---|---|");
     for gp in files {
         let fig = check_capture(&root, &gp);
-        let name = gp.file_name().unwrap().to_string_lossy().replace(".golden.json", "");
+        let name = gp
+            .file_name()
+            .unwrap()
+            .to_string_lossy()
+            .replace(".golden.json", "");
         let pct = 100.0 * fig.binary_matched as f64 / fig.binary_points.max(1) as f64;
         println!(
             "| {name} | {} | {} | {} | {} ({pct:.4} %) | {:.3} | {:.4} |",
-            fig.frames, fig.points, fig.binary_points, fig.binary_matched, fig.max_xyz_err_m * 1e3, fig.max_t_err_us
+            fig.frames,
+            fig.points,
+            fig.binary_points,
+            fig.binary_matched,
+            fig.max_xyz_err_m * 1e3,
+            fig.max_t_err_us
         );
         assert!(fig.binary_points > 0, "{name}: no dumped frame compared");
-        assert!(pct >= 99.9, "{name}: only {pct:.3} % of points match ({fig:?})");
+        assert!(
+            pct >= 99.9,
+            "{name}: only {pct:.3} % of points match ({fig:?})"
+        );
     }
 }

@@ -23,7 +23,10 @@ fn run(
 ) -> (Out, VelodyneStream) {
     let scene = Shapes::room(15.0, 10.0, 1.7, 5.0);
     let mut stream = VelodyneStream::new(cfg);
-    let mut out = Out { sweeps: Vec::new(), facts: None };
+    let mut out = Out {
+        sweeps: Vec::new(),
+        facts: None,
+    };
     let mut truth = Vec::new();
     for i in 0..packets {
         truth.clear();
@@ -54,7 +57,12 @@ fn run(
 
 fn vlp16_sim() -> VelodyneSim {
     let calib = builtin(VelodyneModel::Vlp16).unwrap();
-    let mut sim = VelodyneSim::new(VelodyneModel::Vlp16, ReturnMode::Strongest, calib, 1_700_000_000_000_000_000);
+    let mut sim = VelodyneSim::new(
+        VelodyneModel::Vlp16,
+        ReturnMode::Strongest,
+        calib,
+        1_700_000_000_000_000_000,
+    );
     sim.azimuth0_deg = 123.4;
     sim
 }
@@ -73,14 +81,27 @@ fn sweeps_are_cut_at_the_cut_angle_and_times_are_relative_to_the_first_firing() 
     for s in &out.sweeps[1..25] {
         // A full turn: 100 ms, give or take one block (110.592 µs): both ends fall on a block.
         let span = s.span_ns();
-        assert!((i64::from(span) - 100_000_000).abs() <= 110_592, "sweep {} spans {span} ns", s.index);
+        assert!(
+            (i64::from(span) - 100_000_000).abs() <= 110_592,
+            "sweep {} spans {span} ns",
+            s.index
+        );
         // Sweeps are cut between blocks; a VLP-16 block holds two firing sequences
         // (110.6 µs, 0.4° at 10 Hz): it starts within one block after the cut.
-        assert!(s.first_azimuth < 40, "sweep {} starts at {}", s.index, s.first_azimuth);
+        assert!(
+            s.first_azimuth < 40,
+            "sweep {} starts at {}",
+            s.index,
+            s.first_azimuth
+        );
         assert_eq!(s.missing_packets, 0);
         assert_eq!(s.clock, ClockSource::Host);
         // 754 columns … 24 per packet, 37.7 packets per turn.
-        assert!((1800..=1812).contains(&s.columns_count), "columns {}", s.columns_count);
+        assert!(
+            (1800..=1812).contains(&s.columns_count),
+            "columns {}",
+            s.columns_count
+        );
         assert!(s.points.iter().all(|p| p.t <= span));
     }
     // Consecutive sweeps start 100 ms apart in device time.
@@ -93,13 +114,22 @@ fn sweeps_are_cut_at_the_cut_angle_and_times_are_relative_to_the_first_firing() 
 #[test]
 fn missing_packets_are_counted_in_the_sweep_they_fall_in() {
     let mut sim = vlp16_sim();
-    let (out, stream) = run(&mut sim, 400, StreamConfig::default(), &|i| (200..203).contains(&i) || i == 350, None);
+    let (out, stream) = run(
+        &mut sim,
+        400,
+        StreamConfig::default(),
+        &|i| (200..203).contains(&i) || i == 350,
+        None,
+    );
     assert_eq!(stream.stats().missing, 4);
     let total: u64 = out.sweeps.iter().map(|s| s.missing_packets).sum();
     assert_eq!(total, 4);
     // Packet 200 is 265 ms in: the third sweep boundary is at 265.7 ms, so the loss straddles
     // it; the three missing packets are booked on the sweep the next received packet opens.
-    assert_eq!(out.sweeps.iter().filter(|s| s.missing_packets > 0).count(), 2);
+    assert_eq!(
+        out.sweeps.iter().filter(|s| s.missing_packets > 0).count(),
+        2
+    );
 }
 
 #[test]
@@ -130,12 +160,18 @@ fn the_hour_roll_over_is_seamless() {
 fn gps_time_with_pps_locked_gives_absolute_sensor_timestamps() {
     let mut sim = vlp16_sim();
     sim.toh0_us = 0; // first firing exactly at 12:00:00.000000 UTC
-    // 2024-05-01 12:00:00 UTC = 1714564800 s since the epoch (19844 days · 86400 + 12 h).
+                     // 2024-05-01 12:00:00 UTC = 1714564800 s since the epoch (19844 days · 86400 + 12 h).
     let rmc = "$GPRMC,120000,A,3707.8324,N,12139.2864,W,000.0,144.7,010524,013.8,E,D";
     let cs = rmc[1..].bytes().fold(0u8, |a, c| a ^ c);
     let sentence = format!("{rmc}*{cs:02X}\r\n");
     let pos = move |i: usize| (i == 0).then(|| encode_position_packet(0, 2, &sentence));
-    let (out, _) = run(&mut sim, 200, StreamConfig::default(), &|_| false, Some(&pos));
+    let (out, _) = run(
+        &mut sim,
+        200,
+        StreamConfig::default(),
+        &|_| false,
+        Some(&pos),
+    );
     let s = &out.sweeps[1];
     assert_eq!(s.clock, ClockSource::SensorGps);
     assert_eq!(s.timestamp_ns, s.device_time_ns);
@@ -143,19 +179,32 @@ fn gps_time_with_pps_locked_gives_absolute_sensor_timestamps() {
     // rounded up to the next block (two firing sequences, 110.592 µs).
     let t0 = 1_714_564_800_000_000_000i64;
     let expected = t0 + 65_722_222; // 236.6° / 3600 °/s
-    assert!((0..=110_592).contains(&(s.timestamp_ns - expected)), "{} vs {expected}", s.timestamp_ns);
+    assert!(
+        (0..=110_592).contains(&(s.timestamp_ns - expected)),
+        "{} vs {expected}",
+        s.timestamp_ns
+    );
     // Without PPS lock, the host clock is used.
     let mut sim = vlp16_sim();
     let sentence2 = format!("{rmc}*{cs:02X}\r\n");
     let pos2 = move |i: usize| (i == 0).then(|| encode_position_packet(0, 0, &sentence2));
-    let (out, _) = run(&mut sim, 200, StreamConfig::default(), &|_| false, Some(&pos2));
+    let (out, _) = run(
+        &mut sim,
+        200,
+        StreamConfig::default(),
+        &|_| false,
+        Some(&pos2),
+    );
     assert_eq!(out.sweeps[1].clock, ClockSource::Host);
 }
 
 #[test]
 fn organized_image_has_one_cell_per_ring_and_column() {
     let mut sim = vlp16_sim();
-    let cfg = StreamConfig { keep_columns: true, ..StreamConfig::default() };
+    let cfg = StreamConfig {
+        keep_columns: true,
+        ..StreamConfig::default()
+    };
     let (out, _) = run(&mut sim, 120, cfg, &|_| false, None);
     let s = &out.sweeps[1];
     let img = Organized::from_sweep(s, 16).unwrap();

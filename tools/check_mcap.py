@@ -396,6 +396,31 @@ def compare_expect(check, out, expect):
             check.expect_eq(f"--expect {key}", totals.get(key), expect[key])
         else:
             check.fail(f"--expect file has no {key!r}")
+    output = expect.get("output") if isinstance(expect.get("output"), dict) else {}
+    # Attachments: the calibration files ringscan says it stored, by name and size.
+    if "attachments" in output:
+        want = sorted((a["name"], a["size"]) for a in output["attachments"])
+        got = sorted((a["name"], a["size"]) for a in out.get("attachments", []))
+        check.expect_eq("--expect attachments (name, size)", got, want)
+    # Schema of the point topics follows the format ringscan reports.
+    fmt = output.get("format")
+    if fmt:
+        schema = {"foxglove": "foxglove.PointCloud", "ros2": "sensor_msgs/msg/PointCloud2"}.get(fmt)
+        for c in out.get("channels", []):
+            if POINTS_TOPIC.search(c.get("topic", "")):
+                check.expect_eq(f"schema of {c['topic']}", c.get("schema"), schema)
+    # Per sensor: its points topic carries the model and address ringscan reported.
+    for s in expect.get("sensors", []):
+        topic = s.get("topic")
+        if not topic:
+            continue
+        chans = [c for c in out.get("channels", []) if c.get("topic") == topic]
+        if not chans:
+            check.fail(f"sensor {s.get('address')}: topic {topic} missing")
+            continue
+        md = chans[0].get("metadata", {})
+        check.expect_eq(f"{topic} metadata model", md.get("model"), s.get("model"))
+        check.expect_eq(f"{topic} metadata source_address", md.get("source_address"), s.get("address"))
     topics = expect.get("topics")
     if topics is None and isinstance(expect.get("output"), dict):
         # ringscan --json nests the per-topic counts under "output".

@@ -20,14 +20,27 @@ use ringscan::sim::scene::Shapes;
 use ringscan::sim::velodyne::{encode_position_packet, VelodyneSim};
 
 fn arg(args: &[String], name: &str) -> Option<String> {
-    args.iter().position(|a| a == name).and_then(|i| args.get(i + 1).cloned())
+    args.iter()
+        .position(|a| a == name)
+        .and_then(|i| args.get(i + 1).cloned())
 }
 
 fn spread(n: usize) -> VelodyneCalibration {
     let lasers = (0..n)
-        .map(|i| LaserCalibration::angles(i as u16, (-24.9 + 26.9 * i as f64 / (n - 1) as f64).to_radians(), 0.0))
+        .map(|i| {
+            LaserCalibration::angles(
+                i as u16,
+                (-24.9 + 26.9 * i as f64 / (n - 1) as f64).to_radians(),
+                0.0,
+            )
+        })
         .collect();
-    VelodyneCalibration { lasers, distance_resolution: None, advanced: false, source: "evenly spread".into() }
+    VelodyneCalibration {
+        lasers,
+        distance_resolution: None,
+        advanced: false,
+        source: "evenly spread".into(),
+    }
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -40,10 +53,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Some("dual") => ReturnMode::Dual,
         Some(m) => return Err(format!("unknown --mode {m}").into()),
     };
-    let seconds: f64 = arg(&args, "--seconds").map(|s| s.parse()).transpose()?.unwrap_or(1.0);
-    let hz: f64 = arg(&args, "--hz").map(|s| s.parse()).transpose()?.unwrap_or(10.0);
+    let seconds: f64 = arg(&args, "--seconds")
+        .map(|s| s.parse())
+        .transpose()?
+        .unwrap_or(1.0);
+    let hz: f64 = arg(&args, "--hz")
+        .map(|s| s.parse())
+        .transpose()?
+        .unwrap_or(10.0);
     let out = arg(&args, "--out").ok_or("--out FILE is required")?;
-    let drop_every: usize = arg(&args, "--drop-every").map(|s| s.parse()).transpose()?.unwrap_or(0);
+    let drop_every: usize = arg(&args, "--drop-every")
+        .map(|s| s.parse())
+        .transpose()?
+        .unwrap_or(0);
     let gps = args.iter().any(|a| a == "--gps");
     let calib = match arg(&args, "--calib") {
         Some(p) => parse_velodyne(&std::fs::read_to_string(&p)?, &p)?,
@@ -69,9 +91,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let (host, payload) = sim.next_packet(&scene, &mut truth);
         if gps && (host - t0_ns) / 1_000_000_000 >= next_pos_s as i64 {
             let s = next_pos_s;
-            let body = format!("GPRMC,12{:02}{:02},A,3707.8324,N,12139.2864,W,000.0,144.7,010524,013.8,E,D", s / 60, s % 60);
+            let body = format!(
+                "GPRMC,12{:02}{:02},A,3707.8324,N,12139.2864,W,000.0,144.7,010524,013.8,E,D",
+                s / 60,
+                s % 60
+            );
             let cs = body.bytes().fold(0u8, |a, c| a ^ c);
-            let pos = encode_position_packet((s * 1_000_000) as u32, 2, &format!("${body}*{cs:02X}\r\n"));
+            let pos =
+                encode_position_packet((s * 1_000_000) as u32, 2, &format!("${body}*{cs:02X}\r\n"));
             pcap.write(host, &udp_frame(pos_src, pos_dst, i as u16, &pos))?;
             next_pos_s += 1;
         }
@@ -81,6 +108,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         pcap.write(host, &udp_frame(src, dst, i as u16, &payload))?;
     }
     pcap.into_inner()?;
-    eprintln!("wrote {out}: {n} {} packets ({mode}), {seconds} s at {hz} Hz", model.name());
+    eprintln!(
+        "wrote {out}: {n} {} packets ({mode}), {seconds} s at {hz} Hz",
+        model.name()
+    );
     Ok(())
 }

@@ -10,7 +10,9 @@ use std::time::Instant;
 use ringscan::calib::{parse_velodyne, VelodyneCalibration, MAX_CALIB_BYTES};
 use ringscan::decode::DecodeOptions;
 use ringscan::model::VelodyneModel;
-use ringscan::sink::mcap::{create_file, Compression, Format, SensorId, SensorInfo, SinkOptions, SweepMsg};
+use ringscan::sink::mcap::{
+    create_file, Compression, Format, SensorId, SensorInfo, SinkOptions, SweepMsg,
+};
 use ringscan::sink::{McapSink, SinkError};
 use ringscan::source::pcap::{PcapSource, SourceError, SourceStats};
 use ringscan::sweep::{Demux, SensorFacts, StreamConfig, StreamError, Sweep};
@@ -84,20 +86,39 @@ fn load_calibs(list: &[String]) -> Result<Vec<CalibSpec>, RunError> {
         let (addr, path) = match item.split_once('=') {
             Some((a, p)) => match a.parse::<Ipv4Addr>() {
                 Ok(ip) => (Some(ip), p),
-                Err(_) => return Err(RunError::Usage(format!("--calib {item}: `{a}` is not an IPv4 address"))),
+                Err(_) => {
+                    return Err(RunError::Usage(format!(
+                        "--calib {item}: `{a}` is not an IPv4 address"
+                    )))
+                }
             },
             None => (None, item.as_str()),
         };
-        let cerr = |msg: String| RunError::Calib { path: path.to_string(), msg };
+        let cerr = |msg: String| RunError::Calib {
+            path: path.to_string(),
+            msg,
+        };
         let meta = std::fs::metadata(path).map_err(|e| cerr(e.to_string()))?;
         if meta.len() > MAX_CALIB_BYTES as u64 {
-            return Err(cerr(format!("{} bytes; refusing anything over {MAX_CALIB_BYTES} bytes", meta.len())));
+            return Err(cerr(format!(
+                "{} bytes; refusing anything over {MAX_CALIB_BYTES} bytes",
+                meta.len()
+            )));
         }
         let bytes = std::fs::read(path).map_err(|e| cerr(e.to_string()))?;
-        let text = std::str::from_utf8(&bytes).map_err(|e| cerr(format!("not UTF-8 text (byte {})", e.valid_up_to())))?;
-        let file_name = Path::new(path).file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        let text = std::str::from_utf8(&bytes)
+            .map_err(|e| cerr(format!("not UTF-8 text (byte {})", e.valid_up_to())))?;
+        let file_name = Path::new(path)
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
         let calib = parse_velodyne(text, &file_name).map_err(|e| cerr(e.to_string()))?;
-        out.push(CalibSpec { addr, file_name, bytes, calib });
+        out.push(CalibSpec {
+            addr,
+            file_name,
+            bytes,
+            calib,
+        });
     }
     Ok(out)
 }
@@ -155,7 +176,13 @@ impl Output {
     }
 
     /// Registers a sensor in the sink once its model is known.
-    fn register(&mut self, idx: usize, addr: Ipv4Addr, facts: &SensorFacts, ports: &[u16]) -> Result<(), SinkError> {
+    fn register(
+        &mut self,
+        idx: usize,
+        addr: Ipv4Addr,
+        facts: &SensorFacts,
+        ports: &[u16],
+    ) -> Result<(), SinkError> {
         let single = self.n_sensors_hint <= 1 && idx == 0;
         let name = match (&self.name, facts.model) {
             (Some(n), _) => n.clone(),
@@ -169,7 +196,14 @@ impl Output {
             .map(|(_, n, b)| (n.clone(), b.clone()));
         let mut md = BTreeMap::new();
         md.insert("source_address".to_string(), addr.to_string());
-        md.insert("ports".to_string(), ports.iter().map(|p| p.to_string()).collect::<Vec<_>>().join(","));
+        md.insert(
+            "ports".to_string(),
+            ports
+                .iter()
+                .map(|p| p.to_string())
+                .collect::<Vec<_>>()
+                .join(","),
+        );
         if let Some(m) = facts.model {
             md.insert("model".to_string(), m.name().to_string());
         }
@@ -184,17 +218,35 @@ impl Output {
         md.insert("calibration".to_string(), facts.calibration.clone());
         md.insert("serial".to_string(), String::new());
         md.insert("firmware".to_string(), String::new());
-        md.insert("driver".to_string(), format!("ringscan {}", env!("CARGO_PKG_VERSION")));
-        let topic_prefix = if single { String::new() } else { format!("/{name}") };
+        md.insert(
+            "driver".to_string(),
+            format!("ringscan {}", env!("CARGO_PKG_VERSION")),
+        );
+        let topic_prefix = if single {
+            String::new()
+        } else {
+            format!("/{name}")
+        };
         let s = self.sensor(idx, addr);
         s.name = name.clone();
         s.topic = format!("{topic_prefix}/points");
         s.calib_file = calib.as_ref().map(|(n, _)| n.clone());
         if let Some(sink) = self.sink.as_mut() {
-            let id = sink.add_sensor(&SensorInfo { name, topic_prefix, metadata: md, calibration: calib })?;
+            let id = sink.add_sensor(&SensorInfo {
+                name,
+                topic_prefix,
+                metadata: md,
+                calibration: calib,
+            })?;
             let hold = std::mem::take(&mut self.sensors[idx].raw_hold);
             for (t, port, src_port, payload) in hold {
-                sink.write_raw(id, t.max(0) as u64, std::net::SocketAddrV4::new(addr, src_port), port, &payload)?;
+                sink.write_raw(
+                    id,
+                    t.max(0) as u64,
+                    std::net::SocketAddrV4::new(addr, src_port),
+                    port,
+                    &payload,
+                )?;
             }
             self.sensors[idx].id = Some(id);
         }
@@ -202,7 +254,14 @@ impl Output {
         Ok(())
     }
 
-    fn on_sweep(&mut self, idx: usize, addr: Ipv4Addr, sweep: &Sweep, facts: &SensorFacts, ports: &[u16]) {
+    fn on_sweep(
+        &mut self,
+        idx: usize,
+        addr: Ipv4Addr,
+        sweep: &Sweep,
+        facts: &SensorFacts,
+        ports: &[u16],
+    ) {
         if self.error.is_some() {
             return;
         }
@@ -214,7 +273,9 @@ impl Output {
                 return;
             }
         }
-        let (Some(sink), Some(id)) = (self.sink.as_mut(), self.sensors[idx].id) else { return };
+        let (Some(sink), Some(id)) = (self.sink.as_mut(), self.sensors[idx].id) else {
+            return;
+        };
         let msg = SweepMsg {
             log_time_ns: sweep.last_host_ns.max(0) as u64,
             timestamp_ns: sweep.timestamp_ns.max(0) as u64,
@@ -253,7 +314,10 @@ fn prescan<R: Read>(mut src: PcapSource<R>, port: Option<u16>) -> usize {
     for _ in 0..PRESCAN_DATAGRAMS {
         match src.next_datagram() {
             Ok(Some(d)) => {
-                if d.payload.len() == 1206 && port.is_none_or(|p| p == d.dst.port()) && !addrs.contains(d.src.ip()) {
+                if d.payload.len() == 1206
+                    && port.is_none_or(|p| p == d.dst.port())
+                    && !addrs.contains(d.src.ip())
+                {
                     addrs.push(*d.src.ip());
                 }
             }
@@ -267,17 +331,30 @@ fn prescan<R: Read>(mut src: PcapSource<R>, port: Option<u16>) -> usize {
 pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
     let started = Instant::now();
     let path_s = args.input.display().to_string();
-    let serr = |err: SourceError| RunError::Source { path: path_s.clone(), err };
+    let serr = |err: SourceError| RunError::Source {
+        path: path_s.clone(),
+        err,
+    };
     let model = parse_model(args.model.as_deref())?;
     if !(0.0..360.0).contains(&args.cut_angle_deg) {
-        return Err(RunError::Usage(format!("--cut-angle {}: expected [0, 360) degrees", args.cut_angle_deg)));
+        return Err(RunError::Usage(format!(
+            "--cut-angle {}: expected [0, 360) degrees",
+            args.cut_angle_deg
+        )));
     }
     let decode = DecodeOptions {
         min_range: args.min_range.unwrap_or(0.0),
         max_range: args.max_range.unwrap_or(f32::INFINITY),
     };
-    if decode.min_range.is_nan() || decode.max_range.is_nan() || decode.min_range > decode.max_range || decode.min_range < 0.0 {
-        return Err(RunError::Usage(format!("--min-range {} / --max-range {}: empty range", decode.min_range, decode.max_range)));
+    if decode.min_range.is_nan()
+        || decode.max_range.is_nan()
+        || decode.min_range > decode.max_range
+        || decode.min_range < 0.0
+    {
+        return Err(RunError::Usage(format!(
+            "--min-range {} / --max-range {}: empty range",
+            decode.min_range, decode.max_range
+        )));
     }
     let calibs = load_calibs(&args.calib)?;
     let n_sensors_hint = match args.input_bytes {
@@ -305,7 +382,11 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
     let sink = match &args.out {
         Some(p) => {
             let opts = SinkOptions {
-                format: if args.format == FormatArg::Ros2 { Format::Ros2 } else { Format::Foxglove },
+                format: if args.format == FormatArg::Ros2 {
+                    Format::Ros2
+                } else {
+                    Format::Foxglove
+                },
                 compression: Compression::Zstd,
                 ..SinkOptions::default()
             };
@@ -319,16 +400,29 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
         n_sensors_hint,
         name: args.name.clone(),
         raw: args.raw,
-        calibs: calibs.into_iter().map(|c| (c.addr, c.file_name, c.bytes)).collect(),
+        calibs: calibs
+            .into_iter()
+            .map(|c| (c.addr, c.file_name, c.bytes))
+            .collect(),
         error: None,
         sweeps: 0,
         points: 0,
     };
     let result = match args.input_bytes {
-        Some(b) => pump(PcapSource::new(b).map_err(serr)?, &mut demux, &mut out, None),
+        Some(b) => pump(
+            PcapSource::new(b).map_err(serr)?,
+            &mut demux,
+            &mut out,
+            None,
+        ),
         None => {
             let total = std::fs::metadata(&args.input).map(|m| m.len()).ok();
-            pump(PcapSource::open(&args.input).map_err(serr)?, &mut demux, &mut out, total)
+            pump(
+                PcapSource::open(&args.input).map_err(serr)?,
+                &mut demux,
+                &mut out,
+                total,
+            )
         }
     };
     // Finalise the output on success and on error alike: the file is always a valid MCAP.
@@ -341,7 +435,10 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
             return Err(match e {
                 PumpError::Source(err) => serr(err),
                 PumpError::Stream(idx, err) => RunError::Stream {
-                    addr: demux.stream(idx).map(|(a, _)| a).unwrap_or(Ipv4Addr::UNSPECIFIED),
+                    addr: demux
+                        .stream(idx)
+                        .map(|(a, _)| a)
+                        .unwrap_or(Ipv4Addr::UNSPECIFIED),
                     err,
                 },
                 PumpError::Sink(e) => RunError::Sink(e),
@@ -429,13 +526,18 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
         "output": sink_summary.as_ref().map(|s| json!({
             "path": args.out.as_ref().map(|p| p.display().to_string()),
             "format": if args.format == FormatArg::Ros2 { "ros2" } else { "foxglove" },
+            // Velodyne points have no extra fields: `--fields all` writes the default ones.
+            "fields": if args.fields_all { "all" } else { "default" },
             "topics": s.messages,
             "attachments": s.attachments.iter().map(|a| json!({"name": a.name, "media_type": a.media_type, "size": a.size})).collect::<Vec<_>>(),
             "chunks": s.chunks,
         })),
         "elapsed_s": elapsed,
     });
-    Ok(Summary { json, lost: dropped + malformed + missing })
+    Ok(Summary {
+        json,
+        lost: dropped + malformed + missing,
+    })
 }
 
 enum PumpError {
@@ -474,10 +576,14 @@ fn pump<R: Read>(
         if !registered {
             if let Some((_, stream)) = demux.stream(idx) {
                 if stream.decoder().is_some() {
-                    let ports: Vec<u16> =
-                        demux.sensors().nth(idx).map(|(_, _, p)| p.to_vec()).unwrap_or_default();
+                    let ports: Vec<u16> = demux
+                        .sensors()
+                        .nth(idx)
+                        .map(|(_, _, p)| p.to_vec())
+                        .unwrap_or_default();
                     let facts = stream.facts().clone();
-                    out.register(idx, addr, &facts, &ports).map_err(PumpError::Sink)?;
+                    out.register(idx, addr, &facts, &ports)
+                        .map_err(PumpError::Sink)?;
                 }
             }
         }
@@ -485,8 +591,14 @@ fn pump<R: Read>(
             let id = out.sensor(idx, addr).id;
             match (id, out.sink.as_mut()) {
                 (Some(id), Some(sink)) => {
-                    sink.write_raw(id, time.max(0) as u64, std::net::SocketAddrV4::new(addr, src_port), port, d.payload)
-                        .map_err(PumpError::Sink)?;
+                    sink.write_raw(
+                        id,
+                        time.max(0) as u64,
+                        std::net::SocketAddrV4::new(addr, src_port),
+                        port,
+                        d.payload,
+                    )
+                    .map_err(PumpError::Sink)?;
                 }
                 _ => {
                     let s = &mut out.sensors[idx];
@@ -502,7 +614,12 @@ fn pump<R: Read>(
             last_progress = Instant::now();
             let done = src.stats().bytes;
             let total = total_bytes.unwrap_or(1).max(1);
-            eprint!("\r{:5.1} % · {} sweeps · {} points", 100.0 * done as f64 / total as f64, out.sweeps, out.points);
+            eprint!(
+                "\r{:5.1} % · {} sweeps · {} points",
+                100.0 * done as f64 / total as f64,
+                out.sweeps,
+                out.points
+            );
             let _ = std::io::stderr().flush();
         }
     }
@@ -510,7 +627,13 @@ fn pump<R: Read>(
     let ports: Vec<Vec<u16>> = demux.sensors().map(|(_, _, p)| p.to_vec()).collect();
     let r = demux.finish(&mut |idx, sweep, facts| {
         let addr = addrs.get(idx).copied().unwrap_or(Ipv4Addr::UNSPECIFIED);
-        out.on_sweep(idx, addr, sweep, facts, ports.get(idx).map(|p| p.as_slice()).unwrap_or(&[]));
+        out.on_sweep(
+            idx,
+            addr,
+            sweep,
+            facts,
+            ports.get(idx).map(|p| p.as_slice()).unwrap_or(&[]),
+        );
     });
     if let Err((idx, e)) = r {
         return Err(PumpError::Stream(idx, e));
@@ -523,8 +646,17 @@ fn pump<R: Read>(
         for idx in 0..out.sensors.len() {
             if !out.sensors[idx].registered && !out.sensors[idx].raw_hold.is_empty() {
                 let addr = out.sensors[idx].addr;
-                let facts = demux.stream(idx).map(|(_, s)| s.facts().clone()).unwrap_or_default();
-                out.register(idx, addr, &facts, ports.get(idx).map(|p| p.as_slice()).unwrap_or(&[])).map_err(PumpError::Sink)?;
+                let facts = demux
+                    .stream(idx)
+                    .map(|(_, s)| s.facts().clone())
+                    .unwrap_or_default();
+                out.register(
+                    idx,
+                    addr,
+                    &facts,
+                    ports.get(idx).map(|p| p.as_slice()).unwrap_or(&[]),
+                )
+                .map_err(PumpError::Sink)?;
             }
         }
     }
@@ -544,13 +676,21 @@ pub fn decode_command(args: &DecodeArgs) -> Result<ExitCode, RunError> {
         print_text(&s.json);
     }
     if args.strict && s.lost > 0 {
-        return Err(RunError::Strict(format!("--strict: {} packets missing, dropped or malformed", s.lost)));
+        return Err(RunError::Strict(format!(
+            "--strict: {} packets missing, dropped or malformed",
+            s.lost
+        )));
     }
     Ok(ExitCode::SUCCESS)
 }
 
 /// `ringscan info`.
-pub fn info_command(input: &Path, model: Option<&str>, calib: &[String], json_out: bool) -> Result<ExitCode, RunError> {
+pub fn info_command(
+    input: &Path,
+    model: Option<&str>,
+    calib: &[String],
+    json_out: bool,
+) -> Result<ExitCode, RunError> {
     let args = DecodeArgs {
         input: input.to_path_buf(),
         out: None,
@@ -601,7 +741,10 @@ pub fn demo_command(out: &Path, json_out: bool) -> Result<ExitCode, RunError> {
         println!("{}", s.json);
     } else {
         print_text(&s.json);
-        println!("Open {} in Foxglove (https://app.foxglove.dev) to see the point clouds.", out.display());
+        println!(
+            "Open {} in Foxglove (https://app.foxglove.dev) to see the point clouds.",
+            out.display()
+        );
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -646,7 +789,11 @@ fn print_text(j: &Value) {
             s["calibration"].as_str().unwrap_or("-"),
             s["clock"].as_str().unwrap_or("-"),
             s["pps"].as_str().unwrap_or("no position packets"),
-            if s["gps"].is_null() { "no NMEA time".to_string() } else { format!("RMC valid={}", s["gps"]["valid"]) }
+            if s["gps"].is_null() {
+                "no NMEA time".to_string()
+            } else {
+                format!("RMC valid={}", s["gps"]["valid"])
+            }
         );
     }
     let p = &j["packets"];
@@ -661,7 +808,12 @@ fn print_text(j: &Value) {
         g(&p["ignored"])
     );
     if let Some(o) = j["output"].as_object() {
-        println!("  wrote {} ({}): {}", o["path"].as_str().unwrap_or(""), o["format"].as_str().unwrap_or(""), o["topics"]);
+        println!(
+            "  wrote {} ({}): {}",
+            o["path"].as_str().unwrap_or(""),
+            o["format"].as_str().unwrap_or(""),
+            o["topics"]
+        );
     }
     println!("  {:.3} s", j["elapsed_s"].as_f64().unwrap_or(0.0));
 }

@@ -33,7 +33,10 @@ pub struct DecodeOptions {
 
 impl Default for DecodeOptions {
     fn default() -> Self {
-        Self { min_range: 0.0, max_range: f32::INFINITY }
+        Self {
+            min_range: 0.0,
+            max_range: f32::INFINITY,
+        }
     }
 }
 
@@ -115,7 +118,10 @@ impl VelodyneDecoder {
             });
         }
         if !model.supports(mode) {
-            return Err(DecodeError::Unsupported { model: model.name(), mode: mode.name() });
+            return Err(DecodeError::Unsupported {
+                model: model.name(),
+                mode: mode.name(),
+            });
         }
         if opts.min_range.is_nan() || opts.max_range.is_nan() || opts.min_range > opts.max_range {
             return Err(DecodeError::Option(format!(
@@ -171,7 +177,11 @@ impl VelodyneDecoder {
             expected_bank[b] = bank as u8;
             for (s, slot) in row.iter_mut().enumerate() {
                 let (t, column) = model.firing(mode, b, s);
-                *slot = Slot { t_ns: t as u32, laser: model.laser_of(bank, s) as u16, column: column as u16 };
+                *slot = Slot {
+                    t_ns: t as u32,
+                    laser: model.laser_of(bank, s) as u16,
+                    column: column as u16,
+                };
             }
         }
         let mut dt_in_block = [0f32; SLOTS];
@@ -180,7 +190,9 @@ impl VelodyneDecoder {
             *dt = (model.firing(mode, 0, s).0 - t0) as f32;
         }
         let rate_span_ns = model.firing(mode, BLOCKS - 1, 0).0 - t0;
-        let resolution = calib.distance_resolution.unwrap_or(model.distance_resolution()) as f32;
+        let resolution = calib
+            .distance_resolution
+            .unwrap_or(model.distance_resolution()) as f32;
         Ok(Self {
             model,
             mode,
@@ -237,8 +249,14 @@ impl VelodyneDecoder {
         for b in 0..BLOCKS {
             let bank = p.bank(b).unwrap_or(usize::MAX);
             if bank != usize::from(self.expected_bank[b]) {
-                let expected = [0xEEFFu16, 0xDDFF, 0xCCFF, 0xBBFF][usize::from(self.expected_bank[b])];
-                return Err(DecodeError::Layout { model: self.model.name(), block: b, expected, found: p.flag(b) });
+                let expected =
+                    [0xEEFFu16, 0xDDFF, 0xCCFF, 0xBBFF][usize::from(self.expected_bank[b])];
+                return Err(DecodeError::Layout {
+                    model: self.model.name(),
+                    block: b,
+                    expected,
+                    found: p.flag(b),
+                });
             }
         }
         Ok(())
@@ -283,7 +301,11 @@ impl VelodyneDecoder {
         let az0 = f64::from(p.azimuth(0));
         let az_last = f64::from(p.azimuth(BLOCKS - 1));
         let span = (az_last - az0).rem_euclid(36_000.0);
-        let rate = if self.rate_span_ns > 0.0 { span / self.rate_span_ns } else { 0.0 };
+        let rate = if self.rate_span_ns > 0.0 {
+            span / self.rate_span_ns
+        } else {
+            0.0
+        };
         // Per slot: rotation of the slot's firing after its block's first firing.
         let mut rot = [(1f64, 0f64); SLOTS];
         let to_rad = core::f64::consts::PI / 18_000.0;

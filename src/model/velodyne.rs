@@ -138,10 +138,17 @@ impl VelodyneModel {
 
     /// Parses a command-line id (`vlp16`, `hdl32e`, …; case-insensitive, `-`/`_` optional).
     pub fn from_id(s: &str) -> Option<Self> {
-        let norm: String =
-            s.chars().filter(|c| c.is_ascii_alphanumeric()).map(|c| c.to_ascii_lowercase()).collect();
+        let norm: String = s
+            .chars()
+            .filter(|c| c.is_ascii_alphanumeric())
+            .map(|c| c.to_ascii_lowercase())
+            .collect();
         ALL_MODELS.into_iter().find(|m| {
-            let id: String = m.id().chars().filter(|c| c.is_ascii_alphanumeric()).collect();
+            let id: String = m
+                .id()
+                .chars()
+                .filter(|c| c.is_ascii_alphanumeric())
+                .collect();
             id == norm
         })
     }
@@ -250,7 +257,10 @@ impl VelodyneModel {
                 } else {
                     (57_600.0, 7_200.0, [0.0, 1_300.0, 2_500.0, 3_700.0])
                 };
-                (cycle * b as f64 + group * (slot / 4) as f64 + within[slot % 4], b)
+                (
+                    cycle * b as f64 + group * (slot / 4) as f64 + within[slot % 4],
+                    b,
+                )
             }
             Self::Vls128 => {
                 let seq = block / 4;
@@ -271,7 +281,11 @@ impl VelodyneModel {
 
     /// Firing columns per packet (the largest column index of any slot, plus one).
     pub fn columns_per_packet(self, mode: ReturnMode) -> usize {
-        (0..SLOTS).map(|s| self.firing(mode, BLOCKS - 1, s).1).max().unwrap_or(0) + 1
+        (0..SLOTS)
+            .map(|s| self.firing(mode, BLOCKS - 1, s).1)
+            .max()
+            .unwrap_or(0)
+            + 1
     }
 
     /// Time between the first firings of two consecutive columns, ns (datasheet constants).
@@ -304,27 +318,62 @@ mod tests {
     #[test]
     fn packet_periods_match_the_datasheets() {
         // VLP-16 manual: 24 firing sequences of 55.296 µs per packet = 1327.104 µs.
-        assert_eq!(VelodyneModel::Vlp16.packet_period_ns(ReturnMode::Strongest), 1_327_104.0);
+        assert_eq!(
+            VelodyneModel::Vlp16.packet_period_ns(ReturnMode::Strongest),
+            1_327_104.0
+        );
         // Dual: 12 sequences.
-        assert_eq!(VelodyneModel::Vlp16.packet_period_ns(ReturnMode::Dual), 663_552.0);
+        assert_eq!(
+            VelodyneModel::Vlp16.packet_period_ns(ReturnMode::Dual),
+            663_552.0
+        );
         // HDL-32E: 12 blocks × 46.08 µs = 552.96 µs (the captures show 552-553 µs).
-        assert_eq!(VelodyneModel::Hdl32e.packet_period_ns(ReturnMode::Strongest), 552_960.0);
+        assert_eq!(
+            VelodyneModel::Hdl32e.packet_period_ns(ReturnMode::Strongest),
+            552_960.0
+        );
         // VLP-32C: 12 × 55.296 = 663.552 µs (664 µs in the nebula capture).
-        assert_eq!(VelodyneModel::Vlp32c.packet_period_ns(ReturnMode::Strongest), 663_552.0);
+        assert_eq!(
+            VelodyneModel::Vlp32c.packet_period_ns(ReturnMode::Strongest),
+            663_552.0
+        );
         // HDL-64E S2: 6 firings × 48 µs.
-        assert_eq!(VelodyneModel::Hdl64eS2.packet_period_ns(ReturnMode::Strongest), 288_000.0);
-        assert_eq!(VelodyneModel::Hdl64eS3.packet_period_ns(ReturnMode::Dual), 172_800.0);
+        assert_eq!(
+            VelodyneModel::Hdl64eS2.packet_period_ns(ReturnMode::Strongest),
+            288_000.0
+        );
+        assert_eq!(
+            VelodyneModel::Hdl64eS3.packet_period_ns(ReturnMode::Dual),
+            172_800.0
+        );
     }
 
     #[test]
     fn firing_offsets_follow_the_manual_formulas() {
         let m = VelodyneModel::Vlp16;
         // t = 55.296·(2·block + ch/16) + 2.304·(ch%16) µs.
-        assert_eq!(m.firing(ReturnMode::Strongest, 3, 20), (55_296.0 * 7.0 + 2_304.0 * 4.0, 7));
-        assert_eq!(m.firing(ReturnMode::Dual, 3, 20), (55_296.0 * 3.0 + 2_304.0 * 4.0, 3));
-        assert_eq!(VelodyneModel::Vlp32c.firing(ReturnMode::Strongest, 2, 5).0, 55_296.0 * 2.0 + 2_304.0 * 2.0);
-        assert_eq!(VelodyneModel::Hdl32e.firing(ReturnMode::Strongest, 2, 5).0, 46_080.0 * 2.0 + 1_152.0 * 5.0);
-        assert_eq!(VelodyneModel::Hdl64eS2.firing(ReturnMode::Strongest, 3, 6).0, 48_000.0 + 6_000.0 + 2_460.0);
+        assert_eq!(
+            m.firing(ReturnMode::Strongest, 3, 20),
+            (55_296.0 * 7.0 + 2_304.0 * 4.0, 7)
+        );
+        assert_eq!(
+            m.firing(ReturnMode::Dual, 3, 20),
+            (55_296.0 * 3.0 + 2_304.0 * 4.0, 3)
+        );
+        assert_eq!(
+            VelodyneModel::Vlp32c.firing(ReturnMode::Strongest, 2, 5).0,
+            55_296.0 * 2.0 + 2_304.0 * 2.0
+        );
+        assert_eq!(
+            VelodyneModel::Hdl32e.firing(ReturnMode::Strongest, 2, 5).0,
+            46_080.0 * 2.0 + 1_152.0 * 5.0
+        );
+        assert_eq!(
+            VelodyneModel::Hdl64eS2
+                .firing(ReturnMode::Strongest, 3, 6)
+                .0,
+            48_000.0 + 6_000.0 + 2_460.0
+        );
     }
 
     #[test]
@@ -335,7 +384,10 @@ mod tests {
                 assert_eq!(VelodyneModel::from_product_id(p), Some(m));
             }
         }
-        assert_eq!(VelodyneModel::from_id("HDL-64E_S3"), Some(VelodyneModel::Hdl64eS3));
+        assert_eq!(
+            VelodyneModel::from_id("HDL-64E_S3"),
+            Some(VelodyneModel::Hdl64eS3)
+        );
         assert_eq!(VelodyneModel::from_id("nope"), None);
     }
 }

@@ -7,4 +7,4 @@ pub mod net;
 pub mod scene;
 pub mod velodyne;
 
-pub use scene::{Scene, Hit};
+pub use scene::{Hit, Scene};

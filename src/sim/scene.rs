@@ -56,7 +56,11 @@ impl Shapes {
     /// A rectangular room `[-x, x] × [-y, y]` with floor at `-floor` and ceiling at `ceiling`
     /// (sensor at the origin), plus a few spheres: a scene with every elevation hit.
     pub fn room(x: f64, y: f64, floor: f64, ceiling: f64) -> Self {
-        let p = |n: [f64; 3], d: f64, r: u8| Plane { normal: n, d, reflectivity: r };
+        let p = |n: [f64; 3], d: f64, r: u8| Plane {
+            normal: n,
+            d,
+            reflectivity: r,
+        };
         Self {
             planes: vec![
                 p([1.0, 0.0, 0.0], x, 40),
@@ -67,8 +71,16 @@ impl Shapes {
                 p([0.0, 0.0, 1.0], ceiling, 120),
             ],
             spheres: vec![
-                Sphere { center: [4.0, 1.0, 0.0], radius: 0.8, reflectivity: 200 },
-                Sphere { center: [-3.0, -2.5, -0.5], radius: 0.5, reflectivity: 255 },
+                Sphere {
+                    center: [4.0, 1.0, 0.0],
+                    radius: 0.8,
+                    reflectivity: 200,
+                },
+                Sphere {
+                    center: [-3.0, -2.5, -0.5],
+                    radius: 0.5,
+                    reflectivity: 255,
+                },
             ],
             max_range: 120.0,
         }
@@ -80,7 +92,10 @@ impl Scene for Shapes {
         let mut best: Option<Hit> = None;
         let mut take = |s: f64, r: u8| {
             if s > 1e-6 && s <= self.max_range && best.is_none_or(|b| s < b.range) {
-                best = Some(Hit { range: s, reflectivity: r });
+                best = Some(Hit {
+                    range: s,
+                    reflectivity: r,
+                });
             }
         };
         for pl in &self.planes {
@@ -90,7 +105,11 @@ impl Scene for Shapes {
             }
         }
         for sp in &self.spheres {
-            let oc = [o[0] - sp.center[0], o[1] - sp.center[1], o[2] - sp.center[2]];
+            let oc = [
+                o[0] - sp.center[0],
+                o[1] - sp.center[1],
+                o[2] - sp.center[2],
+            ];
             let b = dot(oc, dir);
             let c = dot(oc, oc) - sp.radius * sp.radius;
             let disc = b * b - c;

@@ -25,12 +25,20 @@ pub struct Block {
 
 impl Default for Block {
     fn default() -> Self {
-        Self { flag: FLAG_UPPER, azimuth: 0, meas: [(0, 0); SLOTS] }
+        Self {
+            flag: FLAG_UPPER,
+            azimuth: 0,
+            meas: [(0, 0); SLOTS],
+        }
     }
 }
 
 /// Writes a 1206-byte data packet.
-pub fn encode_data_packet(blocks: &[Block; BLOCKS], toh_us: u32, factory: [u8; 2]) -> [u8; DATA_PACKET_LEN] {
+pub fn encode_data_packet(
+    blocks: &[Block; BLOCKS],
+    toh_us: u32,
+    factory: [u8; 2],
+) -> [u8; DATA_PACKET_LEN] {
     let mut out = [0u8; DATA_PACKET_LEN];
     for (b, blk) in blocks.iter().enumerate() {
         let o = b * 100;
@@ -104,7 +112,12 @@ pub struct VelodyneSim {
 
 impl VelodyneSim {
     /// A sensor spinning at 10 Hz from azimuth 0, top of hour 0, host time `host0_ns`.
-    pub fn new(model: VelodyneModel, mode: ReturnMode, calib: VelodyneCalibration, host0_ns: i64) -> Self {
+    pub fn new(
+        model: VelodyneModel,
+        mode: ReturnMode,
+        calib: VelodyneCalibration,
+        host0_ns: i64,
+    ) -> Self {
         Self {
             model,
             mode,
@@ -127,13 +140,21 @@ impl VelodyneSim {
     ///
     /// Calibrations with HDL-64E corrections are cast with their beam origin offsets; the
     /// distance written is the one the datasheet equations map back onto the scene point.
-    pub fn next_packet(&mut self, scene: &dyn Scene, truth: &mut Vec<Truth>) -> (i64, [u8; DATA_PACKET_LEN]) {
+    pub fn next_packet(
+        &mut self,
+        scene: &dyn Scene,
+        truth: &mut Vec<Truth>,
+    ) -> (i64, [u8; DATA_PACKET_LEN]) {
         let period = self.period_ns();
         let t_packet_ns = self.packet_index as f64 * period;
-        let toh_us = ((f64::from(self.toh0_us) + t_packet_ns / 1_000.0).round() as u64 % 3_600_000_000) as u32;
+        let toh_us = ((f64::from(self.toh0_us) + t_packet_ns / 1_000.0).round() as u64
+            % 3_600_000_000) as u32;
         // The packet stamp is the first firing; it leaves the sensor one period later.
         let host_ns = self.host0_ns + (t_packet_ns + period).round() as i64;
-        let res = self.calib.distance_resolution.unwrap_or(self.model.distance_resolution());
+        let res = self
+            .calib
+            .distance_resolution
+            .unwrap_or(self.model.distance_resolution());
         let bpf = self.model.blocks_per_firing(self.mode);
         let banks = if self.model.is_hdl64() {
             2
@@ -154,13 +175,17 @@ impl VelodyneSim {
             for s in 0..SLOTS {
                 let (t_rel, _) = self.model.firing(self.mode, b, s);
                 let laser = self.model.laser_of(bank, s);
-                let Some(l) = self.calib.lasers.get(laser) else { continue };
+                let Some(l) = self.calib.lasers.get(laser) else {
+                    continue;
+                };
                 let az = self.azimuth_at(t_packet_ns + t_rel).to_radians() - l.rot_correction;
                 let (sw, cw) = l.vert_correction.sin_cos();
                 let (sa, ca) = az.sin_cos();
                 let dir = [cw * ca, -cw * sa, sw];
                 let origin = [0.0, 0.0, l.vert_offset_correction];
-                let Some(hit) = scene.cast(origin, dir) else { continue };
+                let Some(hit) = scene.cast(origin, dir) else {
+                    continue;
+                };
                 // Dual: every 5th ray also sees a surface 1.5 m behind, weaker: the last return.
                 let mut range = hit.range;
                 let mut refl = hit.reflectivity;
@@ -185,15 +210,31 @@ impl VelodyneSim {
                     continue;
                 }
                 blk.meas[s] = (raw as u16, refl);
-                let xyz = [origin[0] + range * dir[0], origin[1] + range * dir[1], origin[2] + range * dir[2]];
-                truth.push(Truth { block: b, slot: s, laser, xyz, range, reflectivity: refl, t_ns: t_rel, ret });
+                let xyz = [
+                    origin[0] + range * dir[0],
+                    origin[1] + range * dir[1],
+                    origin[2] + range * dir[2],
+                ];
+                truth.push(Truth {
+                    block: b,
+                    slot: s,
+                    laser,
+                    xyz,
+                    range,
+                    reflectivity: refl,
+                    t_ns: t_rel,
+                    ret,
+                });
             }
         }
         let factory = if self.model.is_hdl64() {
             // HDL-64E: status type / value bytes instead of factory bytes.
             [0, 0]
         } else {
-            [self.mode.byte(), self.product_id.or(self.model.product_id()).unwrap_or(0)]
+            [
+                self.mode.byte(),
+                self.product_id.or(self.model.product_id()).unwrap_or(0),
+            ]
         };
         self.packet_index += 1;
         (host_ns, encode_data_packet(&blocks, toh_us, factory))

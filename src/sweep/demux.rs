@@ -43,7 +43,10 @@ pub struct Demux {
 
 impl core::fmt::Debug for Demux {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        f.debug_struct("Demux").field("sensors", &self.sensors.len()).field("stats", &self.stats).finish()
+        f.debug_struct("Demux")
+            .field("sensors", &self.sensors.len())
+            .field("stats", &self.stats)
+            .finish()
     }
 }
 
@@ -51,7 +54,12 @@ impl Demux {
     /// A demultiplexer; `config_for` is called once per new sensor address. With `data_port`
     /// set, data packets to other ports are ignored (position packets are always taken).
     pub fn new(config_for: Box<ConfigFor>, data_port: Option<u16>) -> Self {
-        Self { sensors: Vec::new(), config_for, data_port, stats: DemuxStats::default() }
+        Self {
+            sensors: Vec::new(),
+            config_for,
+            data_port,
+            stats: DemuxStats::default(),
+        }
     }
 
     /// Counters.
@@ -95,7 +103,8 @@ impl Demux {
                     return Ok(None);
                 }
                 let cfg = (self.config_for)(src);
-                self.sensors.push((src, VelodyneStream::new(cfg), Vec::new()));
+                self.sensors
+                    .push((src, VelodyneStream::new(cfg), Vec::new()));
                 self.sensors.len() - 1
             }
         };
@@ -104,7 +113,9 @@ impl Demux {
         if !ports.contains(&dst_port) && ports.len() < 16 {
             ports.push(dst_port);
         }
-        stream.push(host_ns, payload, &mut |s, f| on_sweep(idx, s, f)).map_err(|e| (idx, e))?;
+        stream
+            .push(host_ns, payload, &mut |s, f| on_sweep(idx, s, f))
+            .map_err(|e| (idx, e))?;
         Ok(Some(idx))
     }
 
@@ -114,9 +125,14 @@ impl Demux {
     }
 
     /// Ends every stream, emitting their last sweeps.
-    pub fn finish(&mut self, on_sweep: &mut dyn FnMut(usize, &Sweep, &SensorFacts)) -> Result<(), (usize, StreamError)> {
+    pub fn finish(
+        &mut self,
+        on_sweep: &mut dyn FnMut(usize, &Sweep, &SensorFacts),
+    ) -> Result<(), (usize, StreamError)> {
         for (idx, (_, stream, _)) in self.sensors.iter_mut().enumerate() {
-            stream.finish(&mut |s, f| on_sweep(idx, s, f)).map_err(|e| (idx, e))?;
+            stream
+                .finish(&mut |s, f| on_sweep(idx, s, f))
+                .map_err(|e| (idx, e))?;
         }
         Ok(())
     }

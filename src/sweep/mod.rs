@@ -93,10 +93,25 @@ impl Organized {
         if sweep.columns.len() != sweep.points.len() {
             return None;
         }
-        let cols = sweep.columns.iter().map(|&c| c as usize + 1).max().unwrap_or(0);
-        let layers = if sweep.points.iter().any(|p| p.ret > 0) { 2 } else { 1 };
+        let cols = sweep
+            .columns
+            .iter()
+            .map(|&c| c as usize + 1)
+            .max()
+            .unwrap_or(0);
+        let layers = if sweep.points.iter().any(|p| p.ret > 0) {
+            2
+        } else {
+            1
+        };
         let n = layers * rows * cols;
-        let mut out = Self { rows, cols, layers, points: vec![Point::default(); n], valid: vec![false; n] };
+        let mut out = Self {
+            rows,
+            cols,
+            layers,
+            points: vec![Point::default(); n],
+            valid: vec![false; n],
+        };
         for (p, &c) in sweep.points.iter().zip(&sweep.columns) {
             let (layer, row) = (usize::from(p.ret.min(1)), usize::from(p.ring));
             if row >= rows || layer >= layers {

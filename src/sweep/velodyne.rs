@@ -19,7 +19,9 @@
 use super::Sweep;
 use crate::calib::{builtin, VelodyneCalibration};
 use crate::decode::{DecodeError, DecodeOptions, VelodyneDecoder};
-use crate::model::velodyne::{ReturnMode, VelodyneModel, BLOCKS, DATA_PACKET_LEN, POSITION_PACKET_LEN};
+use crate::model::velodyne::{
+    ReturnMode, VelodyneModel, BLOCKS, DATA_PACKET_LEN, POSITION_PACKET_LEN,
+};
 use crate::time::{complete_toh, toh_delta_us, ClockSource};
 use crate::wire::nmea::{parse_rmc, Rmc};
 use crate::wire::velodyne::{DataPacket, PositionPacket, PpsState};
@@ -216,7 +218,10 @@ impl VelodyneStream {
     }
 
     /// Ends the stream: decodes packets still held for detection and emits the last sweep.
-    pub fn finish(&mut self, on_sweep: &mut dyn FnMut(&Sweep, &SensorFacts)) -> Result<(), StreamError> {
+    pub fn finish(
+        &mut self,
+        on_sweep: &mut dyn FnMut(&Sweep, &SensorFacts),
+    ) -> Result<(), StreamError> {
         if self.decoder.is_none() && !self.pending.is_empty() {
             self.detect()?;
             self.replay_pending(on_sweep);
@@ -291,8 +296,12 @@ impl VelodyneStream {
     }
 
     fn detect(&mut self) -> Result<(), StreamError> {
-        let Some((_, first)) = self.pending.first() else { return Ok(()) };
-        let Ok(p) = DataPacket::new(&first[..]) else { return Ok(()) };
+        let Some((_, first)) = self.pending.first() else {
+            return Ok(());
+        };
+        let Ok(p) = DataPacket::new(&first[..]) else {
+            return Ok(());
+        };
         let hdl64 = p.looks_like_hdl64();
         let mode = if hdl64 {
             if p.looks_dual() {
@@ -318,7 +327,11 @@ impl VelodyneStream {
             }
         }
         self.facts.period_us = period;
-        let id_model = if hdl64 { None } else { VelodyneModel::from_product_id(p.factory_product()) };
+        let id_model = if hdl64 {
+            None
+        } else {
+            VelodyneModel::from_product_id(p.factory_product())
+        };
         let (model, how) = if let Some(m) = self.cfg.model {
             (m, format!("named by the user ({})", m.id()))
         } else {
@@ -332,7 +345,12 @@ impl VelodyneStream {
     }
 
     fn build_decoder(&mut self, model: VelodyneModel, mode: ReturnMode) -> Result<(), StreamError> {
-        let calib = match self.cfg.calibrations.iter().find(|c| c.num_lasers() == model.lasers()) {
+        let calib = match self
+            .cfg
+            .calibrations
+            .iter()
+            .find(|c| c.num_lasers() == model.lasers())
+        {
             Some(c) => c.clone(),
             None => match self.cfg.calibrations.first() {
                 Some(c) => {
@@ -342,7 +360,9 @@ impl VelodyneStream {
                         found: c.num_lasers(),
                     }))
                 }
-                None => builtin::builtin(model).ok_or(StreamError::NeedsCalibration(model.name()))?,
+                None => {
+                    builtin::builtin(model).ok_or(StreamError::NeedsCalibration(model.name()))?
+                }
             },
         };
         self.facts.calibration = calib.source.clone();
@@ -359,15 +379,26 @@ impl VelodyneStream {
         match self.gps {
             Some(g) if g.valid => {
                 let est = g.rmc_utc_ns + toh_delta_us(g.toh_us, toh_us) * 1_000;
-                let clock = if g.pps_locked { ClockSource::SensorGps } else { ClockSource::Host };
+                let clock = if g.pps_locked {
+                    ClockSource::SensorGps
+                } else {
+                    ClockSource::Host
+                };
                 (complete_toh(toh_us, est), clock)
             }
             _ => (complete_toh(toh_us, host_ns), ClockSource::Host),
         }
     }
 
-    fn decode_packet(&mut self, host_ns: i64, p: &DataPacket<'_>, on_sweep: &mut dyn FnMut(&Sweep, &SensorFacts)) {
-        let Some(dec) = self.decoder.as_ref() else { return };
+    fn decode_packet(
+        &mut self,
+        host_ns: i64,
+        p: &DataPacket<'_>,
+        on_sweep: &mut dyn FnMut(&Sweep, &SensorFacts),
+    ) {
+        let Some(dec) = self.decoder.as_ref() else {
+            return;
+        };
         let model = dec.model();
         // A return-mode change (factory byte) rebuilds the decoder.
         if !model.is_hdl64() {
@@ -382,7 +413,9 @@ impl VelodyneStream {
                 }
             }
         }
-        let Some(dec) = self.decoder.as_ref() else { return };
+        let Some(dec) = self.decoder.as_ref() else {
+            return;
+        };
         if dec.check_layout(p).is_err() {
             self.stats.malformed += 1;
             return;
@@ -414,7 +447,9 @@ impl VelodyneStream {
             }
         }
         let cut = self.cfg.cut_angle;
-        let rel = |az: u16| -> u16 { ((u32::from(az) + 36_000 - u32::from(cut) % 36_000) % 36_000) as u16 };
+        let rel = |az: u16| -> u16 {
+            ((u32::from(az) + 36_000 - u32::from(cut) % 36_000) % 36_000) as u16
+        };
         let mut last_rel = self.prev.map(|p| p.rel_az);
         let mut seg_start = 0usize;
         let mut g = 0usize;
@@ -439,7 +474,10 @@ impl VelodyneStream {
         }
         self.cur.last_azimuth = p.azimuth(BLOCKS - 1);
         self.stats.data_packets += 1;
-        self.prev = Some(Prev { toh_us: toh, rel_az: last_rel.unwrap_or(0) });
+        self.prev = Some(Prev {
+            toh_us: toh,
+            rel_az: last_rel.unwrap_or(0),
+        });
     }
 
     fn add_segment(
@@ -450,7 +488,9 @@ impl VelodyneStream {
         first_firing_ns: i64,
         clock: ClockSource,
     ) {
-        let Some(dec) = self.decoder.as_ref() else { return };
+        let Some(dec) = self.decoder.as_ref() else {
+            return;
+        };
         let seg_t0 = i64::from(dec.block_time_ns(blocks.start));
         if !self.sweep_open {
             self.cur.clear();
@@ -481,13 +521,14 @@ impl VelodyneStream {
         }
         let cols = dec.block_column(blocks.end - 1) + 1 - dec.block_column(blocks.start);
         // VLP-16: each block holds two firing columns.
-        let per_block_extra = if matches!(dec.model(), VelodyneModel::Vlp16 | VelodyneModel::PuckHiRes)
-            && !dec.mode().is_dual()
-        {
-            1
-        } else {
-            0
-        };
+        let per_block_extra =
+            if matches!(dec.model(), VelodyneModel::Vlp16 | VelodyneModel::PuckHiRes)
+                && !dec.mode().is_dual()
+            {
+                1
+            } else {
+                0
+            };
         self.cur.columns_count += (cols + per_block_extra) as u32;
         self.stats.points += (self.cur.points.len() - before) as u64;
         self.cur.packets += 1;
@@ -515,8 +556,11 @@ fn choose_model(
     period_us: Option<f64>,
 ) -> Option<(VelodyneModel, String)> {
     use VelodyneModel::*;
-    let candidates: &[VelodyneModel] =
-        if hdl64 { &[Hdl64eS2, Hdl64eS3] } else { &[Vlp16, Hdl32e, Vlp32c, Vls128] };
+    let candidates: &[VelodyneModel] = if hdl64 {
+        &[Hdl64eS2, Hdl64eS3]
+    } else {
+        &[Vlp16, Hdl32e, Vlp32c, Vls128]
+    };
     let fits = |m: VelodyneModel, d: f64| {
         let p = m.packet_period_ns(mode) / 1_000.0;
         m.supports(mode) && (p - d).abs() <= 0.03 * p
@@ -525,7 +569,14 @@ fn choose_model(
         Some(d) => {
             if let Some(m) = id_model {
                 if fits(m, d) {
-                    return Some((m, format!("product id {:#04x} ({}), confirmed by the {d:.0} µs packet period", m.product_id().unwrap_or(0), m.name())));
+                    return Some((
+                        m,
+                        format!(
+                            "product id {:#04x} ({}), confirmed by the {d:.0} µs packet period",
+                            m.product_id().unwrap_or(0),
+                            m.name()
+                        ),
+                    ));
                 }
             }
             if let Some(&m) = candidates.iter().find(|&&m| fits(m, d)) {
@@ -545,9 +596,21 @@ fn choose_model(
         }
         None => {
             if hdl64 {
-                Some((Hdl64eS2, "HDL-64E block layout; one packet only, S2 assumed".to_string()))
+                Some((
+                    Hdl64eS2,
+                    "HDL-64E block layout; one packet only, S2 assumed".to_string(),
+                ))
             } else {
-                id_model.map(|m| (m, format!("product id {:#04x} ({}), not checked against the cadence (one packet)", m.product_id().unwrap_or(0), m.name())))
+                id_model.map(|m| {
+                    (
+                        m,
+                        format!(
+                            "product id {:#04x} ({}), not checked against the cadence (one packet)",
+                            m.product_id().unwrap_or(0),
+                            m.name()
+                        ),
+                    )
+                })
             }
         }
     }
@@ -560,14 +623,38 @@ mod tests {
     #[test]
     fn cadence_overrides_a_wrong_product_id() {
         // 0x21 says HDL-32E but packets come every 1327 µs: a VLP-16.
-        let (m, _) = choose_model(Some(VelodyneModel::Hdl32e), false, ReturnMode::Strongest, Some(1327.0)).unwrap();
+        let (m, _) = choose_model(
+            Some(VelodyneModel::Hdl32e),
+            false,
+            ReturnMode::Strongest,
+            Some(1327.0),
+        )
+        .unwrap();
         assert_eq!(m, VelodyneModel::Vlp16);
-        let (m, _) = choose_model(Some(VelodyneModel::Hdl32e), false, ReturnMode::Strongest, Some(553.0)).unwrap();
+        let (m, _) = choose_model(
+            Some(VelodyneModel::Hdl32e),
+            false,
+            ReturnMode::Strongest,
+            Some(553.0),
+        )
+        .unwrap();
         assert_eq!(m, VelodyneModel::Hdl32e);
         // VLP-16 dual and VLP-32C single share 663.5 µs; the id and the mode settle it.
-        let (m, _) = choose_model(Some(VelodyneModel::Vlp16), false, ReturnMode::Dual, Some(664.0)).unwrap();
+        let (m, _) = choose_model(
+            Some(VelodyneModel::Vlp16),
+            false,
+            ReturnMode::Dual,
+            Some(664.0),
+        )
+        .unwrap();
         assert_eq!(m, VelodyneModel::Vlp16);
-        let (m, _) = choose_model(Some(VelodyneModel::Vlp32c), false, ReturnMode::Strongest, Some(664.0)).unwrap();
+        let (m, _) = choose_model(
+            Some(VelodyneModel::Vlp32c),
+            false,
+            ReturnMode::Strongest,
+            Some(664.0),
+        )
+        .unwrap();
         assert_eq!(m, VelodyneModel::Vlp32c);
         let (m, _) = choose_model(None, true, ReturnMode::Strongest, Some(345.6)).unwrap();
         assert_eq!(m, VelodyneModel::Hdl64eS3);

@@ -36,12 +36,17 @@ pub enum NmeaError {
 
 /// Parses `$xxRMC,hhmmss[.ss],A,ddmm.mmmm,N,dddmm.mmmm,W,speed,course,ddmmyy,...*CS`.
 pub fn parse_rmc(sentence: &[u8]) -> Result<Rmc, NmeaError> {
-    let s = core::str::from_utf8(sentence).map_err(|_| NmeaError::NotRmc)?.trim();
+    let s = core::str::from_utf8(sentence)
+        .map_err(|_| NmeaError::NotRmc)?
+        .trim();
     let body = s.strip_prefix('$').ok_or(NmeaError::NotRmc)?;
     let (body, stated) = match body.split_once('*') {
         Some((b, cs)) => {
             let cs = cs.get(..2).ok_or(NmeaError::Field(99))?;
-            (b, Some(u8::from_str_radix(cs, 16).map_err(|_| NmeaError::Field(99))?))
+            (
+                b,
+                Some(u8::from_str_radix(cs, 16).map_err(|_| NmeaError::Field(99))?),
+            )
         }
         None => (body, None),
     };
@@ -151,10 +156,16 @@ mod tests {
     #[test]
     fn parses_the_monterey_sentence() {
         // From monterey-first-100-packets.pcap: 2012-12-11 22:06:32 UTC.
-        let r = parse_rmc(b"$GPRMC,220632,A,3707.8324,N,12139.2864,W,000.0,144.7,111212,013.8,E,D*09\r\n").unwrap();
+        let r = parse_rmc(
+            b"$GPRMC,220632,A,3707.8324,N,12139.2864,W,000.0,144.7,111212,013.8,E,D*09\r\n",
+        )
+        .unwrap();
         // 2012-12-11 = 15685 days after 1970-01-01.
         assert_eq!(days_from_civil(2012, 12, 11), 15685);
-        assert_eq!(r.utc_ns, (15685 * 86_400 + 22 * 3600 + 6 * 60 + 32) * 1_000_000_000);
+        assert_eq!(
+            r.utc_ns,
+            (15685 * 86_400 + 22 * 3600 + 6 * 60 + 32) * 1_000_000_000
+        );
         assert!(r.valid);
         assert!((r.lat_deg.unwrap() - (37.0 + 7.8324 / 60.0)).abs() < 1e-12);
         assert!((r.lon_deg.unwrap() + (121.0 + 39.2864 / 60.0)).abs() < 1e-12);

@@ -37,11 +37,20 @@ impl<'a> DataPacket<'a> {
         for block in 0..BLOCKS {
             let off = block * BLOCK_LEN;
             if p.bank(block).is_none() {
-                return Err(WireError::BlockFlag { block, offset: off, found: b[off], found2: b[off + 1] });
+                return Err(WireError::BlockFlag {
+                    block,
+                    offset: off,
+                    found: b[off],
+                    found2: b[off + 1],
+                });
             }
             let az = p.u16_at(off + 2);
             if az > 36_000 {
-                return Err(WireError::Azimuth { block, offset: off + 2, found: az });
+                return Err(WireError::Azimuth {
+                    block,
+                    offset: off + 2,
+                    found: az,
+                });
             }
         }
         Ok(p)

@@ -9,7 +9,10 @@ pub fn captures() -> Option<PathBuf> {
     if p.join("golden").is_dir() {
         Some(p)
     } else {
-        eprintln!("SKIP: {} is absent: real-capture checks not run", p.display());
+        eprintln!(
+            "SKIP: {} is absent: real-capture checks not run",
+            p.display()
+        );
         None
     }
 }
@@ -17,10 +20,19 @@ pub fn captures() -> Option<PathBuf> {
 /// Reads a little-endian f32 dump of records of `fields` values.
 pub fn read_f32_records(path: &Path, fields: usize) -> Vec<Vec<f32>> {
     let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    assert_eq!(bytes.len() % (4 * fields), 0, "{}: size not a multiple of the record", path.display());
+    assert_eq!(
+        bytes.len() % (4 * fields),
+        0,
+        "{}: size not a multiple of the record",
+        path.display()
+    );
     bytes
         .chunks_exact(4 * fields)
-        .map(|r| r.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect())
+        .map(|r| {
+            r.chunks_exact(4)
+                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                .collect()
+        })
         .collect()
 }
 
@@ -29,7 +41,10 @@ pub fn datagrams(path: &Path) -> Vec<(i64, u16, Vec<u8>)> {
     let mut src = ringscan::source::pcap::PcapSource::open(path)
         .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let mut out = Vec::new();
-    while let Some(d) = src.next_datagram().unwrap_or_else(|e| panic!("{}: {e}", path.display())) {
+    while let Some(d) = src
+        .next_datagram()
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+    {
         out.push((d.time_ns, d.dst.port(), d.payload.to_vec()));
     }
     out
