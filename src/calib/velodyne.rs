@@ -84,7 +84,9 @@ impl VelodyneCalibration {
     pub fn validate(mut self) -> Result<Self, CalibError> {
         let n = self.lasers.len();
         if !matches!(n, 16 | 32 | 64 | 128) {
-            return Err(CalibError::Invalid(format!("expected 16, 32, 64 or 128 lasers, found {n}")));
+            return Err(CalibError::Invalid(format!(
+                "expected 16, 32, 64 or 128 lasers, found {n}"
+            )));
         }
         self.lasers.sort_by_key(|l| l.laser_id);
         for (i, l) in self.lasers.iter().enumerate() {
@@ -101,8 +103,16 @@ impl VelodyneCalibration {
                 ("dist_correction", l.dist_correction, MAX_CORRECTION_M),
                 ("dist_correction_x", l.dist_correction_x, MAX_CORRECTION_M),
                 ("dist_correction_y", l.dist_correction_y, MAX_CORRECTION_M),
-                ("vert_offset_correction", l.vert_offset_correction, MAX_CORRECTION_M),
-                ("horiz_offset_correction", l.horiz_offset_correction, MAX_CORRECTION_M),
+                (
+                    "vert_offset_correction",
+                    l.vert_offset_correction,
+                    MAX_CORRECTION_M,
+                ),
+                (
+                    "horiz_offset_correction",
+                    l.horiz_offset_correction,
+                    MAX_CORRECTION_M,
+                ),
                 ("focal_distance", l.focal_distance, 1000.0),
                 ("focal_slope", l.focal_slope, 1000.0),
             ];
