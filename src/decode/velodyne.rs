@@ -52,12 +52,23 @@ struct Laser {
     ring: u16,
 }
 
-/// HDL-64E style corrections for one laser (metres).
+/// HDL-64E style corrections for one laser (metres), for [`advanced_xyz`].
+///
+/// The far distance correction and the vertical offset live in [`Laser`]
+/// (`dist_correction`, `vert_offset`).
 #[derive(Clone, Copy, Debug, Default)]
 struct Advanced {
+    /// Near two-point correction along the Velodyne x axis (`dist_correction_x`).
     dist_x: f32,
+    /// Near two-point correction along the Velodyne y axis (`dist_correction_y`).
     dist_y: f32,
+    /// Horizontal offset of the beam origin (`horiz_offset_correction`).
     horiz_offset: f32,
+    /// Whether the two-point correction applies to this laser: velodyne_decoder 3.1.0's rule
+    /// `dist_correction_x != 0 && dist_correction_y != 0` (`calibration.cpp`; the yaml key
+    /// `two_pt_correction_available` is not read by it). A laser whose near corrections equal
+    /// its far one (how ringscan's parsers encode "no two-point correction", see `calib`) is
+    /// left out: the interpolation would give exactly `dist_correction` anyway.
     two_point: bool,
 }
 
@@ -156,7 +167,10 @@ impl VelodyneDecoder {
                     dist_x: l.dist_correction_x as f32,
                     dist_y: l.dist_correction_y as f32,
                     horiz_offset: l.horiz_offset_correction as f32,
-                    two_point: l.dist_correction_x != 0.0 || l.dist_correction_y != 0.0,
+                    two_point: l.dist_correction_x != 0.0
+                        && l.dist_correction_y != 0.0
+                        && (l.dist_correction_x != l.dist_correction
+                            || l.dist_correction_y != l.dist_correction),
                 })
                 .collect()
         });
@@ -372,7 +386,7 @@ impl VelodyneDecoder {
             }
             Some(adv) => {
                 let a = adv.get(usize::from(sl.laser))?;
-                advanced_xyz(d, laser, a, ca, sa)
+                advanced_xyz(f32::from(raw) * self.resolution, laser, a, ca, sa)
             }
         };
         let pt = Point {
@@ -472,31 +486,87 @@ fn small_sin_cos(x: f64) -> (f64, f64) {
     }
 }
 
-/// HDL-64E correction (velodyne_decoder's convention, FORMATS.md §5.1): two-point distance
-/// correction, vertical and horizontal beam offsets. `ca`, `sa`: cos / sin of the corrected
-/// azimuth. Returns the point in the REP 103 frame.
+/// Far calibration point of the HDL-64E two-point distance correction, metres.
+const TWO_POINT_FAR_M: f32 = 25.04;
+/// Near calibration point along the Velodyne x axis, metres.
+const TWO_POINT_NEAR_X_M: f32 = 2.40;
+/// Near calibration point along the Velodyne y axis, metres.
+const TWO_POINT_NEAR_Y_M: f32 = 1.93;
+
+/// HDL-64E S2 / S3 point from a measured distance, following velodyne_decoder 3.1.0
+/// (`src/packet_decoder.cpp`, `PacketDecoder::unpackPoint`, advanced branch), which follows the
+/// HDL-64E S3 manual's formulas with two documented departures. Per laser: far distance
+/// correction `dc`, near corrections `dcx`, `dcy`, horizontal and vertical offsets `h`, `v`,
+/// elevation ω; α = azimuth − rotational correction (`ca`, `sa` = cos α, sin α); `measured_m` =
+/// raw distance × distance resolution, metres (no correction yet):
+///
+/// ```text
+/// corr_x = corr_y = corr_z = dc
+/// if two_point && measured < 25.04:                        # velodyne_decoder: near range only
+///     xy = (measured + dc)·cos ω                           # no offsets here (S3 manual order)
+///     kx = (|xy·sin α| − 2.40) / (25.04 − 2.40)
+///     ky = (|xy·cos α| − 1.93) / (25.04 − 1.93)
+///     corr_x = kx·dc + (1 − kx)·dcx
+///     corr_y = ky·dc + (1 − ky)·dcy
+///     corr_z = (corr_x + corr_y) / 2                       # manual: corr_y; velodyne_decoder: mean
+/// x_v = (measured + corr_x)·cos ω·sin α − h·cos α           # Velodyne frame: x right, y forward
+/// y_v = (measured + corr_y)·cos ω·cos α + h·sin α
+/// z_v = (measured + corr_z)·sin ω + v                      # offset added last, not v·cos ω
+/// (x, y, z) = (y_v, −x_v, z_v)                             # REP 103
+/// ```
+///
+/// Differences from the other references, all deliberate: the ROS driver (`rawdata.cc`) uses
+/// `xy = d·cos ω − v·sin ω` and the offsets inside `xx`/`yy`, extrapolates the two-point line
+/// beyond 25.04 m and uses `z = d_y·sin ω + v·cos ω`; VeloView differs again. With every
+/// correction zero the formula is the plain one (`z = d·sin ω + v`), so tables with only a
+/// vertical offset give the same points on both paths. The two-point line is not continuous at
+/// 25.04 m (e.g. laser 0 of `64e_s2.1-sztaki.yaml` jumps by 3.7 mm between raw 12519 and 12520),
+/// hence `measured_m` is the f32 product `raw · resolution` exactly as velodyne_decoder forms it.
+/// All arithmetic in f32, like velodyne_decoder (f64 changes the points by < 0.01 mm).
 #[inline]
-fn advanced_xyz(d: f32, l: &Laser, a: &Advanced, ca: f32, sa: f32) -> (f32, f32, f32) {
+fn advanced_xyz(measured_m: f32, l: &Laser, a: &Advanced, ca: f32, sa: f32) -> (f32, f32, f32) {
     let (cv, sv) = (l.cos_vert, l.sin_vert);
-    let voff = l.vert_offset;
-    let hoff = a.horiz_offset;
-    // Velodyne frame: x right, y forward.
-    let xy = d * cv - voff * sv;
-    let (mut corr_x, mut corr_y) = (0.0f32, 0.0f32);
-    if a.two_point {
-        let xx = (xy * sa - hoff * ca).abs();
-        let yy = (xy * ca + hoff * sa).abs();
-        let dc = l.dist_correction;
-        corr_x = (dc - a.dist_x) * (xx - 2.4) / (25.04 - 2.4) + a.dist_x - dc;
-        corr_y = (dc - a.dist_y) * (yy - 1.93) / (25.04 - 1.93) + a.dist_y - dc;
+    let dc = l.dist_correction;
+    let (mut corr_x, mut corr_y, mut corr_z) = (dc, dc, dc);
+    if a.two_point && measured_m < TWO_POINT_FAR_M {
+        let xy = (measured_m + dc) * cv;
+        let kx = ((xy * sa).abs() - TWO_POINT_NEAR_X_M) / (TWO_POINT_FAR_M - TWO_POINT_NEAR_X_M);
+        let ky = ((xy * ca).abs() - TWO_POINT_NEAR_Y_M) / (TWO_POINT_FAR_M - TWO_POINT_NEAR_Y_M);
+        corr_x = kx * dc + (1.0 - kx) * a.dist_x;
+        corr_y = ky * dc + (1.0 - ky) * a.dist_y;
+        corr_z = 0.5 * (corr_x + corr_y);
     }
-    let dx = d + corr_x;
-    let xy_x = dx * cv - voff * sv;
-    let xv = xy_x * sa - hoff * ca;
-    let dy = d + corr_y;
-    let xy_y = dy * cv - voff * sv;
-    let yv = xy_y * ca + hoff * sa;
-    let zv = dy * sv + voff * cv;
-    // REP 103: x forward = Velodyne y, y left = −Velodyne x.
+    let hoff = a.horiz_offset;
+    let xv = (measured_m + corr_x) * cv * sa - hoff * ca;
+    let yv = (measured_m + corr_y) * cv * ca + hoff * sa;
+    let zv = (measured_m + corr_z) * sv + l.vert_offset;
     (yv, -xv, zv)
+}
+
+/// HDL-64E corrected intensity (HDL-64E S3 manual App. F "focal" formula, in
+/// velodyne_decoder 3.1.0's form, `PacketDecoder::unpackPoint`):
+///
+/// ```text
+/// I = I_raw + 256·focal_slope·|(1 − focal_distance/131)² − (1 − raw_distance/65535)²|
+/// I = clamp(I, min_intensity, max_intensity)
+/// ```
+///
+/// `focal_distance` in metres (ringscan's unit; the manual's `focalDistance/13100` with
+/// centimetres is the same number; the ROS driver divides a metre value by 13100, its issue
+/// #499). `raw_distance` is the packet's u16 distance, not metres. velodyne_decoder emits this
+/// as the point intensity for HDL-64E calibrations; ringscan keeps the raw reflectivity in
+/// [`Point::intensity`] and offers this as an extra (f32, like the reference).
+pub fn corrected_intensity(
+    laser: &crate::calib::LaserCalibration,
+    raw_intensity: u8,
+    raw_distance: u16,
+) -> f32 {
+    let focal = 1.0 - laser.focal_distance as f32 / 131.0;
+    let dist = 1.0 - f32::from(raw_distance) / 65_535.0;
+    let i = f32::from(raw_intensity)
+        + 256.0 * laser.focal_slope as f32 * (focal * focal - dist * dist).abs();
+    i.clamp(
+        f32::from(laser.min_intensity),
+        f32::from(laser.max_intensity),
+    )
 }

@@ -220,6 +220,18 @@ impl VelodyneModel {
         }
     }
 
+    /// In dual-return mode, whether the first half of a firing's blocks carries the
+    /// **strongest** return and the second half the last one (else the other way round).
+    ///
+    /// - HDL-64E S2 / S3: blocks `i` and `i + 2` (`i % 4 ∈ {0, 1}`) are the two returns of one
+    ///   firing; velodyne_decoder 3.1.0 (`PacketDecoder::unpack_hdl64e`) reads block `i` as the
+    ///   strongest and block `i + 2` as the last return: `true`.
+    /// - VLP-16, Puck Hi-Res, HDL-32E, VLP-32C: even blocks last, odd blocks strongest (VLP-16 and
+    ///   VLP-32C manuals §9.3.2; velodyne_decoder `unpack_16_32_beam`): `false`.
+    pub fn dual_strongest_first(self) -> bool {
+        self.is_hdl64()
+    }
+
     /// Laser id measured in `slot` of a block whose position in its firing is `bank`
     /// (0 = upper / first bank; HDL-64E lower = 1; VLS-128 banks 0..3).
     #[inline]

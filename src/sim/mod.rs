@@ -3,6 +3,7 @@
 //! Knows nothing of decoding: it writes the wire formats from their specification, so a
 //! round trip through the decoder checks both against the scene's ground truth.
 
+pub mod hdl64;
 pub mod net;
 pub mod scene;
 pub mod velodyne;

@@ -179,6 +179,39 @@ impl VelodyneSim {
                     continue;
                 };
                 let az = self.azimuth_at(t_packet_ns + t_rel).to_radians() - l.rot_correction;
+                let second_surface = (self.packet_index as usize * 7 + b / bpf * 3 + s) % 5 == 0;
+                if self.calib.advanced {
+                    // HDL-64E corrections: the raw distance whose corrected point is on the
+                    // scene (sim::hdl64); dual: a weaker surface 1.5 m behind, as below.
+                    let Some(first) = super::hdl64::measure(l, az, res, scene) else {
+                        continue;
+                    };
+                    let (m, ret) = if dual && is_last_block {
+                        if !second_surface {
+                            blk.meas[s] = (first.raw, first.reflectivity);
+                            continue;
+                        }
+                        let Some(m) = super::hdl64::behind(l, az, res, &first, 1.5) else {
+                            continue;
+                        };
+                        (m, 1)
+                    } else {
+                        (first, 0)
+                    };
+                    blk.meas[s] = (m.raw, m.reflectivity);
+                    let range = m.xyz.iter().map(|v| v * v).sum::<f64>().sqrt();
+                    truth.push(Truth {
+                        block: b,
+                        slot: s,
+                        laser,
+                        xyz: m.xyz,
+                        range,
+                        reflectivity: m.reflectivity,
+                        t_ns: t_rel,
+                        ret,
+                    });
+                    continue;
+                }
                 let (sw, cw) = l.vert_correction.sin_cos();
                 let (sa, ca) = az.sin_cos();
                 let dir = [cw * ca, -cw * sa, sw];
@@ -190,7 +223,6 @@ impl VelodyneSim {
                 let mut range = hit.range;
                 let mut refl = hit.reflectivity;
                 let mut ret = 0u8;
-                let second_surface = (self.packet_index as usize * 7 + b / bpf * 3 + s) % 5 == 0;
                 if dual && is_last_block {
                     if !second_surface {
                         // Same as the strongest block: the decoder emits one point, whose truth
