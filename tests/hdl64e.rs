@@ -453,7 +453,6 @@ fn timing_sign_unverified_s3_offsets_follow_velodyne_decoder_table() {
 /// other way round: even = last). Points of a slot: the last return first, then the strongest;
 /// equal distances give one point (return 0) with the strongest block's reflectivity.
 #[test]
-#[ignore = "needs the decoder to read the HDL-64E dual roles from VelodyneModel::dual_strongest_first (decode_with)"]
 fn hdl64e_dual_block_i_is_strongest_and_block_i_plus_2_is_last() {
     let calib = hand_calibration();
     let mut blocks = [Block::default(); 12];

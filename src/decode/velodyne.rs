@@ -333,10 +333,16 @@ impl VelodyneDecoder {
         let mut b = start;
         while b < end {
             if dual {
-                // Blocks [b, b+half) carry the last return, [b+half, b+2·half) the strongest.
+                // Blocks [b, b+half) and [b+half, b+2·half) carry the two returns: last then
+                // strongest, or strongest then last (HDL-64E, `dual_strongest_first`).
                 for k in 0..half {
                     if b + half + k < BLOCKS {
-                        self.block_dual(p, b + k, b + half + k, &rot, t_base_ns, &mut n, &mut emit);
+                        let (last, strongest) = if self.model.dual_strongest_first() {
+                            (b + half + k, b + k)
+                        } else {
+                            (b + k, b + half + k)
+                        };
+                        self.block_dual(p, last, strongest, &rot, t_base_ns, &mut n, &mut emit);
                     }
                 }
             } else {

@@ -170,8 +170,9 @@ impl VelodyneSim {
             blk.flag = [FLAG_UPPER, FLAG_LOWER, FLAG_BANK2, FLAG_BANK3][bank];
             let t_block = t_packet_ns + self.model.firing(self.mode, b, 0).0;
             blk.azimuth = azimuth_cdeg(self.azimuth_at(t_block));
-            // In dual mode, blocks [g, g+half) hold the last return, [g+half, g+bpf) the strongest.
-            let is_last_block = dual && (b % bpf) < bpf / 2;
+            // In dual mode, blocks [g, g+half) hold the last return, [g+half, g+bpf) the
+            // strongest; the other way round where the model sends the strongest first (HDL-64E).
+            let is_last_block = dual && ((b % bpf) < bpf / 2) != self.model.dual_strongest_first();
             for s in 0..SLOTS {
                 let (t_rel, _) = self.model.firing(self.mode, b, s);
                 let laser = self.model.laser_of(bank, s);
