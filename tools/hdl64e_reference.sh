@@ -9,9 +9,8 @@
 #
 # Usage: tools/hdl64e_reference.sh [SECONDS]   (default 0.3 s of sensor time per case)
 # Exit code: 0 when every case agrees within the tolerances printed, 1 otherwise.
-# Known: the dual cases fail while the decoder and the simulator read HDL-64E dual blocks as
-# (last, strongest); velodyne_decoder reads block i as the strongest and i + 2 as the last (see
-# VelodyneModel::dual_strongest_first and the ignored test in tests/hdl64e.rs).
+# HDL-64E dual: velodyne_decoder reads block i as the strongest and i + 2 as the last, and so
+# does ringscan (VelodyneModel::dual_strongest_first).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 root=$PWD
