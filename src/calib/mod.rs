@@ -25,6 +25,7 @@
 //!   `maxIntensity_`).
 
 pub mod builtin;
+pub mod ouster;
 pub mod ros_yaml;
 pub mod velodyne;
 pub mod veloview_xml;

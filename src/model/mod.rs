@@ -2,6 +2,7 @@
 //!
 //! Knows nothing of bytes or I/O.
 
+pub mod ouster;
 pub mod velodyne;
 
 pub use velodyne::{ReturnMode, VelodyneModel};

@@ -1,0 +1,307 @@
+//! Ouster packet formats as data: profiles, pixel field layouts, header variants.
+//!
+//! Source for every offset: ouster-sdk `ouster_core/src/parsing.cpp` (tables
+//! `LEGACY_FIELD_INFO`, `SINGLE_FIELD_INFO`, `DUAL_FIELD_INFO`, `LB_FIELD_INFO`,
+//! `FIVE_WORD_PIXEL_INFO`; `PacketFormat::Impl`), cross-checked with the FW 1.14 / 2.x user
+//! guides (FORMATS.md §5.2). One decoder serves every profile by reading these tables.
+
+use core::fmt;
+
+/// A pixel field: where it sits in the pixel, how wide it is, how it is scaled.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Field {
+    /// Bit offset from the pixel's first byte (little-endian bit order).
+    pub bit: u16,
+    /// Width in bits (≤ 32).
+    pub width: u8,
+    /// Left shift applied after extraction (RNG15 ranges are in 8 mm units: ≪ 3; NIR8 ≪ 4).
+    pub shift: u8,
+}
+
+impl Field {
+    const fn new(bit: u16, width: u8, shift: u8) -> Self {
+        Self { bit, width, shift }
+    }
+}
+
+/// Which header / footer layout the lidar packets use.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum HeaderKind {
+    /// No packet header or footer; each column carries timestamp, measurement id, frame id,
+    /// encoder count and a trailing status word (FW < 2.2 or profile LEGACY).
+    Legacy,
+    /// 32-byte packet header (packet_type u16 @0, frame_id u16 @2, init_id u24 @4,
+    /// prod_sn u40 @7, …) and 32-byte footer (CRC-64 in the last 8 bytes from FW 2.5).
+    Standard,
+    /// FUSA header (FW 3.1+ FUSA profiles): packet_type u8 @0, init_id u24 @1,
+    /// frame_id u32 @4, alert_flags @8, prod_sn u40 @11; footer without CRC.
+    Fusa,
+}
+
+/// A lidar UDP profile (`udp_profile_lidar`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Profile {
+    /// LEGACY: 12-byte pixels, per-column header with encoder count and status trailer.
+    Legacy,
+    /// RNG19_RFL8_SIG16_NIR16 (single return, 12-byte pixels).
+    Rng19Rfl8Sig16Nir16,
+    /// RNG19_RFL8_SIG16_NIR16_DUAL (16-byte pixels).
+    Rng19Rfl8Sig16Nir16Dual,
+    /// RNG15_RFL8_NIR8 (low data rate, 4-byte pixels).
+    Rng15Rfl8Nir8,
+    /// RNG15_RFL8_NIR8_DUAL (8-byte pixels).
+    Rng15Rfl8Nir8Dual,
+    /// FUSA_RNG15_RFL8_NIR8_DUAL (8-byte pixels, FUSA header).
+    FusaRng15Rfl8Nir8Dual,
+    /// FIVE_WORD_PIXEL (20-byte pixels, dual).
+    FiveWordPixel,
+    /// RNG15_RFL8_WIN8 (4-byte pixels).
+    Rng15Rfl8Win8,
+}
+
+/// The fields of one profile (None where the profile lacks the field).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Layout {
+    /// Bytes per pixel.
+    pub pixel_bytes: usize,
+    /// Range of the first return, mm after the shift.
+    pub range: Field,
+    /// Flags of the first return.
+    pub flags: Option<Field>,
+    /// Reflectivity of the first return.
+    pub reflectivity: Field,
+    /// Signal photons of the first return.
+    pub signal: Option<Field>,
+    /// Near-infrared (ambient) photons.
+    pub near_ir: Option<Field>,
+    /// Range of the second return.
+    pub range2: Option<Field>,
+    /// Flags of the second return.
+    pub flags2: Option<Field>,
+    /// Reflectivity of the second return.
+    pub reflectivity2: Option<Field>,
+    /// Signal of the second return.
+    pub signal2: Option<Field>,
+}
+
+/// Every profile, for iteration.
+pub const ALL_PROFILES: [Profile; 8] = [
+    Profile::Legacy,
+    Profile::Rng19Rfl8Sig16Nir16,
+    Profile::Rng19Rfl8Sig16Nir16Dual,
+    Profile::Rng15Rfl8Nir8,
+    Profile::Rng15Rfl8Nir8Dual,
+    Profile::FusaRng15Rfl8Nir8Dual,
+    Profile::FiveWordPixel,
+    Profile::Rng15Rfl8Win8,
+];
+
+impl Profile {
+    /// The metadata name, e.g. `RNG19_RFL8_SIG16_NIR16_DUAL`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Legacy => "LEGACY",
+            Self::Rng19Rfl8Sig16Nir16 => "RNG19_RFL8_SIG16_NIR16",
+            Self::Rng19Rfl8Sig16Nir16Dual => "RNG19_RFL8_SIG16_NIR16_DUAL",
+            Self::Rng15Rfl8Nir8 => "RNG15_RFL8_NIR8",
+            Self::Rng15Rfl8Nir8Dual => "RNG15_RFL8_NIR8_DUAL",
+            Self::FusaRng15Rfl8Nir8Dual => "FUSA_RNG15_RFL8_NIR8_DUAL",
+            Self::FiveWordPixel => "FIVE_WORD_PIXEL",
+            Self::Rng15Rfl8Win8 => "RNG15_RFL8_WIN8",
+        }
+    }
+
+    /// Parses a metadata name (exact, as `udp_profile_lidar` writes it).
+    pub fn from_name(s: &str) -> Option<Self> {
+        ALL_PROFILES.into_iter().find(|p| p.name() == s)
+    }
+
+    /// Header layout.
+    pub fn header(self) -> HeaderKind {
+        match self {
+            Self::Legacy => HeaderKind::Legacy,
+            Self::FusaRng15Rfl8Nir8Dual => HeaderKind::Fusa,
+            _ => HeaderKind::Standard,
+        }
+    }
+
+    /// Whether the profile carries two returns.
+    pub fn is_dual(self) -> bool {
+        self.layout().range2.is_some()
+    }
+
+    /// The pixel layout.
+    pub fn layout(self) -> Layout {
+        let f = Field::new;
+        match self {
+            Self::Legacy => Layout {
+                pixel_bytes: 12,
+                range: f(0, 20, 0),
+                flags: Some(f(28, 4, 0)),
+                reflectivity: f(32, 8, 0),
+                signal: Some(f(48, 16, 0)),
+                near_ir: Some(f(64, 16, 0)),
+                range2: None,
+                flags2: None,
+                reflectivity2: None,
+                signal2: None,
+            },
+            Self::Rng19Rfl8Sig16Nir16 => Layout {
+                pixel_bytes: 12,
+                range: f(0, 19, 0),
+                flags: Some(f(19, 5, 0)),
+                reflectivity: f(32, 8, 0),
+                signal: Some(f(48, 16, 0)),
+                near_ir: Some(f(64, 16, 0)),
+                range2: None,
+                flags2: None,
+                reflectivity2: None,
+                signal2: None,
+            },
+            Self::Rng19Rfl8Sig16Nir16Dual => Layout {
+                pixel_bytes: 16,
+                range: f(0, 19, 0),
+                flags: Some(f(19, 5, 0)),
+                reflectivity: f(24, 8, 0),
+                signal: Some(f(64, 16, 0)),
+                near_ir: Some(f(96, 16, 0)),
+                range2: Some(f(32, 19, 0)),
+                flags2: Some(f(51, 5, 0)),
+                reflectivity2: Some(f(56, 8, 0)),
+                signal2: Some(f(80, 16, 0)),
+            },
+            Self::Rng15Rfl8Nir8 | Self::Rng15Rfl8Win8 => Layout {
+                pixel_bytes: 4,
+                range: f(0, 15, 3),
+                flags: Some(f(15, 1, 0)),
+                reflectivity: f(16, 8, 0),
+                signal: None,
+                near_ir: if self == Self::Rng15Rfl8Nir8 { Some(f(24, 8, 4)) } else { None },
+                range2: None,
+                flags2: None,
+                reflectivity2: None,
+                signal2: None,
+            },
+            Self::Rng15Rfl8Nir8Dual | Self::FusaRng15Rfl8Nir8Dual => Layout {
+                pixel_bytes: 8,
+                range: f(0, 15, 3),
+                flags: Some(f(15, 1, 0)),
+                reflectivity: f(16, 8, 0),
+                signal: None,
+                near_ir: Some(f(24, 8, 4)),
+                range2: Some(f(32, 15, 3)),
+                flags2: Some(f(47, 1, 0)),
+                reflectivity2: Some(f(48, 8, 0)),
+                signal2: None,
+            },
+            Self::FiveWordPixel => Layout {
+                pixel_bytes: 20,
+                range: f(0, 19, 0),
+                flags: Some(f(19, 5, 0)),
+                reflectivity: f(24, 8, 0),
+                signal: Some(f(64, 16, 0)),
+                near_ir: Some(f(96, 16, 0)),
+                range2: Some(f(32, 19, 0)),
+                flags2: Some(f(51, 5, 0)),
+                reflectivity2: Some(f(56, 8, 0)),
+                signal2: Some(f(80, 16, 0)),
+            },
+        }
+    }
+}
+
+impl fmt::Display for Profile {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Sizes of one lidar packet, from the profile and the metadata's column / pixel counts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PacketFormat {
+    /// The profile.
+    pub profile: Profile,
+    /// Columns per packet (16 typical).
+    pub columns_per_packet: usize,
+    /// Pixels per column = channels (16, 32, 64, 128).
+    pub pixels_per_column: usize,
+}
+
+impl PacketFormat {
+    /// Packet header bytes (0 for LEGACY).
+    pub fn header_bytes(&self) -> usize {
+        if self.profile.header() == HeaderKind::Legacy {
+            0
+        } else {
+            32
+        }
+    }
+
+    /// Footer bytes (0 for LEGACY).
+    pub fn footer_bytes(&self) -> usize {
+        self.header_bytes()
+    }
+
+    /// Column header bytes: LEGACY 16 (ts, measurement id, frame id, encoder), else 12.
+    pub fn column_header_bytes(&self) -> usize {
+        if self.profile == Profile::Legacy {
+            16
+        } else {
+            12
+        }
+    }
+
+    /// Column trailer bytes: LEGACY 4 (status word), else 0.
+    pub fn column_trailer_bytes(&self) -> usize {
+        if self.profile == Profile::Legacy {
+            4
+        } else {
+            0
+        }
+    }
+
+    /// Bytes of one column.
+    pub fn column_bytes(&self) -> usize {
+        self.column_header_bytes()
+            + self.pixels_per_column * self.profile.layout().pixel_bytes
+            + self.column_trailer_bytes()
+    }
+
+    /// Bytes of one lidar packet.
+    pub fn packet_bytes(&self) -> usize {
+        self.header_bytes() + self.columns_per_packet * self.column_bytes() + self.footer_bytes()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn packet_sizes_match_the_documented_ones() {
+        // FORMATS.md §5.2 (C = 16 columns).
+        let size = |profile, h| PacketFormat { profile, columns_per_packet: 16, pixels_per_column: h }.packet_bytes();
+        assert_eq!(size(Profile::Legacy, 16), 3392);
+        assert_eq!(size(Profile::Legacy, 32), 6464);
+        assert_eq!(size(Profile::Legacy, 64), 12608);
+        assert_eq!(size(Profile::Legacy, 128), 24896);
+        assert_eq!(size(Profile::Rng19Rfl8Sig16Nir16, 64), 12544);
+        assert_eq!(size(Profile::Rng19Rfl8Sig16Nir16Dual, 64), 16640);
+        assert_eq!(size(Profile::Rng15Rfl8Nir8, 64), 4352);
+        assert_eq!(size(Profile::FiveWordPixel, 64), 20736);
+        assert_eq!(size(Profile::Rng19Rfl8Sig16Nir16, 128), 24832);
+        assert_eq!(size(Profile::Rng19Rfl8Sig16Nir16Dual, 128), 33024);
+        assert_eq!(size(Profile::Rng15Rfl8Nir8, 128), 8448);
+        assert_eq!(size(Profile::FusaRng15Rfl8Nir8Dual, 128), 16640);
+        assert_eq!(size(Profile::Rng19Rfl8Sig16Nir16, 32), 6400);
+        assert_eq!(size(Profile::Rng19Rfl8Sig16Nir16Dual, 32), 8448);
+        assert_eq!(size(Profile::Rng15Rfl8Nir8, 32), 2304);
+    }
+
+    #[test]
+    fn names_round_trip() {
+        for p in ALL_PROFILES {
+            assert_eq!(Profile::from_name(p.name()), Some(p));
+        }
+    }
+}
