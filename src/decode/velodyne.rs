@@ -72,13 +72,39 @@ struct Advanced {
     two_point: bool,
 }
 
+/// Most (bank, slot) combinations: 4 banks × 32 slots (VLS-128).
+const LANES: usize = 4 * SLOTS;
+
+/// Per (bank, slot) constants: the laser that slot fires and when, relative to its block.
+#[derive(Clone, Copy, Debug, Default)]
+struct Lane {
+    laser: Laser,
+    /// Laser id (index into the advanced table).
+    id: u16,
+    /// Firing time after the block's first firing, ns.
+    dt_ns: u32,
+    /// Firing column after the block's first column (VLP-16: the second sequence is +1).
+    col_off: u16,
+}
+
+/// cos / sin of every block azimuth (0.01° steps), shared by all decoders: 288 kB, built once.
+fn azimuth_table() -> &'static [(f32, f32)] {
+    static TABLE: std::sync::OnceLock<Vec<(f32, f32)>> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| {
+        (0..36_000u32)
+            .map(|a| {
+                let (s, c) = (f64::from(a) * (core::f64::consts::PI / 18_000.0)).sin_cos();
+                (c as f32, s as f32)
+            })
+            .collect()
+    })
+}
+
 /// Per (block, slot) constants.
 #[derive(Clone, Copy, Debug, Default)]
 struct Slot {
     /// Firing time from the packet's first firing, ns.
     t_ns: u32,
-    /// Laser id.
-    laser: u16,
     /// Firing column within the packet.
     column: u16,
 }
@@ -91,9 +117,10 @@ pub struct VelodyneDecoder {
     lasers: Vec<Laser>,
     advanced: Option<Vec<Advanced>>,
     slots: Box<[[Slot; SLOTS]; BLOCKS]>,
-    /// Time of each slot's firing after its block's first firing, ns (the same for every
-    /// block of every model).
-    dt_in_block: [f32; SLOTS],
+    /// Per (bank, slot) — index `bank · 32 + slot` — the laser fired and its constants.
+    lanes: Box<[Lane; LANES]>,
+    /// Lanes in use (32 × the banks of the model).
+    n_lanes: usize,
     /// Bank of each block position within its firing group, by the layout of the model.
     expected_bank: [u8; BLOCKS],
     /// Time between block 0's and block 11's first firings, ns.
@@ -191,18 +218,29 @@ impl VelodyneDecoder {
             expected_bank[b] = bank as u8;
             for (s, slot) in row.iter_mut().enumerate() {
                 let (t, column) = model.firing(mode, b, s);
-                *slot = Slot {
-                    t_ns: t as u32,
-                    laser: model.laser_of(bank, s) as u16,
-                    column: column as u16,
+                *slot = Slot { t_ns: t as u32, column: column as u16 };
+            }
+        }
+        let mut lanes = Box::new([Lane::default(); LANES]);
+        for bank in 0..banks {
+            // A block of this bank: the first one in the packet whose bank it is.
+            let Some(b) = (0..BLOCKS).find(|&b| usize::from(expected_bank[b]) == bank) else {
+                continue;
+            };
+            let (t0, c0) = model.firing(mode, b, 0);
+            for s in 0..SLOTS {
+                let (t, c) = model.firing(mode, b, s);
+                let id = model.laser_of(bank, s);
+                lanes[bank * SLOTS + s] = Lane {
+                    laser: lasers.get(id).copied().unwrap_or_default(),
+                    id: id as u16,
+                    dt_ns: (t - t0).round() as u32,
+                    col_off: (c - c0) as u16,
                 };
             }
         }
-        let mut dt_in_block = [0f32; SLOTS];
+        let n_lanes = banks * SLOTS;
         let t0 = model.firing(mode, 0, 0).0;
-        for (s, dt) in dt_in_block.iter_mut().enumerate() {
-            *dt = (model.firing(mode, 0, s).0 - t0) as f32;
-        }
         let rate_span_ns = model.firing(mode, BLOCKS - 1, 0).0 - t0;
         let resolution = calib
             .distance_resolution
@@ -213,7 +251,8 @@ impl VelodyneDecoder {
             lasers,
             advanced,
             slots,
-            dt_in_block,
+            lanes,
+            n_lanes,
             expected_bank,
             rate_span_ns,
             resolution,
@@ -320,12 +359,15 @@ impl VelodyneDecoder {
         } else {
             0.0
         };
-        // Per slot: rotation of the slot's firing after its block's first firing.
-        let mut rot = [(1f64, 0f64); SLOTS];
+        // Per lane: rotation of the lane's firing after its block's first firing, minus the
+        // laser's rotational correction, as one (cos, sin) pair.
+        let mut rot = [(1f32, 0f32); LANES];
         let to_rad = core::f64::consts::PI / 18_000.0;
-        for (s, r) in rot.iter_mut().enumerate() {
-            let delta = rate * f64::from(self.dt_in_block[s]) * to_rad;
-            *r = small_sin_cos(delta);
+        for (r, lane) in rot.iter_mut().zip(self.lanes.iter()).take(self.n_lanes) {
+            let (cd, sd) = small_sin_cos(rate * f64::from(lane.dt_ns) * to_rad);
+            let (cr, sr) = (lane.laser.cos_rot, lane.laser.sin_rot);
+            // cos(δ − r), sin(δ − r)
+            *r = ((cd * cr + sd * sr) as f32, (sd * cr - cd * sr) as f32);
         }
         let dual = self.mode.is_dual();
         let step = if dual { self.blocks_per_firing } else { 1 };
@@ -354,58 +396,57 @@ impl VelodyneDecoder {
     }
 
     #[inline]
-    fn block_frame(&self, p: &DataPacket<'_>, block: usize) -> (f64, f64) {
-        let az = f64::from(p.azimuth(block)) * (core::f64::consts::PI / 18_000.0);
-        let (s, c) = az.sin_cos();
-        (c, s)
+    fn block_frame(&self, p: &DataPacket<'_>, block: usize) -> (f32, f32) {
+        azimuth_table().get(usize::from(p.azimuth(block))).copied().unwrap_or((1.0, 0.0))
     }
 
-    #[inline]
+    #[inline(always)]
     #[allow(clippy::too_many_arguments)]
     fn point(
         &self,
         block: usize,
-        slot: usize,
+        lane: &Lane,
+        rot: (f32, f32),
         raw: u16,
         refl: u8,
         ret: u8,
-        frame: (f64, f64),
-        rot: &[(f64, f64); SLOTS],
+        frame: (f32, f32),
         t_base_ns: i64,
     ) -> Option<(Point, usize)> {
-        let sl = self.slots[block][slot];
-        let laser = self.lasers.get(usize::from(sl.laser))?;
-        let d = f32::from(raw) * self.resolution + laser.dist_correction;
+        let laser = &lane.laser;
+        let measured = f32::from(raw) * self.resolution;
+        let d = measured + laser.dist_correction;
         if !(d >= self.opts.min_range && d <= self.opts.max_range) {
             return None;
         }
-        // cos/sin of (block azimuth + slot rotation − rot_correction).
-        let (cd, sd) = rot[slot];
+        // cos/sin of (block azimuth + lane rotation − rot_correction).
         let (cb, sb) = frame;
-        let (c1, s1) = (cb * cd - sb * sd, sb * cd + cb * sd);
-        let ca = (c1 * laser.cos_rot + s1 * laser.sin_rot) as f32;
-        let sa = (s1 * laser.cos_rot - c1 * laser.sin_rot) as f32;
+        let (cl, sl) = rot;
+        let ca = cb * cl - sb * sl;
+        let sa = sb * cl + cb * sl;
         let (x, y, z) = match &self.advanced {
             None => {
                 let xy = d * laser.cos_vert;
                 (xy * ca, -xy * sa, d * laser.sin_vert + laser.vert_offset)
             }
             Some(adv) => {
-                let a = adv.get(usize::from(sl.laser))?;
-                advanced_xyz(f32::from(raw) * self.resolution, laser, a, ca, sa)
+                let a = adv.get(usize::from(lane.id))?;
+                advanced_xyz(measured, laser, a, ca, sa)
             }
         };
+        let sl0 = &self.slots[block][0];
         let pt = Point {
             x,
             y,
             z,
             intensity: f32::from(refl),
-            t: (t_base_ns + i64::from(sl.t_ns)).clamp(0, i64::from(u32::MAX)) as u32,
+            t: (t_base_ns + i64::from(sl0.t_ns) + i64::from(lane.dt_ns)).clamp(0, i64::from(u32::MAX))
+                as u32,
             ring: laser.ring,
             ret,
             pad: 0,
         };
-        Some((pt, usize::from(sl.column)))
+        Some((pt, usize::from(sl0.column) + usize::from(lane.col_off)))
     }
 
     #[inline]
@@ -413,20 +454,23 @@ impl VelodyneDecoder {
         &self,
         p: &DataPacket<'_>,
         block: usize,
-        rot: &[(f64, f64); SLOTS],
+        rot: &[(f32, f32); LANES],
         t_base_ns: i64,
         n: &mut Decoded,
         emit: &mut F,
     ) {
         let frame = self.block_frame(p, block);
+        let base = usize::from(self.expected_bank[block]) * SLOTS;
+        let lanes = &self.lanes[base..base + SLOTS];
+        let rots = &rot[base..base + SLOTS];
         let m = p.measurements(block);
-        for (slot, meas) in m.chunks_exact(3).enumerate() {
+        for ((meas, lane), &r) in m.chunks_exact(3).zip(lanes).zip(rots) {
             let raw = u16::from_le_bytes([meas[0], meas[1]]);
             if raw == 0 {
                 n.empty += 1;
                 continue;
             }
-            match self.point(block, slot, raw, meas[2], 0, frame, rot, t_base_ns) {
+            match self.point(block, lane, r, raw, meas[2], 0, frame, t_base_ns) {
                 Some((pt, col)) => {
                     emit(pt, col);
                     n.points += 1;
@@ -443,15 +487,18 @@ impl VelodyneDecoder {
         p: &DataPacket<'_>,
         last_block: usize,
         strong_block: usize,
-        rot: &[(f64, f64); SLOTS],
+        rot: &[(f32, f32); LANES],
         t_base_ns: i64,
         n: &mut Decoded,
         emit: &mut F,
     ) {
         let frame = self.block_frame(p, last_block);
+        let base = usize::from(self.expected_bank[last_block]) * SLOTS;
+        let lanes = &self.lanes[base..base + SLOTS];
+        let rots = &rot[base..base + SLOTS];
         let ml = p.measurements(last_block);
         let ms = p.measurements(strong_block);
-        for (slot, (l, s)) in ml.chunks_exact(3).zip(ms.chunks_exact(3)).enumerate() {
+        for (((l, s), lane), &r) in ml.chunks_exact(3).zip(ms.chunks_exact(3)).zip(lanes).zip(rots) {
             let dl = u16::from_le_bytes([l[0], l[1]]);
             let ds = u16::from_le_bytes([s[0], s[1]]);
             let mut one = |raw: u16, refl: u8, ret: u8, n: &mut Decoded| {
@@ -459,7 +506,7 @@ impl VelodyneDecoder {
                     n.empty += 1;
                     return;
                 }
-                match self.point(last_block, slot, raw, refl, ret, frame, rot, t_base_ns) {
+                match self.point(last_block, lane, r, raw, refl, ret, frame, t_base_ns) {
                     Some((pt, col)) => {
                         emit(pt, col);
                         n.points += 1;
