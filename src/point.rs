@@ -40,6 +40,19 @@ pub struct Point {
     pub pad: u8,
 }
 
+/// Values some sensors measure beyond the [`Point`] record (Ouster: range, signal, near-IR),
+/// kept per point in a parallel buffer when asked for (`--fields all`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct PointExtra {
+    /// Range, mm.
+    pub range_mm: u32,
+    /// Signal photons.
+    pub signal: u16,
+    /// Near-infrared (ambient) photons.
+    pub near_ir: u16,
+}
+
 /// Size of one [`Point`] in bytes (the point stride in every sink).
 pub const POINT_STRIDE: usize = core::mem::size_of::<Point>();
 

@@ -1,6 +1,7 @@
 //! Command-line front end: clap commands, progress, exit codes. No algorithms live here.
 
 mod run;
+mod sensors;
 
 use std::path::PathBuf;
 use std::process::ExitCode;

@@ -1,13 +1,11 @@
 //! `decode`, `info` and `demo`: capture → demultiplexer → streams → sink, and the summary.
 
-use std::collections::BTreeMap;
 use std::io::{IsTerminal, Read, Write};
 use std::net::Ipv4Addr;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
-use ringscan::calib::{parse_velodyne, VelodyneCalibration, MAX_CALIB_BYTES};
 use ringscan::decode::DecodeOptions;
 use ringscan::model::VelodyneModel;
 use ringscan::sink::mcap::{
@@ -15,9 +13,10 @@ use ringscan::sink::mcap::{
 };
 use ringscan::sink::{McapSink, SinkError};
 use ringscan::source::pcap::{PcapSource, SourceError, SourceStats};
-use ringscan::sweep::{Demux, SensorFacts, StreamConfig, StreamError, Sweep};
+use ringscan::sweep::{Demux, Facts, SensorStream, StreamError, Sweep};
 use serde_json::{json, Value};
 
+use super::sensors::{self, load_calibs, Chooser, Common};
 use super::FormatArg;
 
 /// The example capture `ringscan demo` decodes: a simulated VLP-16 made by
@@ -73,56 +72,6 @@ pub enum RunError {
     Strict(String),
 }
 
-struct CalibSpec {
-    addr: Option<Ipv4Addr>,
-    file_name: String,
-    bytes: Vec<u8>,
-    calib: VelodyneCalibration,
-}
-
-fn load_calibs(list: &[String]) -> Result<Vec<CalibSpec>, RunError> {
-    let mut out = Vec::new();
-    for item in list {
-        let (addr, path) = match item.split_once('=') {
-            Some((a, p)) => match a.parse::<Ipv4Addr>() {
-                Ok(ip) => (Some(ip), p),
-                Err(_) => {
-                    return Err(RunError::Usage(format!(
-                        "--calib {item}: `{a}` is not an IPv4 address"
-                    )))
-                }
-            },
-            None => (None, item.as_str()),
-        };
-        let cerr = |msg: String| RunError::Calib {
-            path: path.to_string(),
-            msg,
-        };
-        let meta = std::fs::metadata(path).map_err(|e| cerr(e.to_string()))?;
-        if meta.len() > MAX_CALIB_BYTES as u64 {
-            return Err(cerr(format!(
-                "{} bytes; refusing anything over {MAX_CALIB_BYTES} bytes",
-                meta.len()
-            )));
-        }
-        let bytes = std::fs::read(path).map_err(|e| cerr(e.to_string()))?;
-        let text = std::str::from_utf8(&bytes)
-            .map_err(|e| cerr(format!("not UTF-8 text (byte {})", e.valid_up_to())))?;
-        let file_name = Path::new(path)
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let calib = parse_velodyne(text, &file_name).map_err(|e| cerr(e.to_string()))?;
-        out.push(CalibSpec {
-            addr,
-            file_name,
-            bytes,
-            calib,
-        });
-    }
-    Ok(out)
-}
-
 fn parse_model(m: Option<&str>) -> Result<Option<VelodyneModel>, RunError> {
     match m {
         None => Ok(None),
@@ -156,6 +105,7 @@ struct Output {
     error: Option<SinkError>,
     sweeps: u64,
     points: u64,
+    imu_samples: u64,
 }
 
 impl Output {
@@ -180,48 +130,21 @@ impl Output {
         &mut self,
         idx: usize,
         addr: Ipv4Addr,
-        facts: &SensorFacts,
+        facts: Facts<'_>,
         ports: &[u16],
     ) -> Result<(), SinkError> {
         let single = self.n_sensors_hint <= 1 && idx == 0;
-        let name = match (&self.name, facts.model) {
-            (Some(n), _) => n.clone(),
-            (None, Some(m)) => format!("{}-{}", m.id(), addr.octets()[3]),
-            (None, None) => format!("velodyne-{}", addr.octets()[3]),
+        let name = match &self.name {
+            Some(n) => n.clone(),
+            None => sensors::default_name(facts, addr),
         };
+        let calib_name = sensors::calibration_name(facts);
         let calib = self
             .calibs
             .iter()
-            .find(|(a, n, _)| (a.is_none() || *a == Some(addr)) && facts.calibration == *n)
+            .find(|(a, n, _)| (a.is_none() || *a == Some(addr)) && calib_name == *n)
             .map(|(_, n, b)| (n.clone(), b.clone()));
-        let mut md = BTreeMap::new();
-        md.insert("source_address".to_string(), addr.to_string());
-        md.insert(
-            "ports".to_string(),
-            ports
-                .iter()
-                .map(|p| p.to_string())
-                .collect::<Vec<_>>()
-                .join(","),
-        );
-        if let Some(m) = facts.model {
-            md.insert("model".to_string(), m.name().to_string());
-        }
-        if let Some(m) = facts.mode {
-            md.insert("return_mode".to_string(), m.name().to_string());
-        }
-        if let Some(p) = facts.product_id {
-            md.insert("product_id".to_string(), format!("{p:#04x}"));
-        }
-        md.insert("model_detection".to_string(), facts.detection.clone());
-        md.insert("clock".to_string(), facts.clock.name().to_string());
-        md.insert("calibration".to_string(), facts.calibration.clone());
-        md.insert("serial".to_string(), String::new());
-        md.insert("firmware".to_string(), String::new());
-        md.insert(
-            "driver".to_string(),
-            format!("ringscan {}", env!("CARGO_PKG_VERSION")),
-        );
+        let md = sensors::channel_metadata(facts, addr, ports);
         let topic_prefix = if single {
             String::new()
         } else {
@@ -259,7 +182,7 @@ impl Output {
         idx: usize,
         addr: Ipv4Addr,
         sweep: &Sweep,
-        facts: &SensorFacts,
+        facts: Facts<'_>,
         ports: &[u16],
     ) {
         if self.error.is_some() {
@@ -285,7 +208,7 @@ impl Output {
             self.error = Some(e);
             return;
         }
-        let diag = json!({
+        let mut diag = json!({
             "sweep": sweep.index,
             "packets": sweep.packets,
             "missing_packets": sweep.missing_packets,
@@ -295,8 +218,14 @@ impl Output {
             "clock": sweep.clock.name(),
             "device_time_ns": sweep.device_time_ns,
             "first_azimuth_deg": f64::from(sweep.first_azimuth) / 100.0,
-            "pps": facts.pps.map(|p| p.name()),
+            "frame_id": sweep.frame_id,
+            "missing_columns": sweep.missing_columns,
         });
+        if let (Some(d), Value::Object(extra)) =
+            (diag.as_object_mut(), sensors::diagnostics_extra(facts))
+        {
+            d.extend(extra);
+        }
         if let Err(e) = sink.write_diagnostics(id, sweep.last_host_ns.max(0) as u64, &diag) {
             self.error = Some(e);
         }
@@ -309,12 +238,12 @@ pub struct Summary {
     pub lost: u64,
 }
 
-fn prescan<R: Read>(mut src: PcapSource<R>, port: Option<u16>) -> usize {
+fn prescan<R: Read>(mut src: PcapSource<R>, port: Option<u16>, sizes: &[usize]) -> usize {
     let mut addrs: Vec<Ipv4Addr> = Vec::new();
     for _ in 0..PRESCAN_DATAGRAMS {
         match src.next_datagram() {
             Ok(Some(d)) => {
-                if d.payload.len() == 1206
+                if sizes.contains(&d.payload.len())
                     && port.is_none_or(|p| p == d.dst.port())
                     && !addrs.contains(d.src.ip())
                 {
@@ -357,27 +286,29 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
         )));
     }
     let calibs = load_calibs(&args.calib)?;
+    let cut = (args.cut_angle_deg * 100.0).round() as u16 % 36_000;
+    let mut chooser = Chooser::new(
+        &calibs,
+        Common {
+            model,
+            decode,
+            cut_angle: cut,
+        },
+    );
+    let sizes = chooser.lidar_sizes();
     let n_sensors_hint = match args.input_bytes {
-        Some(b) => prescan(PcapSource::new(b).map_err(serr)?, args.port),
-        None => prescan(PcapSource::open(&args.input).map_err(serr)?, args.port),
+        Some(b) => prescan(PcapSource::new(b).map_err(serr)?, args.port, &sizes),
+        None => prescan(
+            PcapSource::open(&args.input).map_err(serr)?,
+            args.port,
+            &sizes,
+        ),
     };
     if args.name.is_some() && n_sensors_hint > 1 {
         return Err(RunError::Usage(format!("--name: the capture holds {n_sensors_hint} sensors; names are given per sensor automatically")));
     }
-    let cut = (args.cut_angle_deg * 100.0).round() as u16 % 36_000;
-    let stream_calibs: Vec<(Option<Ipv4Addr>, VelodyneCalibration)> =
-        calibs.iter().map(|c| (c.addr, c.calib.clone())).collect();
-    let config_for = move |addr: Ipv4Addr| StreamConfig {
-        model,
-        calibrations: stream_calibs
-            .iter()
-            .filter(|(a, _)| a.is_none() || *a == Some(addr))
-            .map(|(_, c)| c.clone())
-            .collect(),
-        decode,
-        cut_angle: cut,
-        ..StreamConfig::default()
-    };
+    let config_for =
+        move |src: Ipv4Addr, port: u16, payload: &[u8]| chooser.choose(src, port, payload);
     let mut demux = Demux::new(Box::new(config_for), args.port);
     let sink = match &args.out {
         Some(p) => {
@@ -407,6 +338,7 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
         error: None,
         sweeps: 0,
         points: 0,
+        imu_samples: 0,
     };
     let result = match args.input_bytes {
         Some(b) => pump(
@@ -455,43 +387,29 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
     let dstats = demux.stats().clone();
     let mut sensors = Vec::new();
     let (mut decoded, mut malformed, mut missing, mut position) = (0u64, 0u64, 0u64, 0u64);
+    let mut sensor_dropped = 0u64;
     for (idx, (addr, stream, ports)) in demux.sensors().enumerate() {
-        let st = stream.stats();
-        let f = stream.facts();
-        decoded += st.data_packets;
-        malformed += st.malformed;
-        missing += st.missing;
-        position += st.position_packets;
+        let (mut v, c) = sensors::sensor_summary(stream);
+        decoded += c.decoded;
+        malformed += c.malformed;
+        missing += c.missing;
+        position += c.position;
+        sensor_dropped += c.dropped;
         let so = out.sensors.get(idx);
-        sensors.push(json!({
-            "name": so.map(|s| s.name.clone()),
-            "address": addr.to_string(),
-            "ports": ports,
-            "model": f.model.map(|m| m.name()),
-            "model_id": f.model.map(|m| m.id()),
-            "return_mode": f.mode.map(|m| m.name()),
-            "product_id": f.product_id.map(|p| format!("{p:#04x}")),
-            "detection": f.detection,
-            "packet_period_us": f.period_us,
-            "calibration": f.calibration,
-            "calibration_file": so.and_then(|s| s.calib_file.clone()),
-            "clock": f.clock.name(),
-            "pps": f.pps.map(|p| p.name()),
-            "gps": f.last_rmc.map(|r| json!({"utc_ns": r.utc_ns, "valid": r.valid, "lat_deg": r.lat_deg, "lon_deg": r.lon_deg})),
-            "nmea_empty": f.empty_nmea,
-            "nmea_bad": f.bad_nmea,
-            "data_packets": st.data_packets,
-            "position_packets": st.position_packets,
-            "malformed": st.malformed,
-            "missing": st.missing,
-            "discontinuities": st.discontinuities,
-            "sweeps": st.sweeps,
-            "points": st.points,
-            "topic": so.map(|s| s.topic.clone()),
-            "raw_dropped": so.map(|s| s.raw_dropped),
-        }));
+        if let Some(o) = v.as_object_mut() {
+            o.insert("name".into(), json!(so.map(|s| s.name.clone())));
+            o.insert("address".into(), json!(addr.to_string()));
+            o.insert("ports".into(), json!(ports));
+            o.insert(
+                "calibration_file".into(),
+                json!(so.and_then(|s| s.calib_file.clone())),
+            );
+            o.insert("topic".into(), json!(so.map(|s| s.topic.clone())));
+            o.insert("raw_dropped".into(), json!(so.map(|s| s.raw_dropped)));
+        }
+        sensors.push(v);
     }
-    let dropped = dstats.other_port + dstats.dropped_sensor_limit;
+    let dropped = dstats.other_port + dstats.dropped_sensor_limit + sensor_dropped;
     let cap = &source_stats;
     let duration_s = match (cap.first_time_ns, cap.last_time_ns) {
         (Some(a), Some(b)) => (b - a) as f64 * 1e-9,
@@ -501,6 +419,7 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
         "input": path_s,
         "sweeps": out.sweeps,
         "points": out.points,
+        "imu_samples": out.imu_samples,
         "packets": {
             "decoded": decoded,
             "dropped": dropped,
@@ -575,14 +494,28 @@ fn pump<R: Read>(
         let registered = out.sensors.get(idx).is_some_and(|s| s.registered);
         if !registered {
             if let Some((_, stream)) = demux.stream(idx) {
-                if stream.decoder().is_some() {
+                if stream.ready() {
                     let ports: Vec<u16> = demux
                         .sensors()
                         .nth(idx)
                         .map(|(_, _, p)| p.to_vec())
                         .unwrap_or_default();
-                    let facts = stream.facts().clone();
-                    out.register(idx, addr, &facts, &ports)
+                    out.register(idx, addr, stream.facts(), &ports)
+                        .map_err(PumpError::Sink)?;
+                }
+            }
+        }
+        if let Some(SensorStream::Ouster(s)) = demux.stream_mut(idx) {
+            let id = out.sensors.get(idx).and_then(|x| x.id);
+            for smp in s.drain_imu() {
+                out.imu_samples += 1;
+                if let (Some(sink), Some(id)) = (out.sink.as_mut(), id) {
+                    let msg = json!({
+                        "timestamp_ns": smp.sensor_ns,
+                        "linear_acceleration": smp.accel,
+                        "angular_velocity": smp.gyro,
+                    });
+                    sink.write_imu(id, smp.host_ns.max(0) as u64, &msg)
                         .map_err(PumpError::Sink)?;
                 }
             }
@@ -646,17 +579,15 @@ fn pump<R: Read>(
         for idx in 0..out.sensors.len() {
             if !out.sensors[idx].registered && !out.sensors[idx].raw_hold.is_empty() {
                 let addr = out.sensors[idx].addr;
-                let facts = demux
-                    .stream(idx)
-                    .map(|(_, s)| s.facts().clone())
-                    .unwrap_or_default();
-                out.register(
-                    idx,
-                    addr,
-                    &facts,
-                    ports.get(idx).map(|p| p.as_slice()).unwrap_or(&[]),
-                )
-                .map_err(PumpError::Sink)?;
+                if let Some((_, stream)) = demux.stream(idx) {
+                    out.register(
+                        idx,
+                        addr,
+                        stream.facts(),
+                        ports.get(idx).map(|p| p.as_slice()).unwrap_or(&[]),
+                    )
+                    .map_err(PumpError::Sink)?;
+                }
             }
         }
     }
@@ -765,14 +696,53 @@ fn print_text(j: &Value) {
         }
     );
     for s in j["sensors"].as_array().into_iter().flatten() {
+        let st = |k: &str| s[k].as_str().unwrap_or("-").to_string();
+        if s["kind"] == "ouster" {
+            println!(
+                "  sensor {} ({}), ports {}: {} sn {} {} {} {}, window [{}, {}]",
+                st("name"),
+                st("address"),
+                s["ports"],
+                st("model"),
+                s["serial"],
+                st("firmware"),
+                st("profile"),
+                st("lidar_mode"),
+                s["column_window"][0],
+                s["column_window"][1]
+            );
+            println!(
+                "    {} lidar + {} IMU packets, {} sweeps, {} points; missing columns {}, malformed {}, CRC failures {}, late {}, other sensor {}, epochs {}",
+                g(&s["lidar_packets"]),
+                g(&s["imu_packets"]),
+                g(&s["sweeps"]),
+                g(&s["points"]),
+                g(&s["missing_columns"]),
+                g(&s["malformed"]),
+                g(&s["crc_failures"]),
+                g(&s["late"]),
+                g(&s["wrong_sensor"]),
+                g(&s["epochs"])
+            );
+            println!(
+                "    metadata: {}; timestamps: {}; clock: {}; CRC checked: {}; shot limiting: {}; thermal: {}",
+                st("calibration"),
+                st("timestamp_mode"),
+                st("clock"),
+                s["crc_checked"],
+                st("shot_limiting"),
+                st("thermal_shutdown")
+            );
+            continue;
+        }
         println!(
             "  sensor {} ({}), ports {}: {} {}, {}",
-            s["name"].as_str().unwrap_or("-"),
-            s["address"].as_str().unwrap_or(""),
+            st("name"),
+            st("address"),
             s["ports"],
             s["model"].as_str().unwrap_or("unknown model"),
-            s["return_mode"].as_str().unwrap_or(""),
-            s["detection"].as_str().unwrap_or("")
+            st("return_mode"),
+            st("detection")
         );
         println!(
             "    {} data + {} position packets, {} sweeps, {} points; missing {}, malformed {}, discontinuities {}",
@@ -786,8 +756,8 @@ fn print_text(j: &Value) {
         );
         println!(
             "    calibration: {}; clock: {}; PPS: {}; GPS: {}",
-            s["calibration"].as_str().unwrap_or("-"),
-            s["clock"].as_str().unwrap_or("-"),
+            st("calibration"),
+            st("clock"),
             s["pps"].as_str().unwrap_or("no position packets"),
             if s["gps"].is_null() {
                 "no NMEA time".to_string()
@@ -795,6 +765,9 @@ fn print_text(j: &Value) {
                 format!("RMC valid={}", s["gps"]["valid"])
             }
         );
+    }
+    if j["sensors"].as_array().is_none_or(|a| a.is_empty()) {
+        println!("  no sensor found (Ouster captures need their metadata: --calib META.json)");
     }
     let p = &j["packets"];
     println!(

@@ -26,6 +26,12 @@ const DIAGNOSTICS_SCHEMA: &str = "ringscan.Diagnostics";
 /// JSON schema of the diagnostics messages: an object whose members the caller chooses.
 const DIAGNOSTICS_JSON_SCHEMA: &str = r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"ringscan.Diagnostics","description":"Per-sweep packet, loss, timing and sensor-health counters of one sensor, as written by ringscan","type":"object","additionalProperties":true}"#;
 
+/// Schema name of the IMU channels.
+const IMU_SCHEMA: &str = "ringscan.Imu";
+
+/// JSON schema of the IMU messages.
+const IMU_JSON_SCHEMA: &str = r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"ringscan.Imu","description":"One IMU sample in SI units","type":"object","properties":{"timestamp_ns":{"type":"integer","description":"sensor clock, ns"},"linear_acceleration":{"type":"array","items":{"type":"number"},"minItems":3,"maxItems":3,"description":"m/s^2, x y z"},"angular_velocity":{"type":"array","items":{"type":"number"},"minItems":3,"maxItems":3,"description":"rad/s, x y z"}},"required":["timestamp_ns","linear_acceleration","angular_velocity"]}"#;
+
 /// Longest sensor name (frame id) accepted.
 const MAX_NAME_LEN: usize = 256;
 
@@ -125,6 +131,7 @@ pub struct SensorChannels {
     points: Channel,
     diagnostics: Channel,
     raw: Option<Channel>,
+    imu: Option<Channel>,
     /// Constant fields of this sensor's `foxglove.PointCloud` messages.
     point_cloud_prefix: PointCloudPrefix,
 }
@@ -164,6 +171,11 @@ impl SensorChannels {
     /// Topic of the raw packets: `<prefix>/raw` (created on the first raw packet).
     pub fn raw_topic(&self) -> String {
         format!("{}/raw", self.prefix)
+    }
+
+    /// Topic of the IMU samples, `<prefix>/imu`.
+    pub fn imu_topic(&self) -> String {
+        format!("{}/imu", self.prefix)
     }
 }
 
@@ -301,6 +313,7 @@ pub struct McapSink<W: Write + Seek> {
     points_schema: u16,
     diagnostics_schema: u16,
     raw_schema: Option<u16>,
+    imu_schema: Option<u16>,
     sensors: Vec<SensorChannels>,
     /// The one message buffer, reused for every message.
     buf: Vec<u8>,
@@ -340,7 +353,11 @@ impl<W: Write + Seek> McapSink<W> {
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get().min(4)) as u32;
         let mut writer = WriteOptions::new()
             .compression(compression)
-            .compression_level(if opts.compression == Compression::Zstd { ZSTD_LEVEL } else { 0 })
+            .compression_level(if opts.compression == Compression::Zstd {
+                ZSTD_LEVEL
+            } else {
+                0
+            })
             .compression_threads(if threads > 1 { threads } else { 0 })
             .chunk_size(Some(chunk_size))
             .library(format!("ringscan {}", env!("CARGO_PKG_VERSION")))
@@ -372,6 +389,7 @@ impl<W: Write + Seek> McapSink<W> {
             points_schema,
             diagnostics_schema,
             raw_schema: None,
+            imu_schema: None,
             sensors: Vec::new(),
             buf: Vec::new(),
             pending_attachments: Vec::new(),
@@ -448,6 +466,7 @@ impl<W: Write + Seek> McapSink<W> {
                 sequence: 0,
             },
             raw: None,
+            imu: None,
             point_cloud_prefix: PointCloudPrefix::new(&info.name),
         });
         Ok(SensorId(self.sensors.len() - 1))
@@ -557,6 +576,56 @@ impl<W: Write + Seek> McapSink<W> {
             .map_err(mcap_err(format!(
                 "writing a packet to {}",
                 sensor.raw_topic()
+            )))
+    }
+
+    /// Writes one IMU sample to `<prefix>/imu` (JSON, schema `ringscan.Imu`: `timestamp_ns`
+    /// (sensor clock), `linear_acceleration` m/s², `angular_velocity` rad/s), creating the
+    /// channel on first use.
+    pub fn write_imu(
+        &mut self,
+        s: SensorId,
+        log_time_ns: u64,
+        json: &serde_json::Value,
+    ) -> Result<(), SinkError> {
+        self.before_message(log_time_ns)?;
+        let registered = self.sensors.len();
+        let sensor = self.sensors.get_mut(s.0).ok_or(SinkError::UnknownSensor {
+            id: s.0,
+            registered,
+        })?;
+        let writer = self.writer.as_mut().ok_or_else(finished_error)?;
+        if sensor.imu.is_none() {
+            let schema = match self.imu_schema {
+                Some(id) => id,
+                None => {
+                    let id = writer
+                        .add_schema(IMU_SCHEMA, "jsonschema", IMU_JSON_SCHEMA.as_bytes())
+                        .map_err(mcap_err("writing the IMU schema"))?;
+                    self.imu_schema = Some(id);
+                    id
+                }
+            };
+            let topic = sensor.imu_topic();
+            let id = writer
+                .add_channel(schema, &topic, "json", &sensor.metadata)
+                .map_err(mcap_err(format!("adding channel {topic}")))?;
+            sensor.imu = Some(Channel { id, sequence: 0 });
+        }
+        self.buf.clear();
+        serde_json::to_writer(&mut self.buf, json).map_err(|source| SinkError::Json {
+            topic: sensor.imu_topic(),
+            source,
+        })?;
+        let Some(channel) = sensor.imu.as_mut() else {
+            return Err(finished_error());
+        };
+        let header = channel.next_header(log_time_ns);
+        writer
+            .write_to_known_channel(&header, &self.buf)
+            .map_err(mcap_err(format!(
+                "writing an IMU sample to {}",
+                sensor.imu_topic()
             )))
     }
 

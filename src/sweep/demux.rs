@@ -1,15 +1,19 @@
-//! Several sensors in one datagram stream: one [`VelodyneStream`] per source address.
+//! Several sensors in one datagram stream: one stream per source address.
 //!
 //! Velodyne sensors send data (1206 B) and position (512 B) packets from the same address to
-//! two ports, so the key is the source IPv4 address. The number of sensors is bounded
-//! ([`MAX_SENSORS`]): datagrams from further addresses are counted and dropped, so a flood of
-//! spoofed sources cannot grow memory.
+//! two ports; Ouster sensors send lidar and IMU packets from one address (two sensors may share
+//! a port: `same_ports.pcap`). So the key is the source IPv4 address, and the kind of stream a
+//! new address gets is decided by the caller's `config_for` from its first datagram (size,
+//! port, and for Ouster the serial / init_id its metadata names). The number of sensors is
+//! bounded ([`MAX_SENSORS`]): datagrams from further addresses are counted and dropped, so a
+//! flood of spoofed sources cannot grow memory.
 
 use std::net::Ipv4Addr;
 
+use super::ouster::{OusterFacts, OusterStream, OusterStreamConfig};
 use super::velodyne::{SensorFacts, StreamConfig, StreamError, VelodyneStream};
 use super::Sweep;
-use crate::model::velodyne::{DATA_PACKET_LEN, POSITION_PACKET_LEN};
+use crate::model::velodyne::DATA_PACKET_LEN;
 
 /// Most sensors tracked at once.
 pub const MAX_SENSORS: usize = 64;
@@ -22,20 +26,84 @@ pub type SensorKey = Ipv4Addr;
 pub struct DemuxStats {
     /// Datagrams routed to a sensor.
     pub routed: u64,
-    /// Datagrams of no Velodyne size from addresses with no sensor (other traffic).
+    /// Datagrams from addresses no configuration claims (other traffic).
     pub ignored: u64,
-    /// Datagrams to other ports than the one asked for.
+    /// Velodyne data packets to other ports than the one asked for.
     pub other_port: u64,
     /// Datagrams dropped because [`MAX_SENSORS`] sensors were already tracked.
     pub dropped_sensor_limit: u64,
 }
 
-/// Per-sensor configuration chooser: gives each new sensor its configuration.
-pub type ConfigFor = dyn FnMut(SensorKey) -> StreamConfig;
+/// How a new sensor is to be decoded.
+#[derive(Clone, Debug)]
+pub enum SensorConfig {
+    /// A Velodyne stream.
+    Velodyne(StreamConfig),
+    /// An Ouster stream with its metadata.
+    Ouster(Box<OusterStreamConfig>),
+}
+
+/// One sensor's stream.
+// At most MAX_SENSORS of these exist; a few hundred bytes apart does not matter.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug)]
+pub enum SensorStream {
+    /// Velodyne.
+    Velodyne(VelodyneStream),
+    /// Ouster.
+    Ouster(Box<OusterStream>),
+}
+
+/// What a stream knows of its sensor.
+#[derive(Clone, Copy, Debug)]
+pub enum Facts<'a> {
+    /// Velodyne.
+    Velodyne(&'a SensorFacts),
+    /// Ouster.
+    Ouster(&'a OusterFacts),
+}
+
+impl SensorStream {
+    /// What is known of the sensor.
+    pub fn facts(&self) -> Facts<'_> {
+        match self {
+            Self::Velodyne(s) => Facts::Velodyne(s.facts()),
+            Self::Ouster(s) => Facts::Ouster(s.facts()),
+        }
+    }
+
+    /// The Velodyne stream, if this is one.
+    pub fn as_velodyne(&self) -> Option<&VelodyneStream> {
+        match self {
+            Self::Velodyne(s) => Some(s),
+            Self::Ouster(_) => None,
+        }
+    }
+
+    /// The Ouster stream, if this is one.
+    pub fn as_ouster(&self) -> Option<&OusterStream> {
+        match self {
+            Self::Ouster(s) => Some(s),
+            Self::Velodyne(_) => None,
+        }
+    }
+
+    /// Whether the stream knows how to decode (Velodyne: once its model is detected).
+    pub fn ready(&self) -> bool {
+        match self {
+            Self::Velodyne(s) => s.decoder().is_some(),
+            Self::Ouster(_) => true,
+        }
+    }
+}
+
+/// Chooses the configuration of a new sensor from its first datagram
+/// (`source, destination port, payload`); `None` leaves the datagram unclaimed.
+pub type ConfigFor = dyn FnMut(SensorKey, u16, &[u8]) -> Option<SensorConfig>;
 
 /// Routes datagrams to per-sensor streams.
 pub struct Demux {
-    sensors: Vec<(SensorKey, VelodyneStream, Vec<u16>)>,
+    sensors: Vec<(SensorKey, SensorStream, Vec<u16>)>,
     config_for: Box<ConfigFor>,
     data_port: Option<u16>,
     stats: DemuxStats,
@@ -50,9 +118,16 @@ impl core::fmt::Debug for Demux {
     }
 }
 
+/// A Velodyne-only chooser: every address sending Velodyne-sized datagrams gets `cfg(addr)`.
+pub fn velodyne_only(mut cfg: impl FnMut(SensorKey) -> StreamConfig + 'static) -> Box<ConfigFor> {
+    Box::new(move |src, _port, payload: &[u8]| {
+        matches!(payload.len(), DATA_PACKET_LEN | 512).then(|| SensorConfig::Velodyne(cfg(src)))
+    })
+}
+
 impl Demux {
     /// A demultiplexer; `config_for` is called once per new sensor address. With `data_port`
-    /// set, data packets to other ports are ignored (position packets are always taken).
+    /// set, Velodyne data packets to other ports are ignored.
     pub fn new(config_for: Box<ConfigFor>, data_port: Option<u16>) -> Self {
         Self {
             sensors: Vec::new(),
@@ -68,71 +143,90 @@ impl Demux {
     }
 
     /// The sensors seen, in order of first appearance, with the destination ports they used.
-    pub fn sensors(&self) -> impl Iterator<Item = (SensorKey, &VelodyneStream, &[u16])> {
+    pub fn sensors(&self) -> impl Iterator<Item = (SensorKey, &SensorStream, &[u16])> {
         self.sensors.iter().map(|(k, s, p)| (*k, s, p.as_slice()))
     }
 
-    /// Routes one datagram; returns the index of the sensor it went to, if any. Finished sweeps
-    /// go to `on_sweep(sensor index, sweep, facts)`.
+    /// The stream of sensor `idx`.
+    pub fn stream(&self, idx: usize) -> Option<(SensorKey, &SensorStream)> {
+        self.sensors.get(idx).map(|(k, s, _)| (*k, s))
+    }
+
+    /// The stream of sensor `idx`, mutably (to drain IMU samples).
+    pub fn stream_mut(&mut self, idx: usize) -> Option<&mut SensorStream> {
+        self.sensors.get_mut(idx).map(|(_, s, _)| s)
+    }
+
+    /// Routes one datagram; returns the index of the sensor it went to, if any. Finished
+    /// sweeps go to `on_sweep(sensor index, sweep, facts)`.
     pub fn push(
         &mut self,
         host_ns: i64,
         src: SensorKey,
         dst_port: u16,
         payload: &[u8],
-        on_sweep: &mut dyn FnMut(usize, &Sweep, &SensorFacts),
+        on_sweep: &mut dyn FnMut(usize, &Sweep, Facts<'_>),
     ) -> Result<Option<usize>, (usize, StreamError)> {
-        let is_data = payload.len() == DATA_PACKET_LEN;
-        if is_data {
-            if let Some(p) = self.data_port {
-                if p != dst_port {
-                    self.stats.other_port += 1;
-                    return Ok(None);
-                }
-            }
-        }
         let idx = match self.sensors.iter().position(|(k, _, _)| *k == src) {
             Some(i) => i,
             None => {
-                if !is_data && payload.len() != POSITION_PACKET_LEN {
+                let Some(cfg) = (self.config_for)(src, dst_port, payload) else {
                     self.stats.ignored += 1;
                     return Ok(None);
-                }
+                };
                 if self.sensors.len() >= MAX_SENSORS {
                     self.stats.dropped_sensor_limit += 1;
                     return Ok(None);
                 }
-                let cfg = (self.config_for)(src);
-                self.sensors
-                    .push((src, VelodyneStream::new(cfg), Vec::new()));
+                let stream = match cfg {
+                    SensorConfig::Velodyne(c) => SensorStream::Velodyne(VelodyneStream::new(c)),
+                    SensorConfig::Ouster(c) => match OusterStream::new(*c) {
+                        Ok(s) => SensorStream::Ouster(Box::new(s)),
+                        Err(e) => return Err((self.sensors.len(), StreamError::Decode(e))),
+                    },
+                };
+                self.sensors.push((src, stream, Vec::new()));
                 self.sensors.len() - 1
             }
         };
-        self.stats.routed += 1;
         let (_, stream, ports) = &mut self.sensors[idx];
+        if let SensorStream::Velodyne(_) = stream {
+            if payload.len() == DATA_PACKET_LEN && self.data_port.is_some_and(|p| p != dst_port) {
+                self.stats.other_port += 1;
+                return Ok(None);
+            }
+        }
+        self.stats.routed += 1;
         if !ports.contains(&dst_port) && ports.len() < 16 {
             ports.push(dst_port);
         }
-        stream
-            .push(host_ns, payload, &mut |s, f| on_sweep(idx, s, f))
-            .map_err(|e| (idx, e))?;
+        match stream {
+            SensorStream::Velodyne(s) => s
+                .push(host_ns, payload, &mut |sw, f| {
+                    on_sweep(idx, sw, Facts::Velodyne(f))
+                })
+                .map_err(|e| (idx, e))?,
+            SensorStream::Ouster(s) => s.push(host_ns, payload, &mut |sw, f| {
+                on_sweep(idx, sw, Facts::Ouster(f))
+            }),
+        }
         Ok(Some(idx))
-    }
-
-    /// The stream of sensor `idx`.
-    pub fn stream(&self, idx: usize) -> Option<(SensorKey, &VelodyneStream)> {
-        self.sensors.get(idx).map(|(k, s, _)| (*k, s))
     }
 
     /// Ends every stream, emitting their last sweeps.
     pub fn finish(
         &mut self,
-        on_sweep: &mut dyn FnMut(usize, &Sweep, &SensorFacts),
+        on_sweep: &mut dyn FnMut(usize, &Sweep, Facts<'_>),
     ) -> Result<(), (usize, StreamError)> {
         for (idx, (_, stream, _)) in self.sensors.iter_mut().enumerate() {
-            stream
-                .finish(&mut |s, f| on_sweep(idx, s, f))
-                .map_err(|e| (idx, e))?;
+            match stream {
+                SensorStream::Velodyne(s) => s
+                    .finish(&mut |sw, f| on_sweep(idx, sw, Facts::Velodyne(f)))
+                    .map_err(|e| (idx, e))?,
+                SensorStream::Ouster(s) => {
+                    s.finish(&mut |sw, f| on_sweep(idx, sw, Facts::Ouster(f)))
+                }
+            }
         }
         Ok(())
     }

@@ -5,12 +5,14 @@
 //! two consecutive packets = round(Δ device time / packet period) − 1.
 
 pub mod demux;
+pub mod ouster;
 pub mod velodyne;
 
 use crate::point::Point;
 use crate::time::ClockSource;
 
-pub use demux::{Demux, DemuxStats, SensorKey};
+pub use demux::{velodyne_only, Demux, DemuxStats, Facts, SensorConfig, SensorKey, SensorStream};
+pub use ouster::{ImuSample, OusterFacts, OusterStats, OusterStream, OusterStreamConfig};
 pub use velodyne::{SensorFacts, StreamConfig, StreamError, StreamStats, VelodyneStream};
 
 /// One sweep: the points of one revolution (or of the sensor's frame), with its times and
@@ -23,6 +25,8 @@ pub struct Sweep {
     pub points: Vec<Point>,
     /// Firing column of each point within the sweep (only when the stream keeps columns).
     pub columns: Vec<u32>,
+    /// Extra values of each point (only when the stream keeps them: Ouster `--fields all`).
+    pub extras: Vec<crate::point::PointExtra>,
     /// The sweep's timestamp (its first firing) in the clock named by `clock`, ns since the
     /// Unix epoch.
     pub timestamp_ns: i64,
@@ -36,8 +40,13 @@ pub struct Sweep {
     pub last_host_ns: i64,
     /// Packets that contributed points.
     pub packets: u32,
-    /// Packets missing inside the sweep (device-time gaps).
+    /// Packets missing inside the sweep (device-time gaps; Ouster: missing columns of the
+    /// column window, in packets, rounded up).
     pub missing_packets: u64,
+    /// Ouster: columns of the column window that never arrived valid (0 for Velodyne).
+    pub missing_columns: u64,
+    /// Ouster: the sensor's frame id (0 for Velodyne).
+    pub frame_id: u32,
     /// Firing columns in the sweep (including those of missing packets is not attempted).
     pub columns_count: u32,
     /// Azimuth of the first firing, 0.01°.
@@ -51,8 +60,10 @@ impl Sweep {
     pub fn clear(&mut self) {
         self.points.clear();
         self.columns.clear();
+        self.extras.clear();
         self.packets = 0;
         self.missing_packets = 0;
+        self.missing_columns = 0;
         self.columns_count = 0;
     }
 

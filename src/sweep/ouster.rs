@@ -1,0 +1,531 @@
+//! One Ouster sensor's stream: frames by `frame_id`, column window, missing columns, epochs,
+//! IMU samples.
+//!
+//! Feed it every UDP payload from one sensor with its host receive time; it calls back with
+//! each finished sweep (one sensor frame). A sweep is cut when a packet of a newer `frame_id`
+//! arrives (half-range signed difference, so the 16-bit — FUSA: 32-bit — counter wraps);
+//! one older frame stays open as a reorder window, and packets older than that are counted
+//! as late and dropped. The sweep's timestamp is its earliest column timestamp; `t` of every
+//! point is measured from it (points already in the sweep are moved if an earlier column
+//! arrives late). Missing columns = columns of the metadata's column window that never
+//! arrived with status bit 0 set. A packet whose `init_id` differs from the metadata's (the
+//! sensor re-initialised) starts a new epoch: counted, warned in the summary, the stream goes on.
+
+use super::Sweep;
+use crate::calib::ouster::{ImuProfile, OusterInfo, TimestampMode};
+use crate::decode::ouster::OusterDecoder;
+use crate::decode::{DecodeError, DecodeOptions};
+use crate::model::ouster::HeaderKind;
+use crate::point::PointExtra;
+use crate::time::ClockSource;
+use crate::wire::ouster::{ImuPacketLegacy, ImuPacketNmea};
+use crate::wire::WireError;
+
+/// TAI − UTC since 2017-01-01, seconds (PTP time is TAI).
+pub const TAI_MINUS_UTC_S: u64 = 37;
+/// Most IMU samples held between two drains.
+pub const MAX_IMU_QUEUE: usize = 4096;
+/// Standard gravity, m/s² per g (ouster-ros `packet_to_imu_msg`).
+const G: f64 = 9.80665;
+
+/// Configuration of one Ouster stream.
+#[derive(Clone, Debug)]
+pub struct OusterStreamConfig {
+    /// The sensor's metadata.
+    pub info: OusterInfo,
+    /// Name of the metadata file (for summaries).
+    pub metadata_name: String,
+    /// Footer CRC check: `None` = the firmware rule (≥ 2.5, not FUSA), `Some(on)` forces it.
+    pub crc: Option<bool>,
+    /// Range filter.
+    pub decode: DecodeOptions,
+    /// Keep range, signal and near-IR per point ([`Sweep::extras`]).
+    pub keep_extras: bool,
+    /// Keep each point's column (measurement id) in [`Sweep::columns`].
+    pub keep_columns: bool,
+}
+
+impl OusterStreamConfig {
+    /// Size of the IMU packets a sensor with this metadata sends, if any.
+    pub fn imu_len_of(info: &OusterInfo) -> Option<usize> {
+        match info.imu_profile {
+            ImuProfile::Legacy => Some(48),
+            ImuProfile::Accel32Gyro32Nmea => Some(crate::wire::ouster::imu_nmea_packet_bytes(
+                info.imu_measurements_per_packet,
+            )),
+            ImuProfile::Off => None,
+        }
+    }
+}
+
+/// Counters of one Ouster stream.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct OusterStats {
+    /// Lidar packets decoded.
+    pub lidar_packets: u64,
+    /// IMU packets decoded.
+    pub imu_packets: u64,
+    /// Packets of no size this sensor sends, or whose headers do not parse.
+    pub malformed: u64,
+    /// Lidar packets whose footer CRC-64 did not match.
+    pub crc_failures: u64,
+    /// Packets whose serial number is not the metadata's.
+    pub wrong_sensor: u64,
+    /// Packets of a frame older than the reorder window.
+    pub late: u64,
+    /// Times the sensor's `init_id` changed (re-initialisation).
+    pub epochs: u64,
+    /// Columns of the column window that never arrived, over all sweeps.
+    pub missing_columns: u64,
+    /// Sweeps emitted.
+    pub sweeps: u64,
+    /// Points emitted.
+    pub points: u64,
+    /// IMU samples dropped because the queue was not drained.
+    pub imu_dropped: u64,
+}
+
+/// One IMU sample in SI units.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ImuSample {
+    /// Sensor timestamp of the accelerometer reading, ns (sensor clock).
+    pub sensor_ns: u64,
+    /// Host receive time of the packet, ns.
+    pub host_ns: i64,
+    /// Linear acceleration, m/s², sensor IMU frame.
+    pub accel: [f64; 3],
+    /// Angular velocity, rad/s.
+    pub gyro: [f64; 3],
+}
+
+/// What the stream knows of its sensor, for summaries and MCAP metadata.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct OusterFacts {
+    /// Product line, e.g. `OS-1-128`.
+    pub prod_line: String,
+    /// Serial number.
+    pub serial: u64,
+    /// Firmware.
+    pub firmware: String,
+    /// Lidar profile name.
+    pub profile: String,
+    /// `WxHz`.
+    pub mode: String,
+    /// Metadata file name.
+    pub metadata: String,
+    /// Clock of the sweep timestamps.
+    pub clock: ClockSource,
+    /// Whether lidar footers are CRC-checked.
+    pub crc_checked: bool,
+    /// init_id currently decoded.
+    pub init_id: u32,
+    /// Worst shot-limiting state seen (0 = normal).
+    pub shot_limiting: u8,
+    /// Worst thermal-shutdown state seen (0 = normal).
+    pub thermal_shutdown: u8,
+}
+
+#[derive(Debug)]
+struct Open {
+    frame_id: u32,
+    sweep: Sweep,
+    seen: Vec<bool>,
+    start_ns: u64,
+}
+
+/// An Ouster stream for one sensor.
+#[derive(Debug)]
+pub struct OusterStream {
+    cfg: OusterStreamConfig,
+    decoder: OusterDecoder,
+    open: Vec<Open>,
+    spare: Vec<Open>,
+    imu: Vec<ImuSample>,
+    stats: OusterStats,
+    facts: OusterFacts,
+    next_index: u64,
+    frame_bits: u32,
+}
+
+impl OusterStream {
+    /// A new stream; fails if the metadata cannot make a decoder.
+    pub fn new(cfg: OusterStreamConfig) -> Result<Self, DecodeError> {
+        let decoder = Self::make_decoder(&cfg, &cfg.info)?;
+        let info = &cfg.info;
+        let clock = if info.timestamp_mode == TimestampMode::Ptp1588 {
+            ClockSource::SensorPtp
+        } else {
+            ClockSource::Host
+        };
+        let facts = OusterFacts {
+            prod_line: info.prod_line.clone(),
+            serial: info.serial,
+            firmware: info.firmware.clone(),
+            profile: info.format.profile.name().to_string(),
+            mode: format!("{}x{}", info.columns_per_frame, info.fps),
+            metadata: cfg.metadata_name.clone(),
+            clock,
+            crc_checked: decoder.crc_check(),
+            init_id: info.init_id,
+            shot_limiting: 0,
+            thermal_shutdown: 0,
+        };
+        let frame_bits = if info.format.profile.header() == HeaderKind::Fusa {
+            32
+        } else {
+            16
+        };
+        Ok(Self {
+            cfg,
+            decoder,
+            open: Vec::with_capacity(2),
+            spare: Vec::with_capacity(2),
+            imu: Vec::new(),
+            stats: OusterStats::default(),
+            facts,
+            next_index: 0,
+            frame_bits,
+        })
+    }
+
+    fn make_decoder(
+        cfg: &OusterStreamConfig,
+        info: &OusterInfo,
+    ) -> Result<OusterDecoder, DecodeError> {
+        let mut d = OusterDecoder::new(info)?;
+        if let Some(on) = cfg.crc {
+            d = d.with_crc_check(on);
+        }
+        Ok(d)
+    }
+
+    /// The metadata.
+    pub fn info(&self) -> &OusterInfo {
+        &self.cfg.info
+    }
+
+    /// The decoder.
+    pub fn decoder(&self) -> &OusterDecoder {
+        &self.decoder
+    }
+
+    /// Counters.
+    pub fn stats(&self) -> &OusterStats {
+        &self.stats
+    }
+
+    /// What is known of the sensor.
+    pub fn facts(&self) -> &OusterFacts {
+        &self.facts
+    }
+
+    /// Whether a payload of this size is one this sensor sends (lidar or IMU).
+    pub fn accepts_len(&self, len: usize) -> bool {
+        len == self.cfg.info.lidar_packet_bytes() || Some(len) == self.imu_len()
+    }
+
+    fn imu_len(&self) -> Option<usize> {
+        OusterStreamConfig::imu_len_of(&self.cfg.info)
+    }
+
+    /// Takes the IMU samples decoded since the last call.
+    pub fn drain_imu(&mut self) -> std::vec::Drain<'_, ImuSample> {
+        self.imu.drain(..)
+    }
+
+    /// Pushes one UDP payload from this sensor; finished sweeps go to `on_sweep`.
+    pub fn push(
+        &mut self,
+        host_ns: i64,
+        payload: &[u8],
+        on_sweep: &mut dyn FnMut(&Sweep, &OusterFacts),
+    ) {
+        if payload.len() == self.cfg.info.lidar_packet_bytes() {
+            self.push_lidar(host_ns, payload, on_sweep);
+        } else if Some(payload.len()) == self.imu_len() {
+            self.push_imu(host_ns, payload);
+        } else {
+            self.stats.malformed += 1;
+        }
+    }
+
+    /// Emits the sweeps still open.
+    pub fn finish(&mut self, on_sweep: &mut dyn FnMut(&Sweep, &OusterFacts)) {
+        self.open.sort_by_key(|o| o.sweep.index);
+        while !self.open.is_empty() {
+            let o = self.open.remove(0);
+            self.emit(o, on_sweep);
+        }
+    }
+
+    fn push_imu(&mut self, host_ns: i64, payload: &[u8]) {
+        let push = |s: ImuSample, stats: &mut OusterStats, q: &mut Vec<ImuSample>| {
+            if q.len() < MAX_IMU_QUEUE {
+                q.push(s);
+            } else {
+                stats.imu_dropped += 1;
+            }
+        };
+        match self.cfg.info.imu_profile {
+            ImuProfile::Legacy => match ImuPacketLegacy::new(payload) {
+                Ok(p) => {
+                    let a = p.accel_g();
+                    let g = p.gyro_dps();
+                    let s = ImuSample {
+                        sensor_ns: p.accel_ts_ns(),
+                        host_ns,
+                        accel: a.map(|v| f64::from(v) * G),
+                        gyro: g.map(|v| f64::from(v).to_radians()),
+                    };
+                    self.stats.imu_packets += 1;
+                    push(s, &mut self.stats, &mut self.imu);
+                }
+                Err(_) => self.stats.malformed += 1,
+            },
+            ImuProfile::Accel32Gyro32Nmea => {
+                match ImuPacketNmea::new(payload, self.cfg.info.imu_measurements_per_packet) {
+                    Ok(p) => {
+                        self.stats.imu_packets += 1;
+                        for m in p.measurements().filter(|m| m.valid()) {
+                            let s = ImuSample {
+                                sensor_ns: m.timestamp_ns,
+                                host_ns,
+                                accel: m.accel.map(f64::from),
+                                gyro: m.gyro.map(f64::from),
+                            };
+                            push(s, &mut self.stats, &mut self.imu);
+                        }
+                    }
+                    Err(_) => self.stats.malformed += 1,
+                }
+            }
+            ImuProfile::Off => self.stats.malformed += 1,
+        }
+    }
+
+    /// Signed difference `b − a` of two frame ids on the sensor's counter width.
+    fn frame_diff(&self, a: u32, b: u32) -> i64 {
+        let m = 1i64 << self.frame_bits;
+        let d = (i64::from(b) - i64::from(a)).rem_euclid(m);
+        if d >= m / 2 {
+            d - m
+        } else {
+            d
+        }
+    }
+
+    fn push_lidar(
+        &mut self,
+        host_ns: i64,
+        payload: &[u8],
+        on_sweep: &mut dyn FnMut(&Sweep, &OusterFacts),
+    ) {
+        let packet = match self.decoder.packet(payload) {
+            Ok(p) => p,
+            Err(DecodeError::SensorId {
+                found_init_id,
+                found_serial,
+                expected_serial,
+                ..
+            }) => {
+                if expected_serial != 0 && found_serial != 0 && found_serial != expected_serial {
+                    self.stats.wrong_sensor += 1;
+                    return;
+                }
+                // Same sensor, new init_id: a new epoch.
+                let mut info = self.cfg.info.clone();
+                info.init_id = found_init_id;
+                match Self::make_decoder(&self.cfg, &info) {
+                    Ok(d) => {
+                        self.finish(on_sweep);
+                        self.decoder = d;
+                        self.cfg.info = info;
+                        self.facts.init_id = found_init_id;
+                        self.stats.epochs += 1;
+                    }
+                    Err(_) => {
+                        self.stats.malformed += 1;
+                        return;
+                    }
+                }
+                match self.decoder.packet(payload) {
+                    Ok(p) => p,
+                    Err(_) => {
+                        self.stats.malformed += 1;
+                        return;
+                    }
+                }
+            }
+            Err(DecodeError::Wire(WireError::Crc { .. })) => {
+                self.stats.crc_failures += 1;
+                return;
+            }
+            Err(_) => {
+                self.stats.malformed += 1;
+                return;
+            }
+        };
+        self.facts.shot_limiting = self.facts.shot_limiting.max(packet.shot_limiting());
+        self.facts.thermal_shutdown = self.facts.thermal_shutdown.max(packet.thermal_shutdown());
+        let fid = packet.frame_id();
+        // Find or open the frame's sweep.
+        let idx = match self.open.iter().position(|o| o.frame_id == fid) {
+            Some(i) => i,
+            None => {
+                let newest = self.open.iter().map(|o| o.frame_id).reduce(|a, b| {
+                    if self.frame_diff(a, b) > 0 {
+                        b
+                    } else {
+                        a
+                    }
+                });
+                if let Some(n) = newest {
+                    if self.frame_diff(n, fid) < 0 {
+                        // Older than the newest frame and not open: late.
+                        self.stats.late += 1;
+                        return;
+                    }
+                }
+                if self.open.len() == 2 {
+                    // Reorder window of one frame: the older open frame is done.
+                    let oldest =
+                        if self.frame_diff(self.open[0].frame_id, self.open[1].frame_id) > 0 {
+                            0
+                        } else {
+                            1
+                        };
+                    let o = self.open.remove(oldest);
+                    self.emit(o, on_sweep);
+                }
+                let mut o = self.spare.pop().unwrap_or_else(|| Open {
+                    frame_id: 0,
+                    sweep: Sweep::default(),
+                    seen: Vec::new(),
+                    start_ns: 0,
+                });
+                o.frame_id = fid;
+                o.sweep.clear();
+                o.sweep.index = self.next_index;
+                self.next_index += 1;
+                o.sweep.frame_id = fid;
+                o.seen.clear();
+                o.seen.resize(self.cfg.info.columns_per_frame, false);
+                o.start_ns = u64::MAX;
+                self.open.push(o);
+                self.open.len() - 1
+            }
+        };
+        // The earliest valid column of this packet.
+        let w = self.cfg.info.columns_per_frame;
+        let first_ts = packet
+            .columns()
+            .filter(|c| c.valid() && usize::from(c.measurement_id()) < w)
+            .map(|c| c.timestamp_ns())
+            .min();
+        let opts = self.cfg.decode;
+        let (keep_extras, keep_columns) = (self.cfg.keep_extras, self.cfg.keep_columns);
+        let o = &mut self.open[idx];
+        if let Some(ts) = first_ts {
+            if o.start_ns == u64::MAX {
+                o.start_ns = ts;
+                o.sweep.device_time_ns = ts as i64;
+                o.sweep.first_host_ns = host_ns;
+            } else if ts < o.start_ns {
+                let shift = (o.start_ns - ts).min(u64::from(u32::MAX)) as u32;
+                for p in &mut o.sweep.points {
+                    p.t = p.t.saturating_add(shift);
+                }
+                o.start_ns = ts;
+                o.sweep.device_time_ns = ts as i64;
+                o.sweep.first_host_ns = o.sweep.first_host_ns.min(host_ns);
+            }
+        }
+        let start = if o.start_ns == u64::MAX {
+            0
+        } else {
+            o.start_ns
+        };
+        let before = o.sweep.points.len();
+        let (points, extras, columns, seen) = (
+            &mut o.sweep.points,
+            &mut o.sweep.extras,
+            &mut o.sweep.columns,
+            &mut o.seen,
+        );
+        let result = self
+            .decoder
+            .decode_with(&packet, start, |pt, ex, _row, col| {
+                if let Some(s) = seen.get_mut(col) {
+                    *s = true;
+                }
+                let r = ex.range_mm as f32 * 1e-3;
+                if !(r >= opts.min_range && r <= opts.max_range) {
+                    return;
+                }
+                points.push(pt);
+                if keep_extras {
+                    extras.push(PointExtra {
+                        range_mm: ex.range_mm,
+                        signal: ex.signal,
+                        near_ir: ex.near_ir,
+                    });
+                }
+                if keep_columns {
+                    columns.push(col as u32);
+                }
+            });
+        // Columns that were valid but had no return still arrived.
+        for c in packet.columns() {
+            let m = usize::from(c.measurement_id());
+            if c.valid() && m < w {
+                if let Some(s) = o.seen.get_mut(m) {
+                    *s = true;
+                }
+            }
+        }
+        if result.is_err() {
+            self.stats.malformed += 1;
+            return;
+        }
+        o.sweep.packets += 1;
+        o.sweep.last_host_ns = host_ns;
+        self.stats.points += (o.sweep.points.len() - before) as u64;
+        self.stats.lidar_packets += 1;
+    }
+
+    fn emit(&mut self, mut o: Open, on_sweep: &mut dyn FnMut(&Sweep, &OusterFacts)) {
+        let info = &self.cfg.info;
+        let in_window = (0..info.columns_per_frame).filter(|&c| info.is_column_in_window(c));
+        let received = in_window
+            .clone()
+            .filter(|&c| o.seen.get(c).copied().unwrap_or(false))
+            .count();
+        let expected = info.columns_in_window();
+        let missing = expected.saturating_sub(received) as u64;
+        let cpp = info.format.columns_per_packet.max(1) as u64;
+        o.sweep.missing_columns = missing;
+        o.sweep.missing_packets = missing.div_ceil(cpp);
+        o.sweep.columns_count = received as u32;
+        o.sweep.clock = self.facts.clock;
+        o.sweep.timestamp_ns = match self.facts.clock {
+            ClockSource::SensorPtp => {
+                o.sweep.device_time_ns - (TAI_MINUS_UTC_S * 1_000_000_000) as i64
+            }
+            _ => o.sweep.first_host_ns,
+        };
+        if o.sweep.packets > 0 {
+            self.stats.sweeps += 1;
+            self.stats.missing_columns += missing;
+            on_sweep(&o.sweep, &self.facts);
+        }
+        self.spare.push(o);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn tai_offset_is_37_seconds() {
+        assert_eq!(super::TAI_MINUS_UTC_S, 37);
+    }
+}
