@@ -218,7 +218,10 @@ impl VelodyneDecoder {
             expected_bank[b] = bank as u8;
             for (s, slot) in row.iter_mut().enumerate() {
                 let (t, column) = model.firing(mode, b, s);
-                *slot = Slot { t_ns: t as u32, column: column as u16 };
+                *slot = Slot {
+                    t_ns: t as u32,
+                    column: column as u16,
+                };
             }
         }
         let mut lanes = Box::new([Lane::default(); LANES]);
@@ -397,7 +400,10 @@ impl VelodyneDecoder {
 
     #[inline]
     fn block_frame(&self, p: &DataPacket<'_>, block: usize) -> (f32, f32) {
-        azimuth_table().get(usize::from(p.azimuth(block))).copied().unwrap_or((1.0, 0.0))
+        azimuth_table()
+            .get(usize::from(p.azimuth(block)))
+            .copied()
+            .unwrap_or((1.0, 0.0))
     }
 
     #[inline(always)]
@@ -440,8 +446,8 @@ impl VelodyneDecoder {
             y,
             z,
             intensity: f32::from(refl),
-            t: (t_base_ns + i64::from(sl0.t_ns) + i64::from(lane.dt_ns)).clamp(0, i64::from(u32::MAX))
-                as u32,
+            t: (t_base_ns + i64::from(sl0.t_ns) + i64::from(lane.dt_ns))
+                .clamp(0, i64::from(u32::MAX)) as u32,
             ring: laser.ring,
             ret,
             pad: 0,
@@ -498,7 +504,12 @@ impl VelodyneDecoder {
         let rots = &rot[base..base + SLOTS];
         let ml = p.measurements(last_block);
         let ms = p.measurements(strong_block);
-        for (((l, s), lane), &r) in ml.chunks_exact(3).zip(ms.chunks_exact(3)).zip(lanes).zip(rots) {
+        for (((l, s), lane), &r) in ml
+            .chunks_exact(3)
+            .zip(ms.chunks_exact(3))
+            .zip(lanes)
+            .zip(rots)
+        {
             let dl = u16::from_le_bytes([l[0], l[1]]);
             let ds = u16::from_le_bytes([s[0], s[1]]);
             let mut one = |raw: u16, refl: u8, ret: u8, n: &mut Decoded| {
