@@ -1,0 +1,111 @@
+//! `ringscan decode` on every Ouster capture in `../shared/captures`, with its metadata: the
+//! sensors found, their points and sweeps, against ouster-sdk's goldens (per-point fidelity is
+//! `tests/ouster_golden.rs`; this checks the whole path: pcap, reassembly, sensor matching,
+//! frame assembly, MCAP).
+
+mod common;
+
+use std::process::Command;
+
+use serde_json::Value;
+
+#[test]
+fn every_ouster_capture_decodes_to_the_goldens_points_and_frames() {
+    let Some(root) = common::captures() else {
+        return;
+    };
+    let idx: Value =
+        serde_json::from_slice(&std::fs::read(root.join("golden/index.json")).unwrap()).unwrap();
+    let out_dir = std::env::temp_dir().join(format!("ringscan-ouster-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&out_dir).unwrap();
+    let mut checked = 0;
+    println!("| capture | sensors | sweeps | points (ringscan = ouster-sdk) |");
+    println!("|---|---|---|---|");
+    for g in idx["goldens"].as_array().unwrap() {
+        if g["reference"] != "ouster-sdk" || !g["capture"].as_str().unwrap().ends_with(".pcap") {
+            continue;
+        }
+        let golden: Value = serde_json::from_slice(
+            &std::fs::read(root.join("golden").join(g["golden"].as_str().unwrap())).unwrap(),
+        )
+        .unwrap();
+        let capture = root.join(golden["capture"].as_str().unwrap());
+        let sensors = golden["sensors"].as_array().unwrap();
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_ringscan"));
+        let out = out_dir.join(format!("{checked}.mcap"));
+        cmd.arg("decode")
+            .arg(&capture)
+            .arg("--json")
+            .arg("--out")
+            .arg(&out);
+        for s in sensors {
+            cmd.arg("--calib")
+                .arg(root.join(s["metadata"].as_str().unwrap()));
+        }
+        let o = cmd.output().unwrap();
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{}: {stderr}", capture.display());
+        let j: Value = serde_json::from_slice(&o.stdout).unwrap();
+        let name = capture.file_name().unwrap().to_string_lossy().to_string();
+        let mut want_points = 0u64;
+        let mut want_sweeps = 0u64;
+        for s in sensors {
+            let sn = s["sn"]
+                .as_str()
+                .and_then(|v| v.parse::<u64>().ok())
+                .unwrap_or(0);
+            let frames = s["frames"].as_array().unwrap();
+            let points: u64 = frames
+                .iter()
+                .filter(|f| f["lidar_data"] != false)
+                .flat_map(|f| f["returns"].as_array().cloned().unwrap_or_default())
+                .map(|r| r["points"].as_u64().unwrap())
+                .sum();
+            let lidar_frames = frames.iter().filter(|f| f["lidar_data"] != false).count() as u64;
+            want_points += points;
+            want_sweeps += lidar_frames;
+            if frames.is_empty() {
+                // No packet at all (empty capture): no sensor to report.
+                continue;
+            }
+            // The sensor with that serial (or the only one) reports the same numbers.
+            let ours = j["sensors"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .find(|x| sn == 0 || x["serial"].as_u64() == Some(sn))
+                .unwrap_or_else(|| panic!("{name}: sensor {sn} not found in {j}"));
+            assert_eq!(
+                ours["points"].as_u64(),
+                Some(points),
+                "{name} sensor {sn}: points"
+            );
+            assert_eq!(
+                ours["sweeps"].as_u64(),
+                Some(lidar_frames),
+                "{name} sensor {sn}: sweeps"
+            );
+        }
+        assert_eq!(j["points"].as_u64(), Some(want_points), "{name}");
+        assert_eq!(j["sweeps"].as_u64(), Some(want_sweeps), "{name}");
+        // The MCAP holds one points message per sweep.
+        let bytes = std::fs::read(&out).unwrap();
+        let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+        let stats = summary.stats.unwrap();
+        let topics = &j["output"]["topics"];
+        let total: u64 = topics
+            .as_object()
+            .unwrap()
+            .values()
+            .map(|v| v.as_u64().unwrap())
+            .sum();
+        assert_eq!(stats.message_count, total, "{name}");
+        println!(
+            "| {name} | {} | {want_sweeps} | {want_points} |",
+            sensors.len()
+        );
+        checked += 1;
+    }
+    assert!(checked >= 12, "only {checked} Ouster captures checked");
+    let _ = std::fs::remove_dir_all(&out_dir);
+}
