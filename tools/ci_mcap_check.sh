@@ -37,6 +37,13 @@ if [ -d "$C" ]; then
   check velodyne-vlp32 "$C/jerry73204__rust-lidar-utils/velodyne-test/test_files/velodyne_vlp32.pcap"
   check nebula-vlp16-dual "$C/tier4__nebula/src/nebula_velodyne/nebula_velodyne/test_resources/decoder_ground_truth/vlp16/1673400471837873222/1673400471837873222_0.pcap" --calib "$C/tier4__nebula/src/nebula_velodyne/nebula_velodyne_decoders/calibration/VLP16.yaml"
   check nebula-vlp32c "$C/tier4__nebula/src/nebula_velodyne/nebula_velodyne/test_resources/decoder_ground_truth/vlp32/1713492677464078412/1713492677464078412_0.pcap" --calib "$C/tier4__nebula/src/nebula_velodyne/nebula_velodyne_decoders/calibration/VLP32.yaml"
+  O=$C/ouster-lidar__ouster-sdk/tests/pcaps
+  check os1-32-legacy "$O/OS-1-32-G_v2.1.1_1024x10.pcap" --calib "$O/OS-1-32-G_v2.1.1_1024x10.json"
+  check os0-32-dual "$O/OS-0-32-U1_v2.2.0_1024x10.pcap" --calib "$O/OS-0-32-U1_v2.2.0_1024x10.json"
+  check os1-128-lowdata "$O/OS-1-128_v2.3.0_1024x10_lb_n3.pcap" --calib "$O/OS-1-128_v2.3.0_1024x10.json"
+  check os1-128-fusa "$O/OS-1-128_767798045_1024x10_20230712_120049.pcap" --calib "$O/OS-1-128_767798045_1024x10_20230712_120049.json"
+  check same-ports "$O/same_ports.pcap" --calib "$O/same_ports.1.json" --calib "$O/same_ports.2.json" --raw
+  check crc-test "$O/crc_test.pcap" --calib "$O/crc_test.json"
 else
   echo "SKIP: $C is absent: real captures not decoded"
 fi
