@@ -3,8 +3,10 @@
 //! Knows nothing of sockets or files. Decoders are built once per calibration (all trigonometry
 //! of the calibration is done then) and allocate nothing per packet.
 
+pub mod ouster;
 pub mod velodyne;
 
+pub use ouster::{Decoded as OusterDecoded, Extra, OusterDecoder, OusterFrame};
 pub use velodyne::{DecodeOptions, VelodyneDecoder};
 
 /// Errors building a decoder or decoding a packet.
@@ -46,4 +48,38 @@ pub enum DecodeError {
     /// A configuration value is unusable.
     #[error("invalid option: {0}")]
     Option(String),
+    /// An Ouster calibration cannot build a decoder (counts, non-finite values).
+    #[error("invalid Ouster calibration: {0}")]
+    Calibration(String),
+    /// A packet or frame is not in the decoder's format.
+    #[error("expected {expected}, found {found}")]
+    Format {
+        /// What the decoder is built for.
+        expected: String,
+        /// What was given.
+        found: String,
+    },
+    /// An Ouster packet from another sensor (ouster-sdk `validate_packet`: init_id / serial).
+    #[error(
+        "packet from another sensor: init_id {found_init_id} (expected {expected_init_id}), \
+         serial {found_serial} (expected {expected_serial})"
+    )]
+    SensorId {
+        /// The metadata's init_id.
+        expected_init_id: u32,
+        /// The packet's init_id.
+        found_init_id: u32,
+        /// The metadata's serial.
+        expected_serial: u64,
+        /// The packet's serial.
+        found_serial: u64,
+    },
+    /// An Ouster packet of another frame than the one being filled.
+    #[error("packet of frame {found} given to frame {expected}")]
+    FrameId {
+        /// The frame's id.
+        expected: u32,
+        /// The packet's frame id.
+        found: u32,
+    },
 }

@@ -116,7 +116,11 @@ impl Profile {
         ALL_PROFILES.into_iter().find(|p| p.name() == s)
     }
 
-    /// Header layout.
+    /// Header layout: none for LEGACY, FUSA for the FUSA profile, else standard. This is
+    /// ouster-sdk's default; the SDK reads the layout from the metadata's
+    /// `lidar_data_format.header_type` (`STANDARD` / `FUSA`) when present, and both layouts
+    /// have the same size, so only the field offsets differ (the decoder and the encoder
+    /// accept another layout: `OusterDecoder::with_header_kind`, `OusterEncoder::with_header`).
     pub fn header(self) -> HeaderKind {
         match self {
             Self::Legacy => HeaderKind::Legacy,
@@ -176,7 +180,11 @@ impl Profile {
                 flags: Some(f(15, 1, 0)),
                 reflectivity: f(16, 8, 0),
                 signal: None,
-                near_ir: if self == Self::Rng15Rfl8Nir8 { Some(f(24, 8, 4)) } else { None },
+                near_ir: if self == Self::Rng15Rfl8Nir8 {
+                    Some(f(24, 8, 4))
+                } else {
+                    None
+                },
                 range2: None,
                 flags2: None,
                 reflectivity2: None,
@@ -280,7 +288,14 @@ mod tests {
     #[test]
     fn packet_sizes_match_the_documented_ones() {
         // FORMATS.md §5.2 (C = 16 columns).
-        let size = |profile, h| PacketFormat { profile, columns_per_packet: 16, pixels_per_column: h }.packet_bytes();
+        let size = |profile, h| {
+            PacketFormat {
+                profile,
+                columns_per_packet: 16,
+                pixels_per_column: h,
+            }
+            .packet_bytes()
+        };
         assert_eq!(size(Profile::Legacy, 16), 3392);
         assert_eq!(size(Profile::Legacy, 32), 6464);
         assert_eq!(size(Profile::Legacy, 64), 12608);

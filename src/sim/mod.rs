@@ -5,6 +5,7 @@
 
 pub mod hdl64;
 pub mod net;
+pub mod ouster;
 pub mod scene;
 pub mod velodyne;
 

@@ -4,6 +4,7 @@
 //! cannot fail or panic: every length is checked up front.
 
 pub mod nmea;
+pub mod ouster;
 pub mod velodyne;
 
 /// A datagram that does not have the shape its format requires.
@@ -40,5 +41,15 @@ pub enum WireError {
         offset: usize,
         /// Value found.
         found: u16,
+    },
+    /// A packet's stored checksum does not match its bytes.
+    #[error("{what}: stored CRC {stored:#018x}, computed {computed:#018x}")]
+    Crc {
+        /// Which packet kind.
+        what: &'static str,
+        /// CRC stored in the packet.
+        stored: u64,
+        /// CRC of the bytes.
+        computed: u64,
     },
 }

@@ -1,0 +1,855 @@
+//! The Ouster decoder: one table-driven loop for every profile.
+//!
+//! [`OusterDecoder::new`] does all the trigonometry of a calibration once: the XYZ lookup
+//! table of ouster-sdk's `make_xyz_lut` with `use_extrinsics = false` (FORMATS.md §5.2 "XYZ";
+//! `ouster_core/src/xyzlut.cpp`), one direction and one offset per pixel (row, column), in f32,
+//! computed in f64 from the beam intrinsics, `beam_to_lidar_transform` and
+//! `lidar_to_sensor_transform`:
+//!
+//! ```text
+//! θe = 2π − 2π·v/W                       (encoder angle of column v)
+//! θa = −beam_azimuth[u]·π/180,  φ = beam_altitude[u]·π/180
+//! dir = (cos(θe+θa)·cosφ, sin(θe+θa)·cosφ, sinφ)
+//! n = beam_to_lidar[0][3];  n_e = hypot(b[0][3], b[2][3]) if b[2][3] ≠ 0 else n
+//! off = (cosθe·n − dir.x·n_e, sinθe·n − dir.y·n_e, −dir.z·n_e + b[2][3])
+//! dir, off ← R(lidar_to_sensor)·(·);  off += t(lidar_to_sensor);  both × 0.001 (mm → m)
+//! xyz = range_mm·dir + off               (range 0: no point)
+//! ```
+//!
+//! Per packet: per valid column one timestamp subtraction; per pixel the profile's fields are
+//! read by their [`Field`](crate::model::ouster::Field) descriptions and the point is one
+//! multiply-add per axis. No trigonometry, no allocation per packet.
+//!
+//! Conventions (DESIGN.md "Points"; ouster-sdk 1.0.1):
+//! - Points are in the Ouster **sensor frame** (x forward toward the side opposite the
+//!   connector, z up), metres.
+//! - `intensity` = REFLECTIVITY (REFLECTIVITY2 for the second return); signal, near-IR, range
+//!   and flags are in [`Extra`].
+//! - `ring` = rank of the beam altitude, 0 = lowest (beams of equal altitude: the lower row in
+//!   the image gets the lower ring). Organised images ([`OusterFrame`]) keep the sensor's row
+//!   order: row 0 = beam 0 = top.
+//! - `ret` 0 = first return (RANGE), 1 = second return (RANGE2, dual profiles).
+//! - A column counts only when its status bit 0 is set and its measurement id is below W, as
+//!   the SDK's frame batcher; a pixel is a point when its range is > 0. RNG15 ranges are in
+//!   8 mm units on the wire and NIR8 values in units of 16; both are scaled as the SDK does
+//!   (`range_mm`, `near_ir` come out in the SDK's units).
+//! - `t` = column timestamp − the sweep start the caller gives, clamped to `0..=u32::MAX` ns.
+
+use super::DecodeError;
+use crate::calib::ouster::OusterInfo;
+use crate::model::ouster::{HeaderKind, Layout, PacketFormat};
+use crate::point::Point;
+use crate::wire::ouster::{read_field_at, Column, LidarPacket};
+
+/// The per-point values beyond the [`Point`] record.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Extra {
+    /// Range, mm (RNG15 profiles: the wire value × 8).
+    pub range_mm: u32,
+    /// Signal photons (0 where the profile has none).
+    pub signal: u16,
+    /// Near-infrared photons of the pixel (NIR8 profiles: the wire value × 16; 0 where the
+    /// profile has none). The same for both returns.
+    pub near_ir: u16,
+    /// Reflectivity (also in [`Point::intensity`]).
+    pub reflectivity: u8,
+    /// The return's flags field.
+    pub flags: u8,
+}
+
+/// What one packet decoded.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Decoded {
+    /// Points emitted (pixels with range > 0 in valid columns, both returns).
+    pub points: usize,
+    /// Valid columns (status bit 0 set, measurement id < W).
+    pub columns: usize,
+    /// Columns skipped: status bit 0 clear.
+    pub invalid_columns: usize,
+    /// Columns skipped: measurement id ≥ W.
+    pub out_of_range_columns: usize,
+}
+
+/// Direction (m per mm of range) and offset (m) of one pixel.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct LutEntry {
+    dir: [f32; 3],
+    off: [f32; 3],
+}
+
+/// Reads the profile's fields of one pixel.
+#[derive(Clone, Copy, Debug)]
+struct Pixel {
+    r: [Extra; 2],
+}
+
+/// An Ouster decoder for one calibration (sensor metadata).
+#[derive(Clone, Debug)]
+pub struct OusterDecoder {
+    format: PacketFormat,
+    header: HeaderKind,
+    layout: Layout,
+    w: usize,
+    h: usize,
+    /// XYZ table, column-major: entry of (row u, column v) at `v·H + u`.
+    lut: Vec<LutEntry>,
+    rings: Vec<u16>,
+    shift: Vec<i32>,
+    crc_check: bool,
+    init_id: u32,
+    serial: u64,
+}
+
+fn bad(reason: String) -> DecodeError {
+    DecodeError::Calibration(reason)
+}
+
+impl OusterDecoder {
+    /// Builds the lookup tables from a calibration. CRC checking follows
+    /// [`OusterInfo::lidar_packets_have_crc`] (firmware ≥ 2.5 with a standard header); change it
+    /// with [`Self::with_crc_check`].
+    pub fn new(info: &OusterInfo) -> Result<Self, DecodeError> {
+        let format = info.format;
+        let h = format.pixels_per_column;
+        let w = info.columns_per_frame;
+        if h == 0 || w == 0 || format.columns_per_packet == 0 {
+            return Err(bad(format!(
+                "frame of {h} rows × {w} columns, {} columns per packet: every count must be > 0",
+                format.columns_per_packet
+            )));
+        }
+        if w > usize::from(u16::MAX) + 1 {
+            return Err(bad(format!(
+                "{w} columns per frame: measurement ids are 16 bits"
+            )));
+        }
+        for (name, n) in [
+            ("beam_altitude_angles", info.beam_altitude_angles.len()),
+            ("beam_azimuth_angles", info.beam_azimuth_angles.len()),
+            ("pixel_shift_by_row", info.pixel_shift_by_row.len()),
+        ] {
+            if n != h {
+                return Err(bad(format!(
+                    "{name} has {n} entries, expected one per pixel row ({h})"
+                )));
+            }
+        }
+        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+        if !finite(&info.beam_altitude_angles)
+            || !finite(&info.beam_azimuth_angles)
+            || !finite(&info.beam_to_lidar)
+            || !finite(&info.lidar_to_sensor)
+        {
+            return Err(bad(
+                "a beam angle or transform entry is not a finite number".to_owned(),
+            ));
+        }
+        let lut = xyz_lut(
+            w,
+            &info.beam_altitude_angles,
+            &info.beam_azimuth_angles,
+            &info.beam_to_lidar,
+            &info.lidar_to_sensor,
+        );
+        Ok(Self {
+            format,
+            header: format.profile.header(),
+            layout: format.profile.layout(),
+            w,
+            h,
+            lut,
+            rings: rings_by_altitude(&info.beam_altitude_angles),
+            shift: info.pixel_shift_by_row.clone(),
+            crc_check: info.lidar_packets_have_crc(),
+            init_id: info.init_id,
+            serial: info.serial,
+        })
+    }
+
+    /// Another header layout than the profile's (the metadata's
+    /// `lidar_data_format.header_type`; ouster-sdk allows a FUSA header with any non-LEGACY
+    /// profile). Ignored for LEGACY, which has no header. A FUSA header has no CRC: the check
+    /// is turned off with it.
+    pub fn with_header_kind(mut self, header: HeaderKind) -> Self {
+        self.header = match (self.format.profile, header) {
+            (crate::model::ouster::Profile::Legacy, _) => HeaderKind::Legacy,
+            (_, HeaderKind::Legacy) => HeaderKind::Standard,
+            (_, h) => h,
+        };
+        if self.header != HeaderKind::Standard {
+            self.crc_check = false;
+        }
+        self
+    }
+
+    /// Turns the footer CRC check of [`Self::packet`] on or off.
+    pub fn with_crc_check(mut self, on: bool) -> Self {
+        self.crc_check = on;
+        self
+    }
+
+    /// Whether [`Self::packet`] checks the footer CRC.
+    pub fn crc_check(&self) -> bool {
+        self.crc_check
+    }
+
+    /// The packet format.
+    pub fn format(&self) -> &PacketFormat {
+        &self.format
+    }
+
+    /// The header layout.
+    pub fn header_kind(&self) -> HeaderKind {
+        self.header
+    }
+
+    /// Columns per frame (W).
+    pub fn columns_per_frame(&self) -> usize {
+        self.w
+    }
+
+    /// Pixels per column (H).
+    pub fn pixels_per_column(&self) -> usize {
+        self.h
+    }
+
+    /// Returns per pixel: 2 for dual profiles, else 1.
+    pub fn returns(&self) -> usize {
+        if self.format.profile.is_dual() {
+            2
+        } else {
+            1
+        }
+    }
+
+    /// Ring of each row (rank of the beam altitude, 0 = lowest).
+    pub fn rings(&self) -> &[u16] {
+        &self.rings
+    }
+
+    /// `pixel_shift_by_row`.
+    pub fn pixel_shift_by_row(&self) -> &[i32] {
+        &self.shift
+    }
+
+    /// Direction of pixel (row, column) in metres per mm of range, and its offset in metres.
+    pub fn lut(&self, row: usize, column: usize) -> Option<([f32; 3], [f32; 3])> {
+        if row >= self.h {
+            return None;
+        }
+        self.lut.get(column * self.h + row).map(|e| (e.dir, e.off))
+    }
+
+    /// The sensor-frame point of a range at pixel (row, column), metres (`None` outside the
+    /// frame; range 0 gives the pixel's offset, which the decoder never emits).
+    pub fn xyz(&self, row: usize, column: usize, range_mm: u32) -> Option<[f32; 3]> {
+        self.lut(row, column).map(|(d, o)| point_of(range_mm, d, o))
+    }
+
+    /// A view of one datagram in this decoder's format, accepted as ouster-sdk accepts lidar
+    /// packets for one sensor, in this order: the length of the format, then the sensor
+    /// ([`Self::check_sensor`]: init_id and serial), then the footer CRC when
+    /// [`Self::crc_check`] is on. (Use [`LidarPacket::new`] for a view without the checks.)
+    pub fn packet<'a>(&self, bytes: &'a [u8]) -> Result<LidarPacket<'a>, DecodeError> {
+        let p = LidarPacket::with_header(bytes, &self.format, self.header)?;
+        self.check_sensor(&p)?;
+        if self.crc_check {
+            p.check_crc()?;
+        }
+        Ok(p)
+    }
+
+    /// ouster-sdk's sensor check (`validate_packet`): the packet's init_id must equal the
+    /// metadata's when both are non-zero, and its serial likewise. Always passes for LEGACY.
+    pub fn check_sensor(&self, p: &LidarPacket<'_>) -> Result<(), DecodeError> {
+        let (init_id, serial) = (p.init_id(), p.serial());
+        let init_bad = self.init_id != 0 && init_id != 0 && init_id != self.init_id;
+        let sn_bad = self.serial != 0 && serial != 0 && serial != self.serial;
+        if init_bad || sn_bad {
+            return Err(DecodeError::SensorId {
+                expected_init_id: self.init_id,
+                found_init_id: init_id,
+                expected_serial: self.serial,
+                found_serial: serial,
+            });
+        }
+        Ok(())
+    }
+
+    fn check_format(&self, p: &LidarPacket<'_>) -> Result<(), DecodeError> {
+        if *p.format() != self.format || p.header_kind() != self.header {
+            return Err(DecodeError::Format {
+                expected: format!("{:?} with {:?} header", self.format, self.header),
+                found: format!("{:?} with {:?} header", p.format(), p.header_kind()),
+            });
+        }
+        Ok(())
+    }
+
+    /// The profile's fields of the pixel that starts at byte `at` of column bytes `b`.
+    #[inline]
+    fn pixel(&self, b: &[u8], at: usize) -> Pixel {
+        let l = &self.layout;
+        let get = |f| read_field_at(b, at, f);
+        let opt = |f: Option<crate::model::ouster::Field>| f.map_or(0, get);
+        let near_ir = opt(l.near_ir) as u16;
+        Pixel {
+            r: [
+                Extra {
+                    range_mm: get(l.range),
+                    signal: opt(l.signal) as u16,
+                    near_ir,
+                    reflectivity: get(l.reflectivity) as u8,
+                    flags: opt(l.flags) as u8,
+                },
+                Extra {
+                    range_mm: opt(l.range2),
+                    signal: opt(l.signal2) as u16,
+                    near_ir,
+                    reflectivity: opt(l.reflectivity2) as u8,
+                    flags: opt(l.flags2) as u8,
+                },
+            ],
+        }
+    }
+
+    /// Decodes one packet, handing every point to `emit` with its [`Extra`] values, its row
+    /// (0 = top beam) and its column (measurement id). Order: column by column in packet
+    /// order, row by row, the first return (`ret` 0) before the second (`ret` 1). `t` =
+    /// column timestamp − `sweep_start_ns`, clamped to `0..=u32::MAX`.
+    ///
+    /// The packet must have been viewed in this decoder's format ([`Self::packet`]).
+    #[inline]
+    pub fn decode_with<F: FnMut(Point, Extra, usize, usize)>(
+        &self,
+        p: &LidarPacket<'_>,
+        sweep_start_ns: u64,
+        mut emit: F,
+    ) -> Result<Decoded, DecodeError> {
+        self.check_format(p)?;
+        let mut n = Decoded::default();
+        let returns = self.returns();
+        for c in p.columns() {
+            let Some(m) = self.column_index(&c, &mut n) else {
+                continue;
+            };
+            let t = c
+                .timestamp_ns()
+                .saturating_sub(sweep_start_ns)
+                .min(u64::from(u32::MAX)) as u32;
+            let lut = &self.lut[m * self.h..(m + 1) * self.h];
+            let b = c.as_bytes();
+            for (row, (e, &ring)) in lut.iter().zip(&self.rings).enumerate() {
+                let pix = self.pixel(b, c.pixel_offset(row));
+                for (ret, x) in pix.r.iter().take(returns).enumerate() {
+                    if x.range_mm == 0 {
+                        continue;
+                    }
+                    let [px_, py, pz] = point_of(x.range_mm, e.dir, e.off);
+                    let pt = Point {
+                        x: px_,
+                        y: py,
+                        z: pz,
+                        intensity: f32::from(x.reflectivity),
+                        t,
+                        ring,
+                        ret: ret as u8,
+                        pad: 0,
+                    };
+                    emit(pt, *x, row, m);
+                    n.points += 1;
+                }
+            }
+        }
+        Ok(n)
+    }
+
+    /// Decodes one packet, appending its points to `out` (see [`Self::decode_with`]).
+    pub fn decode(
+        &self,
+        p: &LidarPacket<'_>,
+        sweep_start_ns: u64,
+        out: &mut Vec<Point>,
+    ) -> Result<Decoded, DecodeError> {
+        self.decode_with(p, sweep_start_ns, |pt, _, _, _| out.push(pt))
+    }
+
+    /// Counts a column and gives its measurement id when it holds data.
+    #[inline]
+    fn column_index(&self, c: &Column<'_>, n: &mut Decoded) -> Option<usize> {
+        if !c.valid() {
+            n.invalid_columns += 1;
+            return None;
+        }
+        let m = usize::from(c.measurement_id());
+        if m >= self.w {
+            n.out_of_range_columns += 1;
+            return None;
+        }
+        n.columns += 1;
+        Some(m)
+    }
+
+    /// An empty frame in this decoder's dimensions (allocates; reuse it with
+    /// [`OusterFrame::clear`]).
+    pub fn new_frame(&self) -> OusterFrame {
+        OusterFrame::new(self.h, self.w, self.returns(), self.shift.clone())
+    }
+
+    /// Writes one packet's valid columns into `frame`, in the sensor's staggered layout (the
+    /// column of a pixel is its measurement id), as ouster-sdk's frame batcher does: invalid
+    /// columns (status bit 0 clear) and columns with a measurement id ≥ W are not written, so
+    /// they stay zero in a cleared frame. The first packet of a cleared frame sets its
+    /// `frame_id` and header values; a packet of another `frame_id` is refused with
+    /// [`DecodeError::FrameId`] (finish the frame, clear it, and give the packet again).
+    pub fn decode_packet_into_frame(
+        &self,
+        p: &LidarPacket<'_>,
+        frame: &mut OusterFrame,
+    ) -> Result<Decoded, DecodeError> {
+        self.check_format(p)?;
+        if frame.rows != self.h || frame.columns != self.w || frame.returns != self.returns() {
+            return Err(DecodeError::Format {
+                expected: format!(
+                    "a frame of {} × {} × {} returns",
+                    self.h,
+                    self.w,
+                    self.returns()
+                ),
+                found: format!(
+                    "a frame of {} × {} × {} returns",
+                    frame.rows, frame.columns, frame.returns
+                ),
+            });
+        }
+        let fid = p.frame_id();
+        match frame.frame_id {
+            Some(id) if id != fid => {
+                return Err(DecodeError::FrameId {
+                    expected: id,
+                    found: fid,
+                })
+            }
+            Some(_) => {}
+            None => {
+                frame.frame_id = Some(fid);
+                frame.init_id = p.init_id();
+                frame.serial = p.serial();
+                frame.thermal_shutdown = p.thermal_shutdown();
+                frame.shot_limiting = p.shot_limiting();
+                frame.countdown_thermal_shutdown = p.countdown_thermal_shutdown();
+                frame.countdown_shot_limiting = p.countdown_shot_limiting();
+            }
+        }
+        frame.packets += 1;
+        frame.alert_flags |= p.alert_flags();
+        let mut n = Decoded::default();
+        let (h, w) = (self.h, self.w);
+        let plane = h * w;
+        let returns = self.returns();
+        for c in p.columns() {
+            let Some(m) = self.column_index(&c, &mut n) else {
+                continue;
+            };
+            frame.timestamp_ns[m] = c.timestamp_ns();
+            frame.measurement_id[m] = m as u16;
+            frame.status[m] = c.status();
+            let lut = &self.lut[m * h..(m + 1) * h];
+            let b = c.as_bytes();
+            for (row, e) in lut.iter().enumerate() {
+                let pix = self.pixel(b, c.pixel_offset(row));
+                let i = row * w + m;
+                frame.near_ir[i] = pix.r[0].near_ir;
+                for (ret, x) in pix.r.iter().take(returns).enumerate() {
+                    let k = ret * plane + i;
+                    frame.range_mm[k] = x.range_mm;
+                    frame.reflectivity[k] = x.reflectivity;
+                    frame.signal[k] = x.signal;
+                    frame.flags[k] = x.flags;
+                    if x.range_mm == 0 {
+                        frame.xyz[k] = [0.0; 3];
+                        frame.valid[k] = false;
+                    } else {
+                        frame.xyz[k] = point_of(x.range_mm, e.dir, e.off);
+                        frame.valid[k] = true;
+                        n.points += 1;
+                    }
+                }
+            }
+        }
+        Ok(n)
+    }
+}
+
+/// One frame as an organised image in the **sensor's staggered layout**: row 0 = beam 0 = the
+/// top beam, column = measurement id; every pixel of a column shares the column's timestamp
+/// but points at its own azimuth. [`Self::destagger`] gives the image a camera would show.
+///
+/// Pixel planes are indexed `(ret · H + row) · W + column` (`near_ir`: `row · W + column`);
+/// column arrays by column. Columns that never arrived valid are all zero, as in ouster-sdk.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OusterFrame {
+    /// H, pixels per column.
+    pub rows: usize,
+    /// W, columns per frame.
+    pub columns: usize,
+    /// Returns per pixel (1 or 2).
+    pub returns: usize,
+    /// Whether the pixel planes are in the sensor's staggered layout (false after
+    /// [`Self::destagger`]).
+    pub staggered: bool,
+    /// `pixel_shift_by_row` of the calibration.
+    pub pixel_shift_by_row: Vec<i32>,
+    /// `frame_id` of the packets (`None` until the first packet).
+    pub frame_id: Option<u32>,
+    /// Packets written.
+    pub packets: usize,
+    /// `init_id` of the first packet.
+    pub init_id: u32,
+    /// Serial of the first packet.
+    pub serial: u64,
+    /// `alert_flags` of every packet, or-ed.
+    pub alert_flags: u8,
+    /// Thermal shutdown status of the first packet.
+    pub thermal_shutdown: u8,
+    /// Shot limiting status of the first packet.
+    pub shot_limiting: u8,
+    /// `countdown_thermal_shutdown` of the first packet.
+    pub countdown_thermal_shutdown: u8,
+    /// `countdown_shot_limiting` of the first packet.
+    pub countdown_shot_limiting: u8,
+    /// Range, mm (returns × H × W).
+    pub range_mm: Vec<u32>,
+    /// Reflectivity (returns × H × W).
+    pub reflectivity: Vec<u8>,
+    /// Signal (returns × H × W; 0 where the profile has none).
+    pub signal: Vec<u16>,
+    /// Flags (returns × H × W).
+    pub flags: Vec<u8>,
+    /// Near-IR (H × W; 0 where the profile has none).
+    pub near_ir: Vec<u16>,
+    /// Sensor-frame point, metres (returns × H × W; zero where there is no point).
+    pub xyz: Vec<[f32; 3]>,
+    /// Whether the pixel is a point: its column arrived valid and its range is > 0
+    /// (returns × H × W).
+    pub valid: Vec<bool>,
+    /// Column timestamps, ns (W; 0 where no valid column arrived).
+    pub timestamp_ns: Vec<u64>,
+    /// Measurement ids (W; 0 where no valid column arrived).
+    pub measurement_id: Vec<u16>,
+    /// Column status (W; 0 where no valid column arrived).
+    pub status: Vec<u32>,
+}
+
+impl OusterFrame {
+    /// An empty frame of H rows, W columns and `returns` returns (allocates).
+    pub fn new(rows: usize, columns: usize, returns: usize, pixel_shift_by_row: Vec<i32>) -> Self {
+        let px = rows * columns;
+        let all = px * returns;
+        Self {
+            rows,
+            columns,
+            returns,
+            staggered: true,
+            pixel_shift_by_row,
+            frame_id: None,
+            packets: 0,
+            init_id: 0,
+            serial: 0,
+            alert_flags: 0,
+            thermal_shutdown: 0,
+            shot_limiting: 0,
+            countdown_thermal_shutdown: 0,
+            countdown_shot_limiting: 0,
+            range_mm: vec![0; all],
+            reflectivity: vec![0; all],
+            signal: vec![0; all],
+            flags: vec![0; all],
+            near_ir: vec![0; px],
+            xyz: vec![[0.0; 3]; all],
+            valid: vec![false; all],
+            timestamp_ns: vec![0; columns],
+            measurement_id: vec![0; columns],
+            status: vec![0; columns],
+        }
+    }
+
+    /// Zeroes every value for the next frame, keeping the buffers (and the layout flag reset
+    /// to staggered).
+    pub fn clear(&mut self) {
+        self.staggered = true;
+        self.frame_id = None;
+        self.packets = 0;
+        self.init_id = 0;
+        self.serial = 0;
+        self.alert_flags = 0;
+        self.thermal_shutdown = 0;
+        self.shot_limiting = 0;
+        self.countdown_thermal_shutdown = 0;
+        self.countdown_shot_limiting = 0;
+        self.range_mm.fill(0);
+        self.reflectivity.fill(0);
+        self.signal.fill(0);
+        self.flags.fill(0);
+        self.near_ir.fill(0);
+        self.xyz.fill([0.0; 3]);
+        self.valid.fill(false);
+        self.timestamp_ns.fill(0);
+        self.measurement_id.fill(0);
+        self.status.fill(0);
+    }
+
+    /// Index of pixel (ret, row, column) in the pixel planes (`None` outside the frame).
+    #[inline]
+    pub fn index(&self, ret: usize, row: usize, column: usize) -> Option<usize> {
+        (ret < self.returns && row < self.rows && column < self.columns)
+            .then(|| (ret * self.rows + row) * self.columns + column)
+    }
+
+    /// Whether column `c` arrived valid (status bit 0).
+    pub fn column_valid(&self, c: usize) -> bool {
+        self.status.get(c).is_some_and(|s| s & 1 != 0)
+    }
+
+    /// Valid columns.
+    pub fn valid_columns(&self) -> usize {
+        self.status.iter().filter(|&&s| s & 1 != 0).count()
+    }
+
+    /// Points (pixels with range > 0 in valid columns) of return `ret`.
+    pub fn points(&self, ret: usize) -> usize {
+        let plane = self.rows * self.columns;
+        self.valid
+            .get(ret * plane..(ret + 1) * plane)
+            .map_or(0, |v| v.iter().filter(|&&b| b).count())
+    }
+
+    /// The destaggered image (allocates): every pixel plane with row `u` moved right by
+    /// `pixel_shift_by_row[u]` (mod W), FORMATS.md §5.2 / ouster-sdk `destagger`:
+    /// `destaggered[u][(v + shift[u]) mod W] = staggered[u][v]`. Column arrays are unchanged
+    /// (they describe the staggered columns; see [`Self::pixel_timestamp_ns`]). A frame that
+    /// is already destaggered is returned as it is.
+    pub fn destagger(&self) -> OusterFrame {
+        if !self.staggered {
+            return self.clone();
+        }
+        let mut out = self.clone();
+        let (w, s) = (self.columns, &self.pixel_shift_by_row);
+        destagger_into(&self.range_mm, &mut out.range_mm, w, s);
+        destagger_into(&self.reflectivity, &mut out.reflectivity, w, s);
+        destagger_into(&self.signal, &mut out.signal, w, s);
+        destagger_into(&self.flags, &mut out.flags, w, s);
+        destagger_into(&self.near_ir, &mut out.near_ir, w, s);
+        destagger_into(&self.xyz, &mut out.xyz, w, s);
+        destagger_into(&self.valid, &mut out.valid, w, s);
+        out.staggered = false;
+        out
+    }
+
+    /// Timestamp of pixel (row, column) in the current layout: in a staggered frame the
+    /// column's; in a destaggered one `ts[(v − shift[u]) mod W]` (ouster-sdk
+    /// `column_timestamp_at_destaggered_pixel`). `None` outside the frame.
+    pub fn pixel_timestamp_ns(&self, row: usize, column: usize) -> Option<u64> {
+        if row >= self.rows || column >= self.columns {
+            return None;
+        }
+        if self.staggered {
+            return self.timestamp_ns.get(column).copied();
+        }
+        let w = self.columns as i64;
+        let s = i64::from(self.pixel_shift_by_row.get(row).copied().unwrap_or(0));
+        let v = (column as i64 - s).rem_euclid(w) as usize;
+        self.timestamp_ns.get(v).copied()
+    }
+}
+
+/// Destaggers image planes of width `w` (any number of rows, planes stacked: row `r` of the
+/// buffer uses `shift[r mod shift.len()]`): `dst[u][(v + shift[u]) mod W] = src[u][v]`.
+/// Rows beyond the shorter of `src` and `dst` are left alone; an empty `shift` copies.
+pub fn destagger_into<T: Copy>(src: &[T], dst: &mut [T], w: usize, shift: &[i32]) {
+    if w == 0 {
+        return;
+    }
+    for (r, (s, d)) in src.chunks_exact(w).zip(dst.chunks_exact_mut(w)).enumerate() {
+        let k = if shift.is_empty() {
+            0
+        } else {
+            i64::from(shift[r % shift.len()]).rem_euclid(w as i64) as usize
+        };
+        // dst[(v + k) mod w] = src[v]
+        d[k..].copy_from_slice(&s[..w - k]);
+        d[..k].copy_from_slice(&s[w - k..]);
+    }
+}
+
+#[inline]
+fn point_of(range_mm: u32, d: [f32; 3], o: [f32; 3]) -> [f32; 3] {
+    let r = range_mm as f32;
+    [r * d[0] + o[0], r * d[1] + o[1], r * d[2] + o[2]]
+}
+
+/// Ring of each row: rank of the altitude, 0 = lowest; equal altitudes: the higher row index
+/// (lower in the image) gets the lower ring.
+fn rings_by_altitude(alt: &[f64]) -> Vec<u16> {
+    let mut order: Vec<usize> = (0..alt.len()).collect();
+    order.sort_by(|&a, &b| alt[a].total_cmp(&alt[b]).then(b.cmp(&a)));
+    let mut rings = vec![0u16; alt.len()];
+    for (rank, &row) in order.iter().enumerate() {
+        rings[row] = rank as u16;
+    }
+    rings
+}
+
+/// ouster-sdk `make_xyz_lut` (OS sensors, `use_extrinsics = false`), column-major.
+fn xyz_lut(
+    w: usize,
+    alt_deg: &[f64],
+    az_deg: &[f64],
+    b2l: &[f64; 16],
+    l2s: &[f64; 16],
+) -> Vec<LutEntry> {
+    use core::f64::consts::PI;
+    let h = alt_deg.len();
+    let n = b2l[3];
+    let bz = b2l[11];
+    let n_e = if bz != 0.0 { n.hypot(bz) } else { n };
+    let rot = |v: [f64; 3]| {
+        [
+            l2s[0] * v[0] + l2s[1] * v[1] + l2s[2] * v[2],
+            l2s[4] * v[0] + l2s[5] * v[1] + l2s[6] * v[2],
+            l2s[8] * v[0] + l2s[9] * v[1] + l2s[10] * v[2],
+        ]
+    };
+    let t = [l2s[3], l2s[7], l2s[11]];
+    let step = 2.0 * PI / w as f64;
+    let mut lut = Vec::with_capacity(w * h);
+    for v in 0..w {
+        let enc = 2.0 * PI - v as f64 * step;
+        let (se, ce) = enc.sin_cos();
+        for u in 0..h {
+            let az = -az_deg[u] * PI / 180.0;
+            let phi = alt_deg[u] * PI / 180.0;
+            let (sa, ca) = (enc + az).sin_cos();
+            let (sp, cp) = phi.sin_cos();
+            let dir = [ca * cp, sa * cp, sp];
+            let off = [
+                ce * n - dir[0] * n_e,
+                se * n - dir[1] * n_e,
+                -dir[2] * n_e + bz,
+            ];
+            let d = rot(dir);
+            let o = rot(off);
+            lut.push(LutEntry {
+                dir: [
+                    (d[0] * 1e-3) as f32,
+                    (d[1] * 1e-3) as f32,
+                    (d[2] * 1e-3) as f32,
+                ],
+                off: [
+                    ((o[0] + t[0]) * 1e-3) as f32,
+                    ((o[1] + t[1]) * 1e-3) as f32,
+                    ((o[2] + t[2]) * 1e-3) as f32,
+                ],
+            });
+        }
+    }
+    lut
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const IDENTITY: [f64; 16] = [
+        1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0,
+    ];
+
+    fn close(a: [f32; 3], b: [f64; 3], tol: f64) -> bool {
+        (0..3).all(|i| (f64::from(a[i]) - b[i]).abs() <= tol)
+    }
+
+    #[test]
+    fn encoder_angle_runs_clockwise_from_column_zero() {
+        // No beam offset, identity transforms: column 0 looks along +x, column W/4 along −y
+        // (θe = 2π − 2π·v/W), column W/2 along −x.
+        let lut = xyz_lut(4, &[0.0], &[0.0], &IDENTITY, &IDENTITY);
+        let p = |v: usize, r: u32| point_of(r, lut[v].dir, lut[v].off);
+        assert!(close(p(0, 1000), [1.0, 0.0, 0.0], 1e-6));
+        assert!(close(p(1, 1000), [0.0, -1.0, 0.0], 1e-6));
+        assert!(close(p(2, 2000), [-2.0, 0.0, 0.0], 1e-6));
+        assert!(close(p(3, 1000), [0.0, 1.0, 0.0], 1e-6));
+    }
+
+    #[test]
+    fn beam_origin_offset_follows_the_legacy_guide_formula() {
+        // x = (r − n)·cos(θe+θa)·cosφ + n·cosθe, z = (r − n)·sinφ (lidar frame), here with
+        // θe = 0, θa = −10°, φ = 30°, n = 15.806 mm, r = 5000 mm, then the default
+        // lidar_to_sensor transform diag(−1, −1, 1) + 36.18 mm in z.
+        let mut b2l = IDENTITY;
+        b2l[3] = 15.806;
+        let mut l2s = IDENTITY;
+        l2s[0] = -1.0;
+        l2s[5] = -1.0;
+        l2s[11] = 36.18;
+        let lut = xyz_lut(1024, &[30.0], &[10.0], &b2l, &l2s);
+        let (r, n) = (5000.0f64, 15.806f64);
+        let (a, phi) = ((-10.0f64).to_radians(), 30.0f64.to_radians());
+        let x = (r - n) * a.cos() * phi.cos() + n;
+        let y = (r - n) * a.sin() * phi.cos();
+        let z = (r - n) * phi.sin();
+        let want = [-x * 1e-3, -y * 1e-3, (z + 36.18) * 1e-3];
+        assert!(close(point_of(5000, lut[0].dir, lut[0].off), want, 1e-6));
+    }
+
+    #[test]
+    fn beam_to_lidar_z_offset_uses_the_euclidean_distance() {
+        // b[0][3] = 3, b[2][3] = 4 → n_e = 5; φ = 0, θa = 0, column 0:
+        // x = r − 5 + 3, z = 4 (mm).
+        let mut b2l = IDENTITY;
+        b2l[3] = 3.0;
+        b2l[11] = 4.0;
+        let lut = xyz_lut(8, &[0.0], &[0.0], &b2l, &IDENTITY);
+        assert!(close(
+            point_of(1000, lut[0].dir, lut[0].off),
+            [0.998, 0.0, 0.004],
+            1e-7
+        ));
+    }
+
+    #[test]
+    fn rings_rank_altitudes_lowest_first() {
+        assert_eq!(
+            rings_by_altitude(&[10.0, 5.0, -1.0, -7.5]),
+            vec![3, 2, 1, 0]
+        );
+        assert_eq!(rings_by_altitude(&[1.0, 3.0, 2.0]), vec![0, 2, 1]);
+        // Equal altitudes: the lower row of the image gets the lower ring.
+        assert_eq!(rings_by_altitude(&[2.0, 2.0, 0.0]), vec![2, 1, 0]);
+    }
+
+    #[test]
+    fn destagger_moves_each_row_by_its_shift() {
+        // dst[u][(v + s[u]) mod W] = src[u][v]
+        let src: Vec<u32> = (0..8).collect(); // two rows of four
+        let mut dst = vec![0; 8];
+        destagger_into(&src, &mut dst, 4, &[1, -1]);
+        assert_eq!(dst, vec![3, 0, 1, 2, 5, 6, 7, 4]);
+        destagger_into(&src, &mut dst, 4, &[4, 9]);
+        assert_eq!(dst, vec![0, 1, 2, 3, 7, 4, 5, 6]);
+    }
+
+    #[test]
+    fn frame_pixel_timestamps_after_destagger() {
+        let mut f = OusterFrame::new(2, 4, 1, vec![1, -1]);
+        f.timestamp_ns = vec![10, 20, 30, 40];
+        f.range_mm = (1..=8).collect();
+        let d = f.destagger();
+        assert!(!d.staggered);
+        assert_eq!(d.range_mm, vec![4, 1, 2, 3, 6, 7, 8, 5]);
+        // Destaggered pixel (0, 1) came from staggered column 0, (1, 3) from column 0 too.
+        assert_eq!(d.pixel_timestamp_ns(0, 1), Some(10));
+        assert_eq!(d.pixel_timestamp_ns(1, 3), Some(10));
+        assert_eq!(f.pixel_timestamp_ns(1, 3), Some(40));
+        assert_eq!(d.pixel_timestamp_ns(2, 0), None);
+    }
+}
