@@ -1,0 +1,265 @@
+//! The Ouster stream on encoded packets: every kind of bad packet is a counted drop (never a
+//! panic), frames are cut on `frame_id` across its wrap, a late packet of the previous frame
+//! is still taken (one-frame reorder window), older ones are counted, invalid columns are
+//! counted as missing, an `init_id` change starts an epoch, IMU packets come out in SI units.
+//! Expected numbers come from the packets the test builds, not from the decoder.
+
+use ringscan::calib::ouster::{parse, OusterInfo};
+use ringscan::decode::DecodeOptions;
+use ringscan::model::ouster::{PacketFormat, Profile};
+use ringscan::sim::ouster::{encode_imu_legacy, OusterEncoder, SimColumn, SimHeader, SimPixel};
+use ringscan::sweep::{OusterStream, OusterStreamConfig, Sweep};
+
+const W: usize = 512;
+const H: usize = 16;
+const CPP: usize = 16;
+
+fn info(profile: Profile) -> OusterInfo {
+    let text = serde_json::json!({
+        "beam_altitude_angles": (0..64).map(|u| 20.0 - 0.5 * f64::from(u)).collect::<Vec<_>>(),
+        "beam_azimuth_angles": vec![0.0; 64],
+        "lidar_mode": "512x10",
+    })
+    .to_string();
+    let mut info = parse(&text, "t.json").unwrap();
+    info.format = PacketFormat {
+        profile,
+        columns_per_packet: CPP,
+        pixels_per_column: H,
+    };
+    info.beam_altitude_angles = (0..H).map(|u| 15.0 - 2.0 * u as f64).collect();
+    info.beam_azimuth_angles = vec![0.0; H];
+    info.pixel_shift_by_row = vec![0; H];
+    info.serial = 992_210_000_957;
+    info.init_id = 77;
+    info.firmware = "v2.5.2".into();
+    info.image_rev = "ousteros-image-prod-aries-v2.5.2+20230101000000".into();
+    info
+}
+
+struct Gen {
+    enc: OusterEncoder,
+    serial: u64,
+}
+
+impl Gen {
+    /// Packet `k` (0-based within its frame) of `frame`: columns 16k..16k+15, every pixel at
+    /// 5 m (range 5000 mm), column timestamps 1 s + frame · 100 ms + column · 100 ms / W.
+    fn packet(&self, frame: u32, k: usize, init_id: u32, invalid_cols: &[usize]) -> Vec<u8> {
+        let cols: Vec<SimColumn> = (0..CPP)
+            .map(|i| {
+                let m = k * CPP + i;
+                SimColumn {
+                    timestamp_ns: 1_000_000_000
+                        + u64::from(frame) * 100_000_000
+                        + (m as u64) * 100_000_000 / W as u64,
+                    measurement_id: m as u16,
+                    status: if invalid_cols.contains(&m) { 0 } else { 1 },
+                    pixels: vec![
+                        SimPixel {
+                            range_mm: 5000,
+                            reflectivity: 50,
+                            signal: 9,
+                            near_ir: 7,
+                            ..SimPixel::default()
+                        };
+                        H
+                    ],
+                }
+            })
+            .collect();
+        let h = SimHeader {
+            packet_type: 1,
+            frame_id: frame,
+            init_id,
+            serial: self.serial,
+            ..SimHeader::default()
+        };
+        let mut out = Vec::new();
+        self.enc.encode(&h, &cols, &mut out).unwrap();
+        out
+    }
+}
+
+fn stream(info: &OusterInfo) -> OusterStream {
+    OusterStream::new(OusterStreamConfig {
+        info: info.clone(),
+        metadata_name: "t.json".into(),
+        crc: None,
+        decode: DecodeOptions::default(),
+        keep_extras: false,
+        keep_columns: false,
+    })
+    .unwrap()
+}
+
+fn run(s: &mut OusterStream, packets: &[Vec<u8>]) -> Vec<Sweep> {
+    let mut out = Vec::new();
+    for p in packets {
+        s.push(0, p, &mut |sw, _| out.push(sw.clone()));
+    }
+    s.finish(&mut |sw, _| out.push(sw.clone()));
+    out
+}
+
+const PER_FRAME: usize = W / CPP; // 32 packets
+
+#[test]
+fn frames_are_cut_on_frame_id_across_the_wrap() {
+    let info = info(Profile::Rng19Rfl8Sig16Nir16);
+    let g = Gen {
+        enc: OusterEncoder::new(&info),
+        serial: info.serial,
+    };
+    let mut packets = Vec::new();
+    for frame in [65_534u32, 65_535, 0, 1] {
+        for k in 0..PER_FRAME {
+            packets.push(g.packet(frame, k, 77, &[]));
+        }
+    }
+    let mut s = stream(&info);
+    let sweeps = run(&mut s, &packets);
+    assert_eq!(sweeps.len(), 4);
+    assert_eq!(
+        sweeps.iter().map(|s| s.frame_id).collect::<Vec<_>>(),
+        [65_534, 65_535, 0, 1]
+    );
+    for sw in &sweeps {
+        assert_eq!(sw.points.len(), W * H);
+        assert_eq!(sw.missing_columns, 0);
+        // t from the frame's first column: the last column is (W−1)/W · 100 ms later.
+        assert_eq!(
+            sw.span_ns(),
+            ((W as u64 - 1) * 100_000_000 / W as u64) as u32
+        );
+    }
+    assert_eq!(s.stats().late, 0);
+}
+
+#[test]
+fn bad_packets_are_counted_drops() {
+    let info = info(Profile::Rng19Rfl8Sig16Nir16); // FW 2.5.2: CRC checked
+    let g = Gen {
+        enc: OusterEncoder::new(&info),
+        serial: info.serial,
+    };
+    let mut packets = Vec::new();
+    for k in 0..PER_FRAME {
+        let mut p = g.packet(10, k, 77, &[]);
+        match k {
+            3 => p.truncate(p.len() - 1), // wrong size: malformed
+            5 => p[100] ^= 0x40,          // flipped bit: CRC failure
+            7 => {
+                p = Gen {
+                    enc: OusterEncoder::new(&info),
+                    serial: 1234,
+                }
+                .packet(10, k, 77, &[])
+            } // other sensor
+            _ => {}
+        }
+        packets.push(p);
+    }
+    packets.push(vec![0u8; 3]); // garbage
+    let mut s = stream(&info);
+    let sweeps = run(&mut s, &packets);
+    let st = s.stats().clone();
+    assert_eq!(st.malformed, 2, "{st:?}");
+    assert_eq!(st.crc_failures, 1, "{st:?}");
+    assert_eq!(st.wrong_sensor, 1, "{st:?}");
+    assert_eq!(sweeps.len(), 1);
+    // Three packets of 16 columns lost.
+    assert_eq!(sweeps[0].missing_columns, 48);
+    assert_eq!(sweeps[0].missing_packets, 3);
+    assert_eq!(sweeps[0].points.len(), (W - 48) * H);
+}
+
+#[test]
+fn invalid_columns_are_missing_and_give_no_points() {
+    let info = info(Profile::Rng15Rfl8Nir8);
+    let g = Gen {
+        enc: OusterEncoder::new(&info),
+        serial: info.serial,
+    };
+    let invalid = [0usize, 17, 18, 511];
+    let packets: Vec<_> = (0..PER_FRAME)
+        .map(|k| g.packet(3, k, 77, &invalid))
+        .collect();
+    let mut s = stream(&info);
+    let sweeps = run(&mut s, &packets);
+    assert_eq!(sweeps[0].missing_columns, invalid.len() as u64);
+    assert_eq!(sweeps[0].points.len(), (W - invalid.len()) * H);
+    // The sweep starts at column 1 (column 0 is invalid).
+    assert_eq!(
+        sweeps[0].device_time_ns,
+        1_000_000_000 + 3 * 100_000_000 + 100_000_000 / W as i64
+    );
+}
+
+#[test]
+fn a_late_packet_of_the_previous_frame_is_kept_older_ones_are_counted() {
+    let info = info(Profile::Rng19Rfl8Sig16Nir16Dual);
+    let g = Gen {
+        enc: OusterEncoder::new(&info),
+        serial: info.serial,
+    };
+    let mut packets = Vec::new();
+    for k in 0..PER_FRAME {
+        if k != 4 {
+            packets.push(g.packet(20, k, 77, &[]));
+        }
+    }
+    for k in 0..PER_FRAME {
+        packets.push(g.packet(21, k, 77, &[]));
+        if k == 2 {
+            packets.push(g.packet(20, 4, 77, &[])); // late by two packets: within the window
+        }
+    }
+    packets.push(g.packet(22, 0, 77, &[]));
+    packets.push(g.packet(20, 9, 77, &[])); // frame 20 is closed by now: late
+    let mut s = stream(&info);
+    let sweeps = run(&mut s, &packets);
+    assert_eq!(
+        sweeps.iter().map(|s| s.frame_id).collect::<Vec<_>>(),
+        [20, 21, 22]
+    );
+    assert_eq!(
+        sweeps[0].missing_columns, 0,
+        "the late packet completed frame 20"
+    );
+    assert_eq!(sweeps[0].points.len(), W * H); // second returns absent (range 0): one point per pixel
+    assert_eq!(s.stats().late, 1);
+}
+
+#[test]
+fn an_init_id_change_is_a_new_epoch_not_a_dropped_sensor() {
+    let info = info(Profile::Rng19Rfl8Sig16Nir16);
+    let g = Gen {
+        enc: OusterEncoder::new(&info),
+        serial: info.serial,
+    };
+    let mut packets: Vec<_> = (0..PER_FRAME).map(|k| g.packet(1, k, 77, &[])).collect();
+    packets.extend((0..PER_FRAME).map(|k| g.packet(0, k, 78, &[])));
+    let mut s = stream(&info);
+    let sweeps = run(&mut s, &packets);
+    assert_eq!(s.stats().epochs, 1);
+    assert_eq!(s.stats().wrong_sensor, 0);
+    assert_eq!(sweeps.len(), 2);
+    assert!(sweeps.iter().all(|s| s.points.len() == W * H));
+    assert_eq!(s.facts().init_id, 78);
+}
+
+#[test]
+fn legacy_imu_packets_come_out_in_si_units() {
+    let info = info(Profile::Rng19Rfl8Sig16Nir16);
+    let mut s = stream(&info);
+    let imu = encode_imu_legacy(5, 6, 7, [0.0, 0.0, 1.0], [90.0, 0.0, -180.0]);
+    s.push(0, &imu, &mut |_, _| {});
+    let samples: Vec<_> = s.drain_imu().collect();
+    assert_eq!(samples.len(), 1);
+    assert_eq!(samples[0].sensor_ns, 6);
+    assert!((samples[0].accel[2] - 9.80665).abs() < 1e-9);
+    assert!((samples[0].gyro[0] - std::f64::consts::FRAC_PI_2).abs() < 1e-6);
+    assert!((samples[0].gyro[2] + std::f64::consts::PI).abs() < 1e-6);
+    assert_eq!(s.stats().imu_packets, 1);
+}
