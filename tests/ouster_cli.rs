@@ -109,3 +109,69 @@ fn every_ouster_capture_decodes_to_the_goldens_points_and_frames() {
     assert!(checked >= 12, "only {checked} Ouster captures checked");
     let _ = std::fs::remove_dir_all(&out_dir);
 }
+
+#[test]
+fn info_names_serial_firmware_profile_mode_window_timestamps_and_packets_per_port() {
+    let Some(root) = common::captures() else {
+        return;
+    };
+    let idx: Value =
+        serde_json::from_slice(&std::fs::read(root.join("golden/index.json")).unwrap()).unwrap();
+    let mut checked = 0;
+    for g in idx["goldens"].as_array().unwrap() {
+        if g["reference"] != "ouster-sdk" || !g["capture"].as_str().unwrap().ends_with(".pcap") {
+            continue;
+        }
+        let golden: Value = serde_json::from_slice(
+            &std::fs::read(root.join("golden").join(g["golden"].as_str().unwrap())).unwrap(),
+        )
+        .unwrap();
+        let capture = root.join(golden["capture"].as_str().unwrap());
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_ringscan"));
+        cmd.arg("info").arg(&capture).arg("--json");
+        for s in golden["sensors"].as_array().unwrap() {
+            cmd.arg("--calib")
+                .arg(root.join(s["metadata"].as_str().unwrap()));
+        }
+        let o = cmd.output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let j: Value = serde_json::from_slice(&o.stdout).unwrap();
+        for s in golden["sensors"].as_array().unwrap() {
+            if s["frames"].as_array().is_none_or(|f| f.is_empty()) {
+                continue;
+            }
+            let sn: u64 = s["sn"].as_str().unwrap().parse().unwrap();
+            let ours = j["sensors"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .find(|x| x["serial"].as_u64() == Some(sn))
+                .unwrap();
+            let name = capture.file_name().unwrap().to_string_lossy();
+            assert_eq!(ours["lidar_mode"], s["lidar_mode"], "{name}");
+            assert_eq!(ours["columns_per_frame"], s["columns_per_frame"], "{name}");
+            assert_eq!(ours["pixels_per_column"], s["pixels_per_column"], "{name}");
+            assert_eq!(ours["column_window"], s["column_window"], "{name}");
+            if s["udp_profile_lidar"] != "OFF" {
+                assert_eq!(ours["profile"], s["udp_profile_lidar"], "{name}");
+            }
+            // Empty only where the metadata has no firmware (the reduced OS-1-64 file).
+            assert!(ours["firmware"].is_string(), "{name}");
+            assert!(ours["timestamp_mode"].is_string(), "{name}");
+            let per_port = ours["packets_per_port"].as_object().unwrap();
+            let total: u64 = per_port.values().map(|v| v.as_u64().unwrap()).sum();
+            assert_eq!(
+                total,
+                ours["lidar_packets"].as_u64().unwrap()
+                    + ours["imu_packets"].as_u64().unwrap()
+                    + ours["malformed"].as_u64().unwrap()
+                    + ours["crc_failures"].as_u64().unwrap()
+                    + ours["wrong_sensor"].as_u64().unwrap()
+                    + ours["late"].as_u64().unwrap(),
+                "{name}: {per_port:?}"
+            );
+            checked += 1;
+        }
+    }
+    assert!(checked >= 15, "{checked}");
+}

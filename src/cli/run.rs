@@ -400,6 +400,12 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
             o.insert("name".into(), json!(so.map(|s| s.name.clone())));
             o.insert("address".into(), json!(addr.to_string()));
             o.insert("ports".into(), json!(ports));
+            let per_port: serde_json::Map<String, Value> = ports
+                .iter()
+                .zip(demux.port_packets(idx))
+                .map(|(p, n)| (p.to_string(), json!(n)))
+                .collect();
+            o.insert("packets_per_port".into(), Value::Object(per_port));
             o.insert(
                 "calibration_file".into(),
                 json!(so.and_then(|s| s.calib_file.clone())),
@@ -724,6 +730,7 @@ fn print_text(j: &Value) {
                 g(&s["wrong_sensor"]),
                 g(&s["epochs"])
             );
+            println!("    packets per port: {}", s["packets_per_port"]);
             println!(
                 "    metadata: {}; timestamps: {}; clock: {}; CRC checked: {}; shot limiting: {}; thermal: {}",
                 st("calibration"),
@@ -754,6 +761,7 @@ fn print_text(j: &Value) {
             g(&s["malformed"]),
             g(&s["discontinuities"])
         );
+        println!("    packets per port: {}", s["packets_per_port"]);
         println!(
             "    calibration: {}; clock: {}; PPS: {}; GPS: {}",
             st("calibration"),

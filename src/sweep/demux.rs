@@ -104,6 +104,8 @@ pub type ConfigFor = dyn FnMut(SensorKey, u16, &[u8]) -> Option<SensorConfig>;
 /// Routes datagrams to per-sensor streams.
 pub struct Demux {
     sensors: Vec<(SensorKey, SensorStream, Vec<u16>)>,
+    /// Datagrams per destination port, parallel to each sensor's port list.
+    port_packets: Vec<Vec<u64>>,
     config_for: Box<ConfigFor>,
     data_port: Option<u16>,
     stats: DemuxStats,
@@ -131,6 +133,7 @@ impl Demux {
     pub fn new(config_for: Box<ConfigFor>, data_port: Option<u16>) -> Self {
         Self {
             sensors: Vec::new(),
+            port_packets: Vec::new(),
             config_for,
             data_port,
             stats: DemuxStats::default(),
@@ -145,6 +148,11 @@ impl Demux {
     /// The sensors seen, in order of first appearance, with the destination ports they used.
     pub fn sensors(&self) -> impl Iterator<Item = (SensorKey, &SensorStream, &[u16])> {
         self.sensors.iter().map(|(k, s, p)| (*k, s, p.as_slice()))
+    }
+
+    /// Datagrams routed to sensor `idx`, per destination port (parallel to its port list).
+    pub fn port_packets(&self, idx: usize) -> &[u64] {
+        self.port_packets.get(idx).map_or(&[], |v| v.as_slice())
     }
 
     /// The stream of sensor `idx`.
@@ -186,6 +194,7 @@ impl Demux {
                     },
                 };
                 self.sensors.push((src, stream, Vec::new()));
+                self.port_packets.push(Vec::new());
                 self.sensors.len() - 1
             }
         };
@@ -197,8 +206,19 @@ impl Demux {
             }
         }
         self.stats.routed += 1;
-        if !ports.contains(&dst_port) && ports.len() < 16 {
-            ports.push(dst_port);
+        match ports.iter().position(|&p| p == dst_port) {
+            Some(i) => {
+                if let Some(n) = self.port_packets.get_mut(idx).and_then(|v| v.get_mut(i)) {
+                    *n += 1;
+                }
+            }
+            None if ports.len() < 16 => {
+                ports.push(dst_port);
+                if let Some(v) = self.port_packets.get_mut(idx) {
+                    v.push(1);
+                }
+            }
+            None => {}
         }
         match stream {
             SensorStream::Velodyne(s) => s
