@@ -53,6 +53,35 @@ pub struct PointExtra {
     pub near_ir: u16,
 }
 
+/// Stride of the extended record written with `--fields all`: a [`Point`] then a
+/// [`PointExtra`].
+pub const EXTENDED_STRIDE: usize = POINT_STRIDE + core::mem::size_of::<PointExtra>();
+
+/// Fields of the extended record, in record order (the [`POINT_FIELDS`] first).
+pub const EXTENDED_FIELDS: [(&str, usize, FieldType); 10] = [
+    ("x", 0, FieldType::F32),
+    ("y", 4, FieldType::F32),
+    ("z", 8, FieldType::F32),
+    ("intensity", 12, FieldType::F32),
+    ("t", 16, FieldType::U32),
+    ("ring", 20, FieldType::U16),
+    ("return", 22, FieldType::U8),
+    ("range", 24, FieldType::U32),
+    ("signal", 28, FieldType::U16),
+    ("near_ir", 30, FieldType::U16),
+];
+
+/// Interleaves points and their extras into extended records (`out` is cleared first).
+pub fn interleave_extended(points: &[Point], extras: &[PointExtra], out: &mut Vec<u8>) {
+    out.clear();
+    out.reserve(points.len() * EXTENDED_STRIDE);
+    let zero = PointExtra::default();
+    for (i, p) in points.iter().enumerate() {
+        out.extend_from_slice(bytemuck::bytes_of(p));
+        out.extend_from_slice(bytemuck::bytes_of(extras.get(i).unwrap_or(&zero)));
+    }
+}
+
 /// Size of one [`Point`] in bytes (the point stride in every sink).
 pub const POINT_STRIDE: usize = core::mem::size_of::<Point>();
 

@@ -263,3 +263,61 @@ fn legacy_imu_packets_come_out_in_si_units() {
     assert!((samples[0].gyro[2] + std::f64::consts::PI).abs() < 1e-6);
     assert_eq!(s.stats().imu_packets, 1);
 }
+
+/// `--fields all` on real data: with extras kept, the sums of range, signal and near-IR over
+/// the points of the dual-return OS-0-32 capture equal ouster-sdk's golden sums (range and
+/// signal of both returns; near-IR is per pixel, so the golden's first-return sum counts it
+/// once per first-return point and the second-return points repeat their pixel's value).
+#[test]
+fn extras_of_a_real_capture_sum_to_the_goldens() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/captures");
+    if !root.join("golden").is_dir() {
+        eprintln!("SKIP: {} is absent", root.display());
+        return;
+    }
+    let dir = root.join("ouster-lidar__ouster-sdk/tests/pcaps");
+    let meta = std::fs::read_to_string(dir.join("OS-0-32-U1_v2.2.0_1024x10.json")).unwrap();
+    let info = parse(&meta, "OS-0-32-U1_v2.2.0_1024x10.json").unwrap();
+    let mut s = OusterStream::new(OusterStreamConfig {
+        info,
+        metadata_name: "m".into(),
+        crc: None,
+        decode: DecodeOptions::default(),
+        keep_extras: true,
+        keep_columns: false,
+    })
+    .unwrap();
+    let mut src =
+        ringscan::source::pcap::PcapSource::open(&dir.join("OS-0-32-U1_v2.2.0_1024x10.pcap"))
+            .unwrap();
+    let mut sweeps = Vec::new();
+    while let Some(d) = src.next_datagram().unwrap() {
+        s.push(d.time_ns, d.payload, &mut |sw, _| sweeps.push(sw.clone()));
+    }
+    s.finish(&mut |sw, _| sweeps.push(sw.clone()));
+    assert_eq!(sweeps.len(), 1);
+    let sw = &sweeps[0];
+    assert_eq!(sw.extras.len(), sw.points.len());
+    let golden: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(root.join(
+            "golden/ouster-lidar__ouster-sdk/tests/pcaps/OS-0-32-U1_v2.2.0_1024x10.golden.json",
+        ))
+        .unwrap(),
+    )
+    .unwrap();
+    let r = &golden["sensors"][0]["frames"][0]["returns"];
+    let g = |i: usize, k: &str| r[i]["sum"][k].as_f64().unwrap() as u64;
+    let sum = |ret: u8, f: &dyn Fn(&ringscan::point::PointExtra) -> u64| -> u64 {
+        sw.points
+            .iter()
+            .zip(&sw.extras)
+            .filter(|(p, _)| p.ret == ret)
+            .map(|(_, e)| f(e))
+            .sum()
+    };
+    assert_eq!(sum(0, &|e| u64::from(e.range_mm)), g(0, "range_mm"));
+    assert_eq!(sum(1, &|e| u64::from(e.range_mm)), g(1, "range2_mm"));
+    assert_eq!(sum(0, &|e| u64::from(e.signal)), g(0, "signal"));
+    assert_eq!(sum(1, &|e| u64::from(e.signal)), g(1, "signal2"));
+    assert_eq!(sum(0, &|e| u64::from(e.near_ir)), g(0, "nir"));
+}

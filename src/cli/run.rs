@@ -204,7 +204,12 @@ impl Output {
             timestamp_ns: sweep.timestamp_ns.max(0) as u64,
             points: &sweep.points,
         };
-        if let Err(e) = sink.write_sweep(id, &msg) {
+        let written = if sweep.extras.len() == sweep.points.len() && !sweep.extras.is_empty() {
+            sink.write_sweep_extended(id, &msg, &sweep.extras)
+        } else {
+            sink.write_sweep(id, &msg)
+        };
+        if let Err(e) = written {
             self.error = Some(e);
             return;
         }
@@ -293,6 +298,7 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
             model,
             decode,
             cut_angle: cut,
+            keep_extras: args.fields_all,
         },
     );
     let sizes = chooser.lidar_sizes();

@@ -94,6 +94,8 @@ pub struct Common {
     pub model: Option<VelodyneModel>,
     pub decode: DecodeOptions,
     pub cut_angle: u16,
+    /// `--fields all`: keep range, signal and near-IR per point (Ouster).
+    pub keep_extras: bool,
 }
 
 /// Chooses the configuration of a new source address from its first datagram.
@@ -175,7 +177,7 @@ impl Chooser {
                     metadata_name: name.clone(),
                     crc: None,
                     decode: self.common.decode,
-                    keep_extras: false,
+                    keep_extras: self.common.keep_extras,
                     keep_columns: false,
                 })));
             }

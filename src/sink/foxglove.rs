@@ -160,7 +160,12 @@ impl PointCloudPrefix {
     /// Encodes fields 2–5 for a sensor whose frame is `frame_id`: the identity pose, a stride of
     /// [`POINT_STRIDE`] and the fields of [`POINT_FIELDS`] in record order.
     pub fn new(frame_id: &str) -> Self {
-        let mut bytes = Vec::with_capacity(64 + frame_id.len() + 16 * POINT_FIELDS.len());
+        Self::with_fields(frame_id, POINT_STRIDE, &POINT_FIELDS)
+    }
+
+    /// The same for another record layout (`--fields all`: [`crate::point::EXTENDED_FIELDS`]).
+    pub fn with_fields(frame_id: &str, stride: usize, fields: &[(&str, usize, FieldType)]) -> Self {
+        let mut bytes = Vec::with_capacity(64 + frame_id.len() + 16 * fields.len());
         // frame_id = 2
         put_string_field(&mut bytes, 2, frame_id);
         // pose = 3: Pose { position = 1: Vector3 {0,0,0}, orientation = 2: Quaternion {w = 1} }
@@ -171,10 +176,10 @@ impl PointCloudPrefix {
         put_len_field(&mut pose, 2, &quaternion);
         put_len_field(&mut bytes, 3, &pose);
         // point_stride = 4 (fixed32)
-        put_fixed32_field(&mut bytes, 4, POINT_STRIDE as u32);
+        put_fixed32_field(&mut bytes, 4, stride as u32);
         // fields = 5: PackedElementField { name = 1, offset = 2 (fixed32), type = 3 }
         let mut field = Vec::with_capacity(24);
-        for (name, offset, ty) in POINT_FIELDS {
+        for &(name, offset, ty) in fields {
             field.clear();
             put_string_field(&mut field, 1, name);
             put_fixed32_field(&mut field, 2, offset as u32);
@@ -200,7 +205,16 @@ pub fn encode_point_cloud(
     prefix: &PointCloudPrefix,
     points: &[Point],
 ) -> Option<()> {
-    let data = crate::point::as_bytes(points);
+    encode_point_cloud_bytes(buf, timestamp_ns, prefix, crate::point::as_bytes(points))
+}
+
+/// [`encode_point_cloud`] from record bytes already laid out as `prefix` describes.
+pub fn encode_point_cloud_bytes(
+    buf: &mut Vec<u8>,
+    timestamp_ns: u64,
+    prefix: &PointCloudPrefix,
+    data: &[u8],
+) -> Option<()> {
     // timestamp (≤ 2 + 2·10 bytes) + prefix + data key and length (≤ 1 + 10) + data
     let len = 22 + prefix.bytes.len() + 11 + data.len();
     if len > MAX_MESSAGE_LEN {

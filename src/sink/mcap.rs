@@ -134,6 +134,8 @@ pub struct SensorChannels {
     imu: Option<Channel>,
     /// Constant fields of this sensor's `foxglove.PointCloud` messages.
     point_cloud_prefix: PointCloudPrefix,
+    /// The same for the extended record (`--fields all`), made on first use.
+    extended_prefix: Option<PointCloudPrefix>,
 }
 
 #[derive(Debug)]
@@ -317,6 +319,8 @@ pub struct McapSink<W: Write + Seek> {
     sensors: Vec<SensorChannels>,
     /// The one message buffer, reused for every message.
     buf: Vec<u8>,
+    /// Interleaved extended records (`--fields all`), reused.
+    records: Vec<u8>,
     pending_attachments: Vec<PendingAttachment>,
     attachments: Vec<AttachmentSummary>,
     /// Every (name, bytes) attached or pending, so a file shared by sensors is stored once.
@@ -392,6 +396,7 @@ impl<W: Write + Seek> McapSink<W> {
             imu_schema: None,
             sensors: Vec::new(),
             buf: Vec::new(),
+            records: Vec::new(),
             pending_attachments: Vec::new(),
             attachments: Vec::new(),
             attached: Vec::new(),
@@ -468,6 +473,7 @@ impl<W: Write + Seek> McapSink<W> {
             raw: None,
             imu: None,
             point_cloud_prefix: PointCloudPrefix::new(&info.name),
+            extended_prefix: None,
         });
         Ok(SensorId(self.sensors.len() - 1))
     }
@@ -512,6 +518,80 @@ impl<W: Write + Seek> McapSink<W> {
                     })?
             }
         }
+        let header = sensor.points.next_header(sweep.log_time_ns);
+        let writer = self.writer.as_mut().ok_or_else(finished_error)?;
+        writer
+            .write_to_known_channel(&header, &self.buf)
+            .map_err(mcap_err(format!(
+                "writing a sweep to {}",
+                sensor.points_topic()
+            )))
+    }
+
+    /// Writes one sweep with its extra fields (`--fields all`): records of
+    /// [`crate::point::EXTENDED_FIELDS`], a point then its range, signal and near-IR.
+    pub fn write_sweep_extended(
+        &mut self,
+        s: SensorId,
+        sweep: &SweepMsg,
+        extras: &[crate::point::PointExtra],
+    ) -> Result<(), SinkError> {
+        use crate::point::{interleave_extended, EXTENDED_FIELDS, EXTENDED_STRIDE};
+        self.before_message(sweep.log_time_ns)?;
+        let registered = self.sensors.len();
+        let sensor = self.sensors.get_mut(s.0).ok_or(SinkError::UnknownSensor {
+            id: s.0,
+            registered,
+        })?;
+        let mut records = std::mem::take(&mut self.records);
+        interleave_extended(sweep.points, extras, &mut records);
+        let topic = sensor.points_topic();
+        let found = records.len();
+        let too_large = |max| SinkError::TooLarge {
+            topic: topic.clone(),
+            what: "point data",
+            found,
+            max,
+        };
+        if sensor.extended_prefix.is_none() {
+            sensor.extended_prefix = Some(PointCloudPrefix::with_fields(
+                &sensor.name,
+                EXTENDED_STRIDE,
+                &EXTENDED_FIELDS,
+            ));
+        }
+        let encoded = match self.format {
+            Format::Foxglove => {
+                let Some(prefix) = sensor.extended_prefix.as_ref() else {
+                    return Err(finished_error());
+                };
+                foxglove::encode_point_cloud_bytes(
+                    &mut self.buf,
+                    sweep.timestamp_ns,
+                    prefix,
+                    &records,
+                )
+                .ok_or_else(|| too_large(foxglove::MAX_MESSAGE_LEN - 1024))
+            }
+            Format::Ros2 => ros2::encode_point_cloud2_fields(
+                &mut self.buf,
+                sweep.timestamp_ns,
+                &sensor.name,
+                EXTENDED_STRIDE,
+                &EXTENDED_FIELDS,
+                &records,
+            )
+            .map_err(|e| match e {
+                Ros2EncodeError::TimestampOutOfRange => SinkError::TimestampOutOfRange {
+                    topic: topic.clone(),
+                    timestamp_ns: sweep.timestamp_ns,
+                    format: ros2::POINT_CLOUD2_SCHEMA,
+                },
+                Ros2EncodeError::TooLarge => too_large(ros2::MAX_DATA_LEN),
+            }),
+        };
+        self.records = records;
+        encoded?;
         let header = sensor.points.next_header(sweep.log_time_ns);
         let writer = self.writer.as_mut().ok_or_else(finished_error)?;
         writer

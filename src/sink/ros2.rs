@@ -185,19 +185,40 @@ pub fn encode_point_cloud2(
     frame_id: &str,
     points: &[Point],
 ) -> Result<(), Ros2EncodeError> {
-    let data = crate::point::as_bytes(points);
+    encode_point_cloud2_fields(
+        buf,
+        timestamp_ns,
+        frame_id,
+        POINT_STRIDE,
+        &POINT_FIELDS,
+        crate::point::as_bytes(points),
+    )
+}
+
+/// [`encode_point_cloud2`] for records of `stride` bytes laid out as `fields` describes.
+pub fn encode_point_cloud2_fields(
+    buf: &mut Vec<u8>,
+    timestamp_ns: u64,
+    frame_id: &str,
+    stride: usize,
+    fields: &[(&str, usize, FieldType)],
+    data: &[u8],
+) -> Result<(), Ros2EncodeError> {
+    if stride == 0 {
+        return Err(Ros2EncodeError::TooLarge);
+    }
     if data.len() > MAX_DATA_LEN || frame_id.len() > MAX_FRAME_ID_LEN {
         return Err(Ros2EncodeError::TooLarge);
     }
     let sec = i32::try_from(timestamp_ns / 1_000_000_000)
         .map_err(|_| Ros2EncodeError::TimestampOutOfRange)?;
     let nanosec = (timestamp_ns % 1_000_000_000) as u32;
-    // Both fit: data.len() < 2^31 and points.len() = data.len() / 24.
-    let width = points.len() as u32;
+    // Both fit: data.len() < 2^31.
+    let width = (data.len() / stride) as u32;
     let row_step = data.len() as u32;
 
     buf.clear();
-    buf.reserve(4 + 16 + frame_id.len() + 16 + POINT_FIELDS.len() * 28 + 16 + data.len() + 4);
+    buf.reserve(4 + 16 + frame_id.len() + 16 + fields.len() * 28 + 16 + data.len() + 4);
     let mut w = Cdr::new(buf);
     // header: std_msgs/Header { builtin_interfaces/Time stamp; string frame_id }
     w.i32(sec);
@@ -205,15 +226,15 @@ pub fn encode_point_cloud2(
     w.string(frame_id);
     w.u32(1); // height
     w.u32(width);
-    w.u32(POINT_FIELDS.len() as u32);
-    for (name, offset, ty) in POINT_FIELDS {
+    w.u32(fields.len() as u32);
+    for &(name, offset, ty) in fields {
         w.string(name);
         w.u32(offset as u32);
         w.u8(datatype_of(ty));
         w.u32(1); // count
     }
     w.u8(0); // is_bigendian
-    w.u32(POINT_STRIDE as u32); // point_step
+    w.u32(stride as u32); // point_step
     w.u32(row_step);
     w.u32(row_step); // data: sequence<uint8> length
     w.buf.extend_from_slice(data);
