@@ -1,0 +1,162 @@
+//! Every input the fuzzers found (`fixtures/regressions/<target>-<short>.bin`), replayed through
+//! the very harness its fuzz target runs (`tools/fuzz/harness.rs`), with every check on —
+//! including those of issues still open, which the fuzz targets step around.
+//!
+//! A crash that is reported and not fixed yet has its own `#[ignore]`d test naming the file to
+//! fix. When the fix lands: remove the issue from `harness::OPEN_ISSUES`, drop the `#[ignore]`.
+//! FUZZING.md tells how to add a new one.
+#![cfg(all(feature = "pcap", feature = "mcap", feature = "sim"))]
+
+#[path = "../tools/fuzz/harness.rs"]
+mod harness;
+
+use std::path::PathBuf;
+
+/// Every regression input and the open issue (in `harness::OPEN_ISSUES`) it reproduces, if any.
+const REGRESSIONS: &[(&str, Option<&str>)] = &[
+    (
+        "velodyne_packet-t-base-overflow.bin",
+        Some("decode-t-base-overflow"),
+    ),
+    (
+        "velodyne_stream-demux-finish-first-error.bin",
+        Some("demux-finish-stops-at-first-error"),
+    ),
+    (
+        "decode_to_mcap-sensor-name-collision.bin",
+        Some("cli-sensor-name-collision"),
+    ),
+    (
+        "velodyne_stream-host-time-overflow.bin",
+        Some("stream-host-time-overflow"),
+    ),
+    (
+        "decode_to_mcap-host-time-overflow.bin",
+        Some("stream-host-time-overflow"),
+    ),
+    (
+        "velodyne_packet-nmea-date-char-boundary.bin",
+        Some("nmea-char-boundary"),
+    ),
+    (
+        "velodyne_packet-nmea-time-char-boundary.bin",
+        Some("nmea-char-boundary"),
+    ),
+    (
+        "decode_to_mcap-nmea-char-boundary.bin",
+        Some("nmea-char-boundary"),
+    ),
+];
+
+fn dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("fixtures/regressions")
+}
+
+/// Runs one saved input through its target's harness, strictly.
+fn replay(file: &str) {
+    let data = std::fs::read(dir().join(file)).unwrap_or_else(|e| panic!("{file}: {e}"));
+    let target = file.split('-').next().unwrap_or_default();
+    harness::set_strict(true);
+    match target {
+        "pcap" => harness::pcap(&data),
+        "reassembly" => harness::reassembly(&data),
+        "velodyne_packet" => harness::velodyne_packet(&data),
+        "velodyne_stream" => harness::velodyne_stream(&data),
+        "calib_velodyne" => harness::calib_velodyne(&data),
+        "decode_to_mcap" => harness::decode_to_mcap(&data),
+        other => panic!("{file}: no fuzz target named {other:?}"),
+    }
+}
+
+#[test]
+fn every_regression_file_is_listed() {
+    let mut on_disk: Vec<String> = std::fs::read_dir(dir())
+        .expect("fixtures/regressions")
+        .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".bin"))
+        .collect();
+    on_disk.sort();
+    let mut listed: Vec<String> = REGRESSIONS.iter().map(|(f, _)| f.to_string()).collect();
+    listed.sort();
+    assert_eq!(
+        on_disk, listed,
+        "fixtures/regressions and REGRESSIONS differ"
+    );
+    for (file, issue) in REGRESSIONS {
+        if let Some(issue) = issue {
+            assert!(
+                harness::OPEN_ISSUES.contains(issue),
+                "{file}: issue {issue:?} is not in harness::OPEN_ISSUES (fixed? then list it as None)"
+            );
+        }
+    }
+}
+
+/// Inputs whose issue is fixed (or never was open) must pass, strictly.
+#[test]
+fn fixed_regressions_replay_cleanly() {
+    for (file, issue) in REGRESSIONS {
+        if issue.is_none_or(|i| !harness::OPEN_ISSUES.contains(&i)) {
+            replay(file);
+        }
+    }
+}
+
+#[test]
+#[ignore = "crash: `t_base_ns + firing offset` overflows (debug panic, release wraps to t = 0) \
+            for a time base near i64::MAX; fix pending in src/decode/velodyne.rs (saturating_add)"]
+fn velodyne_packet_t_base_overflow() {
+    replay("velodyne_packet-t-base-overflow.bin");
+}
+
+#[test]
+#[ignore = "crash: Demux::finish returns at the first stream that fails (a VLS-128 with no \
+            calibration), so later sensors never emit their last sweep; fix pending in \
+            src/sweep/demux.rs"]
+fn velodyne_stream_demux_finish_first_error() {
+    replay("velodyne_stream-demux-finish-first-error.bin");
+}
+
+#[test]
+#[ignore = "crash: two VLP-16s at 192.168.1.200 and 192.164.1.200 are both named vlp16-200, \
+            McapSink::add_sensor refuses the second topic prefix and the decode fails; fix \
+            pending in src/cli/sensors.rs (default_name)"]
+fn decode_to_mcap_sensor_name_collision() {
+    replay("decode_to_mcap-sensor-name-collision.bin");
+}
+
+#[test]
+#[ignore = "crash: host times 1.7e18 then -8.4e18 ns (op jumps) overflow `first_firing_ns + block \
+            time - sweep device time`; fix pending in src/sweep/velodyne.rs (decode_packet)"]
+fn velodyne_stream_host_time_overflow() {
+    replay("velodyne_stream-host-time-overflow.bin");
+}
+
+#[test]
+#[ignore = "crash: a pcapng whose 4th packet has a corrupt timestamp (saturates to i64::MAX ns) \
+            overflows `hour + toh` in complete_toh; fix pending in src/time.rs (complete_toh) \
+            and src/sweep/velodyne.rs"]
+fn decode_to_mcap_host_time_overflow() {
+    replay("decode_to_mcap-host-time-overflow.bin");
+}
+
+#[test]
+#[ignore = "crash: parse_rmc panics on the RMC date `721Ҫ1` (6 bytes, not ASCII): \
+            `&d[2..4]` is not a char boundary; fix pending in src/wire/nmea.rs (parse_ddmmyy)"]
+fn velodyne_packet_nmea_date_char_boundary() {
+    replay("velodyne_packet-nmea-date-char-boundary.bin");
+}
+
+#[test]
+#[ignore = "crash: parse_rmc panics on the RMC time `0Ҫ000` (6 bytes, not ASCII): \
+            `&whole[0..2]` is not a char boundary; fix pending in src/wire/nmea.rs (parse_hhmmss)"]
+fn velodyne_packet_nmea_time_char_boundary() {
+    replay("velodyne_packet-nmea-time-char-boundary.bin");
+}
+
+#[test]
+#[ignore = "crash: a 594-byte pcap holding one position packet whose RMC date is not ASCII \
+            panics `ringscan decode` (release too, exit 101); fix pending in src/wire/nmea.rs"]
+fn decode_to_mcap_nmea_char_boundary() {
+    replay("decode_to_mcap-nmea-char-boundary.bin");
+}

@@ -1,0 +1,233 @@
+#!/usr/bin/env python3
+"""Writes the seed corpora of the fuzz targets into tools/fuzz/corpus/<target>/ (git-ignored).
+
+Seeds come from the repository's fixtures/ and, when present, the real captures and
+calibration files in ../shared/captures (read at run time; nothing from there is committed).
+Each seed is small (libFuzzer works best on inputs of a few KB): captures are cut after their
+first records (a truncated tail is a valid input), and pcapng variants are written from the
+classic files. Existing corpus files are kept (libFuzzer adds to the same folders).
+
+Usage: tools/fuzz/seed_corpus.py [--captures DIR]
+"""
+
+import argparse
+import hashlib
+import os
+import random
+import struct
+import sys
+from pathlib import Path
+
+FUZZ = Path(__file__).resolve().parent
+REPO = FUZZ.parent.parent
+CORPUS = FUZZ / "corpus"
+
+
+def put(target, data, tag=""):
+    d = CORPUS / target
+    d.mkdir(parents=True, exist_ok=True)
+    name = (tag + "-" if tag else "") + hashlib.sha1(data).hexdigest()[:16]
+    (d / name).write_bytes(data)
+
+
+# ----- pcap reading / writing ----------------------------------------------------------------
+
+
+def read_classic(data):
+    """(endian, nanos, linktype, [(sec, frac, caplen, origlen, frame)]) of a classic pcap."""
+    magic = data[:4]
+    if magic in (b"\xd4\xc3\xb2\xa1", b"\x4d\x3c\xb2\xa1"):
+        e = "<"
+    elif magic in (b"\xa1\xb2\xc3\xd4", b"\xa1\xb2\x3c\x4d"):
+        e = ">"
+    else:
+        return None
+    nanos = magic in (b"\x4d\x3c\xb2\xa1", b"\xa1\xb2\x3c\x4d")
+    linktype = struct.unpack(e + "I", data[20:24])[0] & 0xFFFF
+    recs, at = [], 24
+    while at + 16 <= len(data):
+        sec, frac, cap, orig = struct.unpack(e + "IIII", data[at : at + 16])
+        frame = data[at + 16 : at + 16 + cap]
+        if len(frame) < cap:
+            break
+        recs.append((sec, frac, cap, orig, frame))
+        at += 16 + cap
+    return e, nanos, linktype, recs
+
+
+def classic_bytes(e, nanos, linktype, recs, snaplen=65535):
+    magic = 0xA1B23C4D if nanos else 0xA1B2C3D4
+    out = bytearray(struct.pack(e + "IHHiIII", magic, 2, 4, 0, 0, snaplen, linktype))
+    for sec, frac, cap, orig, frame in recs:
+        out += struct.pack(e + "IIII", sec, frac, len(frame), orig) + frame
+    return bytes(out)
+
+
+def ng_block(e, btype, body):
+    pad = (-len(body)) % 4
+    total = 12 + len(body) + pad
+    return struct.pack(e + "II", btype, total) + body + b"\0" * pad + struct.pack(e + "I", total)
+
+
+def pcapng_bytes(e, nanos, linktype, recs, tsresol=None):
+    shb = struct.pack(e + "IHHq", 0x1A2B3C4D, 1, 0, -1)
+    out = bytearray(ng_block(e, 0x0A0D0D0A, shb))
+    opts = b""
+    res = tsresol if tsresol is not None else (9 if nanos else 6)
+    if res != 6:
+        opts = struct.pack(e + "HH", 9, 1) + bytes([res]) + b"\0\0\0" + struct.pack(e + "HH", 0, 0)
+    out += ng_block(e, 1, struct.pack(e + "HHI", linktype, 0, 0) + opts)
+    for sec, frac, cap, orig, frame in recs:
+        if res == 9:
+            ts = sec * 1_000_000_000 + (frac if nanos else frac * 1000)
+        else:
+            ts = sec * 1_000_000 + (frac // 1000 if nanos else frac)
+        body = struct.pack(e + "IIIII", 0, ts >> 32, ts & 0xFFFFFFFF, len(frame), orig) + frame
+        out += ng_block(e, 6, body)
+    return bytes(out)
+
+
+def udp_payloads(recs, linktype):
+    """(src ip bytes, dst port, payload) of unfragmented IPv4 UDP in Ethernet records."""
+    out = []
+    for _sec, _frac, _cap, _orig, f in recs:
+        if linktype != 1 or len(f) < 42 or f[12:14] != b"\x08\x00":
+            continue
+        ihl = (f[14] & 15) * 4
+        if f[23] != 17:
+            continue
+        udp = 14 + ihl
+        dport = struct.unpack(">H", f[udp + 2 : udp + 4])[0]
+        ulen = struct.unpack(">H", f[udp + 4 : udp + 6])[0]
+        out.append((f[26:30], dport, f[udp + 8 : udp + ulen]))
+    return out
+
+
+def head_records(recs, max_bytes):
+    out, size = [], 24
+    for r in recs:
+        size += 16 + len(r[4])
+        if size > max_bytes and out:
+            break
+        out.append(r)
+    return out
+
+
+# ----- synthetic Velodyne packets (for the stream and packet targets) ------------------------
+
+
+def synth_ops(rng, n, model_sel, az0, step):
+    """velodyne_stream ops of kind 1 (synthesised data packet), `n` of them."""
+    out = bytearray()
+    for i in range(n):
+        out += bytes([1]) + struct.pack("<h", 130) + struct.pack("<H", 1327)
+        out += bytes([model_sel]) + struct.pack("<HhB", (az0 + i * 12 * step) % 36000, step, rng.randrange(256))
+    return bytes(out)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--captures", default=str(REPO.parent / "shared" / "captures"))
+    args = ap.parse_args()
+    caps = Path(args.captures)
+    rng = random.Random(1)
+
+    pcaps = sorted(REPO.glob("fixtures/**/*.pcap"))
+    calibs = []
+    if caps.is_dir():
+        pcaps += sorted(caps.glob("**/*.pcap"))
+        calibs = sorted(p for ext in ("yaml", "yml", "xml") for p in caps.glob(f"**/*.{ext}"))
+    else:
+        print(f"seed_corpus: {caps} absent: seeding from fixtures/ only", file=sys.stderr)
+    calibs = [c for c in calibs if c.stat().st_size <= 64 * 1024 and "metadata" not in c.name]
+
+    data_payloads, pos_payloads = [], []
+    for p in pcaps:
+        raw = p.read_bytes()
+        parsed = read_classic(raw[: 256 * 1024])
+        if parsed is None:
+            put("pcap", raw[:16384], "raw")
+            continue
+        e, nanos, lt, recs = parsed
+        for limit, tag in ((4096, "h4k"), (20000, "h20k")):
+            head = head_records(recs, limit)
+            put("pcap", classic_bytes(e, nanos, lt, head), tag)
+        head = head_records(recs, 12000)
+        put("pcap", pcapng_bytes(e, nanos, lt, head), "ng")
+        put("pcap", pcapng_bytes(">", nanos, lt, head, tsresol=0x8A), "ngbe")
+        put("decode_to_mcap", classic_bytes(e, nanos, lt, head_records(recs, 60000)), "h60k")
+        put("decode_to_mcap", pcapng_bytes(e, nanos, lt, head_records(recs, 30000)), "ng")
+        for ip, port, payload in udp_payloads(recs[:400], lt):
+            if len(payload) == 1206 and len(data_payloads) < 400:
+                data_payloads.append((p.name, ip, port, payload))
+            elif len(payload) == 512 and len(pos_payloads) < 40:
+                pos_payloads.append((p.name, ip, port, payload))
+
+    # velodyne_packet: selector byte + one payload.
+    seen = set()
+    for name, _ip, _port, payload in data_payloads:
+        if (name, payload[1204:1206]) in seen:
+            continue
+        seen.add((name, payload[1204:1206]))
+        for sel in (0x00, 0x01, 0x02, 0x0B, 0x07):
+            put("velodyne_packet", bytes([sel]) + payload, "data")
+    for _name, _ip, _port, payload in pos_payloads[:8]:
+        put("velodyne_packet", b"\x00" + payload, "pos")
+    for sel in (0x20, 0x62, 0x63):
+        put("velodyne_packet", bytes([sel]) + bytes(rng.randrange(256) for _ in range(1206)), "rand")
+
+    # velodyne_stream: config (c0, cut angle, port flag, toh) then ops.
+    by_file = {}
+    for name, ip, port, payload in data_payloads + pos_payloads:
+        by_file.setdefault(name, []).append((ip, port, payload))
+    for name, items in by_file.items():
+        ops = bytearray()
+        for ip, port, payload in items[:24]:
+            if len(payload) == 1206:
+                ops += bytes([0]) + struct.pack("<h", 130) + payload
+            else:
+                ops += bytes([3]) + struct.pack("<h", 0) + struct.pack("<H", 512) + payload
+        for c0 in (0x00, 0x10):
+            put("velodyne_stream", bytes([c0]) + b"\0\0\0" + b"\0\0\0\0" + bytes(ops), "cap")
+    for model_sel in range(7):
+        for mode in (0, 1, 2):
+            sel = model_sel | (mode << 3)
+            ops = synth_ops(rng, 40, sel, 35500, 40)
+            put("velodyne_stream", bytes([0x10, 0, 0, 0]) + struct.pack("<I", 3_599_990_000) + ops, "synth")
+    gps = bytes([2]) + struct.pack("<h", 0) + bytes([0x41]) + struct.pack("<I", 1000) + struct.pack("<I", 79_200) + b"\x0b\x0c\x0c"
+    put("velodyne_stream", bytes([0, 0, 0, 0, 0, 0, 0, 0]) + gps + synth_ops(rng, 60, 0, 0, 20), "gps")
+
+    # calib_velodyne: the calibration files as they are.
+    for c in calibs:
+        put("calib_velodyne", c.read_bytes(), c.suffix[1:])
+    put("calib_velodyne", b"lasers:\n- {laser_id: 0, rot_correction: 0.0, vert_correction: 0.1}\nnum_lasers: 1\n", "tiny")
+
+    # reassembly: config, then pushes of one datagram of key 2 in shuffled order, then key 0.
+    for total, frag in ((1300, 400), (5000, 1480), (64000, 8000)):
+        cfg = struct.pack("<HBH", 1000, 8, 20000) + struct.pack("<I", 0)
+        ops = bytearray()
+        pieces = list(range(0, total, frag))
+        rng.shuffle(pieces)
+        for off in pieces:
+            ln = min(frag, total - off)
+            more = off + ln < total
+            op = 2 | (4 if more else 0) | 16
+            ops += bytes([op, 1]) + struct.pack("<HH", off // 8, ln)
+        put("reassembly", cfg + bytes(ops), "shuffled")
+        data = bytes(rng.randrange(256) for _ in range(min(total, 3000)))
+        ops = bytearray()
+        off = 0
+        while off < len(data):
+            ln = min(frag, len(data) - off)
+            more = off + ln < len(data)
+            ops += bytes([(4 if more else 0) | 16, 0]) + struct.pack("<HH", off // 8, ln)
+            ops += data[off : off + ln]
+            off += ln
+        put("reassembly", cfg + bytes(ops), "bytes")
+
+    for t in sorted(os.listdir(CORPUS)):
+        print(f"{t}: {len(os.listdir(CORPUS / t))} seeds")
+
+
+if __name__ == "__main__":
+    main()
