@@ -175,3 +175,43 @@ fn info_names_serial_firmware_profile_mode_window_timestamps_and_packets_per_por
     }
     assert!(checked >= 15, "{checked}");
 }
+
+/// `--crc on` checks every footer: FW 2.3 writes footers that are not CRCs (INVENTORY.md: 64 of
+/// 64 invalid), so every packet is a counted drop; `crc_test.pcap` (FW 3.2, 34 valid CRCs) loses
+/// none. `auto` leaves FW 2.3 unchecked.
+#[test]
+fn crc_on_drops_and_counts_packets_whose_footer_is_not_a_crc() {
+    let Some(root) = common::captures() else {
+        return;
+    };
+    let dir = root.join("ouster-lidar__ouster-sdk/tests/pcaps");
+    let run = |name: &str, meta: &str, crc: &str| -> Value {
+        let o = Command::new(env!("CARGO_BIN_EXE_ringscan"))
+            .arg("decode")
+            .arg(dir.join(name))
+            .arg("--calib")
+            .arg(dir.join(meta))
+            .args(["--crc", crc, "--json"])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        serde_json::from_slice(&o.stdout).unwrap()
+    };
+    let j = run(
+        "OS-2-128-U1_v2.3.0_1024x10.pcap",
+        "OS-2-128-U1_v2.3.0_1024x10.json",
+        "on",
+    );
+    assert_eq!(j["sensors"][0]["crc_failures"], 64);
+    assert_eq!(j["points"], 0);
+    let j = run(
+        "OS-2-128-U1_v2.3.0_1024x10.pcap",
+        "OS-2-128-U1_v2.3.0_1024x10.json",
+        "auto",
+    );
+    assert_eq!(j["sensors"][0]["crc_failures"], 0);
+    assert_eq!(j["points"], 119_682);
+    let j = run("crc_test.pcap", "crc_test.json", "on");
+    assert_eq!(j["sensors"][0]["crc_failures"], 0);
+    assert_eq!(j["points"], 29_692);
+}

@@ -40,6 +40,17 @@ pub enum FormatArg {
     Ros2,
 }
 
+/// Ouster CRC checking.
+#[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
+pub enum CrcArg {
+    /// Check where the firmware writes valid CRCs (≥ 2.5, not FUSA).
+    Auto,
+    /// Always check (packets with a bad CRC are dropped and counted).
+    On,
+    /// Never check.
+    Off,
+}
+
 /// Which point fields are written.
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
 pub enum FieldsArg {
@@ -88,6 +99,9 @@ struct DecodeCmd {
     /// Also write every UDP payload to `/raw`, so the drive can be decoded again later.
     #[arg(long)]
     raw: bool,
+    /// Ouster footer CRC-64 check: `auto` = for firmware ≥ 2.5 (not FUSA), `on`, `off`.
+    #[arg(long, value_enum, default_value_t = CrcArg::Auto)]
+    crc: CrcArg,
     /// Exit with an error if any packet was missing, dropped or malformed.
     #[arg(long)]
     strict: bool,
@@ -156,6 +170,11 @@ pub fn main() -> ExitCode {
                 format: c.format,
                 raw: c.raw,
                 strict: c.strict,
+                crc: match c.crc {
+                    CrcArg::Auto => None,
+                    CrcArg::On => Some(true),
+                    CrcArg::Off => Some(false),
+                },
                 json: c.json,
                 input_bytes: None,
             };

@@ -44,6 +44,8 @@ pub struct DecodeArgs {
     pub format: FormatArg,
     pub raw: bool,
     pub strict: bool,
+    /// Ouster CRC check: `None` = the firmware rule.
+    pub crc: Option<bool>,
     pub json: bool,
     /// Decode these bytes instead of reading `input` (the demo).
     pub input_bytes: Option<&'static [u8]>,
@@ -299,6 +301,7 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
             decode,
             cut_angle: cut,
             keep_extras: args.fields_all,
+            crc: args.crc,
         },
     );
     let sizes = chooser.lidar_sizes();
@@ -648,6 +651,7 @@ pub fn info_command(
         format: FormatArg::Foxglove,
         raw: false,
         strict: false,
+        crc: None,
         json: json_out,
         input_bytes: None,
     };
@@ -676,6 +680,7 @@ pub fn demo_command(out: &Path, json_out: bool) -> Result<ExitCode, RunError> {
         format: FormatArg::Foxglove,
         raw: false,
         strict: false,
+        crc: None,
         json: json_out,
         input_bytes: Some(DEMO_PCAP),
     };

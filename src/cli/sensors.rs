@@ -96,6 +96,8 @@ pub struct Common {
     pub cut_angle: u16,
     /// `--fields all`: keep range, signal and near-IR per point (Ouster).
     pub keep_extras: bool,
+    /// `--crc`: `None` = the firmware rule.
+    pub crc: Option<bool>,
 }
 
 /// Chooses the configuration of a new source address from its first datagram.
@@ -175,7 +177,7 @@ impl Chooser {
                 return Some(SensorConfig::Ouster(Box::new(OusterStreamConfig {
                     info: info.clone(),
                     metadata_name: name.clone(),
-                    crc: None,
+                    crc: self.common.crc,
                     decode: self.common.decode,
                     keep_extras: self.common.keep_extras,
                     keep_columns: false,
