@@ -37,7 +37,7 @@
 
 use super::DecodeError;
 use crate::calib::ouster::OusterInfo;
-use crate::model::ouster::{HeaderKind, Layout, PacketFormat};
+use crate::model::ouster::{Field, HeaderKind, Layout, PacketFormat};
 use crate::point::Point;
 use crate::wire::ouster::{read_field_at, Column, LidarPacket};
 
@@ -70,11 +70,33 @@ pub struct Decoded {
     pub out_of_range_columns: usize,
 }
 
-/// Direction (m per mm of range) and offset (m) of one pixel.
+/// Direction (m per mm of range) and offset (m) of one pixel, as four lanes each so that a
+/// point is one 4-wide multiply-add: `[r, r, r, reflectivity] · dir + off` gives x, y, z and
+/// the intensity (`dir[3]` = 1, `off[3]` = 0; every lane the same IEEE operations as
+/// [`point_of`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 struct LutEntry {
-    dir: [f32; 3],
-    off: [f32; 3],
+    dir: [f32; 4],
+    off: [f32; 4],
+}
+
+impl LutEntry {
+    fn d3(&self) -> [f32; 3] {
+        [self.dir[0], self.dir[1], self.dir[2]]
+    }
+
+    fn o3(&self) -> [f32; 3] {
+        [self.off[0], self.off[1], self.off[2]]
+    }
+}
+
+/// A [`Point`] as the decoder assembles it: x, y, z, intensity, then `t`, `ring`, `ret`
+/// and `pad` as one little-endian word (two stores per point instead of one per field).
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct PointWords {
+    xyzi: [f32; 4],
+    tail: u64,
 }
 
 /// Reads the profile's fields of one pixel.
@@ -83,17 +105,118 @@ struct Pixel {
     r: [Extra; 2],
 }
 
+/// One pixel field, specialised when the decoder is built: a single 4-byte little-endian load
+/// at byte `at` of the pixel (`at + 4` ≤ pixel bytes), then `>> shr`, `& mask`, `<< shl`. A
+/// field the profile lacks has mask 0 and reads 0, so the hot loop has no `Option` per field.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct FieldReader {
+    at: usize,
+    shr: u32,
+    mask: u32,
+    shl: u32,
+}
+
+impl FieldReader {
+    /// The reader of field `f` in pixels of `pixel_bytes` bytes; `None` when no 4-byte load
+    /// inside the pixel holds the whole field (then the generic path is used).
+    fn new(f: Option<Field>, pixel_bytes: usize) -> Option<Self> {
+        let Some(f) = f else {
+            return Some(Self::default());
+        };
+        let (bit, width, shl) = (usize::from(f.bit), u32::from(f.width), u32::from(f.shift));
+        if pixel_bytes < 4 || width == 0 || width > 32 || shl > 31 {
+            return None;
+        }
+        let at = (bit / 8).min(pixel_bytes - 4);
+        let shr = u32::try_from(bit - 8 * at).ok()?;
+        if shr + width > 32 {
+            return None;
+        }
+        Some(Self {
+            at,
+            shr,
+            mask: u32::MAX >> (32 - width),
+            shl,
+        })
+    }
+
+    /// The field's value in pixel `px` (as [`read_field_at`] gives it).
+    #[inline(always)]
+    fn read<const N: usize>(self, px: &[u8; N]) -> u32 {
+        // `at ≤ N − 4` by construction; the `min` lets the compiler drop the bounds check.
+        let at = self.at.min(N.saturating_sub(4));
+        let v = match px.get(at..at + 4) {
+            Some(&[a, b, c, d]) => u32::from_le_bytes([a, b, c, d]),
+            _ => 0,
+        };
+        ((v >> self.shr) & self.mask) << self.shl
+    }
+}
+
+/// Every field of a profile as [`FieldReader`]s (`None` in the decoder when a field does not
+/// fit one; then the generic [`read_field_at`] path serves).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Readers {
+    range: FieldReader,
+    flags: FieldReader,
+    reflectivity: FieldReader,
+    signal: FieldReader,
+    near_ir: FieldReader,
+    range2: FieldReader,
+    flags2: FieldReader,
+    reflectivity2: FieldReader,
+    signal2: FieldReader,
+}
+
+impl Readers {
+    fn new(l: &Layout) -> Option<Self> {
+        let r = |f| FieldReader::new(f, l.pixel_bytes);
+        Some(Self {
+            range: r(Some(l.range))?,
+            flags: r(l.flags)?,
+            reflectivity: r(Some(l.reflectivity))?,
+            signal: r(l.signal)?,
+            near_ir: r(l.near_ir)?,
+            range2: r(l.range2)?,
+            flags2: r(l.flags2)?,
+            reflectivity2: r(l.reflectivity2)?,
+            signal2: r(l.signal2)?,
+        })
+    }
+
+    /// First (`SECOND` false) or second return of pixel `px`, with the pixel's near-IR.
+    #[inline(always)]
+    fn extra<const N: usize, const SECOND: bool>(&self, px: &[u8; N], near_ir: u16) -> Extra {
+        let (range, signal, reflectivity, flags) = if SECOND {
+            (self.range2, self.signal2, self.reflectivity2, self.flags2)
+        } else {
+            (self.range, self.signal, self.reflectivity, self.flags)
+        };
+        Extra {
+            range_mm: range.read(px),
+            signal: signal.read(px) as u16,
+            near_ir,
+            reflectivity: reflectivity.read(px) as u8,
+            flags: flags.read(px) as u8,
+        }
+    }
+}
+
 /// An Ouster decoder for one calibration (sensor metadata).
 #[derive(Clone, Debug)]
 pub struct OusterDecoder {
     format: PacketFormat,
     header: HeaderKind,
     layout: Layout,
+    /// The layout's fields specialised to fixed loads (`None`: generic path).
+    readers: Option<Readers>,
     w: usize,
     h: usize,
     /// XYZ table, column-major: entry of (row u, column v) at `v·H + u`.
     lut: Vec<LutEntry>,
     rings: Vec<u16>,
+    /// Per row: `ring << 32`, the ring's bits in the last word of a [`PointWords`].
+    ring_tails: Vec<u64>,
     shift: Vec<i32>,
     crc_check: bool,
     init_id: u32,
@@ -144,6 +267,7 @@ impl OusterDecoder {
                 "a beam angle or transform entry is not a finite number".to_owned(),
             ));
         }
+        let rings = rings_by_altitude(&info.beam_altitude_angles);
         let lut = xyz_lut(
             w,
             &info.beam_altitude_angles,
@@ -155,10 +279,12 @@ impl OusterDecoder {
             format,
             header: format.profile.header(),
             layout: format.profile.layout(),
+            readers: Readers::new(&format.profile.layout()),
             w,
             h,
             lut,
-            rings: rings_by_altitude(&info.beam_altitude_angles),
+            rings: rings.clone(),
+            ring_tails: rings.iter().map(|&r| u64::from(r) << 32).collect(),
             shift: info.pixel_shift_by_row.clone(),
             crc_check: info.lidar_packets_have_crc(),
             init_id: info.init_id,
@@ -237,7 +363,9 @@ impl OusterDecoder {
         if row >= self.h {
             return None;
         }
-        self.lut.get(column * self.h + row).map(|e| (e.dir, e.off))
+        self.lut
+            .get(column * self.h + row)
+            .map(|e| (e.d3(), e.o3()))
     }
 
     /// The sensor-frame point of a range at pixel (row, column), metres (`None` outside the
@@ -319,6 +447,11 @@ impl OusterDecoder {
     /// column timestamp − `sweep_start_ns`, clamped to `0..=u32::MAX`.
     ///
     /// The packet must have been viewed in this decoder's format ([`Self::packet`]).
+    ///
+    /// The loop is chosen once per packet by the pixel size, so that every field is one
+    /// fixed-width load at an offset set when the decoder was built and the pixels come as
+    /// fixed-size arrays (no bounds check, no `Option` per pixel); the values are the same
+    /// as [`read_field_at`]'s.
     #[inline]
     pub fn decode_with<F: FnMut(Point, Extra, usize, usize)>(
         &self,
@@ -327,51 +460,225 @@ impl OusterDecoder {
         mut emit: F,
     ) -> Result<Decoded, DecodeError> {
         self.check_format(p)?;
+        let Some(rd) = self.readers else {
+            return Ok(self.decode_generic(p, sweep_start_ns, &mut emit));
+        };
+        Ok(match self.layout.pixel_bytes {
+            4 => self.decode_fixed::<4, F>(p, sweep_start_ns, &rd, &mut emit),
+            8 => self.decode_fixed::<8, F>(p, sweep_start_ns, &rd, &mut emit),
+            12 => self.decode_fixed::<12, F>(p, sweep_start_ns, &rd, &mut emit),
+            16 => self.decode_fixed::<16, F>(p, sweep_start_ns, &rd, &mut emit),
+            20 => self.decode_fixed::<20, F>(p, sweep_start_ns, &rd, &mut emit),
+            _ => self.decode_generic(p, sweep_start_ns, &mut emit),
+        })
+    }
+
+    /// [`Self::decode_with`] for pixels of `N` bytes: the single- and dual-return loops apart.
+    #[inline(always)]
+    fn decode_fixed<const N: usize, F: FnMut(Point, Extra, usize, usize)>(
+        &self,
+        p: &LidarPacket<'_>,
+        sweep_start_ns: u64,
+        rd: &Readers,
+        emit: &mut F,
+    ) -> Decoded {
+        if self.returns() == 2 {
+            self.emit_returns::<N, true, F>(p, sweep_start_ns, rd, emit)
+        } else {
+            self.emit_returns::<N, false, F>(p, sweep_start_ns, rd, emit)
+        }
+    }
+
+    /// [`Self::decode_with`] for pixels of `N` bytes with one or two (`DUAL`) returns. Up to
+    /// [`BLOCK_ROWS`] rows of a column are decoded into buffers on the stack without a branch
+    /// per pixel, then handed to `emit` in a second, short loop: the caller's work per point
+    /// does not compete with the field extraction for registers.
+    #[inline(always)]
+    fn emit_returns<const N: usize, const DUAL: bool, F: FnMut(Point, Extra, usize, usize)>(
+        &self,
+        p: &LidarPacket<'_>,
+        sweep_start_ns: u64,
+        rd: &Readers,
+        emit: &mut F,
+    ) -> Decoded {
+        let mut n = Decoded::default();
+        let h = self.h;
+        let mut points = [Point::default(); STAGE];
+        let mut extras = [Extra::default(); STAGE];
+        let mut rows = [0u32; STAGE];
+        for c in p.columns() {
+            let Some(m) = self.column_index(&c, &mut n) else {
+                continue;
+            };
+            let t = u64::from(column_time(c.timestamp_ns(), sweep_start_ns));
+            let Some(lut) = self.lut.get(m * h..(m + 1) * h) else {
+                continue;
+            };
+            let blocks = c
+                .pixel_data()
+                .chunks(BLOCK_ROWS * N)
+                .zip(lut.chunks(BLOCK_ROWS))
+                .zip(self.ring_tails.chunks(BLOCK_ROWS));
+            let mut row = 0u32;
+            for ((pixels, lut), tails) in blocks {
+                let mut k = 0;
+                for ((px, e), &ring) in pixels.chunks_exact(N).zip(lut).zip(tails) {
+                    let Ok(px) = <&[u8; N]>::try_from(px) else {
+                        continue;
+                    };
+                    // At most 2 × BLOCK_ROWS = STAGE writes per block: `k < STAGE` at each
+                    // write, the mask only spares the bounds check.
+                    let near_ir = rd.near_ir.read(px) as u16;
+                    let x = rd.extra::<N, false>(px, near_ir);
+                    points[k % STAGE] = make_point(x.range_mm, x.reflectivity, e, t | ring);
+                    extras[k % STAGE] = x;
+                    rows[k % STAGE] = row;
+                    k += usize::from(x.range_mm != 0);
+                    if DUAL {
+                        let x = rd.extra::<N, true>(px, near_ir);
+                        let pt = make_point(x.range_mm, x.reflectivity, e, t | ring | RET1);
+                        points[k % STAGE] = pt;
+                        extras[k % STAGE] = x;
+                        rows[k % STAGE] = row;
+                        k += usize::from(x.range_mm != 0);
+                    }
+                    row += 1;
+                }
+                let k = k.min(STAGE);
+                for ((&pt, &x), &r) in points[..k].iter().zip(&extras[..k]).zip(&rows[..k]) {
+                    emit(pt, x, r as usize, m);
+                }
+                n.points += k;
+            }
+        }
+        n
+    }
+
+    /// [`Self::decode_with`] through [`read_field_at`], for layouts [`Readers`] cannot serve.
+    fn decode_generic<F: FnMut(Point, Extra, usize, usize)>(
+        &self,
+        p: &LidarPacket<'_>,
+        sweep_start_ns: u64,
+        emit: &mut F,
+    ) -> Decoded {
         let mut n = Decoded::default();
         let returns = self.returns();
         for c in p.columns() {
             let Some(m) = self.column_index(&c, &mut n) else {
                 continue;
             };
-            let t = c
-                .timestamp_ns()
-                .saturating_sub(sweep_start_ns)
-                .min(u64::from(u32::MAX)) as u32;
+            let t = u64::from(column_time(c.timestamp_ns(), sweep_start_ns));
             let lut = &self.lut[m * self.h..(m + 1) * self.h];
             let b = c.as_bytes();
-            for (row, (e, &ring)) in lut.iter().zip(&self.rings).enumerate() {
+            for (row, (e, &ring)) in lut.iter().zip(&self.ring_tails).enumerate() {
                 let pix = self.pixel(b, c.pixel_offset(row));
                 for (ret, x) in pix.r.iter().take(returns).enumerate() {
                     if x.range_mm == 0 {
                         continue;
                     }
-                    let [px_, py, pz] = point_of(x.range_mm, e.dir, e.off);
-                    let pt = Point {
-                        x: px_,
-                        y: py,
-                        z: pz,
-                        intensity: f32::from(x.reflectivity),
-                        t,
-                        ring,
-                        ret: ret as u8,
-                        pad: 0,
-                    };
-                    emit(pt, *x, row, m);
+                    let tail = t | ring | if ret == 0 { 0 } else { RET1 };
+                    emit(make_point(x.range_mm, x.reflectivity, e, tail), *x, row, m);
                     n.points += 1;
                 }
             }
         }
-        Ok(n)
+        n
     }
 
-    /// Decodes one packet, appending its points to `out` (see [`Self::decode_with`]).
+    /// Decodes one packet, appending its points to `out`: the same points in the same order
+    /// as [`Self::decode_with`], by the fastest path (use it when every point is kept and the
+    /// [`Extra`] values are not needed).
+    ///
+    /// Each column's points are assembled in a small buffer on the stack without a branch
+    /// per pixel (every pixel is written, the write position advances only past points) and
+    /// appended with one `extend_from_slice`: wide copies into `out` instead of one narrow
+    /// store per field, which is what bounds this loop (BENCHMARKS.md, "Ouster").
     pub fn decode(
         &self,
         p: &LidarPacket<'_>,
         sweep_start_ns: u64,
         out: &mut Vec<Point>,
     ) -> Result<Decoded, DecodeError> {
-        self.decode_with(p, sweep_start_ns, |pt, _, _, _| out.push(pt))
+        self.check_format(p)?;
+        let Some(rd) = self.readers else {
+            return Ok(self.decode_generic(p, sweep_start_ns, &mut |pt, _, _, _| out.push(pt)));
+        };
+        let dual = self.returns() == 2;
+        Ok(match self.layout.pixel_bytes {
+            4 => self.append_fixed::<4>(p, sweep_start_ns, &rd, dual, out),
+            8 => self.append_fixed::<8>(p, sweep_start_ns, &rd, dual, out),
+            12 => self.append_fixed::<12>(p, sweep_start_ns, &rd, dual, out),
+            16 => self.append_fixed::<16>(p, sweep_start_ns, &rd, dual, out),
+            20 => self.append_fixed::<20>(p, sweep_start_ns, &rd, dual, out),
+            _ => self.decode_generic(p, sweep_start_ns, &mut |pt, _, _, _| out.push(pt)),
+        })
+    }
+
+    /// [`Self::decode`] for pixels of `N` bytes: the single- and dual-return loops apart.
+    fn append_fixed<const N: usize>(
+        &self,
+        p: &LidarPacket<'_>,
+        sweep_start_ns: u64,
+        rd: &Readers,
+        dual: bool,
+        out: &mut Vec<Point>,
+    ) -> Decoded {
+        if dual {
+            self.append_returns::<N, true>(p, sweep_start_ns, rd, out)
+        } else {
+            self.append_returns::<N, false>(p, sweep_start_ns, rd, out)
+        }
+    }
+
+    /// [`Self::decode`] for pixels of `N` bytes with one or two (`DUAL`) returns.
+    #[inline(always)]
+    fn append_returns<const N: usize, const DUAL: bool>(
+        &self,
+        p: &LidarPacket<'_>,
+        sweep_start_ns: u64,
+        rd: &Readers,
+        out: &mut Vec<Point>,
+    ) -> Decoded {
+        let mut n = Decoded::default();
+        let h = self.h;
+        let mut stage = [Point::default(); STAGE];
+        for c in p.columns() {
+            let Some(m) = self.column_index(&c, &mut n) else {
+                continue;
+            };
+            let t = u64::from(column_time(c.timestamp_ns(), sweep_start_ns));
+            let Some(lut) = self.lut.get(m * h..(m + 1) * h) else {
+                continue;
+            };
+            let blocks = c
+                .pixel_data()
+                .chunks(BLOCK_ROWS * N)
+                .zip(lut.chunks(BLOCK_ROWS))
+                .zip(self.ring_tails.chunks(BLOCK_ROWS));
+            for ((pixels, lut), tails) in blocks {
+                let mut k = 0;
+                for ((px, e), &ring) in pixels.chunks_exact(N).zip(lut).zip(tails) {
+                    let Ok(px) = <&[u8; N]>::try_from(px) else {
+                        continue;
+                    };
+                    // At most STAGE writes per block (see `emit_returns`).
+                    let range = rd.range.read(px);
+                    let refl = rd.reflectivity.read(px) as u8;
+                    stage[k % STAGE] = make_point(range, refl, e, t | ring);
+                    k += usize::from(range != 0);
+                    if DUAL {
+                        let range = rd.range2.read(px);
+                        let refl = rd.reflectivity2.read(px) as u8;
+                        stage[k % STAGE] = make_point(range, refl, e, t | ring | RET1);
+                        k += usize::from(range != 0);
+                    }
+                }
+                let k = k.min(STAGE);
+                out.extend_from_slice(&stage[..k]);
+                n.points += k;
+            }
+        }
+        n
     }
 
     /// Counts a column and gives its measurement id when it holds data.
@@ -444,16 +751,87 @@ impl OusterDecoder {
         frame.packets += 1;
         frame.alert_flags |= p.alert_flags();
         let mut n = Decoded::default();
+        match (self.readers, self.layout.pixel_bytes) {
+            (Some(rd), 4) => self.frame_fixed::<4>(p, frame, &rd, &mut n),
+            (Some(rd), 8) => self.frame_fixed::<8>(p, frame, &rd, &mut n),
+            (Some(rd), 12) => self.frame_fixed::<12>(p, frame, &rd, &mut n),
+            (Some(rd), 16) => self.frame_fixed::<16>(p, frame, &rd, &mut n),
+            (Some(rd), 20) => self.frame_fixed::<20>(p, frame, &rd, &mut n),
+            _ => self.frame_generic(p, frame, &mut n),
+        }
+        Ok(n)
+    }
+
+    /// Writes the column header values of valid column `m` into `frame`.
+    #[inline(always)]
+    fn frame_column(frame: &mut OusterFrame, c: &Column<'_>, m: usize) {
+        frame.timestamp_ns[m] = c.timestamp_ns();
+        frame.measurement_id[m] = m as u16;
+        frame.status[m] = c.status();
+    }
+
+    /// Writes one return of one pixel (plane index `k`) into `frame`.
+    #[inline(always)]
+    fn frame_pixel(frame: &mut OusterFrame, k: usize, x: &Extra, e: &LutEntry, n: &mut Decoded) {
+        frame.range_mm[k] = x.range_mm;
+        frame.reflectivity[k] = x.reflectivity;
+        frame.signal[k] = x.signal;
+        frame.flags[k] = x.flags;
+        if x.range_mm == 0 {
+            frame.xyz[k] = [0.0; 3];
+            frame.valid[k] = false;
+        } else {
+            frame.xyz[k] = point_of(x.range_mm, e.d3(), e.o3());
+            frame.valid[k] = true;
+            n.points += 1;
+        }
+    }
+
+    /// [`Self::decode_packet_into_frame`] for pixels of `N` bytes (see [`Self::decode_with`]).
+    fn frame_fixed<const N: usize>(
+        &self,
+        p: &LidarPacket<'_>,
+        frame: &mut OusterFrame,
+        rd: &Readers,
+        n: &mut Decoded,
+    ) {
+        let (h, w) = (self.h, self.w);
+        let plane = h * w;
+        let dual = self.returns() == 2;
+        for c in p.columns() {
+            let Some(m) = self.column_index(&c, n) else {
+                continue;
+            };
+            Self::frame_column(frame, &c, m);
+            let Some(lut) = self.lut.get(m * h..(m + 1) * h) else {
+                continue;
+            };
+            for (row, (px, e)) in c.pixel_data().chunks_exact(N).zip(lut).enumerate() {
+                let Ok(px) = <&[u8; N]>::try_from(px) else {
+                    continue;
+                };
+                let i = row * w + m;
+                let near_ir = rd.near_ir.read(px) as u16;
+                frame.near_ir[i] = near_ir;
+                Self::frame_pixel(frame, i, &rd.extra::<N, false>(px, near_ir), e, n);
+                if dual {
+                    let x = rd.extra::<N, true>(px, near_ir);
+                    Self::frame_pixel(frame, plane + i, &x, e, n);
+                }
+            }
+        }
+    }
+
+    /// [`Self::decode_packet_into_frame`] through [`read_field_at`].
+    fn frame_generic(&self, p: &LidarPacket<'_>, frame: &mut OusterFrame, n: &mut Decoded) {
         let (h, w) = (self.h, self.w);
         let plane = h * w;
         let returns = self.returns();
         for c in p.columns() {
-            let Some(m) = self.column_index(&c, &mut n) else {
+            let Some(m) = self.column_index(&c, n) else {
                 continue;
             };
-            frame.timestamp_ns[m] = c.timestamp_ns();
-            frame.measurement_id[m] = m as u16;
-            frame.status[m] = c.status();
+            Self::frame_column(frame, &c, m);
             let lut = &self.lut[m * h..(m + 1) * h];
             let b = c.as_bytes();
             for (row, e) in lut.iter().enumerate() {
@@ -461,23 +839,10 @@ impl OusterDecoder {
                 let i = row * w + m;
                 frame.near_ir[i] = pix.r[0].near_ir;
                 for (ret, x) in pix.r.iter().take(returns).enumerate() {
-                    let k = ret * plane + i;
-                    frame.range_mm[k] = x.range_mm;
-                    frame.reflectivity[k] = x.reflectivity;
-                    frame.signal[k] = x.signal;
-                    frame.flags[k] = x.flags;
-                    if x.range_mm == 0 {
-                        frame.xyz[k] = [0.0; 3];
-                        frame.valid[k] = false;
-                    } else {
-                        frame.xyz[k] = point_of(x.range_mm, e.dir, e.off);
-                        frame.valid[k] = true;
-                        n.points += 1;
-                    }
+                    Self::frame_pixel(frame, ret * plane + i, x, e, n);
                 }
             }
         }
-        Ok(n)
     }
 }
 
@@ -688,6 +1053,52 @@ fn point_of(range_mm: u32, d: [f32; 3], o: [f32; 3]) -> [f32; 3] {
     [r * d[0] + o[0], r * d[1] + o[1], r * d[2] + o[2]]
 }
 
+/// Rows of a column decoded per block by the fixed-size loops.
+const BLOCK_ROWS: usize = 128;
+/// Points held per block: two returns of [`BLOCK_ROWS`] rows.
+const STAGE: usize = 2 * BLOCK_ROWS;
+
+/// `ret` = 1 in the last word of a [`PointWords`].
+const RET1: u64 = 1 << 48;
+
+/// The point of a return of range `range_mm` and reflectivity `refl` at a pixel whose table
+/// entry is `e`; `tail` = `t | ring << 32 | ret << 48` (the last 8 bytes of the record).
+///
+/// x, y, z and the intensity are one 4-wide multiply-add (`[r, r, r, refl] · dir + off`,
+/// the same rounding as [`point_of`] lane by lane) and the record is written as two words: the
+/// stores of the points are much of what the decoder's loop costs (BENCHMARKS.md, "Ouster").
+#[inline(always)]
+fn make_point(range_mm: u32, refl: u8, e: &LutEntry, tail: u64) -> Point {
+    let r = range_mm as f32;
+    let m = [r, r, r, f32::from(refl)];
+    let mut xyzi = [0f32; 4];
+    for (((v, m), d), o) in xyzi.iter_mut().zip(m).zip(e.dir).zip(e.off) {
+        *v = m * d + o;
+    }
+    if cfg!(target_endian = "little") {
+        bytemuck::cast(PointWords { xyzi, tail })
+    } else {
+        Point {
+            x: xyzi[0],
+            y: xyzi[1],
+            z: xyzi[2],
+            intensity: xyzi[3],
+            t: tail as u32,
+            ring: (tail >> 32) as u16,
+            ret: (tail >> 48) as u8,
+            pad: 0,
+        }
+    }
+}
+
+/// `t` of a column: its timestamp − the sweep start, clamped to `0..=u32::MAX` ns.
+#[inline(always)]
+fn column_time(timestamp_ns: u64, sweep_start_ns: u64) -> u32 {
+    timestamp_ns
+        .saturating_sub(sweep_start_ns)
+        .min(u64::from(u32::MAX)) as u32
+}
+
 /// Ring of each row: rank of the altitude, 0 = lowest; equal altitudes: the higher row index
 /// (lower in the image) gets the lower ring.
 fn rings_by_altitude(alt: &[f64]) -> Vec<u16> {
@@ -744,11 +1155,13 @@ fn xyz_lut(
                     (d[0] * 1e-3) as f32,
                     (d[1] * 1e-3) as f32,
                     (d[2] * 1e-3) as f32,
+                    1.0,
                 ],
                 off: [
                     ((o[0] + t[0]) * 1e-3) as f32,
                     ((o[1] + t[1]) * 1e-3) as f32,
                     ((o[2] + t[2]) * 1e-3) as f32,
+                    0.0,
                 ],
             });
         }
@@ -773,7 +1186,7 @@ mod tests {
         // No beam offset, identity transforms: column 0 looks along +x, column W/4 along −y
         // (θe = 2π − 2π·v/W), column W/2 along −x.
         let lut = xyz_lut(4, &[0.0], &[0.0], &IDENTITY, &IDENTITY);
-        let p = |v: usize, r: u32| point_of(r, lut[v].dir, lut[v].off);
+        let p = |v: usize, r: u32| point_of(r, lut[v].d3(), lut[v].o3());
         assert!(close(p(0, 1000), [1.0, 0.0, 0.0], 1e-6));
         assert!(close(p(1, 1000), [0.0, -1.0, 0.0], 1e-6));
         assert!(close(p(2, 2000), [-2.0, 0.0, 0.0], 1e-6));
@@ -798,7 +1211,7 @@ mod tests {
         let y = (r - n) * a.sin() * phi.cos();
         let z = (r - n) * phi.sin();
         let want = [-x * 1e-3, -y * 1e-3, (z + 36.18) * 1e-3];
-        assert!(close(point_of(5000, lut[0].dir, lut[0].off), want, 1e-6));
+        assert!(close(point_of(5000, lut[0].d3(), lut[0].o3()), want, 1e-6));
     }
 
     #[test]
@@ -810,10 +1223,76 @@ mod tests {
         b2l[11] = 4.0;
         let lut = xyz_lut(8, &[0.0], &[0.0], &b2l, &IDENTITY);
         assert!(close(
-            point_of(1000, lut[0].dir, lut[0].off),
+            point_of(1000, lut[0].d3(), lut[0].o3()),
             [0.998, 0.0, 0.004],
             1e-7
         ));
+    }
+
+    /// Pixel bytes of `n` bytes from a simple xorshift generator.
+    fn noise(seed: &mut u64, n: usize) -> Vec<u8> {
+        (0..n)
+            .map(|_| {
+                *seed ^= *seed << 13;
+                *seed ^= *seed >> 7;
+                *seed ^= *seed << 17;
+                *seed as u8
+            })
+            .collect()
+    }
+
+    fn fixed_reads_equal_generic<const N: usize>(l: &Layout, rd: &Readers, seed: &mut u64) {
+        let fields = [
+            (Some(l.range), rd.range),
+            (l.flags, rd.flags),
+            (Some(l.reflectivity), rd.reflectivity),
+            (l.signal, rd.signal),
+            (l.near_ir, rd.near_ir),
+            (l.range2, rd.range2),
+            (l.flags2, rd.flags2),
+            (l.reflectivity2, rd.reflectivity2),
+            (l.signal2, rd.signal2),
+        ];
+        for _ in 0..200 {
+            let px = noise(seed, N);
+            let arr: &[u8; N] = px.as_slice().try_into().unwrap();
+            for (f, r) in fields {
+                let want = f.map_or(0, |f| read_field_at(&px, 0, f));
+                assert_eq!(r.read(arr), want, "{f:?} {r:?} {px:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn fixed_field_readers_serve_every_profile_and_read_as_the_generic_path() {
+        let mut seed = 0x9E37_79B9_7F4A_7C15u64;
+        for p in crate::model::ouster::ALL_PROFILES {
+            let l = p.layout();
+            let rd = Readers::new(&l).unwrap_or_else(|| panic!("{p}: no fixed readers"));
+            match l.pixel_bytes {
+                4 => fixed_reads_equal_generic::<4>(&l, &rd, &mut seed),
+                8 => fixed_reads_equal_generic::<8>(&l, &rd, &mut seed),
+                12 => fixed_reads_equal_generic::<12>(&l, &rd, &mut seed),
+                16 => fixed_reads_equal_generic::<16>(&l, &rd, &mut seed),
+                20 => fixed_reads_equal_generic::<20>(&l, &rd, &mut seed),
+                n => panic!("{p}: pixels of {n} bytes have no fixed loop"),
+            }
+        }
+    }
+
+    #[test]
+    fn field_readers_refuse_what_one_load_cannot_hold() {
+        let f = |bit, width| {
+            Some(Field {
+                bit,
+                width,
+                shift: 0,
+            })
+        };
+        assert!(FieldReader::new(f(0, 32), 4).is_some());
+        assert!(FieldReader::new(f(4, 32), 8).is_none());
+        assert!(FieldReader::new(f(0, 8), 3).is_none());
+        assert_eq!(FieldReader::new(None, 4), Some(FieldReader::default()));
     }
 
     #[test]

@@ -508,6 +508,19 @@ impl<'a> Column<'a> {
         self.b
     }
 
+    /// The bytes of all `H` pixels, back to back (row 0 first; the column header and, for
+    /// LEGACY, the status trailer excluded): `H × pixel bytes` long, so that
+    /// `chunks_exact(pixel bytes)` gives every pixel.
+    #[inline]
+    pub fn pixel_data(&self) -> &'a [u8] {
+        let b: &'a [u8] = self.b;
+        let start = self.column_header_bytes.min(b.len());
+        let end = start
+            .saturating_add(self.pixels.saturating_mul(self.pixel_bytes))
+            .min(b.len());
+        &b[start..end]
+    }
+
     /// Byte offset of pixel `row` within [`Self::as_bytes`] (for [`read_field_at`]).
     #[inline]
     pub fn pixel_offset(&self, row: usize) -> usize {
