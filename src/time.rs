@@ -35,17 +35,22 @@ impl ClockSource {
 
 /// Completes a top-of-hour µs counter to ns since the Unix epoch, using the hour of
 /// `reference_ns` and moving by ±1 h when the result is more than 30 min away from it.
+///
+/// Saturates at the ends of the `i64` range (a corrupt capture time can lie there).
 pub fn complete_toh(toh_us: u32, reference_ns: i64) -> i64 {
-    let hour = reference_ns.div_euclid(HOUR_NS) * HOUR_NS;
-    let t = hour + i64::from(toh_us % HOUR_US) * 1_000;
-    let half = HOUR_NS / 2;
-    if t - reference_ns > half {
-        t - HOUR_NS
-    } else if reference_ns - t > half {
-        t + HOUR_NS
+    let reference = i128::from(reference_ns);
+    let hour_ns = i128::from(HOUR_NS);
+    let hour = reference.div_euclid(hour_ns) * hour_ns;
+    let t = hour + i128::from(toh_us % HOUR_US) * 1_000;
+    let half = hour_ns / 2;
+    let t = if t - reference > half {
+        t - hour_ns
+    } else if reference - t > half {
+        t + hour_ns
     } else {
         t
-    }
+    };
+    t.clamp(i128::from(i64::MIN), i128::from(i64::MAX)) as i64
 }
 
 /// Difference `b − a` of two top-of-hour counters in µs, in (−30 min, +30 min], across the
@@ -82,6 +87,14 @@ mod tests {
         // Reference 10:59:59 (host late), counter 0:00.2 → 11:00:00.2.
         let ref_ns = 11 * HOUR_NS - 1_000_000_000;
         assert_eq!(complete_toh(200_000, ref_ns), 11 * HOUR_NS + 200_000_000);
+    }
+
+    #[test]
+    fn extreme_references_saturate() {
+        // Found by fuzzing: host times near the ends of i64 overflowed `hour + toh`.
+        assert_eq!(complete_toh(3_599_999_999, i64::MAX), i64::MAX);
+        let t = complete_toh(0, i64::MIN);
+        assert!(t <= i64::MIN + HOUR_NS);
     }
 
     #[test]

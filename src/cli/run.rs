@@ -136,10 +136,15 @@ impl Output {
         ports: &[u16],
     ) -> Result<(), SinkError> {
         let single = self.n_sensors_hint <= 1 && idx == 0;
-        let name = match &self.name {
+        let mut name = match &self.name {
             Some(n) => n.clone(),
             None => sensors::default_name(facts, addr),
         };
+        // Two sensors of one model whose addresses end alike: name them by the whole address.
+        if self.sensors.iter().any(|s| s.registered && s.name == name) {
+            let o = addr.octets();
+            name = format!("{name}-{}-{}-{}", o[0], o[1], o[2]);
+        }
         let calib_name = sensors::calibration_name(facts);
         let calib = self
             .calibs

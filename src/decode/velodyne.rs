@@ -446,7 +446,8 @@ impl VelodyneDecoder {
             y,
             z,
             intensity: f32::from(refl),
-            t: (t_base_ns + i64::from(sl0.t_ns) + i64::from(lane.dt_ns))
+            t: t_base_ns
+                .saturating_add(i64::from(sl0.t_ns) + i64::from(lane.dt_ns))
                 .clamp(0, i64::from(u32::MAX)) as u32,
             ring: laser.ring,
             ret,

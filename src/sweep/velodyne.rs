@@ -272,7 +272,14 @@ impl VelodyneStream {
                 self.facts.product_id = Some(packet.factory_product());
                 self.facts.mode_byte = Some(packet.factory_mode());
             }
-            let mut buf = Box::new([0u8; DATA_PACKET_LEN]);
+            // Detection that keeps failing (the caller may go on after the error) must not grow
+            // memory: keep the latest DETECT_PACKETS packets, count the older ones as dropped.
+            let mut buf = if self.pending.len() >= DETECT_PACKETS {
+                self.stats.malformed += 1;
+                self.pending.remove(0).1
+            } else {
+                Box::new([0u8; DATA_PACKET_LEN])
+            };
             buf.copy_from_slice(packet.bytes());
             self.pending.push((host_ns, buf));
             if self.pending.len() < DETECT_PACKETS && self.cfg.model.is_none() {
@@ -425,7 +432,7 @@ impl VelodyneStream {
         let block_t: [u32; BLOCKS] = core::array::from_fn(|b| dec.block_time_ns(b));
         let toh = p.timestamp_us();
         let (stamp_ns, clock) = self.device_time(toh, host_ns);
-        let first_firing_ns = stamp_ns + model.stamp_to_first_firing_ns();
+        let first_firing_ns = stamp_ns.saturating_add(model.stamp_to_first_firing_ns());
         let period_ns = model.packet_period_ns(mode);
 
         // Loss and discontinuities.
@@ -457,9 +464,13 @@ impl VelodyneStream {
             let r = rel(p.azimuth(g));
             let wrapped = matches!(last_rel, Some(l) if u32::from(l) > u32::from(r) + 18_000);
             let too_long = self.sweep_open
-                && first_firing_ns + i64::from(block_t[g]) - self.cur.device_time_ns
+                && first_firing_ns
+                    .saturating_add(i64::from(block_t[g]))
+                    .saturating_sub(self.cur.device_time_ns)
                     > self.cfg.max_sweep_ns;
-            if (wrapped || too_long) && self.sweep_open {
+            // Blocks of this packet before `g` may open the sweep themselves (a wrap inside the
+            // stream's first packet, or the first after a discontinuity).
+            if (wrapped || too_long) && (self.sweep_open || g > seg_start) {
                 if g > seg_start {
                     self.add_segment(host_ns, p, seg_start..g, first_firing_ns, clock);
                 }
@@ -495,10 +506,10 @@ impl VelodyneStream {
         if !self.sweep_open {
             self.cur.clear();
             self.cur.index = self.next_index;
-            self.cur.device_time_ns = first_firing_ns + seg_t0;
+            self.cur.device_time_ns = first_firing_ns.saturating_add(seg_t0);
             self.cur.clock = clock;
             self.cur.timestamp_ns = match clock {
-                ClockSource::Host => host_ns + seg_t0,
+                ClockSource::Host => host_ns.saturating_add(seg_t0),
                 _ => self.cur.device_time_ns,
             };
             self.cur.first_host_ns = host_ns;
@@ -506,7 +517,7 @@ impl VelodyneStream {
             self.sweep_open = true;
             self.facts.clock = clock;
         }
-        let t_base = first_firing_ns - self.cur.device_time_ns;
+        let t_base = first_firing_ns.saturating_sub(self.cur.device_time_ns);
         let col_base = self.cur.columns_count;
         let before = self.cur.points.len();
         if self.cfg.keep_columns {

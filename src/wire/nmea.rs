@@ -93,6 +93,9 @@ fn digits(s: &str) -> Option<i64> {
 }
 
 fn parse_hhmmss(t: &str) -> Option<(i64, i64, i64, i64)> {
+    if !t.is_ascii() {
+        return None; // byte-indexed slicing below needs single-byte characters
+    }
     let (whole, frac) = t.split_once('.').unwrap_or((t, ""));
     if whole.len() != 6 {
         return None;
@@ -112,7 +115,7 @@ fn parse_hhmmss(t: &str) -> Option<(i64, i64, i64, i64)> {
 }
 
 fn parse_ddmmyy(d: &str) -> Option<(i64, i64, i64)> {
-    if d.len() != 6 {
+    if d.len() != 6 || !d.is_ascii() {
         return None;
     }
     let day = digits(&d[0..2])?;
@@ -125,7 +128,7 @@ fn parse_ddmmyy(d: &str) -> Option<(i64, i64, i64)> {
 }
 
 fn parse_coord(v: &str, hemi: &str, deg_digits: usize) -> Option<f64> {
-    if v.len() < deg_digits + 2 {
+    if v.len() < deg_digits + 2 || !v.is_ascii() {
         return None;
     }
     let deg: f64 = v.get(..deg_digits)?.parse().ok()?;
@@ -181,5 +184,9 @@ mod tests {
         assert_eq!(parse_rmc(b"$GPGGA,1,2,3"), Err(NmeaError::NotRmc));
         assert!(parse_rmc(b"$GPRMC,99xx32,A,,,,,,,111212").is_err());
         assert!(parse_rmc(&[0xff, 0xfe]).is_err());
+        // Multi-byte characters where digits belong (found by fuzzing): an error, not a panic.
+        assert!(parse_rmc("$GPRMC,2206é2,A,,,,,,,111212".as_bytes()).is_err());
+        assert!(parse_rmc("$GPRMC,220632,A,,,,,,,1é1212".as_bytes()).is_err());
+        assert!(parse_rmc("$GPRMC,220632,A,37é7.8324,N,,,,,111212".as_bytes()).is_ok());
     }
 }
