@@ -134,7 +134,7 @@ fn velodyne_stream_host_time_overflow() {
 
 #[test]
 #[ignore = "crash: a pcapng whose 4th packet has a corrupt timestamp (saturates to i64::MAX ns) \
-            overflows `hour + toh` in complete_toh; fix pending in src/time.rs (complete_toh) \
+            overflows `t + HOUR_NS` in complete_toh (time.rs:45); fix pending in src/time.rs \
             and src/sweep/velodyne.rs"]
 fn decode_to_mcap_host_time_overflow() {
     replay("decode_to_mcap-host-time-overflow.bin");

@@ -56,7 +56,7 @@ pub const OPEN_ISSUES: &[&str] = &[
     "cli-sensor-name-collision",
     // src/time.rs `complete_toh` and src/sweep/velodyne.rs `decode_packet`: a host time near
     // i64::MIN / i64::MAX (a corrupt pcapng timestamp or if_tsoffset saturates there) overflows
-    // `hour + toh` in complete_toh, and host times far apart overflow `first_firing_ns + block
+    // `t ± HOUR_NS` in complete_toh, and host times far apart overflow `first_firing_ns + block
     // time − sweep device time` in decode_packet.
     "stream-host-time-overflow",
     // src/wire/nmea.rs `parse_hhmmss` / `parse_ddmmyy`: `&field[0..2]` etc. slice a 6-byte field
