@@ -525,14 +525,11 @@ fn fragmented_udp_in_a_capture_reads_back_in_any_order() {
         .unwrap();
 }
 
-/// Found by the wrap property above: the head starts at 359.90°, the second firing of the first
-/// packet is at 0.23°. A new sweep must start there (the first firing whose azimuth is smaller
-/// than the previous one's by more than half a turn, src/sweep/velodyne.rs); the stream only
-/// cuts once a sweep is open, so the wrap inside the first packet (and inside the first packet
-/// after a discontinuity) is missed and sweep 0 runs from 359.90° round to the next wrap.
+/// Found by the wrap property above (fixed in 8664547): the head starts at 359.90°, the second
+/// firing of the first packet is at 0.23°, and a new sweep must start there — the first firing
+/// whose azimuth is smaller than the previous one's by more than half a turn — even in the
+/// stream's first packet, before any sweep is open.
 #[test]
-#[ignore = "bug: a wrap inside the first packet of a stream (or after a discontinuity) does not \
-            start a new sweep (`wrapped && self.sweep_open`); fix pending in src/sweep/velodyne.rs"]
 fn a_wrap_inside_the_first_packet_starts_a_new_sweep() {
     for mode in [ReturnMode::Strongest, ReturnMode::Dual] {
         let m = Motion {

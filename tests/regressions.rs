@@ -14,38 +14,17 @@ use std::path::PathBuf;
 
 /// Every regression input and the open issue (in `harness::OPEN_ISSUES`) it reproduces, if any.
 const REGRESSIONS: &[(&str, Option<&str>)] = &[
-    (
-        "velodyne_packet-t-base-overflow.bin",
-        Some("decode-t-base-overflow"),
-    ),
+    ("velodyne_packet-t-base-overflow.bin", None),
     (
         "velodyne_stream-demux-finish-first-error.bin",
         Some("demux-finish-stops-at-first-error"),
     ),
-    (
-        "decode_to_mcap-sensor-name-collision.bin",
-        Some("cli-sensor-name-collision"),
-    ),
-    (
-        "velodyne_stream-host-time-overflow.bin",
-        Some("stream-host-time-overflow"),
-    ),
-    (
-        "decode_to_mcap-host-time-overflow.bin",
-        Some("stream-host-time-overflow"),
-    ),
-    (
-        "velodyne_packet-nmea-date-char-boundary.bin",
-        Some("nmea-char-boundary"),
-    ),
-    (
-        "velodyne_packet-nmea-time-char-boundary.bin",
-        Some("nmea-char-boundary"),
-    ),
-    (
-        "decode_to_mcap-nmea-char-boundary.bin",
-        Some("nmea-char-boundary"),
-    ),
+    ("decode_to_mcap-sensor-name-collision.bin", None),
+    ("velodyne_stream-host-time-overflow.bin", None),
+    ("decode_to_mcap-host-time-overflow.bin", None),
+    ("velodyne_packet-nmea-date-char-boundary.bin", None),
+    ("velodyne_packet-nmea-time-char-boundary.bin", None),
+    ("decode_to_mcap-nmea-char-boundary.bin", None),
 ];
 
 fn dir() -> PathBuf {
@@ -102,9 +81,9 @@ fn fixed_regressions_replay_cleanly() {
     }
 }
 
+/// `t_base_ns + firing offset` overflowed for a time base near i64::MAX (src/decode/velodyne.rs;
+/// fixed in 8664547).
 #[test]
-#[ignore = "crash: `t_base_ns + firing offset` overflows (debug panic, release wraps to t = 0) \
-            for a time base near i64::MAX; fix pending in src/decode/velodyne.rs (saturating_add)"]
 fn velodyne_packet_t_base_overflow() {
     replay("velodyne_packet-t-base-overflow.bin");
 }
@@ -117,46 +96,44 @@ fn velodyne_stream_demux_finish_first_error() {
     replay("velodyne_stream-demux-finish-first-error.bin");
 }
 
+/// Two VLP-16s at 192.168.1.200 and 192.164.1.200 were both named vlp16-200 and the sink refused
+/// the second (src/cli; fixed in 8664547: the second is named by its whole address).
 #[test]
-#[ignore = "crash: two VLP-16s at 192.168.1.200 and 192.164.1.200 are both named vlp16-200, \
-            McapSink::add_sensor refuses the second topic prefix and the decode fails; fix \
-            pending in src/cli/sensors.rs (default_name)"]
 fn decode_to_mcap_sensor_name_collision() {
     replay("decode_to_mcap-sensor-name-collision.bin");
 }
 
+/// Host times 1.7e18 then -8.4e18 ns overflowed the sweep time arithmetic (src/sweep/velodyne.rs;
+/// fixed in 8664547).
 #[test]
-#[ignore = "crash: host times 1.7e18 then -8.4e18 ns (op jumps) overflow `first_firing_ns + block \
-            time - sweep device time`; fix pending in src/sweep/velodyne.rs (decode_packet)"]
 fn velodyne_stream_host_time_overflow() {
     replay("velodyne_stream-host-time-overflow.bin");
 }
 
+/// A pcapng whose 4th packet has a corrupt stamp (i64::MAX ns) overflowed `complete_toh`
+/// (src/time.rs; fixed in 8664547).
 #[test]
-#[ignore = "crash: a pcapng whose 4th packet has a corrupt timestamp (saturates to i64::MAX ns) \
-            overflows `t + HOUR_NS` in complete_toh (time.rs:45); fix pending in src/time.rs \
-            and src/sweep/velodyne.rs"]
 fn decode_to_mcap_host_time_overflow() {
     replay("decode_to_mcap-host-time-overflow.bin");
 }
 
+/// The RMC date `721Ҫ1` (6 bytes, not ASCII) was sliced off a char boundary: panic
+/// (src/wire/nmea.rs; fixed in 8664547).
 #[test]
-#[ignore = "crash: parse_rmc panics on the RMC date `721Ҫ1` (6 bytes, not ASCII): \
-            `&d[2..4]` is not a char boundary; fix pending in src/wire/nmea.rs (parse_ddmmyy)"]
 fn velodyne_packet_nmea_date_char_boundary() {
     replay("velodyne_packet-nmea-date-char-boundary.bin");
 }
 
+/// The RMC time `0Ҫ000` (6 bytes, not ASCII) was sliced off a char boundary: panic
+/// (src/wire/nmea.rs; fixed in 8664547).
 #[test]
-#[ignore = "crash: parse_rmc panics on the RMC time `0Ҫ000` (6 bytes, not ASCII): \
-            `&whole[0..2]` is not a char boundary; fix pending in src/wire/nmea.rs (parse_hhmmss)"]
 fn velodyne_packet_nmea_time_char_boundary() {
     replay("velodyne_packet-nmea-time-char-boundary.bin");
 }
 
+/// A 594-byte pcap with one position packet whose RMC date is not ASCII made `ringscan decode`
+/// panic, release builds too (src/wire/nmea.rs; fixed in 8664547).
 #[test]
-#[ignore = "crash: a 594-byte pcap holding one position packet whose RMC date is not ASCII \
-            panics `ringscan decode` (release too, exit 101); fix pending in src/wire/nmea.rs"]
 fn decode_to_mcap_nmea_char_boundary() {
     replay("decode_to_mcap-nmea-char-boundary.bin");
 }
