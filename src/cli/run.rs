@@ -24,7 +24,7 @@ use super::FormatArg;
 const DEMO_PCAP: &[u8] = include_bytes!("../../fixtures/demo-vlp16.pcap");
 
 /// Datagrams read ahead to count the sensors (for topic names) before decoding.
-const PRESCAN_DATAGRAMS: usize = 20_000;
+const PRESCAN_DATAGRAMS: usize = 4_000;
 /// Raw datagrams held per sensor until its model is known (for `--raw`).
 const RAW_HOLD: usize = 256;
 
