@@ -17,7 +17,7 @@ const REGRESSIONS: &[(&str, Option<&str>)] = &[
     ("velodyne_packet-t-base-overflow.bin", None),
     (
         "velodyne_stream-demux-finish-first-error.bin",
-        Some("demux-finish-stops-at-first-error"),
+        None,
     ),
     ("decode_to_mcap-sensor-name-collision.bin", None),
     ("velodyne_stream-host-time-overflow.bin", None),
@@ -89,9 +89,6 @@ fn velodyne_packet_t_base_overflow() {
 }
 
 #[test]
-#[ignore = "crash: Demux::finish returns at the first stream that fails (a VLS-128 with no \
-            calibration), so later sensors never emit their last sweep; fix pending in \
-            src/sweep/demux.rs"]
 fn velodyne_stream_demux_finish_first_error() {
     replay("velodyne_stream-demux-finish-first-error.bin");
 }

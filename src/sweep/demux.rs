@@ -238,16 +238,21 @@ impl Demux {
         &mut self,
         on_sweep: &mut dyn FnMut(usize, &Sweep, Facts<'_>),
     ) -> Result<(), (usize, StreamError)> {
+        // A stream that fails does not keep the others from finishing; the first error is
+        // returned.
+        let mut first_error = None;
         for (idx, (_, stream, _)) in self.sensors.iter_mut().enumerate() {
             match stream {
-                SensorStream::Velodyne(s) => s
-                    .finish(&mut |sw, f| on_sweep(idx, sw, Facts::Velodyne(f)))
-                    .map_err(|e| (idx, e))?,
+                SensorStream::Velodyne(s) => {
+                    if let Err(e) = s.finish(&mut |sw, f| on_sweep(idx, sw, Facts::Velodyne(f))) {
+                        first_error.get_or_insert((idx, e));
+                    }
+                }
                 SensorStream::Ouster(s) => {
                     s.finish(&mut |sw, f| on_sweep(idx, sw, Facts::Ouster(f)))
                 }
             }
         }
-        Ok(())
+        first_error.map_or(Ok(()), Err)
     }
 }

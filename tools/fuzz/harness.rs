@@ -41,12 +41,7 @@ use ringscan::wire::velodyne::{
 /// targets step around them so that fuzzing goes on; `tests/regressions.rs` replays each saved
 /// input with [`set_strict`] on (an `#[ignore]`d test until the fix lands). When a fix lands,
 /// remove its name here: the fuzz targets then check it again.
-pub const OPEN_ISSUES: &[&str] = &[
-    // src/sweep/demux.rs `Demux::finish`: returns at the first stream that fails (e.g. a
-    // sensor whose model needs a calibration), so the streams after it never emit their last
-    // sweep ("ends every stream" does not hold).
-    "demux-finish-stops-at-first-error",
-];
+pub const OPEN_ISSUES: &[&str] = &[];
 
 // Fixed in 8664547, checked again by the fuzz targets (their step-arounds below stay, inert,
 // for the next such issue): "decode-t-base-overflow" (src/decode/velodyne.rs), "nmea-char-boundary"
