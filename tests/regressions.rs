@@ -15,10 +15,7 @@ use std::path::PathBuf;
 /// Every regression input and the open issue (in `harness::OPEN_ISSUES`) it reproduces, if any.
 const REGRESSIONS: &[(&str, Option<&str>)] = &[
     ("velodyne_packet-t-base-overflow.bin", None),
-    (
-        "velodyne_stream-demux-finish-first-error.bin",
-        None,
-    ),
+    ("velodyne_stream-demux-finish-first-error.bin", None),
     ("decode_to_mcap-sensor-name-collision.bin", None),
     ("velodyne_stream-host-time-overflow.bin", None),
     ("decode_to_mcap-host-time-overflow.bin", None),
