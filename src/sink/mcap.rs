@@ -620,25 +620,20 @@ impl<W: Write + Seek> McapSink<W> {
         })?;
         let writer = self.writer.as_mut().ok_or_else(finished_error)?;
         if sensor.raw.is_none() {
-            let schema = match self.raw_schema {
-                Some(id) => id,
-                None => {
-                    let id = writer
-                        .add_schema(
-                            foxglove::RAW_PACKET_SCHEMA,
-                            "protobuf",
-                            &foxglove::raw_packet_descriptor_set(),
-                        )
-                        .map_err(mcap_err("writing the raw packet schema"))?;
-                    self.raw_schema = Some(id);
-                    id
-                }
-            };
             let topic = sensor.raw_topic();
-            let id = writer
-                .add_channel(schema, &topic, "protobuf", &sensor.metadata)
-                .map_err(mcap_err(format!("adding channel {topic}")))?;
-            sensor.raw = Some(Channel { id, sequence: 0 });
+            lazy_channel(
+                writer,
+                &mut self.raw_schema,
+                (
+                    foxglove::RAW_PACKET_SCHEMA,
+                    "protobuf",
+                    &foxglove::raw_packet_descriptor_set,
+                ),
+                &mut sensor.raw,
+                &topic,
+                "protobuf",
+                &sensor.metadata,
+            )?;
         }
         foxglove::encode_raw_packet(&mut self.buf, log_time_ns, src, dst_port, payload)
             .ok_or_else(|| SinkError::TooLarge {
@@ -676,21 +671,18 @@ impl<W: Write + Seek> McapSink<W> {
         })?;
         let writer = self.writer.as_mut().ok_or_else(finished_error)?;
         if sensor.imu.is_none() {
-            let schema = match self.imu_schema {
-                Some(id) => id,
-                None => {
-                    let id = writer
-                        .add_schema(IMU_SCHEMA, "jsonschema", IMU_JSON_SCHEMA.as_bytes())
-                        .map_err(mcap_err("writing the IMU schema"))?;
-                    self.imu_schema = Some(id);
-                    id
-                }
-            };
             let topic = sensor.imu_topic();
-            let id = writer
-                .add_channel(schema, &topic, "json", &sensor.metadata)
-                .map_err(mcap_err(format!("adding channel {topic}")))?;
-            sensor.imu = Some(Channel { id, sequence: 0 });
+            lazy_channel(
+                writer,
+                &mut self.imu_schema,
+                (IMU_SCHEMA, "jsonschema", &|| {
+                    IMU_JSON_SCHEMA.as_bytes().to_vec()
+                }),
+                &mut sensor.imu,
+                &topic,
+                "json",
+                &sensor.metadata,
+            )?;
         }
         self.buf.clear();
         serde_json::to_writer(&mut self.buf, json).map_err(|source| SinkError::Json {
@@ -864,6 +856,37 @@ impl<W: Write + Seek> Drop for McapSink<W> {
     fn drop(&mut self) {
         self.discard();
     }
+}
+
+/// Creates a channel on its first use (and its schema on the first use of any such channel).
+fn lazy_channel<W: Write + Seek>(
+    writer: &mut Writer<W>,
+    schema_id: &mut Option<u16>,
+    schema: (&str, &str, &dyn Fn() -> Vec<u8>),
+    channel: &mut Option<Channel>,
+    topic: &str,
+    message_encoding: &str,
+    metadata: &BTreeMap<String, String>,
+) -> Result<(), SinkError> {
+    if channel.is_some() {
+        return Ok(());
+    }
+    let (name, encoding, data) = schema;
+    let id = match *schema_id {
+        Some(id) => id,
+        None => {
+            let id = writer
+                .add_schema(name, encoding, &data())
+                .map_err(mcap_err(format!("writing the {name} schema")))?;
+            *schema_id = Some(id);
+            id
+        }
+    };
+    let id = writer
+        .add_channel(id, topic, message_encoding, metadata)
+        .map_err(mcap_err(format!("adding channel {topic}")))?;
+    *channel = Some(Channel { id, sequence: 0 });
+    Ok(())
 }
 
 fn finished_error() -> SinkError {
