@@ -1,0 +1,3 @@
+//! Point-cloud stages applied to a sweep after decoding (and deskewing).
+
+pub mod filter;
