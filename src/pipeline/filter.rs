@@ -1,6 +1,7 @@
 //! Sensor placement and the point filters that run before voxelisation.
 //!
-//! In order, per point of a (deskewed) sweep, in one pass that compacts the buffer in place:
+//! In order, per point of a (deskewed) sweep, in one pass that copies the survivors from the
+//! sweep into the caller's buffer:
 //! 1. **range**: keep `min_range_m ≤ |p| ≤ max_range_m` (sensor frame, from the sensor origin);
 //! 2. **field of view**: keep azimuths (`atan2(y, x)` in the sensor frame, degrees, counter-
 //!    clockwise from x forward) in `[azimuth_min_deg, azimuth_max_deg]` going counter-clockwise
@@ -11,7 +12,8 @@
 //! 4. **crop box**: drop points inside the axis-aligned box given in `base_link` (the vehicle's
 //!    own body, which a roof-mounted sensor sees).
 //!
-//! Each removal is counted in [`FilterStats`]. No allocation, no I/O.
+//! Each removal is counted in [`FilterStats`]. No allocation once the caller's buffer has grown
+//! to a sweep's size; no I/O.
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 
@@ -287,13 +289,20 @@ impl Filter {
         true
     }
 
-    /// Filters `points` in place (order kept) and moves the survivors into `base_link` with
-    /// `base_from_sensor`.
-    pub fn apply(&self, points: &mut Vec<Point>, base_from_sensor: &Isometry3<f64>) -> FilterStats {
+    /// Writes the points of `src` that pass the filters, moved into `base_link` with
+    /// `base_from_sensor`, to `dst` (cleared first; order kept).
+    pub fn apply(
+        &self,
+        src: &[Point],
+        dst: &mut Vec<Point>,
+        base_from_sensor: &Isometry3<f64>,
+    ) -> FilterStats {
         let mut stats = FilterStats {
-            input: points.len(),
+            input: src.len(),
             ..FilterStats::default()
         };
+        dst.clear();
+        dst.reserve(src.len());
         let m = base_from_sensor.to_homogeneous();
         let identity = *base_from_sensor == Isometry3::identity();
         let a: [f32; 12] = std::array::from_fn(|i| m[(i / 4, i % 4)] as f32);
@@ -301,16 +310,17 @@ impl Filter {
             .config
             .crop_box
             .map(|b| (b.min_m.map(|v| v as f32), b.max_m.map(|v| v as f32)));
-        points.retain_mut(|p| {
+        for &p in src {
+            let mut p = p;
             let r2 = p.x * p.x + p.y * p.y + p.z * p.z;
             // NaN fails both comparisons: non-finite points go with the range filter.
             if !(r2 >= self.min2 && r2 <= self.max2) {
                 stats.range += 1;
-                return false;
+                continue;
             }
-            if !self.in_fov(p) {
+            if !self.in_fov(&p) {
                 stats.fov += 1;
-                return false;
+                continue;
             }
             if !identity {
                 let (x, y, z) = (p.x, p.y, p.z);
@@ -327,11 +337,11 @@ impl Filter {
                     && p.z <= hi[2]
                 {
                     stats.crop_box += 1;
-                    return false;
+                    continue;
                 }
             }
-            true
-        });
+            dst.push(p);
+        }
         stats
     }
 }
@@ -409,8 +419,8 @@ mod tests {
             },
         ] {
             let filter = Filter::new(cfg).unwrap();
-            let mut kept = pts.clone();
-            let stats = filter.apply(&mut kept, &Isometry3::identity());
+            let mut kept = Vec::new();
+            let stats = filter.apply(&pts, &mut kept, &Isometry3::identity());
             let expected: Vec<Point> = pts.iter().filter(|p| reference(&cfg, p)).copied().collect();
             assert_eq!(kept, expected, "{cfg:?}");
             assert!(!expected.is_empty() && expected.len() < pts.len());
@@ -434,8 +444,12 @@ mod tests {
         let filter = Filter::new(cfg).unwrap();
         // The second point, 0.5 m to the sensor's right and 0.2 m below it, lands on the
         // vehicle's roof at (1.7, 0, 1.6).
-        let mut pts = vec![at(5.0, 0.0, 0.0), at(0.0, -0.5, -0.2)];
-        let stats = filter.apply(&mut pts, &e.base_from_sensor);
+        let mut pts = vec![at(9.0, 9.0, 9.0)];
+        let stats = filter.apply(
+            &[at(5.0, 0.0, 0.0), at(0.0, -0.5, -0.2)],
+            &mut pts,
+            &e.base_from_sensor,
+        );
         assert_eq!(stats.crop_box, 1);
         assert_eq!(pts.len(), 1);
         assert!((pts[0].x - 1.2).abs() < 1e-6 && (pts[0].y - 5.0).abs() < 1e-6);
@@ -508,7 +522,9 @@ mod tests {
         );
         // Non-finite points are dropped as out of range, not passed on.
         let f = Filter::new(d).unwrap();
-        let mut pts = vec![at(f32::NAN, 0.0, 0.0), at(1.0, 0.0, 0.0)];
-        assert_eq!(f.apply(&mut pts, &Isometry3::identity()).range, 1);
+        let mut out = Vec::new();
+        let pts = [at(f32::NAN, 0.0, 0.0), at(1.0, 0.0, 0.0)];
+        assert_eq!(f.apply(&pts, &mut out, &Isometry3::identity()).range, 1);
+        assert_eq!(out, [pts[1]]);
     }
 }

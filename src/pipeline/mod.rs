@@ -15,6 +15,7 @@ pub mod cluster;
 pub mod config;
 pub mod filter;
 pub mod ground;
+pub mod run;
 pub mod voxel;
 
 /// A stage parameter out of its valid range, found when the stage is built.
