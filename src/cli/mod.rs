@@ -1,5 +1,7 @@
 //! Command-line front end: clap commands, progress, exit codes. No algorithms live here.
 
+mod pipeline;
+mod render;
 mod run;
 mod sensors;
 
@@ -29,6 +31,8 @@ enum Command {
     Info(InfoCmd),
     /// Decode the built-in example capture (a simulated VLP-16) and write demo.mcap.
     Demo(DemoCmd),
+    /// Draw a bird's-eye picture of one sweep of an MCAP written with `--pipeline`.
+    Render(render::RenderCmd),
 }
 
 /// Point cloud message layout.
@@ -108,6 +112,8 @@ struct DecodeCmd {
     /// Print one JSON summary object on stdout at the end.
     #[arg(long)]
     json: bool,
+    #[command(flatten)]
+    pipeline: pipeline::PipelineArgs,
 }
 
 #[derive(clap::Args, Debug)]
@@ -177,11 +183,13 @@ pub fn main() -> ExitCode {
                 },
                 json: c.json,
                 input_bytes: None,
+                pipeline: c.pipeline,
             };
             run::decode_command(&args)
         }
         Command::Info(c) => run::info_command(&c.input, c.model.as_deref(), &c.calib, c.json),
         Command::Demo(c) => run::demo_command(&c.out, c.json),
+        Command::Render(c) => render::render_command(&c),
     };
     match result {
         Ok(code) => code,

@@ -16,6 +16,7 @@ use ringscan::source::pcap::{PcapSource, SourceError, SourceStats};
 use ringscan::sweep::{Demux, Facts, SensorStream, StreamError, Sweep};
 use serde_json::{json, Value};
 
+use super::pipeline::{PipelineArgs, PipelineRunner};
 use super::sensors::{self, load_calibs, Chooser, Common};
 use super::FormatArg;
 
@@ -49,6 +50,8 @@ pub struct DecodeArgs {
     pub json: bool,
     /// Decode these bytes instead of reading `input` (the demo).
     pub input_bytes: Option<&'static [u8]>,
+    /// `--pipeline`, `--deskew`, `--extrinsics`.
+    pub pipeline: PipelineArgs,
 }
 
 /// Why a run failed.
@@ -108,6 +111,7 @@ struct Output {
     sweeps: u64,
     points: u64,
     imu_samples: u64,
+    pipeline: Option<PipelineRunner>,
 }
 
 impl Output {
@@ -203,6 +207,20 @@ impl Output {
                 return;
             }
         }
+        // The pipeline (when asked for) deskews a copy of the sweep, which is written instead.
+        let sweep = match self.pipeline.as_mut() {
+            Some(p) => {
+                let sink = self.sink.as_mut().zip(self.sensors[idx].id);
+                match p.process(idx, &self.sensors[idx].name, sweep, sink) {
+                    Ok(s) => s,
+                    Err(e) => {
+                        self.error = Some(e);
+                        return;
+                    }
+                }
+            }
+            None => sweep,
+        };
         let (Some(sink), Some(id)) = (self.sink.as_mut(), self.sensors[idx].id) else {
             return;
         };
@@ -297,6 +315,16 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
             decode.min_range, decode.max_range
         )));
     }
+    let pipeline = args
+        .pipeline
+        .setup()
+        .map_err(RunError::Usage)?
+        .map(PipelineRunner::new);
+    if pipeline.as_ref().is_some_and(PipelineRunner::outputs) && args.format == FormatArg::Ros2 {
+        return Err(RunError::Usage(
+            "--pipeline: its outputs are written with --format foxglove only".into(),
+        ));
+    }
     let calibs = load_calibs(&args.calib)?;
     let cut = (args.cut_angle_deg * 100.0).round() as u16 % 36_000;
     let mut chooser = Chooser::new(
@@ -353,6 +381,7 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
         sweeps: 0,
         points: 0,
         imu_samples: 0,
+        pipeline,
     };
     let result = match args.input_bytes {
         Some(b) => pump(
@@ -473,6 +502,10 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
         })),
         "elapsed_s": elapsed,
     });
+    let mut json = json;
+    if let (Some(p), Some(o)) = (out.pipeline.as_ref(), json.as_object_mut()) {
+        o.insert("pipeline".into(), p.summary());
+    }
     Ok(Summary {
         json,
         lost: dropped + malformed + missing,
@@ -527,8 +560,12 @@ fn pump<R: Read>(
         }
         if let Some(SensorStream::Ouster(s)) = demux.stream_mut(idx) {
             let id = out.sensors.get(idx).and_then(|x| x.id);
+            let imu_to_sensor = s.info().imu_to_sensor;
             for smp in s.drain_imu() {
                 out.imu_samples += 1;
+                if let Some(p) = out.pipeline.as_mut() {
+                    p.push_imu(idx, &imu_to_sensor, &smp);
+                }
                 if let (Some(sink), Some(id)) = (out.sink.as_mut(), id) {
                     let msg = json!({
                         "timestamp_ns": smp.sensor_ns,
@@ -659,6 +696,7 @@ pub fn info_command(
         crc: None,
         json: json_out,
         input_bytes: None,
+        pipeline: PipelineArgs::default(),
     };
     let s = decode_capture(&args)?;
     if json_out {
@@ -688,6 +726,7 @@ pub fn demo_command(out: &Path, json_out: bool) -> Result<ExitCode, RunError> {
         crc: None,
         json: json_out,
         input_bytes: Some(DEMO_PCAP),
+        pipeline: PipelineArgs::default(),
     };
     let s = decode_capture(&args)?;
     if json_out {
