@@ -7,6 +7,7 @@ pub mod hdl64;
 pub mod net;
 pub mod ouster;
 pub mod scene;
+pub mod scenes;
 pub mod velodyne;
 
 pub use scene::{Hit, Scene};
