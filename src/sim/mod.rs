@@ -4,6 +4,7 @@
 //! round trip through the decoder checks both against the scene's ground truth.
 
 pub mod hdl64;
+pub mod motion;
 pub mod net;
 pub mod ouster;
 pub mod scene;
