@@ -40,6 +40,9 @@ fn replay(file: &str) {
         "velodyne_stream" => harness::velodyne_stream(&data),
         "calib_velodyne" => harness::calib_velodyne(&data),
         "decode_to_mcap" => harness::decode_to_mcap(&data),
+        "calib_ouster" => harness::calib_ouster(&data),
+        "ouster_packet" => harness::ouster_packet(&data),
+        "ouster_stream" => harness::ouster_stream(&data),
         other => panic!("{file}: no fuzz target named {other:?}"),
     }
 }

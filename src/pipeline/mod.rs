@@ -143,13 +143,14 @@ pub(crate) fn pack_key(i: i64, j: i64, k: i64) -> u64 {
     b(i) << 42 | b(j) << 21 | b(k)
 }
 
-/// The grid index `floor(v)` of a scaled coordinate if it fits a packed key.
+/// The grid index `floor(v)` of a scaled coordinate if it fits a packed key. (Written with a
+/// truncating cast: `f64::floor` is a library call on baseline x86-64, without SSE4.1.)
 #[inline]
 pub(crate) fn grid_index(scaled: f64) -> Option<i64> {
-    let f = scaled.floor();
     let lim = KEY_BIAS as f64;
-    if f >= -lim && f < lim {
-        Some(f as i64)
+    if scaled >= -lim && scaled < lim {
+        let t = scaled as i64; // truncates toward zero; exact for |scaled| < 2^20
+        Some(if (t as f64) > scaled { t - 1 } else { t })
     } else {
         None // also NaN
     }

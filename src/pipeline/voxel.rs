@@ -211,6 +211,13 @@ impl VoxelGrid {
         stats
     }
 
+    /// For each point of the last call's input, the index in `out` of the point that stands
+    /// for its voxel, or `u32::MAX` for a skipped point: to carry labels computed on the
+    /// downsampled cloud back to the sweep.
+    pub fn voxel_of_points(&self) -> &[u32] {
+        &self.slot_of
+    }
+
     /// Fills `slot_of` and `acc` (one slot per voxel, in output order).
     fn group(&mut self, points: &[Point]) -> VoxelStats {
         let [lx, ly, lz] = self.config.leaf_size_m;
