@@ -18,6 +18,8 @@ and prints one JSON object on stdout:
                               "sum_x", "sum_y", "sum_z", "sum_intensity", "sum_ring", "sum_return",
                               "t_min", "t_max", "timestamp_min_ns", "timestamp_max_ns"}},
      "raw": {topic: {"packets", "payload_bytes", "sources"}},
+     "scenes": {topic: {"messages", "deletions", "entities", "cubes", "cube_points", "frame_ids"}},
+     "transforms": {topic: [{"parent", "child", "translation", "rotation"}]},
      "totals": {"sweeps", "points"},
      "ok": bool, "errors": [...]}
 
@@ -26,7 +28,12 @@ sweep); pipeline outputs (`/ground`, `/map`, ...) are listed under `point_clouds
 
 --expect takes ringscan's `--json` output (or any JSON object) and compares `sweeps`, `points`
 and, when present, `topics` or `output.topics` ({topic: count} or [{"topic", "messages"}]) with
-the file.
+the file. With `--pipeline` output (`pipeline.counts` in the JSON), it also compares the ground
+and obstacle points and the clusters over every `ground` / `obstacles` / `clusters` topic, and
+checks that the cubes' `points` metadata sum to the obstacle points.
+
+`foxglove.SceneUpdate` (clusters) and `foxglove.FrameTransform` (`/tf_static`) messages are
+decoded with mcap-protobuf-support like every protobuf channel, from the schema in the file.
 
 Exit status: 0 when the file is valid and matches, 1 on any error or mismatch (each printed on
 stderr), 2 on bad usage.
@@ -320,6 +327,8 @@ def read_file(path, check):
         counts = {t: 0 for t in topics.values()}
         clouds = {}
         raw = {}
+        scenes = {}
+        transforms = {}
         last_seq = {}
         for schema, channel, message, decoded in reader.iter_decoded_messages(log_time_order=False):
             topic = channel.topic
@@ -333,6 +342,36 @@ def read_file(path, check):
             name = schema.name if schema else None
             if name in POINT_CLOUD_SCHEMAS:
                 add_point_cloud(check, clouds.setdefault(topic, PointStats()), topic, name, decoded)
+            elif name == "foxglove.SceneUpdate":
+                sc = scenes.setdefault(
+                    topic,
+                    {"messages": 0, "deletions": 0, "entities": 0, "cubes": 0, "cube_points": 0, "frame_ids": set()},
+                )
+                sc["messages"] += 1
+                sc["deletions"] += len(decoded.deletions)
+                for e in decoded.entities:
+                    sc["entities"] += 1
+                    sc["cubes"] += len(e.cubes)
+                    sc["frame_ids"].add(e.frame_id)
+                    for kv in e.metadata:
+                        if kv.key == "points":
+                            sc["cube_points"] += int(kv.value)
+                    for c in e.cubes:
+                        if not (c.size.x >= 0 and c.size.y >= 0 and c.size.z >= 0):
+                            check.fail(f"{topic}: cube of entity {e.id} has size {c.size}")
+            elif name == "foxglove.FrameTransform":
+                t, q = decoded.translation, decoded.rotation
+                transforms.setdefault(topic, []).append(
+                    {
+                        "parent": decoded.parent_frame_id,
+                        "child": decoded.child_frame_id,
+                        "translation": [t.x, t.y, t.z],
+                        "rotation": [q.x, q.y, q.z, q.w],
+                    }
+                )
+                norm = (q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w) ** 0.5
+                if abs(norm - 1.0) > 1e-6:
+                    check.fail(f"{topic}: rotation of {decoded.child_frame_id} has norm {norm}")
             elif name == "ringscan.RawPacket":
                 r = raw.setdefault(topic, {"packets": 0, "payload_bytes": 0, "sources": set()})
                 r["packets"] += 1
@@ -344,6 +383,8 @@ def read_file(path, check):
         out["messages"] = dict(sorted(counts.items()))
         out["point_clouds"] = {t: s.to_json() for t, s in sorted(clouds.items())}
         out["raw"] = {t: {**r, "sources": sorted(r["sources"])} for t, r in sorted(raw.items())}
+        out["scenes"] = {t: {**sc, "frame_ids": sorted(sc["frame_ids"])} for t, sc in sorted(scenes.items())}
+        out["transforms"] = dict(sorted(transforms.items()))
 
         if stats is not None:
             stat_counts = {topics.get(cid, f"#{cid}"): n for cid, n in stats.channel_message_counts.items()}
@@ -421,6 +462,20 @@ def compare_expect(check, out, expect):
         md = chans[0].get("metadata", {})
         check.expect_eq(f"{topic} metadata model", md.get("model"), s.get("model"))
         check.expect_eq(f"{topic} metadata source_address", md.get("source_address"), s.get("address"))
+    # Pipeline outputs: totals over every sensor's ground / obstacles / clusters topics.
+    counts = (expect.get("pipeline") or {}).get("counts") if isinstance(expect.get("pipeline"), dict) else None
+    if counts and (expect.get("pipeline") or {}).get("outputs", True):
+        clouds = out.get("point_clouds", {})
+        scenes = out.get("scenes", {})
+        ends = lambda t, leaf: t == "/" + leaf or t.endswith("/" + leaf)
+        ground = sum(c["points"] for t, c in clouds.items() if ends(t, "ground"))
+        obstacles = sum(c["points"] for t, c in clouds.items() if ends(t, "obstacles"))
+        clusters = sum(sc["entities"] for t, sc in scenes.items() if ends(t, "clusters"))
+        cube_points = sum(sc["cube_points"] for t, sc in scenes.items() if ends(t, "clusters"))
+        check.expect_eq("--expect pipeline.counts.ground (ground points)", ground, counts.get("ground"))
+        check.expect_eq("--expect pipeline.counts.obstacles (obstacle points)", obstacles, counts.get("obstacles"))
+        check.expect_eq("--expect pipeline.counts.clusters (SceneUpdate entities)", clusters, counts.get("clusters"))
+        check.expect_eq("cubes' points metadata vs obstacle points", cube_points, obstacles)
     topics = expect.get("topics")
     if topics is None and isinstance(expect.get("output"), dict):
         # ringscan --json nests the per-topic counts under "output".

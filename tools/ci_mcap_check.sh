@@ -24,6 +24,24 @@ check() { # name, decode args...
   done
 }
 
+check_pipeline() { # name, decode args... (foxglove only: the pipeline outputs are protobuf)
+  local name=$1; shift
+  local m="$out/$name.pipeline.mcap" j="$out/$name.pipeline.json"
+  "$bin" decode "$@" --pipeline default --out "$m" --json > "$j"
+  if tools/check_mcap.sh "$m" --expect "$j" --quiet; then
+    echo "ok   $name (pipeline): $(python3 -c 'import json,sys; d=json.load(open(sys.argv[1]))["pipeline"]["counts"]; print(d["ground"], "ground,", d["obstacles"], "obstacle points,", d["clusters"], "clusters")' "$j")"
+  else
+    echo "FAIL $name (pipeline)"; fail=1
+  fi
+  # The check must be able to fail: one obstacle point more in the expectation is a mismatch.
+  python3 -c 'import json,sys; d=json.load(open(sys.argv[1])); d["pipeline"]["counts"]["obstacles"]+=1; json.dump(d,open(sys.argv[2],"w"))' "$j" "$j.bad"
+  if tools/check_mcap.sh "$m" --expect "$j.bad" --quiet 2>/dev/null; then
+    echo "FAIL $name (pipeline): a wrong obstacle count was not caught"; fail=1
+  fi
+}
+
+check_pipeline demo-vlp16 fixtures/demo-vlp16.pcap
+
 "$bin" demo --out "$out/demo.mcap" --json > "$out/demo.json"
 if tools/check_mcap.sh "$out/demo.mcap" --expect "$out/demo.json" --quiet; then echo "ok   demo"; else echo "FAIL demo"; fail=1; fi
 
@@ -44,6 +62,9 @@ if [ -d "$C" ]; then
   check os1-128-fusa "$O/OS-1-128_767798045_1024x10_20230712_120049.pcap" --calib "$O/OS-1-128_767798045_1024x10_20230712_120049.json"
   check same-ports "$O/same_ports.pcap" --calib "$O/same_ports.1.json" --calib "$O/same_ports.2.json" --raw
   check crc-test "$O/crc_test.pcap" --calib "$O/crc_test.json"
+  check_pipeline monterey "$C/Kitware__VeloView/Testing/Data/monterey-first-100-packets.pcap" --calib "$C/ros-drivers__velodyne/velodyne_pointcloud/params/32db.yaml" --extrinsics hdl32e-201=0.5,0,1.9,0,0,0
+  check_pipeline os2-128 "$O/OS-2-128-U1_v2.3.0_1024x10.pcap" --calib "$O/OS-2-128-U1_v2.3.0_1024x10.json"
+  check_pipeline same-ports "$O/same_ports.pcap" --calib "$O/same_ports.1.json" --calib "$O/same_ports.2.json"
 else
   echo "SKIP: $C is absent: real captures not decoded"
 fi
