@@ -13,7 +13,8 @@
 //! ~3 MB) and runs [`Pipeline::run`] with the default configuration and a constant-velocity
 //! deskew at 15 m/s and 60 °/s (so deskew does real work). After criterion, the per-stage
 //! median and maximum over 200 runs are printed, from the stage times the pipeline reports
-//! with an `Instant` clock, and the process's CPU time per run over the same 200 runs (user +
+//! with an `Instant` clock (for the default configuration and with `voxel.leaf_m = 0.3`),
+//! and the process's CPU time per run over the same 200 runs (user +
 //! system from `/proc/self/stat`, Linux): on a shared machine wall time includes waiting for a
 //! core, CPU time does not.
 
@@ -91,7 +92,11 @@ fn hdl32_sweep(root: &Path) -> Option<Sweep> {
 }
 
 fn pipeline() -> Pipeline {
-    let mut p = Pipeline::new(&PipelineConfig::default(), Isometry3::identity()).unwrap();
+    pipeline_with(&PipelineConfig::default())
+}
+
+fn pipeline_with(cfg: &PipelineConfig) -> Pipeline {
+    let mut p = Pipeline::new(cfg, Isometry3::identity()).unwrap();
     p.set_twist(Twist {
         linear_mps: Vector3::new(15.0, 0.0, 0.0),
         angular_radps: Vector3::new(0.0, 0.0, 60f64.to_radians()),
@@ -109,8 +114,8 @@ fn cpu_ns() -> Option<u64> {
     Some(ticks * 10_000_000)
 }
 
-fn stage_report(name: &str, sweep: &Sweep) {
-    let mut p = pipeline();
+fn stage_report(name: &str, sweep: &Sweep, cfg: &PipelineConfig) {
+    let mut p = pipeline_with(cfg);
     let mut work = sweep.clone();
     let origin = Instant::now();
     let mut clock = || origin.elapsed().as_nanos() as u64;
@@ -182,7 +187,15 @@ fn bench(c: &mut Criterion) {
     }
     g.finish();
     for (name, sweep) in &inputs {
-        stage_report(name, sweep);
+        stage_report(name, sweep, &PipelineConfig::default());
+    }
+    // The same with coarser voxels: what the leaf size costs.
+    let coarse = PipelineConfig {
+        voxel_leaf_m: 0.3,
+        ..PipelineConfig::default()
+    };
+    for (name, sweep) in &inputs {
+        stage_report(name, sweep, &coarse);
     }
 }
 
