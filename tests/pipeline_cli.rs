@@ -416,3 +416,146 @@ fn bad_pipeline_settings_are_refused_with_the_key() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Point records of every `/points` message, in order.
+fn sweep_points(path: &Path) -> Vec<Vec<(f32, f32, f32, u32)>> {
+    let (msgs, _) = read(path);
+    msgs["/points"]
+        .iter()
+        .map(|m| {
+            let pc = PointCloud::decode(&m[..]).unwrap();
+            let t_off = pc.fields.iter().find(|f| f.name == "t").unwrap().offset as usize;
+            pc.data
+                .chunks_exact(pc.point_stride as usize)
+                .map(|r| {
+                    let f = |o: usize| f32::from_le_bytes(r[o..o + 4].try_into().unwrap());
+                    (
+                        f(0),
+                        f(4),
+                        f(8),
+                        u32::from_le_bytes(r[t_off..t_off + 4].try_into().unwrap()),
+                    )
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// `--deskew poses:FILE` on a real capture: a TUM file moving straight ahead at 2 m/s (and
+/// one standing still) must shift every point by exactly the distance driven since the sweep's
+/// timestamp, `x' = x + 2 m/s · t`: this checks the file's parsing, the time base (TUM seconds
+/// against the sweeps' timestamps) and the deskew direction through the command line.
+#[test]
+fn a_poses_file_moves_the_points_by_its_motion() {
+    let Some((pcap, calib)) = inputs() else {
+        return;
+    };
+    let dir = out_path("poses");
+    std::fs::create_dir_all(&dir).unwrap();
+    // Two poses 4·10⁹ s apart bracket any capture time.
+    let v = 2.0f64;
+    let moving = dir.join("moving.tum");
+    std::fs::write(
+        &moving,
+        format!(
+            "# t x y z qx qy qz qw\n0 0 0 0 0 0 0 1\n4000000000 {} 0 0 0 0 0 1\n",
+            v * 4e9
+        ),
+    )
+    .unwrap();
+    let still = dir.join("still.tum");
+    std::fs::write(&still, "0 5 5 5 0 0 0 1\n4000000000 5 5 5 0 0 0 1\n").unwrap();
+    let run = |extra: &[&str], name: &str| {
+        let out = dir.join(name);
+        let mut args = vec![
+            "decode",
+            pcap.to_str().unwrap(),
+            "--calib",
+            calib.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--json",
+        ];
+        args.extend(extra);
+        let o = ringscan(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        (sweep_points(&out), j)
+    };
+    let (plain, _) = run(&[], "plain.mcap");
+    let poses_still = format!("poses:{}", still.display());
+    let (same, j) = run(&["--deskew", &poses_still], "still.mcap");
+    assert_eq!(j["pipeline"]["deskew"], "poses");
+    assert_eq!(j["pipeline"]["deskew_skipped"], 0);
+    assert_eq!(same, plain, "standing still changes nothing");
+    let poses_moving = format!("poses:{}", moving.display());
+    let (moved, j) = run(&["--deskew", &poses_moving], "moving.mcap");
+    assert_eq!(j["pipeline"]["deskew_skipped"], 0);
+    assert_eq!(moved.len(), plain.len());
+    let mut worst = 0f64;
+    for (a, b) in plain.iter().zip(&moved) {
+        assert_eq!(a.len(), b.len());
+        for (p, q) in a.iter().zip(b) {
+            assert_eq!(p.3, q.3);
+            let want = f64::from(p.0) + v * f64::from(p.3) * 1e-9;
+            let err = (f64::from(q.0) - want)
+                .abs()
+                .max(f64::from(q.1 - p.1).abs())
+                .max(f64::from(q.2 - p.2).abs());
+            worst = worst.max(err);
+        }
+    }
+    assert!(worst < 1e-4, "worst deviation {worst} m");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `--deskew imu` on a real Ouster capture with IMU packets: every sweep is deskewed (the gyro
+/// covers each sweep), none skipped.
+#[test]
+fn imu_deskew_runs_on_a_real_ouster_capture() {
+    let Some(root) = common::captures() else {
+        return;
+    };
+    let dir = root.join("ouster-lidar__ouster-sdk/tests/pcaps");
+    let o = ringscan(&[
+        "decode",
+        dir.join("OS-1-128_v2.3.0_1024x10_lb_n3.pcap")
+            .to_str()
+            .unwrap(),
+        "--calib",
+        dir.join("OS-1-128_v2.3.0_1024x10.json").to_str().unwrap(),
+        "--pipeline",
+        "default",
+        "--deskew",
+        "imu",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["pipeline"]["deskew"], "imu");
+    assert_eq!(j["pipeline"]["sweeps"], 3);
+    assert_eq!(j["pipeline"]["deskew_skipped"], 0, "{}", j["pipeline"]);
+    // A Velodyne has no IMU: each sweep is counted as skipped, with the reason.
+    let Some((pcap, calib)) = inputs() else {
+        return;
+    };
+    let o = ringscan(&[
+        "decode",
+        pcap.to_str().unwrap(),
+        "--calib",
+        calib.to_str().unwrap(),
+        "--pipeline",
+        "default",
+        "--deskew",
+        "imu",
+        "--json",
+    ]);
+    assert!(o.status.success());
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let p = &j["pipeline"];
+    assert_eq!(p["deskew_skipped"], p["sweeps"]);
+    assert!(p["sensors"][0]["deskew_last_error"]
+        .as_str()
+        .unwrap()
+        .contains("IMU"));
+}
