@@ -177,6 +177,22 @@ fn metadata_spec(addr: Ipv4Addr, name: String, bytes: Vec<u8>) -> Result<CalibSp
     })
 }
 
+/// An output error with the file's path and every cause (down to the OS error, e.g. "No space
+/// left on device").
+fn file_error(path: &Path, e: &SinkError) -> RunError {
+    let mut msg = format!("{}: {e}", path.display());
+    let mut cause = std::error::Error::source(e);
+    while let Some(c) = cause {
+        let s = c.to_string();
+        if !msg.contains(&s) {
+            msg.push_str(": ");
+            msg.push_str(&s);
+        }
+        cause = c.source();
+    }
+    RunError::Live(msg)
+}
+
 /// What the decode thread hands back.
 struct DecodeResult {
     summary: serde_json::Map<String, Value>,
@@ -211,7 +227,7 @@ impl DecodeThread {
                     if let Err(e) = self.session.push(r.time_ns, r.src, r.port, &r.payload) {
                         let err = self.session.run_error(e, "listen");
                         let _ = self.session.close_sink();
-                        return Err(err);
+                        return Err(self.with_path(err));
                     }
                     if self.session.demux().stats().ignored > ignored {
                         self.unclaimed(*r.src.ip(), r.payload.len());
@@ -225,10 +241,27 @@ impl DecodeThread {
             }
             if last_check.elapsed() >= Duration::from_millis(100) {
                 last_check = Instant::now();
-                self.housekeeping()?;
+                if let Err(e) = self.housekeeping() {
+                    let _ = self.session.close_sink();
+                    return Err(self.with_path(e));
+                }
             }
         }
-        self.finish()
+        match self.finish() {
+            Ok(r) => Ok(r),
+            Err((e, path)) => Err(match (e, path) {
+                (RunError::Sink(e), Some(p)) => file_error(&p, &e),
+                (e, _) => e,
+            }),
+        }
+    }
+
+    /// Output errors name the file.
+    fn with_path(&self, e: RunError) -> RunError {
+        match (e, &self.files) {
+            (RunError::Sink(e), Some(f)) => RunError::Live(format!("{}: {e}", f.current.display())),
+            (e, _) => e,
+        }
     }
 
     /// A datagram from a sensor address that no configuration claimed: an Ouster sensor whose
@@ -335,13 +368,17 @@ impl DecodeThread {
         Ok(())
     }
 
-    fn finish(mut self) -> Result<DecodeResult, RunError> {
+    fn finish(mut self) -> Result<DecodeResult, (RunError, Option<PathBuf>)> {
+        let path = self.files.as_ref().map(|f| f.current.clone());
         if let Err(e) = self.session.finish_streams() {
             let err = self.session.run_error(e, "listen");
             let _ = self.session.close_sink();
-            return Err(err);
+            return Err((err, path));
         }
-        let last = self.session.close_sink()?;
+        let last = self
+            .session
+            .close_sink()
+            .map_err(|e| (RunError::Sink(e), path))?;
         let mut files = Vec::new();
         if let Some(f) = self.files.take() {
             files = f.closed;
@@ -446,7 +483,7 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
             interface: args.interface,
             recv_buffer: args.recv_buffer,
         })
-        .map_err(|e| RunError::Usage(e.to_string()))?;
+        .map_err(|e| RunError::Live(e.to_string()))?;
         // Linux reports twice the usable size; the kernel's cap is net.core.rmem_max.
         if s.granted_recv_buffer < s.requested_recv_buffer {
             tracing::warn!(
@@ -503,7 +540,10 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
                                 opened: Instant::now(),
                                 closed: Vec::new(),
                             };
-                            session.set_sink(Some(files.create(&current)?));
+                            let sink = files
+                                .create(&current)
+                                .map_err(|e| file_error(&current, &e))?;
+                            session.set_sink(Some(sink));
                             Some(files)
                         }
                         None => None,
@@ -517,7 +557,7 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
                     }
                     Err(e) => {
                         let _ = ready_tx.send(Err(e));
-                        return Err(RunError::Usage("decode thread setup failed".into()));
+                        return Err(RunError::Live("decode thread setup failed".into()));
                     }
                 };
                 let t = DecodeThread {
@@ -537,7 +577,7 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
                 }
                 r
             })
-            .map_err(|e| RunError::Usage(format!("starting the decode thread: {e}")))?
+            .map_err(|e| RunError::Live(format!("starting the decode thread: {e}")))?
     };
     match ready_rx.recv() {
         Ok(Ok(())) => {}
@@ -545,7 +585,7 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
             let _ = decode.join();
             return Err(e);
         }
-        Err(_) => return Err(RunError::Usage("the decode thread did not start".into())),
+        Err(_) => return Err(RunError::Live("the decode thread did not start".into())),
     }
 
     tracing::info!(
@@ -558,7 +598,7 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
-        .map_err(|e| RunError::Usage(format!("starting the runtime: {e}")))?;
+        .map_err(|e| RunError::Live(format!("starting the runtime: {e}")))?;
     let sources = Arc::new(addrs.clone());
     let terminal = std::io::stderr().is_terminal();
     let reason = rt.block_on(async {
@@ -566,7 +606,7 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
         for s in &sockets {
             let sock = match s.socket.try_clone() {
                 Ok(x) => x,
-                Err(e) => return Err(RunError::Usage(format!("UDP port {}: {e}", s.port))),
+                Err(e) => return Err(RunError::Live(format!("UDP port {}: {e}", s.port))),
             };
             let q = Queue {
                 tx: tx.clone(),
@@ -578,7 +618,7 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
         drop(tx);
         let mut sigterm = match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
             Ok(s) => s,
-            Err(e) => return Err(RunError::Usage(format!("installing the SIGTERM handler: {e}"))),
+            Err(e) => return Err(RunError::Live(format!("installing the SIGTERM handler: {e}"))),
         };
         let deadline = args.duration.map(|d| tokio::time::Instant::now() + d);
         let mut tick = tokio::time::interval(Duration::from_secs(1));
@@ -628,7 +668,7 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
     tracing::info!("stopping: {reason}");
     let result = match decode.join() {
         Ok(r) => r?,
-        Err(_) => return Err(RunError::Usage("the decode thread panicked".into())),
+        Err(_) => return Err(RunError::Live("the decode thread panicked".into())),
     };
     let elapsed = started.elapsed().as_secs_f64();
 

@@ -69,6 +69,9 @@ pub enum RunError {
     /// Writing the output failed.
     #[error("{0}")]
     Sink(#[from] SinkError),
+    /// The live listener could not go on (sockets, threads, the output file), with context.
+    #[error("{0}")]
+    Live(String),
     /// `--strict` and something was lost.
     #[error("{0}")]
     Strict(String),
@@ -404,7 +407,6 @@ impl Session {
 
     /// Adds a calibration (e.g. Ouster metadata fetched from the sensor) for sensors not yet
     /// seen; it is attached to the output like a `--calib` file.
-    #[allow(dead_code)] // used by `listen`
     pub fn add_calib(&mut self, spec: CalibSpec) {
         self.chooser.borrow_mut().add(&spec);
         self.out
@@ -414,7 +416,6 @@ impl Session {
 
     /// Closes the current output and continues into `next` (`--split-every`): every sensor
     /// already known is registered again in the new file. Returns the closed file's summary.
-    #[allow(dead_code)] // used by `listen`
     pub fn rotate(&mut self, next: Sink) -> Result<Option<SinkSummary>, SinkError> {
         let old = self.out.sink.replace(next);
         let closed = match old {
@@ -448,7 +449,6 @@ impl Session {
     }
 
     /// The demultiplexer (per-sensor streams and counters).
-    #[allow(dead_code)] // used by `listen`
     pub fn demux(&self) -> &Demux {
         &self.demux
     }

@@ -86,16 +86,20 @@ pub struct BoundSocket {
     inode: Option<u64>,
 }
 
-/// Opens a UDP socket on `0.0.0.0:port` with address reuse, a large receive buffer and the
-/// multicast membership, if any.
+/// Opens a UDP socket on `0.0.0.0:port` with a large receive buffer and, with a multicast
+/// group, address reuse and the group membership.
 pub fn bind(opts: &SocketOptions) -> Result<BoundSocket, UdpError> {
     let port = opts.port;
     let ctx = |what: &str| format!("UDP port {port}: {what}");
     let socket = Socket::new(Domain::IPV4, Type::DGRAM, Some(Protocol::UDP))
         .map_err(io_err(ctx("creating the socket")))?;
-    socket
-        .set_reuse_address(true)
-        .map_err(io_err(ctx("SO_REUSEADDR")))?;
+    // Several listeners may share a multicast group; a unicast port stays exclusive, so a second
+    // listener fails clearly instead of silently splitting the traffic.
+    if opts.multicast.is_some() {
+        socket
+            .set_reuse_address(true)
+            .map_err(io_err(ctx("SO_REUSEADDR")))?;
+    }
     // Ask for the whole buffer; the kernel silently caps it at net.core.rmem_max. Read back what
     // was granted.
     let _ = socket.set_recv_buffer_size(opts.recv_buffer);

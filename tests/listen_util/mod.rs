@@ -12,6 +12,12 @@ use std::time::{Duration, Instant};
 
 pub const BIN: &str = env!("CARGO_BIN_EXE_ringscan");
 
+/// Tests of one binary run one at a time: they use fixed ports.
+pub fn serial() -> std::sync::MutexGuard<'static, ()> {
+    static LOCK: Mutex<()> = Mutex::new(());
+    LOCK.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 /// An offset N such that every `port + N` is free on 127.0.0.1 right now: 0 (the capture's own
 /// ports, which LEGACY Ouster metadata needs) when they are free.
 pub fn free_offset(ports: &[u16]) -> i32 {
