@@ -1,6 +1,8 @@
 //! Command-line front end: clap commands, progress, exit codes. No algorithms live here.
 
 mod listen;
+mod pipeline;
+mod render;
 mod replay;
 mod run;
 mod sensors;
@@ -35,6 +37,8 @@ enum Command {
     Listen(ListenCmd),
     /// Send a capture's UDP payloads again, paced by its timestamps.
     Replay(ReplayCmd),
+    /// Draw a bird's-eye picture of one sweep of an MCAP written with `--pipeline`.
+    Render(render::RenderCmd),
 }
 
 /// Point cloud message layout.
@@ -114,6 +118,8 @@ struct DecodeCmd {
     /// Print one JSON summary object on stdout at the end.
     #[arg(long)]
     json: bool,
+    #[command(flatten)]
+    pipeline: pipeline::PipelineArgs,
 }
 
 #[derive(clap::Args, Debug)]
@@ -277,6 +283,7 @@ pub fn main() -> ExitCode {
                 },
                 json: c.json,
                 input_bytes: None,
+                pipeline: c.pipeline,
             };
             run::decode_command(&args)
         }
@@ -310,6 +317,10 @@ pub fn main() -> ExitCode {
                         CrcArg::On => Some(true),
                         CrcArg::Off => Some(false),
                     },
+                    // The pipeline runs on decoded captures (`decode --pipeline`); live, the
+                    // sweeps are written as they come.
+                    pipeline: Default::default(),
+                    format: c.format,
                 },
                 format: c.format,
                 multicast: c.multicast,
@@ -331,6 +342,7 @@ pub fn main() -> ExitCode {
             per_source_loopback: c.per_source_loopback,
             json: c.json,
         }),
+        Command::Render(c) => render::render_command(&c),
     };
     match result {
         Ok(code) => code,

@@ -16,6 +16,7 @@ use ringscan::source::pcap::{PcapSource, SourceError, SourceStats};
 use ringscan::sweep::{Demux, Facts, SensorStream, StreamError, Sweep};
 use serde_json::{json, Value};
 
+use super::pipeline::{PipelineArgs, PipelineRunner};
 use super::sensors::{self, load_calibs, CalibSpec, Chooser, Common};
 use super::FormatArg;
 
@@ -49,6 +50,8 @@ pub struct DecodeArgs {
     pub json: bool,
     /// Decode these bytes instead of reading `input` (the demo).
     pub input_bytes: Option<&'static [u8]>,
+    /// `--pipeline`, `--deskew`, `--extrinsics`.
+    pub pipeline: PipelineArgs,
 }
 
 /// Why a run failed.
@@ -116,6 +119,7 @@ struct Output {
     sweeps: u64,
     points: u64,
     imu_samples: u64,
+    pipeline: Option<PipelineRunner>,
 }
 
 impl Output {
@@ -214,6 +218,20 @@ impl Output {
                 return;
             }
         }
+        // The pipeline (when asked for) deskews a copy of the sweep, which is written instead.
+        let sweep = match self.pipeline.as_mut() {
+            Some(p) => {
+                let sink = self.sink.as_mut().zip(self.sensors[idx].id);
+                match p.process(idx, &self.sensors[idx].name, sweep, sink) {
+                    Ok(s) => s,
+                    Err(e) => {
+                        self.error = Some(e);
+                        return;
+                    }
+                }
+            }
+            None => sweep,
+        };
         let (Some(sink), Some(id)) = (self.sink.as_mut(), self.sensors[idx].id) else {
             return;
         };
@@ -292,6 +310,10 @@ pub struct SessionOptions {
     pub fields_all: bool,
     pub raw: bool,
     pub crc: Option<bool>,
+    /// `--pipeline`, `--deskew`, `--extrinsics`.
+    pub pipeline: PipelineArgs,
+    /// Points message layout (the pipeline's outputs need `foxglove`).
+    pub format: FormatArg,
 }
 
 impl DecodeArgs {
@@ -307,6 +329,8 @@ impl DecodeArgs {
             fields_all: self.fields_all,
             raw: self.raw,
             crc: self.crc,
+            pipeline: self.pipeline.clone(),
+            format: self.format,
         }
     }
 }
@@ -351,6 +375,17 @@ impl Session {
                 decode.min_range, decode.max_range
             )));
         }
+        let pipeline = opts
+            .pipeline
+            .setup()
+            .map_err(RunError::Usage)?
+            .map(PipelineRunner::new);
+        if pipeline.as_ref().is_some_and(PipelineRunner::outputs) && opts.format == FormatArg::Ros2
+        {
+            return Err(RunError::Usage(
+                "--pipeline: its outputs are written with --format foxglove only".into(),
+            ));
+        }
         let calibs = load_calibs(&opts.calib)?;
         let cut = (opts.cut_angle_deg * 100.0).round() as u16 % 36_000;
         let chooser = std::rc::Rc::new(std::cell::RefCell::new(Chooser::new(
@@ -382,6 +417,7 @@ impl Session {
             sweeps: 0,
             points: 0,
             imu_samples: 0,
+            pipeline,
         };
         Ok(Self {
             demux,
@@ -509,8 +545,12 @@ impl Session {
         }
         if let Some(SensorStream::Ouster(s)) = demux.stream_mut(idx) {
             let id = out.sensors.get(idx).and_then(|x| x.id);
+            let imu_to_sensor = s.info().imu_to_sensor;
             for smp in s.drain_imu() {
                 out.imu_samples += 1;
+                if let Some(p) = out.pipeline.as_mut() {
+                    p.push_imu(idx, &imu_to_sensor, &smp);
+                }
                 if let (Some(sink), Some(id)) = (out.sink.as_mut(), id) {
                     let msg = json!({
                         "timestamp_ns": smp.sensor_ns,
@@ -635,6 +675,9 @@ impl Session {
             }),
         );
         m.insert("sensors".into(), Value::Array(sensors));
+        if let Some(p) = out.pipeline.as_ref() {
+            m.insert("pipeline".into(), p.summary());
+        }
         (m, dropped + malformed + missing)
     }
 }
@@ -832,6 +875,7 @@ pub fn info_command(
         crc: None,
         json: json_out,
         input_bytes: None,
+        pipeline: PipelineArgs::default(),
     };
     let s = decode_capture(&args)?;
     if json_out {
@@ -861,6 +905,7 @@ pub fn demo_command(out: &Path, json_out: bool) -> Result<ExitCode, RunError> {
         crc: None,
         json: json_out,
         input_bytes: Some(DEMO_PCAP),
+        pipeline: PipelineArgs::default(),
     };
     let s = decode_capture(&args)?;
     if json_out {

@@ -179,6 +179,28 @@ impl SensorChannels {
     pub fn imu_topic(&self) -> String {
         format!("{}/imu", self.prefix)
     }
+
+    /// The topic prefix: `""` for a single sensor, `"/<name>"` when there are several.
+    pub fn prefix(&self) -> &str {
+        &self.prefix
+    }
+}
+
+/// Handle of a channel made by [`McapSink::add_topic`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct TopicId(usize);
+
+/// The schema of a channel made by [`McapSink::add_topic`].
+#[derive(Clone, Copy)]
+pub struct TopicSchema<'a> {
+    /// Schema name, e.g. `foxglove.SceneUpdate`.
+    pub name: &'a str,
+    /// Schema encoding, e.g. `protobuf`.
+    pub encoding: &'a str,
+    /// Makes the schema data (called once per schema name).
+    pub data: &'a dyn Fn() -> Vec<u8>,
+    /// Message encoding of the channel, e.g. `protobuf`.
+    pub message_encoding: &'a str,
 }
 
 /// One attachment written to the file.
@@ -327,6 +349,10 @@ pub struct McapSink<W: Write + Seek> {
     attached: Vec<(String, Vec<u8>)>,
     first_log_time: Option<u64>,
     commit: Option<FileCommit<W>>,
+    /// Schemas of [`McapSink::add_topic`] channels, by name.
+    extra_schemas: Vec<(String, u16)>,
+    /// Channels made by [`McapSink::add_topic`]: topic and channel.
+    extra_channels: Vec<(String, Channel)>,
 }
 
 impl<W: Write + Seek> std::fmt::Debug for McapSink<W> {
@@ -402,6 +428,8 @@ impl<W: Write + Seek> McapSink<W> {
             attached: Vec::new(),
             first_log_time: None,
             commit: None,
+            extra_schemas: Vec::new(),
+            extra_channels: Vec::new(),
         })
     }
 
@@ -727,6 +755,56 @@ impl<W: Write + Seek> McapSink<W> {
                 "writing diagnostics to {}",
                 sensor.diagnostics_topic()
             )))
+    }
+
+    /// Adds a channel on `topic` with `schema` (the schema is written once per name) and
+    /// `metadata`: for outputs beyond a sensor's own channels (pipeline outputs, transforms).
+    pub fn add_topic(
+        &mut self,
+        topic: &str,
+        schema: TopicSchema<'_>,
+        metadata: &BTreeMap<String, String>,
+    ) -> Result<TopicId, SinkError> {
+        let writer = self.writer.as_mut().ok_or_else(finished_error)?;
+        let schema_id = match self.extra_schemas.iter().find(|(n, _)| n == schema.name) {
+            Some(&(_, id)) => id,
+            None => {
+                let id = writer
+                    .add_schema(schema.name, schema.encoding, &(schema.data)())
+                    .map_err(mcap_err(format!("writing the {} schema", schema.name)))?;
+                self.extra_schemas.push((schema.name.to_string(), id));
+                id
+            }
+        };
+        let id = writer
+            .add_channel(schema_id, topic, schema.message_encoding, metadata)
+            .map_err(mcap_err(format!("adding channel {topic}")))?;
+        self.extra_channels
+            .push((topic.to_string(), Channel { id, sequence: 0 }));
+        Ok(TopicId(self.extra_channels.len() - 1))
+    }
+
+    /// Writes one already encoded message to a channel made by [`add_topic`](Self::add_topic).
+    pub fn write_message(
+        &mut self,
+        topic: TopicId,
+        log_time_ns: u64,
+        data: &[u8],
+    ) -> Result<(), SinkError> {
+        self.before_message(log_time_ns)?;
+        let registered = self.extra_channels.len();
+        let (name, channel) =
+            self.extra_channels
+                .get_mut(topic.0)
+                .ok_or(SinkError::UnknownSensor {
+                    id: topic.0,
+                    registered,
+                })?;
+        let header = channel.next_header(log_time_ns);
+        let writer = self.writer.as_mut().ok_or_else(finished_error)?;
+        writer
+            .write_to_known_channel(&header, data)
+            .map_err(mcap_err(format!("writing a message to {name}")))
     }
 
     /// Writes the summary section and footer. For a sink made by [`create_file`], then flushes,
