@@ -46,7 +46,9 @@ fn write_labels(path: &Path, n: usize, clusters: &Clusters) -> std::io::Result<(
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let out_dir = std::env::args().nth(1).ok_or("usage: pipeline_dump OUT_DIR")?;
+    let out_dir = std::env::args()
+        .nth(1)
+        .ok_or("usage: pipeline_dump OUT_DIR")?;
     let out_dir = Path::new(&out_dir);
     std::fs::create_dir_all(out_dir)?;
     let root = pipeline_support::captures().ok_or("../shared/captures is absent")?;
@@ -62,16 +64,27 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 origin: GridOrigin::MinBoundMinusHalfLeaf,
                 ..VoxelConfig::cubic(leaf)
             })?;
-            counts.push(format!("\"{leaf}\": {}", grid.downsample(&sweep, &mut down).voxels));
+            counts.push(format!(
+                "\"{leaf}\": {}",
+                grid.downsample(&sweep, &mut down).voxels
+            ));
         }
         VoxelGrid::new(VoxelConfig::cubic(0.1))?.downsample(&sweep, &mut down);
         write_xyz(&out_dir.join(format!("{name}.down.xyz.f32")), &down)?;
         let mut clusters = Clusters::new();
         Clusterer::new(ClusterParams::new(0.5, 1, usize::MAX))?.cluster(&down, &mut clusters);
-        write_labels(&out_dir.join(format!("{name}.down.labels.i32")), down.len(), &clusters)?;
+        write_labels(
+            &out_dir.join(format!("{name}.down.labels.i32")),
+            down.len(),
+            &clusters,
+        )?;
         let all = clusters.len();
         Clusterer::new(ClusterParams::new(0.5, 10, 2000))?.cluster(&down, &mut clusters);
-        write_labels(&out_dir.join(format!("{name}.down.labels10.i32")), down.len(), &clusters)?;
+        write_labels(
+            &out_dir.join(format!("{name}.down.labels10.i32")),
+            down.len(),
+            &clusters,
+        )?;
         std::fs::write(
             out_dir.join(format!("{name}.json")),
             format!(
@@ -82,7 +95,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 counts.join(", ")
             ),
         )?;
-        eprintln!("{name}: {} points, {} voxelised, {all} clusters", sweep.len(), down.len());
+        eprintln!(
+            "{name}: {} points, {} voxelised, {all} clusters",
+            sweep.len(),
+            down.len()
+        );
     }
     Ok(())
 }
