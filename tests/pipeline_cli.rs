@@ -29,6 +29,8 @@ struct Field {
 }
 #[derive(Clone, PartialEq, prost::Message)]
 struct PointCloud {
+    #[prost(message, optional, tag = "1")]
+    timestamp: Option<prost_types::Timestamp>,
     #[prost(string, tag = "2")]
     frame_id: String,
     #[prost(fixed32, tag = "4")]
@@ -558,4 +560,63 @@ fn imu_deskew_runs_on_a_real_ouster_capture() {
         .as_str()
         .unwrap()
         .contains("IMU"));
+}
+
+/// `deskew.reference = "end"` with a constant twist from a TOML file: every point goes to the
+/// pose at the sweep's last point, `x' = x + v·(t − t_end)` for straight motion, and the
+/// messages are stamped `t_end` later than the sweep's first firing.
+#[test]
+fn end_reference_moves_points_to_the_last_pose_and_restamps() {
+    let Some((pcap, calib)) = inputs() else {
+        return;
+    };
+    let dir = out_path("end");
+    std::fs::create_dir_all(&dir).unwrap();
+    let cfg = dir.join("end.toml");
+    std::fs::write(
+        &cfg,
+        "[deskew]\nmode = \"constant-velocity\"\nreference = \"end\"\nlinear_mps = [3.0, 0, 0]\n",
+    )
+    .unwrap();
+    let stamps_and_points = |extra: &[&str], name: &str| {
+        let out = dir.join(name);
+        let mut args = vec![
+            "decode",
+            pcap.to_str().unwrap(),
+            "--calib",
+            calib.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend(extra);
+        let o = ringscan(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let (msgs, _) = read(&out);
+        let stamps: Vec<i128> = msgs["/points"]
+            .iter()
+            .map(|m| {
+                let t = PointCloud::decode(&m[..]).unwrap().timestamp.unwrap();
+                i128::from(t.seconds) * 1_000_000_000 + i128::from(t.nanos)
+            })
+            .collect();
+        (stamps, sweep_points(&out))
+    };
+    let (s0, plain) = stamps_and_points(&[], "plain.mcap");
+    let (s1, moved) = stamps_and_points(&["--pipeline", cfg.to_str().unwrap()], "end.mcap");
+    assert_eq!(plain.len(), moved.len());
+    let mut worst = 0f64;
+    for k in 0..plain.len() {
+        let t_end = plain[k].iter().map(|p| p.3).max().unwrap();
+        assert_eq!(
+            s1[k] - s0[k],
+            i128::from(t_end),
+            "sweep {k} restamped by its span"
+        );
+        for (p, q) in plain[k].iter().zip(&moved[k]) {
+            let want = f64::from(p.0) + 3.0 * (f64::from(p.3) - f64::from(t_end)) * 1e-9;
+            worst = worst.max((f64::from(q.0) - want).abs());
+        }
+    }
+    assert!(worst < 1e-4, "worst deviation {worst} m");
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -304,6 +304,10 @@ impl PipelineRunner {
         sp.work.clone_from(sweep);
         let mut clock = || origin.elapsed().as_nanos() as u64;
         let stats = sp.pipeline.run(&mut sp.work, &mut clock);
+        // Points deskewed to the sweep's end pose are stamped with the end's time.
+        sp.work.timestamp_ns = sweep
+            .timestamp_ns
+            .saturating_add(i64::from(stats.reference_ns));
         sp.sweeps += 1;
         if sp.times.len() < TIMES_KEPT {
             sp.times.push(stats.times);
@@ -331,7 +335,7 @@ impl PipelineRunner {
         }
         if let Some((sink, id)) = sink {
             let log_time = sweep.last_host_ns.max(0) as u64;
-            let stamp = sweep.timestamp_ns.max(0) as u64;
+            let stamp = sp.work.timestamp_ns.max(0) as u64;
             if outputs {
                 if sp.topics.is_none() {
                     sp.topics = Some(PipelineTopics::add(sink, id, &sp.frame_id)?);

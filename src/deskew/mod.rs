@@ -118,6 +118,8 @@ pub struct Deskewer {
     poses: Vec<Isometry3<f64>>,
     /// `ref_from_sensor` at step k.
     table: Vec<Affine>,
+    /// Time of the reference pose of the last sweep deskewed, ns after its timestamp.
+    reference_ns: u32,
 }
 
 impl Deskewer {
@@ -127,7 +129,15 @@ impl Deskewer {
             reference,
             poses: vec![Isometry3::identity(); TABLE_STEPS + 1],
             table: vec![[0.0; 12]; TABLE_STEPS + 1],
+            reference_ns: 0,
         }
+    }
+
+    /// When the pose the last deskewed sweep's points are now expressed in was taken, ns after
+    /// the sweep's timestamp: 0 for [`Reference::Start`], the sweep's last point time for
+    /// [`Reference::End`] (a writer stamps the deskewed sweep with this time).
+    pub fn reference_ns(&self) -> u32 {
+        self.reference_ns
     }
 
     /// The reference pose.
@@ -138,6 +148,7 @@ impl Deskewer {
     /// Constant velocity: `start_from_sensor(t) = exp(ξ·t)`.
     pub fn deskew_constant_velocity(&mut self, points: &mut [Point], twist: &Twist) {
         let span_ns = span_ns(points);
+        self.reference_ns = 0;
         if span_ns == 0 {
             return;
         }
@@ -159,6 +170,7 @@ impl Deskewer {
         linear_mps: &Vector3<f64>,
     ) -> Result<(), DeskewError> {
         let span_ns = span_ns(points);
+        self.reference_ns = 0;
         if span_ns == 0 {
             return Ok(());
         }
@@ -188,6 +200,7 @@ impl Deskewer {
         table: &PoseTable,
     ) -> Result<(), DeskewError> {
         let span_ns = span_ns(points);
+        self.reference_ns = 0;
         if span_ns == 0 {
             return Ok(());
         }
@@ -203,10 +216,11 @@ impl Deskewer {
 
     /// Builds `ref_from_sensor` per step from `self.poses` and moves the points.
     fn apply(&mut self, points: &mut [Point], span_ns: u32) {
-        let reference_inv = match self.reference {
-            Reference::Start => self.poses[0].inverse(),
-            Reference::End => self.poses[TABLE_STEPS].inverse(),
+        let (reference_inv, reference_ns) = match self.reference {
+            Reference::Start => (self.poses[0].inverse(), 0),
+            Reference::End => (self.poses[TABLE_STEPS].inverse(), span_ns),
         };
+        self.reference_ns = reference_ns;
         for (a, pose) in self.table.iter_mut().zip(&self.poses) {
             *a = affine_of(&(reference_inv * pose));
         }

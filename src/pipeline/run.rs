@@ -62,6 +62,9 @@ pub struct SweepStats {
     pub deskewed: bool,
     /// Why deskew was skipped for this sweep, if it was.
     pub deskew_error: Option<DeskewError>,
+    /// When the pose the deskewed points are in was taken, ns after the sweep's timestamp
+    /// (0, or the last point's time with `deskew.reference = "end"`).
+    pub reference_ns: u32,
     /// What the filters removed.
     pub filter: FilterStats,
     /// Points after the filters.
@@ -273,7 +276,12 @@ impl Pipeline {
             },
         };
         match deskewed {
-            Ok(d) => stats.deskewed = d,
+            Ok(d) => {
+                stats.deskewed = d;
+                if d {
+                    stats.reference_ns = self.deskewer.reference_ns();
+                }
+            }
             Err(e) => stats.deskew_error = Some(e),
         }
         let t1 = clock();
