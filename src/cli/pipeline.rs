@@ -179,6 +179,49 @@ fn median_max_ms(mut v: Vec<u64>) -> Value {
     json!({"median_ms": median * 1e-6, "max_ms": v[n - 1] as f64 * 1e-6})
 }
 
+/// Copies `src` into `dst` reusing `dst`'s buffers (a derived `clone_from` would allocate
+/// new ones for every sweep). Destructured exhaustively: a new field of `Sweep` must be
+/// handled here.
+fn copy_sweep(dst: &mut Sweep, src: &Sweep) {
+    let Sweep {
+        index,
+        points,
+        columns,
+        extras,
+        timestamp_ns,
+        clock,
+        device_time_ns,
+        first_host_ns,
+        last_host_ns,
+        packets,
+        missing_packets,
+        missing_columns,
+        frame_id,
+        columns_count,
+        first_azimuth,
+        last_azimuth,
+    } = src;
+    dst.points.clear();
+    dst.points.extend_from_slice(points);
+    dst.columns.clear();
+    dst.columns.extend_from_slice(columns);
+    dst.extras.clear();
+    dst.extras.extend_from_slice(extras);
+    dst.index = *index;
+    dst.timestamp_ns = *timestamp_ns;
+    dst.clock = *clock;
+    dst.device_time_ns = *device_time_ns;
+    dst.first_host_ns = *first_host_ns;
+    dst.last_host_ns = *last_host_ns;
+    dst.packets = *packets;
+    dst.missing_packets = *missing_packets;
+    dst.missing_columns = *missing_columns;
+    dst.frame_id = *frame_id;
+    dst.columns_count = *columns_count;
+    dst.first_azimuth = *first_azimuth;
+    dst.last_azimuth = *last_azimuth;
+}
+
 impl PipelineRunner {
     /// A runner for the resolved flags.
     pub fn new(setup: PipelineSetup) -> Self {
@@ -301,7 +344,7 @@ impl PipelineRunner {
                 })
             }
         };
-        sp.work.clone_from(sweep);
+        copy_sweep(&mut sp.work, sweep);
         let mut clock = || origin.elapsed().as_nanos() as u64;
         let stats = sp.pipeline.run(&mut sp.work, &mut clock);
         // Points deskewed to the sweep's end pose are stamped with the end's time.
