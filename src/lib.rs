@@ -3,9 +3,10 @@
 //! A LiDAR driver and packet decoder: raw Velodyne and Ouster traffic into timestamped,
 //! ring-tagged points assembled into sweeps, with packet loss counted, never hidden.
 //!
-//! The core (`wire`, `model`, `calib`, `decode`, `sweep`) performs no I/O, reads no clock and
-//! allocates nothing per packet; it builds with `--no-default-features`. Sources (pcap), sinks
-//! (MCAP) and the command line are features on top.
+//! The core (`wire`, `model`, `calib`, `decode`, `sweep`, `deskew`, `pipeline`) performs no
+//! I/O, reads no clock and allocates nothing per packet (the pipeline stages nothing per sweep
+//! once their buffers are warm); it builds with `--no-default-features`. Sources (pcap), sinks
+//! (MCAP), pipeline configuration files (`config`) and the command line are features on top.
 //!
 //! ## Decoding one packet
 //!
