@@ -4,8 +4,8 @@
 //! ring-tagged points assembled into sweeps, with packet loss counted, never hidden.
 //!
 //! The core (`wire`, `model`, `calib`, `decode`, `sweep`, `deskew`, `pipeline`) performs no
-//! I/O, reads no clock and allocates nothing per packet (the pipeline stages nothing per sweep
-//! once their buffers are warm); it builds with `--no-default-features`. Sources (pcap), sinks
+//! I/O, reads no clock and allocates nothing per packet (nor, once their buffers are warm, per
+//! sweep in the pipeline stages); it builds with `--no-default-features`. Sources (pcap), sinks
 //! (MCAP), pipeline configuration files (`config`) and the command line are features on top.
 //!
 //! ## Decoding one packet
