@@ -360,6 +360,8 @@ fn extrinsics_write_tf_static_and_base_link_outputs() {
         "--json",
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["pipeline"]["extrinsics_unused"], serde_json::json!([]));
     let (msgs, schemas) = read(&out);
     assert_eq!(
         schemas.get("/tf_static").map(String::as_str),
@@ -619,4 +621,26 @@ fn end_reference_moves_points_to_the_last_pose_and_restamps() {
     }
     assert!(worst < 1e-4, "worst deviation {worst} m");
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Extrinsics naming no sensor are reported, not silently ignored.
+#[test]
+fn extrinsics_for_an_unknown_sensor_are_reported() {
+    let pcap = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo-vlp16.pcap");
+    let o = ringscan(&[
+        "decode",
+        pcap.to_str().unwrap(),
+        "--pipeline",
+        "default",
+        "--extrinsics",
+        "nobody=0,0,1,0,0,0",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(
+        j["pipeline"]["extrinsics_unused"],
+        serde_json::json!(["nobody"])
+    );
+    assert!(String::from_utf8_lossy(&o.stderr).contains("nobody"));
 }

@@ -450,6 +450,19 @@ impl PipelineRunner {
             }));
         }
         let cfg = &self.setup.config;
+        let unused: Vec<&str> = self
+            .setup
+            .extrinsics
+            .iter()
+            .map(|e| e.name.as_str())
+            .filter(|n| !all.iter().any(|s| s.name == *n))
+            .collect();
+        for n in &unused {
+            tracing::warn!(
+                "--extrinsics {n}=…: no sensor of that name (sensor names: {:?})",
+                all.iter().map(|s| s.name.as_str()).collect::<Vec<_>>()
+            );
+        }
         json!({
             "config": self.setup.source,
             "deskew": cfg.deskew.mode.name(),
@@ -488,6 +501,7 @@ impl PipelineRunner {
                 "removed_by_crop_box": sum(|t| t.filter.crop_box),
             },
             "deskew_skipped": all.iter().map(|s| s.deskew_skipped).sum::<u64>(),
+            "extrinsics_unused": unused,
             "sensors": per_sensor,
         })
     }

@@ -35,7 +35,7 @@ pub struct RenderCmd {
     /// Half-width of the square drawn, metres.
     #[arg(long, default_value_t = 40.0)]
     range_m: f64,
-    /// Image side, pixels.
+    /// Image side, pixels (64 ..= 4096).
     #[arg(long, default_value_t = 1000)]
     size_px: u32,
 }
@@ -354,7 +354,7 @@ fn rgb(c: [f32; 3]) -> [u8; 3] {
 }
 
 fn draw(frame: &Frame, cmd: &RenderCmd) -> Canvas {
-    let size = cmd.size_px.clamp(64, 8192);
+    let size = cmd.size_px.clamp(64, 4096);
     let range = if cmd.range_m.is_finite() && cmd.range_m > 0.5 {
         cmd.range_m
     } else {
