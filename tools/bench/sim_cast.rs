@@ -13,7 +13,9 @@
 //!   the speed-up of the culling is the ratio of the two;
 //! * `packet/hdl32e_urban_route`: `VelodyneSim::next_packet` of an HDL-32E driving the route
 //!   (pose per firing, cast, encode); elements = measurements (384 per packet). An HDL-32E
-//!   needs 694,000 measurements per second of sensor time (1808 packets/s).
+//!   needs 694,000 measurements per second of sensor time (1808 packets/s);
+//! * `packet/hdl32e_urban_fixed_pose`: the same from a fixed pose on the first street (no
+//!   pose evaluation per firing): the cost of the motion is the ratio of the two.
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
 use nalgebra::{Point3, Vector3};
@@ -86,6 +88,15 @@ fn bench(c: &mut Criterion) {
                 sim.packet_index = 0;
             }
             black_box(sim.next_packet(&world, &mut truth))
+        })
+    });
+    let calib = builtin(model).expect("built-in HDL-32E table");
+    let mut fixed = VelodyneSim::new(model, ReturnMode::Strongest, calib, 0);
+    fixed.trajectory = Trajectory::fixed(nalgebra::Isometry3::translation(40.0, 0.0, 1.8));
+    g.bench_function("hdl32e_urban_fixed_pose", |b| {
+        b.iter(|| {
+            truth.clear();
+            black_box(fixed.next_packet(&world, &mut truth))
         })
     });
     g.finish();
