@@ -29,14 +29,15 @@
 //! - `--out FILE.pcap` or `--udp ADDR:PORT` (data to PORT; Velodyne position packets to 8308,
 //!   Ouster IMU to the metadata's IMU port or 7503, on ADDR), paced in real time, or `--rate X`
 //!   times faster (`--rate 0`: as fast as possible).
-//! - `--seconds S` of sensor time (default 1 s, or the route's duration with `--route`).
+//! - `--seconds S` of sensor time (default 1 s; with `--route` / `--poses` their duration).
 //!
 //! Scene and motion:
 //! - `--scene room|urban|corridor|flat_floor|flat|slope10|ramp|kerbs` (default `room`, a
 //!   sensor-centred room; the others are `ringscan::sim::scenes`, ground at z = 0).
 //! - `--speed M/S --yaw-rate DEG/S`: a constant twist (forward speed, yaw rate) from the start
 //!   pose; `--route urban`: the urban loop (`Route::urban`, use with `--scene urban`);
-//!   `--poses FILE.tum`: interpolate a TUM trajectory (`t x y z qx qy qz qw`, world_from_sensor);
+//!   `--poses FILE.tum`: interpolate a TUM trajectory (`t x y z qx qy qz qw`, world_from_sensor;
+//!   the run starts at its first time and lasts to its last unless `--seconds`);
 //!   none of these: a static sensor. The start pose is `--start X,Y,Z,YAW_DEG` (default
 //!   0,0,0,0 in `room`, 0,0,1.8,0 elsewhere; the urban street's (40,0,1.8,0) in `urban`).
 //!
@@ -47,8 +48,8 @@
 //! - `--poses-out FILE.tum`: the true `world_from_sensor` every `--poses-step-ms` (default 1 ms)
 //!   over the run, TUM text, times in seconds on the packets' clock.
 //!
-//! Time: the run starts at 2024-05-01 12:00:00 UTC (Velodyne top-of-hour 0); truth times and
-//! pcap timestamps are ns since the epoch on that clock. Sources: Velodyne 192.168.1.201,
+//! Time: the run starts at 2024-05-01 12:00:00 UTC (Velodyne top-of-hour 0), or at the first
+//! time of `--poses`; truth times and pcap timestamps are ns since the epoch on that clock. Sources: Velodyne 192.168.1.201,
 //! Ouster 192.168.1.202.
 
 use std::fs::File;
@@ -184,8 +185,21 @@ fn start_pose(args: &[String], scene: &str) -> Res<Isometry3<f64>> {
 
 fn main() -> Res<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    // 2024-05-01 12:00:00 UTC, sensor top-of-hour counter at 0.
-    let t0_ns: i64 = 1_714_564_800_000_000_000;
+    // 2024-05-01 12:00:00 UTC, sensor top-of-hour counter at 0; with --poses, the table's
+    // first time (the run follows the table's clock).
+    let poses = match arg(&args, "--poses") {
+        Some(p) => {
+            let t = PoseTable::parse_tum(&std::fs::read_to_string(&p)?)?;
+            if t.poses.is_empty() {
+                return Err(format!("{p}: no poses").into());
+            }
+            Some(t)
+        }
+        None => None,
+    };
+    let t0_ns: i64 = poses
+        .as_ref()
+        .map_or(1_714_564_800_000_000_000, PoseTable::first_ns);
 
     let scene_name = arg(&args, "--scene").unwrap_or_else(|| "room".into());
     let scene: Box<dyn Scene> = if scene_name == "room" {
@@ -210,8 +224,10 @@ fn main() -> Res<()> {
         let route = Route::urban();
         route_s = Some(route.duration_s());
         Trajectory::route(t0_ns, route)
-    } else if let Some(p) = arg(&args, "--poses") {
-        Trajectory::poses(PoseTable::parse_tum(&std::fs::read_to_string(&p)?)?)
+    } else if let Some(table) = poses {
+        let last = table.poses.last().map_or(t0_ns, |p| p.0);
+        route_s = Some((last - t0_ns) as f64 * 1e-9);
+        Trajectory::poses(table)
     } else if speed.is_some() || yaw_rate.is_some() {
         Trajectory::twist(
             t0_ns,
@@ -348,6 +364,7 @@ fn main() -> Res<()> {
         };
         let rings = calib.rings();
         let mut sim = VelodyneSim::new(model, mode, calib, t0_ns);
+        sim.toh0_us = (t0_ns.rem_euclid(3_600_000_000_000) / 1_000) as u32;
         sim.deg_per_s = 360.0 * hz;
         sim.azimuth0_deg = 200.0;
         sim.trajectory = trajectory.clone();
