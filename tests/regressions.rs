@@ -22,6 +22,7 @@ const REGRESSIONS: &[(&str, Option<&str>)] = &[
     ("velodyne_packet-nmea-date-char-boundary.bin", None),
     ("velodyne_packet-nmea-time-char-boundary.bin", None),
     ("decode_to_mcap-nmea-char-boundary.bin", None),
+    ("ouster_packet-duplicate-measurement-id.bin", None),
 ];
 
 fn dir() -> PathBuf {

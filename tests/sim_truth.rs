@@ -104,8 +104,8 @@ fn velodyne(
         worst_excess: f64::NEG_INFINITY,
         ..Figures::default()
     };
-    // 0.2 s: two revolutions, 3 m and 12° of motion.
-    let packets = (0.2e9 / sim.period_ns()).round() as usize;
+    // 0.11 s: a revolution and a bit, 1.65 m and 6.6° of motion.
+    let packets = (0.11e9 / sim.period_ns()).round() as usize;
     let what = format!("{} ({name})", model.name());
     for _ in 0..packets {
         let mut truth: Vec<Truth> = Vec::new();
@@ -254,7 +254,7 @@ fn ouster_metadata_and_profiles_recover_the_scene_while_moving() {
         "pcaps/windowed_frame1_0.json",
     ] {
         let info = metadata(&root, rel);
-        ouster(&info, rel, &scene, 0.12);
+        ouster(&info, rel, &scene, 0.1);
     }
     // Every profile with one sensor's beam intrinsics, and other columns per frame.
     let base = metadata(&root, "metadata/3_0_1_os-122246000293-128.json");
@@ -262,7 +262,7 @@ fn ouster_metadata_and_profiles_recover_the_scene_while_moving() {
         let mut info = base.clone();
         info.format.profile = profile;
         info.lidar_profile_name = profile.name().to_owned();
-        ouster(&info, "3_0_1 metadata, profile set", &scene, 0.04);
+        ouster(&info, "3_0_1 metadata, profile set", &scene, 0.03);
     }
     for (w, fps) in [(512, 20), (2048, 10), (4096, 5)] {
         let mut info = base.clone();
@@ -270,18 +270,18 @@ fn ouster_metadata_and_profiles_recover_the_scene_while_moving() {
         info.columns_per_frame = w;
         info.fps = fps;
         info.column_window = (0, w - 1);
-        ouster(&info, "3_0_1 metadata, mode set", &scene, 0.04);
+        ouster(&info, "3_0_1 metadata, mode set", &scene, 0.03);
     }
 }
 
 /// The IMU packets carry the specific force and body rate of the trajectory at the IMU, in the
 /// IMU frame: for a constant body twist (v, ω) and the IMU at r (sensor frame), the closed form
 /// is f = ω × (v + ω × r) + g·ẑ (yaw-only motion keeps ẑ up), ω unchanged, both rotated into
-/// the IMU axes by `imu_to_sensor`.
+/// the IMU axes by `imu_to_sensor`. The packets go through ringscan's IMU path
+/// (`OusterStream`, SI units), which must give back those values at the sample times.
 #[test]
 fn ouster_imu_packets_follow_the_motion() {
-    use ringscan::calib::ouster::ImuProfile;
-    use ringscan::wire::ouster::{ImuPacketLegacy, ImuPacketNmea};
+    use ringscan::sweep::{OusterStream, OusterStreamConfig};
     let Some(root) = common::captures() else {
         return;
     };
@@ -306,34 +306,26 @@ fn ouster_imu_packets_follow_the_motion() {
         let r_si = nalgebra::Rotation3::from_matrix(&nalgebra::Matrix3::new(
             m[0], m[1], m[2], m[4], m[5], m[6], m[8], m[9], m[10],
         ));
-        let f_s = w.cross(&(v + w.cross(&r))) + Vector3::new(0.0, 0.0, g);
-        let f_want = r_si.inverse() * f_s;
+        let f_want = r_si.inverse() * (w.cross(&(v + w.cross(&r))) + Vector3::new(0.0, 0.0, g));
         let w_want = r_si.inverse() * w;
+        let mut stream = OusterStream::new(OusterStreamConfig {
+            info: info.clone(),
+            metadata_name: rel.into(),
+            crc: None,
+            decode: DecodeOptions::default(),
+            keep_extras: false,
+            keep_columns: false,
+        })
+        .unwrap();
         let mut samples = 0;
         for _ in 0..20 {
-            let (_, b) = sim.next_imu_packet().unwrap();
-            let got: Vec<(Vector3<f64>, Vector3<f64>)> = match info.imu_profile {
-                ImuProfile::Legacy => {
-                    let p = ImuPacketLegacy::new(&b).unwrap();
-                    let a = p.accel_g().map(|x| f64::from(x) * g);
-                    let d = p.gyro_dps().map(|x| f64::from(x).to_radians());
-                    vec![(Vector3::from(a), Vector3::from(d))]
-                }
-                ImuProfile::Accel32Gyro32Nmea => {
-                    let p = ImuPacketNmea::new(&b, info.imu_measurements_per_packet).unwrap();
-                    assert_eq!(p.crc(), p.computed_crc());
-                    p.measurements()
-                        .map(|m| {
-                            (
-                                Vector3::from(m.accel.map(f64::from)),
-                                Vector3::from(m.gyro.map(f64::from)),
-                            )
-                        })
-                        .collect()
-                }
-                ImuProfile::Off => unreachable!(),
-            };
-            for (a, gy) in got {
+            let t_first = sim.next_imu_time_ns();
+            let (host, b) = sim.next_imu_packet().unwrap();
+            stream.push(host, &b, &mut |_, _| {});
+            for (k, s) in stream.drain_imu().enumerate() {
+                let a = Vector3::from(s.accel);
+                let gy = Vector3::from(s.gyro);
+                assert_eq!(s.sensor_ns as i64, t_first + k as i64 * sim.imu_period_ns);
                 assert!((a - f_want).norm() < 1e-4, "{rel}: accel {a} want {f_want}");
                 assert!(
                     (gy - w_want).norm() < 1e-5,
@@ -342,8 +334,9 @@ fn ouster_imu_packets_follow_the_motion() {
                 samples += 1;
             }
         }
+        assert!(samples >= 20, "{rel}: {samples} samples");
         eprintln!(
-            "{rel}: {samples} IMU samples ({:?}) match the closed form",
+            "{rel}: {samples} IMU samples ({:?}) through OusterStream match the closed form",
             info.imu_profile
         );
     }

@@ -106,6 +106,10 @@ struct DecodeCmd {
     /// Message layout.
     #[arg(long, value_enum, default_value_t = FormatArg::Foxglove)]
     format: FormatArg,
+    /// MCAP chunk compression: `zstd` (level 1), `zstd:LEVEL` (−7 … 19; negative levels are
+    /// zstd's fast modes), `lz4` or `none`.
+    #[arg(long, default_value = "zstd")]
+    compression: run::ChunkCompression,
     /// Also write every UDP payload to `/raw`, so the drive can be decoded again later.
     #[arg(long)]
     raw: bool,
@@ -274,6 +278,7 @@ pub fn main() -> ExitCode {
                 max_range: c.max_range,
                 fields_all: c.fields == FieldsArg::All,
                 format: c.format,
+                compression: c.compression,
                 raw: c.raw,
                 strict: c.strict,
                 crc: match c.crc {

@@ -42,6 +42,8 @@ pub struct DecodeArgs {
     pub min_range: Option<f32>,
     pub max_range: Option<f32>,
     pub fields_all: bool,
+    /// `--compression`.
+    pub compression: ChunkCompression,
     pub format: FormatArg,
     pub raw: bool,
     pub strict: bool,
@@ -702,14 +704,75 @@ pub fn output_json(
 
 /// Sink options for `--format`.
 pub fn sink_options(format: FormatArg) -> SinkOptions {
+    sink_options_with(format, ChunkCompression::default())
+}
+
+/// The sink options of `--format` and `--compression`.
+pub fn sink_options_with(format: FormatArg, compression: ChunkCompression) -> SinkOptions {
     SinkOptions {
         format: if format == FormatArg::Ros2 {
             Format::Ros2
         } else {
             Format::Foxglove
         },
-        compression: Compression::Zstd,
+        compression: compression.kind,
+        zstd_level: compression.zstd_level,
         ..SinkOptions::default()
+    }
+}
+
+/// `--compression`: how MCAP chunks are compressed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ChunkCompression {
+    /// zstd, lz4 or none.
+    pub kind: Compression,
+    /// The zstd level (ignored otherwise).
+    pub zstd_level: i32,
+}
+
+impl Default for ChunkCompression {
+    fn default() -> Self {
+        Self {
+            kind: Compression::Zstd,
+            zstd_level: ringscan::sink::mcap::DEFAULT_ZSTD_LEVEL,
+        }
+    }
+}
+
+impl std::str::FromStr for ChunkCompression {
+    type Err = String;
+
+    /// `zstd`, `zstd:LEVEL`, `lz4` or `none`.
+    fn from_str(s: &str) -> Result<Self, String> {
+        let levels = ringscan::sink::mcap::ZSTD_LEVELS;
+        match s {
+            "zstd" => Ok(Self::default()),
+            "lz4" => Ok(Self {
+                kind: Compression::Lz4,
+                ..Self::default()
+            }),
+            "none" => Ok(Self {
+                kind: Compression::None,
+                ..Self::default()
+            }),
+            _ => {
+                let level = s
+                    .strip_prefix("zstd:")
+                    .and_then(|l| l.parse::<i32>().ok())
+                    .filter(|l| levels.contains(l) && *l != 0)
+                    .ok_or_else(|| {
+                        format!(
+                            "{s:?}: expected zstd, zstd:LEVEL (LEVEL {} … {}, not 0; negative levels are zstd's fast modes), lz4 or none",
+                            levels.start(),
+                            levels.end()
+                        )
+                    })?;
+                Ok(Self {
+                    kind: Compression::Zstd,
+                    zstd_level: level,
+                })
+            }
+        }
     }
 }
 
@@ -736,7 +799,10 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
     }
     session.set_sensor_hint(n_sensors_hint);
     let sink = match &args.out {
-        Some(p) => Some(create_file(p, sink_options(args.format))?),
+        Some(p) => Some(create_file(
+            p,
+            sink_options_with(args.format, args.compression),
+        )?),
         None => None,
     };
     session.set_sink(sink);
@@ -869,6 +935,7 @@ pub fn info_command(
         min_range: None,
         max_range: None,
         fields_all: false,
+        compression: ChunkCompression::default(),
         format: FormatArg::Foxglove,
         raw: false,
         strict: false,
@@ -899,6 +966,7 @@ pub fn demo_command(out: &Path, json_out: bool) -> Result<ExitCode, RunError> {
         min_range: None,
         max_range: None,
         fields_all: false,
+        compression: ChunkCompression::default(),
         format: FormatArg::Foxglove,
         raw: false,
         strict: false,

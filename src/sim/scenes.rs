@@ -135,7 +135,9 @@ impl Lcg {
 /// wide on the outside, the whole inner block raised as sidewalk; building walls (boxes 6–20 m
 /// high, irregular lengths, setbacks and gaps) on both sides; parked cars on straight stretches
 /// 3.9 m from the centreline (clear of the corners); poles 1 m behind the kerbs at irregular
-/// spacing.
+/// spacing. Nothing stands on the roads' centrelines or the route's corner arcs: a vehicle
+/// driving [`super::motion::Route::urban`] is clear of every object. Sidewalk tops are at
+/// z = 0.15 m, everything else on the ground at z = 0.
 pub fn urban() -> World {
     let mut b = Builder::new();
     let mut rng = Lcg(0x9E37_79B9_7F4A_7C15);
@@ -161,10 +163,17 @@ pub fn urban() -> World {
         let yaw = t[1].atan2(t[0]);
         let at = |s: f64, l: f64| [a[0] + s * t[0] + l * left[0], a[1] + s * t[1] + l * left[1]];
         for side in [1.0, -1.0] {
-            // Buildings: inner side on the block (from 8 m), outer side beyond the sidewalk.
-            let mut s = rng.range(0.0, 8.0);
-            while s < len - 6.0 {
-                let l = rng.range(8.0, 25.0).min(len - s);
+            // Inner side: on the block, clear of the cross streets (13 m from each end);
+            // outer side: beyond the sidewalk, the whole length.
+            let (lo, hi) = if side > 0.0 {
+                (13.0, len - 13.0)
+            } else {
+                (0.0, len)
+            };
+            // Buildings: inner side 8.5–14 m from the centreline, outer side 12.5–16 m.
+            let mut s = lo + rng.range(0.0, 8.0);
+            while s < hi - 6.0 {
+                let l = rng.range(8.0, 25.0).min(hi - s);
                 let setback = if side > 0.0 {
                     rng.range(8.5, 14.0)
                 } else {
@@ -198,8 +207,8 @@ pub fn urban() -> World {
                 s += rng.range(6.0, 14.0);
             }
             // Poles on the sidewalks, 1 m behind the kerb.
-            let mut s = rng.range(3.0, 15.0);
-            while s < len {
+            let mut s = lo + rng.range(3.0, 15.0);
+            while s < hi {
                 let c = at(s, side * 6.0);
                 b.object(Prim::Cylinder {
                     center: c,
@@ -361,5 +370,39 @@ mod tests {
         let h = w.cast([8.0, -1.0, 10.0], [0.0, 0.0, -1.0]).unwrap();
         assert_ne!(h.label, GROUND);
         assert!((h.range - (10.0 - 2.3)).abs() < 1e-9);
+    }
+
+    #[test]
+    fn the_urban_route_is_clear_of_every_object() {
+        use crate::sim::motion::{Route, Trajectory};
+        let w = urban();
+        let route = Route::urban();
+        let dur = route.duration_s();
+        let tr = Trajectory::route(0, route);
+        // A vehicle 2 m wide: rays sideways and down from the sensor path at 0.5 m steps hit
+        // nothing closer than 1 m sideways (kerb faces included) and the road straight below.
+        let n = (dur * 30.0) as usize;
+        for k in 0..=n {
+            let p = tr.pose_s(dur * k as f64 / n as f64);
+            let o: [f64; 3] = p.translation.vector.into();
+            let down = w.cast(o, [0.0, 0.0, -1.0]).unwrap();
+            assert_eq!(down.label, GROUND, "at {o:?}");
+            assert!((down.range - 1.8).abs() < 1e-9, "road under {o:?}");
+            for h in [0.1, 0.5, 1.0] {
+                for a in 0..16 {
+                    let az = f64::from(a) * std::f64::consts::PI / 8.0;
+                    let d = [az.cos(), az.sin(), 0.0];
+                    let lo = [o[0], o[1], h];
+                    if let Some(hit) = w.cast(lo, d) {
+                        assert!(
+                            hit.range > 1.0,
+                            "object {} {} m from {lo:?}",
+                            hit.label,
+                            hit.range
+                        );
+                    }
+                }
+            }
+        }
     }
 }

@@ -112,10 +112,13 @@ pub struct Truth {
     pub xyz: [f64; 3],
     /// The same point in the world frame, metres.
     pub world: [f64; 3],
-    /// [`GROUND`](super::scene::GROUND) (0) or the id of the object hit.
+    /// [`GROUND`](super::scene::GROUND) (0) or the id of the object hit. A dual-return last
+    /// return (a surface 1.5 m behind, which the scene does not hold) keeps the first's label.
     pub label: u32,
     /// Absolute firing time on the simulator's clock, ns (`host0_ns` + offset from the first
-    /// packet's first firing, rounded to the ns); the pose is `trajectory.pose(time_ns)`.
+    /// packet's first firing, rounded to the ns); the pose is `trajectory.pose(time_ns)`. The
+    /// packet's top-of-hour stamp is its first firing's time rounded to the µs (`toh0_us` at
+    /// `host0_ns`), so a decoder's absolute point time differs from this by < 0.5 µs.
     pub time_ns: i64,
     /// Range along the beam, metres.
     pub range: f64,

@@ -45,13 +45,17 @@ pub enum Format {
     Ros2,
 }
 
-/// Zstandard level of [`Compression::Zstd`].
-pub const ZSTD_LEVEL: u32 = 1;
+/// Zstandard level of [`Compression::Zstd`] unless [`SinkOptions::zstd_level`] says otherwise.
+pub const DEFAULT_ZSTD_LEVEL: i32 = 1;
+
+/// Zstandard levels [`SinkOptions::zstd_level`] accepts: zstd's "fast" levels down to −7 and the
+/// regular ones up to 19 (higher levels need more memory than a driver should take).
+pub const ZSTD_LEVELS: core::ops::RangeInclusive<i32> = -7..=19;
 
 /// Chunk compression.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Compression {
-    /// Zstandard at level [`ZSTD_LEVEL`], multi-threaded (the default). Level 1 keeps 97 % of
+    /// Zstandard at [`SinkOptions::zstd_level`], multi-threaded (the default). Level 1 keeps 97 % of
     /// level 3's ratio on point clouds (1.59 vs 1.64 on the HDL-32E capture) at twice the
     /// speed: `tools/bench/mcap_compression.rs`, figures in BENCHMARKS.md.
     #[default]
@@ -72,6 +76,9 @@ pub struct SinkOptions {
     /// Target uncompressed chunk size in bytes: a chunk is closed once it has grown past this.
     /// 0 means [`DEFAULT_CHUNK_SIZE`].
     pub chunk_size: u64,
+    /// Zstandard level (with [`Compression::Zstd`]), within [`ZSTD_LEVELS`]; negative levels are
+    /// zstd's fast modes.
+    pub zstd_level: i32,
 }
 
 impl Default for SinkOptions {
@@ -80,6 +87,7 @@ impl Default for SinkOptions {
             format: Format::Foxglove,
             compression: Compression::Zstd,
             chunk_size: DEFAULT_CHUNK_SIZE,
+            zstd_level: DEFAULT_ZSTD_LEVEL,
         }
     }
 }
@@ -383,8 +391,11 @@ impl<W: Write + Seek> McapSink<W> {
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get().min(4)) as u32;
         let mut writer = WriteOptions::new()
             .compression(compression)
+            // The mcap crate takes the level as a u32 and hands it to zstd as an i32: a negative
+            // (fast) level travels as its two's complement.
             .compression_level(if opts.compression == Compression::Zstd {
-                ZSTD_LEVEL
+                opts.zstd_level
+                    .clamp(*ZSTD_LEVELS.start(), *ZSTD_LEVELS.end()) as u32
             } else {
                 0
             })

@@ -29,7 +29,7 @@ use ringscan::source::pcap::PcapSource;
 use ringscan::source::reassembly::{
     FragmentKey, Push, Reassembler, ReassemblyConfig, MAX_IPV4_PAYLOAD,
 };
-use ringscan::sweep::{Demux, Organized, SensorFacts, StreamConfig, Sweep};
+use ringscan::sweep::{Demux, Facts, Organized, SensorConfig, SensorFacts, StreamConfig, Sweep};
 use ringscan::wire::nmea::parse_rmc;
 use ringscan::wire::velodyne::{
     DataPacket, PositionPacket, FLAG_BANK2, FLAG_BANK3, FLAG_LOWER, FLAG_UPPER,
@@ -1144,33 +1144,29 @@ struct Out {
 }
 
 impl Out {
+    /// Registers a sensor with the name and metadata `ringscan decode` gives it.
+    fn register_any(&mut self, idx: usize, addr: Ipv4Addr, facts: Facts<'_>, ports: &[u16]) {
+        match facts {
+            Facts::Velodyne(f) => self.register(idx, addr, f, ports),
+            Facts::Ouster(f) => {
+                let mut md = BTreeMap::new();
+                md.insert("source_address".to_string(), addr.to_string());
+                md.insert("serial".to_string(), f.serial.to_string());
+                md.insert("profile".to_string(), f.profile.clone());
+                md.insert("mode".to_string(), f.mode.clone());
+                md.insert("clock".to_string(), f.clock.name().to_string());
+                let base = format!("os-{}", addr.octets()[3]);
+                self.register_named(idx, addr, base, md);
+            }
+        }
+    }
+
     fn register(&mut self, idx: usize, addr: Ipv4Addr, facts: &SensorFacts, ports: &[u16]) {
-        while self.sensors.len() <= idx {
-            self.sensors.push(OutSensor {
-                id: None,
-                registered: false,
-                name: String::new(),
-            });
-        }
-        if self.sensors[idx].registered || self.error.is_some() {
-            return;
-        }
         // The names and metadata `ringscan decode` gives a sensor (src/cli/sensors.rs
-        // `default_name`, made unique by the whole address in src/cli/run.rs `register`).
-        let mut name = match facts.model {
+        // `default_name`).
+        let name = match facts.model {
             Some(m) => format!("{}-{}", m.id(), addr.octets()[3]),
             None => format!("velodyne-{}", addr.octets()[3]),
-        };
-        if self.sensors.iter().any(|s| s.registered && s.name == name) {
-            let o = addr.octets();
-            name = format!("{name}-{}-{}-{}", o[0], o[1], o[2]);
-        }
-        self.sensors[idx].name = name.clone();
-        let single = self.single && idx == 0;
-        let topic_prefix = if single {
-            String::new()
-        } else {
-            format!("/{name}")
         };
         let mut md = BTreeMap::new();
         md.insert("source_address".to_string(), addr.to_string());
@@ -1191,6 +1187,38 @@ impl Out {
         md.insert("model_detection".to_string(), facts.detection.clone());
         md.insert("clock".to_string(), facts.clock.name().to_string());
         md.insert("calibration".to_string(), facts.calibration.clone());
+        self.register_named(idx, addr, name, md);
+    }
+
+    fn register_named(
+        &mut self,
+        idx: usize,
+        addr: Ipv4Addr,
+        mut name: String,
+        md: BTreeMap<String, String>,
+    ) {
+        while self.sensors.len() <= idx {
+            self.sensors.push(OutSensor {
+                id: None,
+                registered: false,
+                name: String::new(),
+            });
+        }
+        if self.sensors[idx].registered || self.error.is_some() {
+            return;
+        }
+        // Made unique by the whole address, as src/cli/run.rs `register` does.
+        if self.sensors.iter().any(|s| s.registered && s.name == name) {
+            let o = addr.octets();
+            name = format!("{name}-{}-{}-{}", o[0], o[1], o[2]);
+        }
+        self.sensors[idx].name = name.clone();
+        let single = self.single && idx == 0;
+        let topic_prefix = if single {
+            String::new()
+        } else {
+            format!("/{name}")
+        };
         let info = SensorInfo {
             name,
             topic_prefix: topic_prefix.clone(),
@@ -1211,11 +1239,11 @@ impl Out {
         *self.written.entry(topic).or_insert(0) += 1;
     }
 
-    fn on_sweep(&mut self, idx: usize, addr: Ipv4Addr, sweep: &Sweep, facts: &SensorFacts) {
+    fn on_sweep(&mut self, idx: usize, addr: Ipv4Addr, sweep: &Sweep, facts: Facts<'_>) {
         if self.error.is_some() {
             return;
         }
-        self.register(idx, addr, facts, &[]);
+        self.register_any(idx, addr, facts, &[]);
         let Some(id) = self.sensors.get(idx).and_then(|s| s.id) else {
             return;
         };
@@ -1225,7 +1253,12 @@ impl Out {
             points: &sweep.points,
         };
         let topic = self.sink.channels(id).map(|c| c.points_topic());
-        match self.sink.write_sweep(id, &msg) {
+        let written = if sweep.extras.len() == sweep.points.len() && !sweep.extras.is_empty() {
+            self.sink.write_sweep_extended(id, &msg, &sweep.extras)
+        } else {
+            self.sink.write_sweep(id, &msg)
+        };
+        match written {
             Ok(()) => self.count(topic.unwrap_or_default()),
             Err(e) => {
                 self.error = Some(e);
@@ -1286,15 +1319,22 @@ pub fn decode_to_mcap(data: &[u8]) {
         },
         compression: [Compression::Zstd, Compression::Lz4, Compression::None][variant / 2 % 3],
         chunk_size: if variant >= 6 { 64 * 1024 } else { 0 },
+        zstd_level: [1, -3, 3][variant % 3],
     };
     let raw = variant % 4 == 3;
+    // An Ouster sensor beside the Velodyne ones: datagrams of its lidar or IMU size go to it.
+    let ouster = decode_to_mcap_ouster(variant);
+    let ouster_lidar = ouster.info.lidar_packet_bytes();
+    let ouster_imu = OusterStreamConfig::imu_len_of(&ouster.info);
+    let is_ouster = move |n: usize| n == ouster_lidar || Some(n) == ouster_imu;
     // The sensor count first, as the CLI's pre-scan does.
     let Ok(mut pre) = PcapSource::new(data) else {
         return;
     };
     let mut addrs: Vec<Ipv4Addr> = Vec::new();
     while let Ok(Some(d)) = pre.next_datagram() {
-        if d.payload.len() == DATA_PACKET_LEN && !addrs.contains(d.src.ip()) {
+        let n = d.payload.len();
+        if (n == DATA_PACKET_LEN || is_ouster(n)) && !addrs.contains(d.src.ip()) {
             addrs.push(*d.src.ip());
         }
     }
@@ -1309,10 +1349,14 @@ pub fn decode_to_mcap(data: &[u8]) {
         written: BTreeMap::new(),
         topics: Vec::new(),
     };
-    let mut demux = Demux::new(
-        ringscan::sweep::velodyne_only(|_| StreamConfig::default()),
-        None,
-    );
+    let config_for = move |_src: Ipv4Addr, _port: u16, payload: &[u8]| match payload.len() {
+        DATA_PACKET_LEN | POSITION_PACKET_LEN => {
+            Some(SensorConfig::Velodyne(StreamConfig::default()))
+        }
+        n if is_ouster(n) => Some(SensorConfig::Ouster(Box::new(ouster.clone()))),
+        _ => None,
+    };
+    let mut demux = Demux::new(Box::new(config_for), None);
     let mut src = PcapSource::new(data).expect("opened once already");
     // A source error ends the input, as in the CLI (which then reports it).
     while let Ok(Some(d)) = src.next_datagram() {
@@ -1324,9 +1368,7 @@ pub fn decode_to_mcap(data: &[u8]) {
             continue;
         }
         let routed = demux.push(time, addr, port, d.payload, &mut |idx, sweep, facts| {
-            if let ringscan::sweep::Facts::Velodyne(facts) = facts {
-                out.on_sweep(idx, addr, sweep, facts);
-            }
+            out.on_sweep(idx, addr, sweep, facts);
         });
         let idx = match routed {
             Ok(Some(idx)) => idx,
@@ -1337,15 +1379,35 @@ pub fn decode_to_mcap(data: &[u8]) {
             break;
         }
         if !out.sensors.get(idx).is_some_and(|s| s.registered) {
-            if let Some(stream) = demux.stream(idx).and_then(|(_, s)| s.as_velodyne()) {
-                if stream.decoder().is_some() {
-                    let facts = stream.facts().clone();
+            if let Some((_, stream)) = demux.stream(idx) {
+                if stream.ready() {
                     let ports: Vec<u16> = demux
                         .sensors()
                         .nth(idx)
                         .map(|(_, _, p)| p.to_vec())
                         .unwrap_or_default();
-                    out.register(idx, addr, &facts, &ports);
+                    out.register_any(idx, addr, stream.facts(), &ports);
+                }
+            }
+        }
+        // IMU samples, as `ringscan decode` writes them.
+        if let Some(ringscan::sweep::SensorStream::Ouster(s)) = demux.stream_mut(idx) {
+            let id = out.sensors.get(idx).and_then(|x| x.id);
+            let samples: Vec<_> = s.drain_imu().collect();
+            for smp in samples {
+                let Some(id) = id else { continue };
+                if out.error.is_some() {
+                    break;
+                }
+                let msg = serde_json::json!({
+                    "timestamp_ns": smp.sensor_ns,
+                    "linear_acceleration": smp.accel,
+                    "angular_velocity": smp.gyro,
+                });
+                let topic = out.sink.channels(id).map(|c| c.imu_topic());
+                match out.sink.write_imu(id, smp.host_ns.max(0) as u64, &msg) {
+                    Ok(()) => out.count(topic.unwrap_or_default()),
+                    Err(e) => out.error = Some(e),
                 }
             }
         }
@@ -1372,9 +1434,7 @@ pub fn decode_to_mcap(data: &[u8]) {
         let addrs: Vec<Ipv4Addr> = demux.sensors().map(|(a, _, _)| a).collect();
         let _ = demux.finish(&mut |idx, sweep, facts| {
             let addr = addrs.get(idx).copied().unwrap_or(Ipv4Addr::UNSPECIFIED);
-            if let ringscan::sweep::Facts::Velodyne(facts) = facts {
-                out.on_sweep(idx, addr, sweep, facts);
-            }
+            out.on_sweep(idx, addr, sweep, facts);
         });
     }
     if let Some(e) = &out.error {
@@ -1811,4 +1871,38 @@ pub fn ouster_stream(data: &[u8]) {
     );
     assert_eq!(st.sweeps, sweeps);
     assert_eq!(st.points, points);
+}
+
+/// The Ouster sensor of `decode_to_mcap`: a small OS-1-16 in one of three profiles (single,
+/// dual, LEGACY), extra fields on or off, by the input length.
+fn decode_to_mcap_ouster(variant: usize) -> OusterStreamConfig {
+    let profile = ["RNG19_RFL8_SIG16_NIR16", "RNG15_RFL8_NIR8_DUAL", "LEGACY"][variant % 3];
+    let alt: Vec<f64> = (0..16).map(|i| 15.0 - 2.0 * f64::from(i)).collect();
+    let text = serde_json::json!({
+        "prod_line": "OS-1-16",
+        "prod_sn": "992210000957",
+        "build_rev": "v2.3.0",
+        "lidar_mode": "512x10",
+        "beam_altitude_angles": alt,
+        "beam_azimuth_angles": vec![1.5; 16],
+        "data_format": {
+            "pixels_per_column": 16,
+            "columns_per_packet": 16,
+            "columns_per_frame": 512,
+            "pixel_shift_by_row": vec![0; 16],
+            "column_window": [0, 511],
+            "udp_profile_lidar": profile,
+            "udp_profile_imu": "LEGACY",
+        },
+    })
+    .to_string();
+    let info = parse_ouster(&text, "fuzz.json").expect("the fixed metadata parses");
+    OusterStreamConfig {
+        info,
+        metadata_name: "fuzz.json".into(),
+        crc: Some(false),
+        decode: DecodeOptions::default(),
+        keep_extras: variant % 2 == 1,
+        keep_columns: false,
+    }
 }

@@ -185,6 +185,13 @@ def reassembled_udp(recs, linktype):
                 del pending[key]
     return out
 
+
+def udp_eth(src_ip, dport, payload, ident):
+    """An Ethernet / IPv4 / UDP frame (unfragmented, checksum 0) from src_ip to 10.5.5.1."""
+    udp = struct.pack(">HHHH", 7502, dport, 8 + len(payload), 0) + payload
+    ip = struct.pack(">BBHHHBBH4s4s", 0x45, 0, 20 + len(udp), ident & 0xFFFF, 0, 64, 17, 0, src_ip, b"\x0a\x05\x05\x01")
+    return b"\xff" * 6 + b"\x02" * 6 + b"\x08\x00" + ip + udp
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--captures", default=str(REPO.parent / "shared" / "captures"))
@@ -256,6 +263,40 @@ def main():
             put("velodyne_stream", bytes([0x10, 0, 0, 0]) + struct.pack("<I", 3_599_990_000) + ops, "synth")
     gps = bytes([2]) + struct.pack("<h", 0) + bytes([0x41]) + struct.pack("<I", 1000) + struct.pack("<I", 79_200) + b"\x0b\x0c\x0c"
     put("velodyne_stream", bytes([0, 0, 0, 0, 0, 0, 0, 0]) + gps + synth_ops(rng, 60, 0, 0, 20), "gps")
+
+    # decode_to_mcap: its Ouster sensor (an OS-1-16, 512x10, by the input length: RNG19,
+    # RNG15 dual or LEGACY) needs datagrams of that size; a few frames of each, with IMU packets.
+    for variant in range(3):
+        recs = []
+        t = 1_700_000_000_000_000
+        for k in range(48):
+            if variant == 2:
+                pkt = bytearray()
+                for c in range(16):
+                    mid = (k * 16 + c) % 512
+                    pkt += struct.pack("<QHHI", t * 1000 + c * 97_656, mid, k // 32, mid * 176)
+                    pkt += bytes(rng.randrange(256) for _ in range(16 * 12))
+                    pkt += b"\xff\xff\xff\xff"
+            else:
+                pb = 12 if variant == 0 else 8
+                pkt = bytearray(struct.pack("<HH", 1, k // 32) + bytes(3) + (992210000957).to_bytes(5, "little"))
+                pkt += bytes(32 - len(pkt))
+                for c in range(16):
+                    mid = (k * 16 + c) % 512
+                    pkt += struct.pack("<QHHI", t * 1000 + c * 97_656, mid, 1, 0)[:12]
+                    pkt += bytes(rng.randrange(256) for _ in range(16 * pb))
+                pkt += bytes(32)
+            size = len(pkt)
+            recs.append((t // 1_000_000, t % 1_000_000, 0, 0, udp_eth(b"\x0a\x05\x05\x57", 7502, bytes(pkt), k)))
+            if k % 4 == 0:
+                imu = struct.pack("<QQQ", t * 1000, t * 1000, t * 1000) + struct.pack("<6f", 0.01, 0.0, 1.0, 0.5, -0.2, 3.0)
+                recs.append((t // 1_000_000, t % 1_000_000, 0, 0, udp_eth(b"\x0a\x05\x05\x57", 7503, imu, 1000 + k)))
+            t += 6250
+        recs = [(a, b, len(f), len(f), f) for a, b, _c, _o, f in recs]
+        data = classic_bytes("<", False, 1, recs)
+        # The harness picks the Ouster profile by the input length (len % 3).
+        data += bytes((variant - len(data)) % 3)
+        put("decode_to_mcap", data, f"ouster{variant}-{size}")
 
     # calib_velodyne: the calibration files as they are.
     for c in calibs:
