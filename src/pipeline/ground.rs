@@ -8,22 +8,34 @@
 //!   what Open3D's `segment_plane` does, and it is right only when the ground is one plane: on a
 //!   slope change, a ramp or a kerb part of the ground lies outside the plane.
 //!
-//! - **Polar grid with local planes** (`PolarGrid`), robust to slopes, ramps and kerbs. The
-//!   xy plane around the sensor is cut into sectors (equal angles) and rings (at least
-//!   `radial_bin_m` wide, growing with range so bins stay roughly square). In each bin a plane
-//!   is fitted to the lowest points (the mean of the lowest few plus a margin gives the seeds;
-//!   then least squares by principal components, refitted twice on the points within
-//!   `distance_threshold_m`). Walking each sector outwards, a bin's plane is accepted as ground
-//!   if it is no steeper than `max_slope_deg` and continues the last accepted ground of that
-//!   sector: at the bin's inner edge it is within `max_step_m` of it (plus the height a
-//!   `max_slope_deg` slope gains over any skipped bins). For the first bins, the reference is
-//!   the plane `z = −sensor_height_m` when given. A point is ground when it lies at most
-//!   `distance_threshold_m` above its bin's accepted plane (or, if the bin's own plane was
-//!   rejected, above the sector's last accepted ground plane, extended). Local planes follow
-//!   slopes and ramps; the continuity test keeps the roofs of cars and the tops of walls (flat,
-//!   but far above the ground before them) out; a kerb is a step of ≤ `max_step_m`, so the
-//!   pavement beyond it is ground while its vertical face, steeper than `max_slope_deg`, is not
-//!   part of any accepted plane.
+//! - **Polar grid with local planes** (`PolarGrid`), for slopes, ramps and kerbs. The xy plane
+//!   around the sensor is cut into sectors (equal angles) and rings (at least `radial_bin_m`
+//!   wide, growing with range so bins stay roughly square). In each bin a plane is fitted to
+//!   the lowest points (the mean of the lowest ten plus the threshold gives the seeds; then
+//!   least squares by principal components, refitted twice on the points within
+//!   `distance_threshold_m`). When a bin's points lie along one line (a single scan line
+//!   crosses it, common at range with few channels) the line fixes only one direction, so the
+//!   most horizontal plane containing it is taken instead of a noise-driven one. Walking each
+//!   sector outwards, a bin's plane is accepted as ground if it is no steeper than
+//!   `max_slope_deg` and continues the last accepted ground of that sector: at the bin's inner
+//!   edge it is within `max_step_m` of it, plus the rise a `max_slope_deg` slope allows over
+//!   any skipped bins. The first reference is the plane `z = −sensor_height_m` when given. In
+//!   an accepted bin a second flat layer at most a step above the first (the pavement past a
+//!   kerb) is fitted to the points between the threshold and a step above, and accepted if it
+//!   too is flat. A point is ground when it lies at most `distance_threshold_m` above its bin's
+//!   accepted plane, or within the threshold of the second layer (if the bin's own plane was
+//!   rejected: above the sector's last accepted plane, extended).
+//!
+//!   Why this design: one plane per small bin follows slope changes (RANSAC's single plane
+//!   loses a ramp); seeding from the lowest points keeps object sides out of the fit; the
+//!   outward continuity test keeps flat object tops (car roofs, box tops: flat but far above
+//!   the ground before them) out. Measured on simulated scenes (`tests/pipeline_sim.rs`,
+//!   HDL-32E and OS-1-128): precision ≥ 0.987 and recall ≥ 0.983 on flat ground, a 10 %
+//!   slope and a 15 % ramp to a plateau, where RANSAC's recall falls to 0.85–0.89 on the ramp.
+//!   Limit: a kerb face lower than the threshold (15 cm against 0.15 m) is called ground
+//!   (precision 0.95 on the kerb scene); a smaller threshold helps only on noise-free data, and
+//!   a face crossed by a single scan line looks like a gentle ramp along that line, which no
+//!   per-point test on sparse rings can tell from a slope.
 //!
 //! Points with a NaN or infinite coordinate are labelled not ground.
 
@@ -53,13 +65,13 @@ pub struct PolarGridParams {
 }
 
 impl Default for PolarGridParams {
-    /// 64 sectors, 1 m bins, 100 m, 0.15 m above the plane, 15°, 0.25 m steps, no sensor
+    /// 64 sectors, 1 m bins, 150 m, 0.15 m above the plane, 15°, 0.25 m steps, no sensor
     /// height.
     fn default() -> Self {
         Self {
             sectors: 64,
             radial_bin_m: 1.0,
-            max_range_m: 100.0,
+            max_range_m: 150.0,
             distance_threshold_m: 0.15,
             max_slope_deg: 15.0,
             max_step_m: 0.25,
@@ -112,7 +124,9 @@ pub struct GroundSegmenter {
     cursor: Vec<u32>,
     ring_edges: Vec<f64>,
     ring_lut: Vec<u16>,
-    planes: Vec<Option<[f64; 4]>>,
+    /// Per bin: its lowest-points plane and, when its points lie along one line, that line's
+    /// direction.
+    planes: Vec<Option<Fit>>,
     scratch: Vec<f32>,
 }
 
@@ -373,6 +387,7 @@ impl GroundSegmenter {
         //    ground; label the points above their plane by at most the threshold.
         let cos_max = p.max_slope_deg.to_radians().cos();
         let tan_max = p.max_slope_deg.to_radians().tan();
+        let sin_max = p.max_slope_deg.to_radians().sin();
         let mut stats = GroundStats::default();
         for sec in 0..sectors {
             let mid = (sec as f64 + 0.5) / sector_scale - core::f64::consts::PI;
@@ -386,29 +401,66 @@ impl GroundSegmenter {
                 let r_out = self.ring_edges[ring + 1];
                 let (px, py) = (r_in * cs, r_in * sn);
                 let mut used = reference.map(|(pl, _)| pl);
-                if let Some(pl) = self.planes[b] {
-                    let flat = pl[2] >= cos_max;
-                    let continues = match reference {
-                        None => true,
-                        Some((rp, r_ref)) => {
+                let mut own = None;
+                if let Some((pl, line)) = self.planes[b] {
+                    let accept = match (line, reference) {
+                        // A single scan line: no steeper than the steepest ground, and
+                        // within a step of the ground before it.
+                        (Some(dir), Some((rp, r_ref))) => {
                             let allowed = p.max_step_m + (r_in - r_ref).max(0.0) * tan_max;
-                            (height_at(&pl, px, py) - height_at(&rp, px, py)).abs() <= allowed
+                            dir[2].abs() <= sin_max
+                                && (height_at(&pl, px, py) - height_at(&rp, px, py)).abs()
+                                    <= allowed
+                        }
+                        (Some(dir), None) => dir[2].abs() <= sin_max,
+                        (None, reference) => {
+                            pl[2] >= cos_max
+                                && reference.is_none_or(|(rp, r_ref)| {
+                                    let allowed = p.max_step_m + (r_in - r_ref).max(0.0) * tan_max;
+                                    (height_at(&pl, px, py) - height_at(&rp, px, py)).abs()
+                                        <= allowed
+                                })
                         }
                     };
-                    if flat && continues {
+                    if accept {
                         used = Some(pl);
+                        own = Some(pl);
                         reference = Some((pl, r_out));
                         stats.ground_bins += 1;
                     }
                 }
                 let Some(pl) = used else { continue };
                 let (s, e) = (self.bin_start[b] as usize, self.bin_start[b + 1] as usize);
+                let thr = p.distance_threshold_m;
+                let dist = |pl: &[f64; 4], x: f64, y: f64, z: f64| {
+                    pl[0] * x + pl[1] * y + pl[2] * z + pl[3]
+                };
+                // A second flat layer at most one step above (the pavement beyond a kerb in the
+                // same bin), fitted to the points between the threshold and a step above.
+                let upper = if own.is_some() && p.max_step_m > thr {
+                    let (xs, ys, zs) = (&self.xs[s..e], &self.ys[s..e], &self.zs[s..e]);
+                    fit(xs, ys, zs, |x, y, z| {
+                        let d = dist(&pl, x, y, z);
+                        d > thr && d <= p.max_step_m + thr
+                    })
+                    .and_then(|(up, _)| fit(xs, ys, zs, |x, y, z| dist(&up, x, y, z).abs() <= thr))
+                    .map(|f| f.0)
+                    .filter(|up| {
+                        let rise = height_at(up, px, py) - height_at(&pl, px, py);
+                        up[2] >= cos_max && rise > 0.0 && rise <= p.max_step_m + thr
+                    })
+                } else {
+                    None
+                };
                 for t in s..e {
-                    let d = pl[0] * f64::from(self.xs[t])
-                        + pl[1] * f64::from(self.ys[t])
-                        + pl[2] * f64::from(self.zs[t])
-                        + pl[3];
-                    if d <= p.distance_threshold_m {
+                    let (x, y, z) = (
+                        f64::from(self.xs[t]),
+                        f64::from(self.ys[t]),
+                        f64::from(self.zs[t]),
+                    );
+                    if dist(&pl, x, y, z) <= thr
+                        || upper.is_some_and(|up| dist(&up, x, y, z).abs() <= thr)
+                    {
                         labels[self.idx[t] as usize] = true;
                     }
                 }
@@ -433,15 +485,13 @@ fn count_within(xs: &[f32], ys: &[f32], zs: &[f32], pl: [f32; 4], thr: f32) -> u
     n
 }
 
+/// A fitted plane `a x + b y + c z + d = 0` (unit normal, `c > 0`), and the direction of the
+/// line its points lie along when they do (one scan line crossing a bin).
+type Fit = ([f64; 4], Option<[f64; 3]>);
+
 /// Seeds = points below the mean of the lowest `LOWEST` points plus `thr`; plane by
-/// principal components; refitted twice on the points within `thr`. Normal with `c > 0`.
-fn fit_lowest(
-    xs: &[f32],
-    ys: &[f32],
-    zs: &[f32],
-    thr: f64,
-    scratch: &mut Vec<f32>,
-) -> Option<[f64; 4]> {
+/// principal components; refitted twice on the points within `thr`.
+fn fit_lowest(xs: &[f32], ys: &[f32], zs: &[f32], thr: f64, scratch: &mut Vec<f32>) -> Option<Fit> {
     const LOWEST: usize = 10;
     if xs.len() < 3 {
         return None;
@@ -452,25 +502,20 @@ fn fit_lowest(
     scratch.select_nth_unstable_by(k - 1, f32::total_cmp);
     let low = scratch[..k].iter().map(|&z| f64::from(z)).sum::<f64>() / k as f64;
     let seed_top = low + thr;
-    let mut plane = fit(xs, ys, zs, |_, _, z| z <= seed_top)?;
+    let mut f = fit(xs, ys, zs, |_, _, z| z <= seed_top)?;
     for _ in 0..2 {
-        let pl = plane;
-        plane = fit(xs, ys, zs, |x, y, z| {
+        let pl = f.0;
+        f = fit(xs, ys, zs, |x, y, z| {
             (pl[0] * x + pl[1] * y + pl[2] * z + pl[3]).abs() <= thr
         })
-        .unwrap_or(pl);
+        .unwrap_or(f);
     }
-    Some(plane)
+    Some(f)
 }
 
 /// Least-squares plane (smallest principal axis) of the selected points; `None` if fewer than
 /// three or degenerate.
-fn fit(
-    xs: &[f32],
-    ys: &[f32],
-    zs: &[f32],
-    keep: impl Fn(f64, f64, f64) -> bool,
-) -> Option<[f64; 4]> {
+fn fit(xs: &[f32], ys: &[f32], zs: &[f32], keep: impl Fn(f64, f64, f64) -> bool) -> Option<Fit> {
     let mut n = 0usize;
     let mut sum = Vector3::zeros();
     for ((&x, &y), &z) in xs.iter().zip(ys).zip(zs) {
@@ -495,14 +540,15 @@ fn fit(
     let eig = SymmetricEigen::new(cov);
     let mut order = [0usize, 1, 2];
     order.sort_unstable_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
-    let [small, middle, _] = order;
+    let [small, middle, large] = order;
     // Points along one line (a single scan line crossing the bin) fix only that line: of the
-    // planes containing it, take the most horizontal one rather than the noise's choice.
-    let mut nrm: Vector3<f64> = if eig.eigenvalues[middle] / (n as f64) < LINE_SPREAD_M2 {
-        let dir: Vector3<f64> = eig.eigenvectors.column(order[2]).into_owned();
-        Vector3::z() - dir * dir.z
-    } else {
-        eig.eigenvectors.column(small).into_owned()
+    // planes containing it, take the most horizontal one rather than the noise's choice, and
+    // say so: the caller judges such a plane by the line's own slope.
+    let line: Option<Vector3<f64>> = (eig.eigenvalues[middle] / (n as f64) < LINE_SPREAD_M2)
+        .then(|| eig.eigenvectors.column(large).into_owned());
+    let mut nrm: Vector3<f64> = match line {
+        Some(dir) => Vector3::z() - dir * dir.z,
+        None => eig.eigenvectors.column(small).into_owned(),
     };
     let len = nrm.norm();
     if len.is_nan() || len <= 1e-9 {
@@ -512,7 +558,10 @@ fn fit(
     if nrm.z < 0.0 {
         nrm = -nrm;
     }
-    Some([nrm.x, nrm.y, nrm.z, -nrm.dot(&mean)])
+    Some((
+        [nrm.x, nrm.y, nrm.z, -nrm.dot(&mean)],
+        line.map(|d| [d.x, d.y, d.z]),
+    ))
 }
 
 /// Variance (m²) across the main direction below which a bin's points count as one line.
