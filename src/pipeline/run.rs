@@ -488,6 +488,40 @@ mod tests {
     }
 
     #[test]
+    fn empty_and_degenerate_sweeps_run_without_panic() {
+        let mut p = Pipeline::new(&PipelineConfig::default(), Isometry3::identity()).unwrap();
+        let mut empty = Sweep::default();
+        let s = p.run(&mut empty, &mut || 0);
+        assert_eq!(
+            (s.input, s.voxels, s.ground, s.obstacles, s.clusters),
+            (0, 0, 0, 0, 0)
+        );
+        // One point, all points at one time, non-finite coordinates.
+        let mut odd = Sweep {
+            points: vec![
+                Point {
+                    x: f32::NAN,
+                    ..Point::default()
+                },
+                Point {
+                    x: 5.0,
+                    y: f32::INFINITY,
+                    ..Point::default()
+                },
+                Point {
+                    x: 5.0,
+                    z: -1.0,
+                    ..Point::default()
+                },
+            ],
+            ..Sweep::default()
+        };
+        let s = p.run(&mut odd, &mut || 0);
+        assert_eq!(s.filter.range, 2, "non-finite points go");
+        assert_eq!(s.ground + s.obstacles + s.unclustered, s.voxels);
+    }
+
+    #[test]
     fn missing_motion_data_skips_deskew_and_says_why() {
         let mut cfg = PipelineConfig::default();
         cfg.deskew.mode = DeskewMode::Imu;
