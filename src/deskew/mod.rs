@@ -226,14 +226,20 @@ impl Deskewer {
         }
         let steps_per_ns = TABLE_STEPS as f32 / span_ns as f32;
         let table = &self.table[..];
+        // Points of one column (Ouster) or firing share their time: the interpolated transform
+        // is computed once per distinct time in a run.
+        let mut last_t = u32::MAX;
+        let mut m = [0f32; 12];
         for p in points.iter_mut() {
-            let u = p.t as f32 * steps_per_ns;
-            let k = (u as usize).min(TABLE_STEPS - 1);
-            let f = u - k as f32;
-            let (a, b) = (&table[k], &table[k + 1]);
-            let mut m = [0f32; 12];
-            for i in 0..12 {
-                m[i] = a[i] + (b[i] - a[i]) * f;
+            if p.t != last_t || last_t == u32::MAX {
+                last_t = p.t;
+                let u = p.t as f32 * steps_per_ns;
+                let k = (u as usize).min(TABLE_STEPS - 1);
+                let f = u - k as f32;
+                let (a, b) = (&table[k], &table[k + 1]);
+                for i in 0..12 {
+                    m[i] = a[i] + (b[i] - a[i]) * f;
+                }
             }
             let (x, y, z) = (p.x, p.y, p.z);
             p.x = m[0] * x + m[1] * y + m[2] * z + m[3];
