@@ -13,7 +13,7 @@
 //! ~3 MB) and runs [`Pipeline::run`] with the default configuration and a constant-velocity
 //! deskew at 15 m/s and 60 °/s (so deskew does real work). After criterion, the per-stage
 //! median and maximum over 200 runs are printed, from the stage times the pipeline reports
-//! with an `Instant` clock (for the default configuration and with `voxel.leaf_m = 0.3`),
+//! with an `Instant` clock (for the default configuration and with `voxel.leaf_m` 0.25 and 0.3),
 //! and the process's CPU time per run over the same 200 runs (user +
 //! system from `/proc/self/stat`, Linux): on a shared machine wall time includes waiting for a
 //! core, CPU time does not.
@@ -190,12 +190,14 @@ fn bench(c: &mut Criterion) {
         stage_report(name, sweep, &PipelineConfig::default());
     }
     // The same with coarser voxels: what the leaf size costs.
-    let coarse = PipelineConfig {
-        voxel_leaf_m: 0.3,
-        ..PipelineConfig::default()
-    };
-    for (name, sweep) in &inputs {
-        stage_report(name, sweep, &coarse);
+    for leaf in [0.25, 0.3] {
+        let coarse = PipelineConfig {
+            voxel_leaf_m: leaf,
+            ..PipelineConfig::default()
+        };
+        for (name, sweep) in &inputs {
+            stage_report(name, sweep, &coarse);
+        }
     }
 }
 
