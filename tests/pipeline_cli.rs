@@ -336,6 +336,20 @@ fn default_pipeline_on_a_real_capture_writes_consistent_channels() {
     ]);
     assert!(!r.status.success());
     assert!(String::from_utf8_lossy(&r.stderr).contains("sweep 999"));
+    let r = ringscan(&[
+        "render",
+        out.to_str().unwrap(),
+        "--sensor",
+        "/nope",
+        "--out",
+        png.to_str().unwrap(),
+    ]);
+    assert_eq!(r.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(
+        err.contains("/nope/ground") && err.contains("--sensor \"\""),
+        "{err}"
+    );
     let _ = std::fs::remove_file(&out);
     let _ = std::fs::remove_file(&png);
 }

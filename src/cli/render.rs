@@ -159,6 +159,8 @@ fn read_frame(cmd: &RenderCmd) -> Result<Frame, RunError> {
     let mut ids: [Option<u16>; 3] = [None; 3];
     let mut got = [false; 3];
     let mut frame = Frame::default();
+    // Every pipeline prefix in the file, to name them when the one asked for is absent.
+    let mut prefixes: Vec<String> = Vec::new();
     while let Some(event) = reader.next_event() {
         match event.map_err(|e| bad(&path, e))? {
             LinearReadEvent::ReadRequest(n) => {
@@ -171,6 +173,11 @@ fn read_frame(cmd: &RenderCmd) -> Result<Frame, RunError> {
                     Record::Channel(c) => {
                         if let Some(i) = topics.iter().position(|t| *t == c.topic) {
                             ids[i] = Some(c.id);
+                        }
+                        if let Some(p) = c.topic.strip_suffix("/ground") {
+                            if prefixes.len() < 64 && !prefixes.iter().any(|q| q == p) {
+                                prefixes.push(p.to_string());
+                            }
                         }
                     }
                     Record::Message { header, data } => {
@@ -223,10 +230,22 @@ fn read_frame(cmd: &RenderCmd) -> Result<Frame, RunError> {
     if ids.iter().any(Option::is_none) {
         return Err(bad(
             &path,
-            format!(
-                "no {} channels: write the file with `ringscan decode --pipeline default` (and pass --sensor /NAME when it holds several sensors)",
-                topics.join(", ")
-            ),
+            if prefixes.is_empty() {
+                format!(
+                    "no {} channels: write the file with `ringscan decode --pipeline default`",
+                    topics.join(", ")
+                )
+            } else {
+                format!(
+                    "no {} channels; pipeline outputs here: --sensor {}",
+                    topics.join(", "),
+                    prefixes
+                        .iter()
+                        .map(|p| if p.is_empty() { "\"\"" } else { p.as_str() })
+                        .collect::<Vec<_>>()
+                        .join(" or --sensor ")
+                )
+            },
         ));
     }
     Err(bad(
