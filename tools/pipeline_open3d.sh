@@ -14,7 +14,9 @@
 #    voxel counts and cluster labels (tools/pipeline_dump.rs).
 # 3. tools/pipeline_open3d.py: voxel counts and cluster partitions against Open3D (exit 1 on
 #    any difference), then Open3D's voxel_down_sample + segment_plane + cluster_dbscan timed
-#    with one thread (OMP_NUM_THREADS=1).
+#    with one thread (OMP_NUM_THREADS=1), median of REPEAT runs, between two runs of
+#    `pipeline_dump --time REPEAT` (ringscan's voxel + ground + cluster, same parameters,
+#    same CPU, median of REPEAT runs).
 # 4. `cargo bench --bench pipeline` (tools/bench/pipeline.rs): ringscan's stages on the same
 #    sweeps, pinned to the same CPU.
 set -euo pipefail
@@ -30,9 +32,16 @@ if ! "$VENV/bin/python" -c "import open3d, numpy" 2>/dev/null; then
     "$VENV/bin/pip" install --quiet open3d-cpu==0.20.0 numpy==2.4.6
 fi
 
-cargo run --quiet --release --example pipeline_dump -- "$DIR"
+cargo build --quiet --release --example pipeline_dump
+DUMP="${CARGO_TARGET_DIR:-$ROOT/target}/release/examples/pipeline_dump"
+"$DUMP" "$DIR"
+echo "load average: $(cut -d' ' -f1-3 /proc/loadavg)"
+# ringscan, Open3D, ringscan again: the reference is timed between two ringscan runs.
+taskset -c "$CPU" "$DUMP" --time "${REPEAT:-10}"
 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 taskset -c "$CPU" \
     "$VENV/bin/python" "$ROOT/tools/pipeline_open3d.py" "$DIR" "${REPEAT:-10}"
+taskset -c "$CPU" "$DUMP" --time "${REPEAT:-10}"
+echo "load average: $(cut -d' ' -f1-3 /proc/loadavg)"
 
 if [ -z "${NO_BENCH:-}" ]; then
     cargo bench --bench pipeline --no-run --quiet

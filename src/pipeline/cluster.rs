@@ -47,8 +47,8 @@ pub struct ClusterParams {
 }
 
 impl ClusterParams {
-    /// PCL's usual defaults aside, a start for 10 Hz automotive sweeps: 0.5 m, 10 points,
-    /// no upper bound.
+    /// Parameters from their values (checked by [`Clusterer::new`]); e.g. `new(0.5, 10,
+    /// usize::MAX)`: 0.5 m, at least 10 points, no upper bound.
     pub fn new(tolerance_m: f64, min_points: usize, max_points: usize) -> Self {
         Self {
             tolerance_m,
