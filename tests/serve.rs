@@ -561,3 +561,71 @@ fn listen_serve_slow_client_does_not_slow_the_others() {
     );
     let _ = std::fs::remove_dir_all(&tmp);
 }
+
+/// `decode --pipeline default --serve`: the pipeline outputs are published with the payloads of
+/// the MCAP's `/ground`, `/obstacles` and `/clusters`.
+#[test]
+fn decode_serve_publishes_the_pipeline_outputs() {
+    let _g = serial();
+    let tmp = tmp_dir("pipeline");
+    let out = tmp.join("pipeline.mcap");
+    let served = start(&[
+        "decode".into(),
+        demo_pcap().display().to_string(),
+        "--out".into(),
+        out.display().to_string(),
+        "--pipeline".into(),
+        "default".into(),
+        "--serve".into(),
+        "127.0.0.1:0".into(),
+        "--json".into(),
+    ]);
+    let mut client = Client::connect(served.addr);
+    let topics = ["/ground", "/obstacles", "/clusters"];
+    for (k, t) in topics.iter().enumerate() {
+        let ch = client.wait_channel(t);
+        client.subscribe(100 + k as u32, ch);
+    }
+    let received = client.receive_all();
+    let (code, json, err) = served.finish(None);
+    assert_eq!(code, Some(0), "{err}");
+    let schema = |t: &str| {
+        let c = client.channels.iter().find(|c| c.1 == t).unwrap();
+        (c.2.clone(), c.3.clone())
+    };
+    assert_eq!(
+        schema("/ground"),
+        ("protobuf".into(), "foxglove.PointCloud".into())
+    );
+    assert_eq!(
+        schema("/obstacles"),
+        ("protobuf".into(), "foxglove.PointCloud".into())
+    );
+    assert_eq!(
+        schema("/clusters"),
+        ("protobuf".into(), "foxglove.SceneUpdate".into())
+    );
+    for (k, t) in topics.iter().enumerate() {
+        let got: Vec<Data> = received
+            .iter()
+            .filter(|d| d.subscription == 100 + k as u32)
+            .cloned()
+            .collect();
+        let file = mcap_messages(&out, t);
+        assert_eq!(file.len() as u64, json["sweeps"].as_u64().unwrap(), "{t}");
+        assert!(
+            got.len() >= 2,
+            "{t}: {} of {} received",
+            got.len(),
+            file.len()
+        );
+        assert_tail_of(&got, &file, t);
+        if *t == "/obstacles" {
+            let c = parse_cloud(&got[0].payload);
+            assert_eq!(c.point_stride, 28);
+            assert_eq!(c.field_names.last().map(String::as_str), Some("cluster"));
+        }
+    }
+    assert_eq!(json["serve"]["messages_dropped"], 0);
+    let _ = std::fs::remove_dir_all(&tmp);
+}
