@@ -27,6 +27,9 @@ use super::run::RunError;
 
 /// How long `close` lets clients' queues drain at the end of a run.
 const DRAIN: Duration = Duration::from_secs(2);
+/// Largest wait of `decode --serve` between two messages: a longer gap in the capture's clock
+/// is skipped.
+const MAX_PACE_GAP: Duration = Duration::from_secs(5);
 
 /// The `--serve` flags `decode` and `listen` share.
 #[derive(clap::Args, Debug, Clone, Default)]
@@ -173,13 +176,16 @@ impl LivePublisher {
         let Some(p) = self.pace.as_mut() else {
             return;
         };
-        let (wall0, log0) = *p.origin.get_or_insert((Instant::now(), log_time_ns));
-        let since = log_time_ns.saturating_sub(log0) as f64 / p.factor;
-        // A capture's clock can jump; never sleep more than a few seconds per sweep.
-        let due = wall0 + Duration::from_secs_f64((since * 1e-9).min(1e9));
         let now = Instant::now();
-        if due > now {
-            std::thread::sleep((due - now).min(Duration::from_secs(5)));
+        let (wall0, log0) = *p.origin.get_or_insert((now, log_time_ns));
+        let since_s = (log_time_ns as f64 - log0 as f64) * 1e-9 / p.factor;
+        let due_s = since_s - now.duration_since(wall0).as_secs_f64();
+        // A capture's clock that jumps back or more than MAX_PACE_GAP ahead starts the pacing
+        // afresh instead of rushing or stalling.
+        if since_s < 0.0 || due_s > MAX_PACE_GAP.as_secs_f64() {
+            p.origin = Some((now, log_time_ns));
+        } else if due_s > 0.0 {
+            std::thread::sleep(Duration::from_secs_f64(due_s));
         }
     }
 
