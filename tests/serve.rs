@@ -629,3 +629,103 @@ fn decode_serve_publishes_the_pipeline_outputs() {
     assert_eq!(json["serve"]["messages_dropped"], 0);
     let _ = std::fs::remove_dir_all(&tmp);
 }
+
+/// The protocol details, in process: `serverInfo`, `advertise` (also of later channels), invalid
+/// subscriptions ignored, `messageData` layout, `unsubscribe`, the connection limit, and that
+/// every publish is either queued or counted as dropped for a client that never reads.
+#[test]
+fn live_view_protocol_in_process() {
+    use ringscan::sink::live_view::{ChannelSpec, LiveView, ServeOptions};
+    use std::sync::atomic::Ordering;
+
+    let view = LiveView::bind(
+        "127.0.0.1:0".parse().unwrap(),
+        ServeOptions {
+            queue_messages: 2,
+            max_clients: 2,
+            ..ServeOptions::default()
+        },
+    )
+    .unwrap();
+    let spec = |topic| ChannelSpec {
+        topic,
+        encoding: "protobuf",
+        schema_name: "test.Msg",
+        schema: b"foobar",
+    };
+    let a = view.add_channel(&spec("/a"));
+    let b = view.add_channel(&spec("/b"));
+    let wait = |what: &str, f: &dyn Fn() -> bool| {
+        let t = Instant::now();
+        while !f() {
+            assert!(t.elapsed() < Duration::from_secs(10), "{what}");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    };
+
+    let mut c1 = Client::connect(view.local_addr());
+    assert_eq!(c1.wait_channel("/b"), u64::from(b.0));
+    assert_eq!(c1.server_name.as_deref(), Some("ringscan"));
+    let ch_a = c1.channels.iter().find(|c| c.1 == "/a").unwrap().clone();
+    // RFC 4648 test vector: "foobar" → "Zm9vYmFy".
+    assert_eq!(
+        (ch_a.0, ch_a.2.as_str(), ch_a.3.as_str(), ch_a.4.as_str()),
+        (u64::from(a.0), "protobuf", "test.Msg", "Zm9vYmFy")
+    );
+    // One valid subscription, one to an unknown channel, one reusing the id.
+    let msg = serde_json::json!({"op": "subscribe", "subscriptions": [
+        {"id": 5, "channelId": a.0}, {"id": 6, "channelId": 99}, {"id": 5, "channelId": b.0}]});
+    c1.ws.send(Message::text(msg.to_string())).unwrap();
+    wait("subscribed to /a", &|| view.has_subscribers(a));
+    assert!(
+        !view.has_subscribers(b),
+        "a reused subscription id is ignored"
+    );
+    assert_eq!(view.publish(b, 1, b"nobody"), 0);
+    assert_eq!(view.publish(a, 0x0102_0304_0506_0708, b"hello"), 1);
+    match c1.ws.read().unwrap() {
+        Message::Binary(f) => assert_eq!(
+            &f[..],
+            [1, 5, 0, 0, 0, 8, 7, 6, 5, 4, 3, 2, 1, b'h', b'e', b'l', b'l', b'o']
+        ),
+        m => panic!("expected messageData, got {m:?}"),
+    }
+    // A channel added later is advertised to the connected client.
+    let c = view.add_channel(&spec("/c"));
+    assert_eq!(c1.wait_channel("/c"), u64::from(c.0));
+    let unsub = serde_json::json!({"op": "unsubscribe", "subscriptionIds": [5]});
+    c1.ws.send(Message::text(unsub.to_string())).unwrap();
+    wait("unsubscribed", &|| !view.has_subscribers(a));
+
+    // A second client that subscribes and never reads; a third is over the limit.
+    let mut c2 = Client::connect(view.local_addr());
+    c2.wait_channel("/a");
+    c2.subscribe(1, u64::from(a.0));
+    wait("second client subscribed", &|| view.has_subscribers(a));
+    let refused = TcpStream::connect(view.local_addr()).and_then(|s| {
+        tungstenite::client::client(format!("ws://{}/", view.local_addr()), s)
+            .map(|_| ())
+            .map_err(|e| std::io::Error::other(e.to_string()))
+    });
+    assert!(refused.is_err(), "a third connection is refused");
+    let stats = view.stats();
+    wait("refusal counted", &|| {
+        stats.clients_refused.load(Ordering::Relaxed) == 1
+    });
+    let payload = vec![7u8; 256 << 10];
+    let mut queued = 0;
+    for i in 0..200 {
+        queued += view.publish(a, i, &payload);
+    }
+    let dropped = stats.messages_dropped.load(Ordering::Relaxed);
+    assert!(dropped > 0, "a client that never reads loses messages");
+    assert_eq!(
+        queued as u64 + dropped,
+        200,
+        "every message queued or counted"
+    );
+    let clients = view.close(Duration::from_millis(200));
+    assert_eq!(clients.len(), 2);
+    assert_eq!(clients.iter().map(|c| c.dropped).sum::<u64>(), dropped);
+    eprintln!("in process: 200 publishes of 256 KiB to a client that never reads: {queued} queued, {dropped} dropped");
+}

@@ -326,6 +326,7 @@ impl LivePublisher {
             "address": self.addr.to_string(),
             "clients_total": g(&s.clients_total),
             "handshakes_failed": g(&s.handshakes_failed),
+            "clients_refused": g(&s.clients_refused),
             "messages_queued": g(&s.messages_queued),
             "messages_sent": g(&s.messages_sent),
             "messages_dropped": g(&s.messages_dropped),

@@ -43,6 +43,8 @@ pub const OP_MESSAGE_DATA: u8 = 0x01;
 pub const DEFAULT_QUEUE_MESSAGES: usize = 8;
 /// Payload bytes queued per client at most, by default.
 pub const DEFAULT_QUEUE_BYTES: usize = 64 << 20;
+/// Connections (in the handshake or connected) served at once, by default.
+pub const DEFAULT_MAX_CLIENTS: usize = 16;
 /// Largest message a client may send (its requests are small JSON objects).
 const MAX_CLIENT_MESSAGE: usize = 1 << 20;
 /// Time a connection has to complete its WebSocket handshake.
@@ -60,6 +62,8 @@ pub struct ServeOptions {
     /// Payload bytes queued per client at most (a single larger message is still queued when
     /// the queue is empty, so no message is too large to be sent).
     pub queue_bytes: usize,
+    /// Connections served at once; more are closed at once (so memory stays bounded).
+    pub max_clients: usize,
 }
 
 impl Default for ServeOptions {
@@ -68,6 +72,7 @@ impl Default for ServeOptions {
             name: "ringscan".to_string(),
             queue_messages: DEFAULT_QUEUE_MESSAGES,
             queue_bytes: DEFAULT_QUEUE_BYTES,
+            max_clients: DEFAULT_MAX_CLIENTS,
         }
     }
 }
@@ -98,6 +103,8 @@ pub struct LiveViewStats {
     pub clients_total: AtomicU64,
     /// Connections refused or failed during the handshake (wrong subprotocol, not WebSocket).
     pub handshakes_failed: AtomicU64,
+    /// Connections closed at once because `max_clients` were being served.
+    pub clients_refused: AtomicU64,
     /// Messages handed to clients' queues.
     pub messages_queued: AtomicU64,
     /// Messages written to clients' sockets.
@@ -404,6 +411,12 @@ async fn serve(
             d = &mut stop => break d.unwrap_or(Duration::ZERO),
             accepted = listener.accept() => match accepted {
                 Ok((stream, peer)) => {
+                    if tasks.len() >= shared.opts.max_clients {
+                        shared.stats.clients_refused.fetch_add(1, Ordering::Relaxed);
+                        tracing::info!("live view: {peer} refused: {} connections served", tasks.len());
+                        drop(stream);
+                        continue;
+                    }
                     tasks.spawn(client(stream, peer, shared.clone()));
                 }
                 Err(e) => {
