@@ -49,6 +49,8 @@ pub const DEFAULT_MAX_CLIENTS: usize = 16;
 const MAX_CLIENT_MESSAGE: usize = 1 << 20;
 /// Time a connection has to complete its WebSocket handshake.
 const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(10);
+/// While closing, the wait for clients' queues ends after this long without a message written.
+const DRAIN_STALL: Duration = Duration::from_millis(300);
 /// Finished clients kept for [`LiveView::clients`].
 const CLIENT_HISTORY: usize = 64;
 
@@ -429,7 +431,21 @@ async fn serve(
         }
     };
     drop(listener);
-    let _ = tokio::time::timeout(drain, async { while tasks.join_next().await.is_some() {} }).await;
+    // Wait for the clients to write their queues: until all are done, `drain` is over, or no
+    // message was written for DRAIN_STALL (only clients that stopped reading are left).
+    let deadline = tokio::time::Instant::now() + drain;
+    let mut sent = shared.stats.messages_sent.load(Ordering::Relaxed);
+    let mut progress_at = tokio::time::Instant::now();
+    while !tasks.is_empty() && tokio::time::Instant::now() < deadline {
+        let _ = tokio::time::timeout(Duration::from_millis(20), tasks.join_next()).await;
+        let now_sent = shared.stats.messages_sent.load(Ordering::Relaxed);
+        if now_sent != sent {
+            sent = now_sent;
+            progress_at = tokio::time::Instant::now();
+        } else if progress_at.elapsed() >= DRAIN_STALL {
+            break;
+        }
+    }
 }
 
 /// Accepts the handshake only with the Foxglove subprotocol, and selects it.
