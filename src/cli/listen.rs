@@ -95,6 +95,8 @@ pub struct ListenArgs {
     pub duration: Option<Duration>,
     pub strict: bool,
     pub json: bool,
+    /// `--serve`: the live view.
+    pub serve: super::serve::ServeArgs,
 }
 
 /// From the decode thread to the main thread.
@@ -506,7 +508,9 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
         .map(|s| s.kernel_drops().unwrap_or(0))
         .collect();
 
-    // The decode thread.
+    // The live view (bound before the sockets report ready) and the decode thread.
+    let live_view = super::serve::LivePublisher::start(&args.serve, None)?;
+    let live_stats = live_view.as_ref().map(|l| l.stats());
     let stats = Arc::new(ReceiveStats::default());
     let live = Arc::new(Live::default());
     let (tx, rx) = std::sync::mpsc::sync_channel::<Received>(QUEUE_DATAGRAMS);
@@ -528,6 +532,7 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
                 let setup = (|| -> Result<(Session, Option<Files>), RunError> {
                     let mut session = Session::new(&opts)?;
                     session.set_sensor_hint(n_sensors);
+                    session.set_live(live_view);
                     let files = match out {
                         Some(base) => {
                             let current = Files::path_for(&base, split, 0);
@@ -646,7 +651,8 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
                 },
                 _ = tick.tick() => {
                     if terminal {
-                        eprint!("{}", status_line(&live, &stats, kernel_drops(&sockets), &mut prev));
+                        let serve = live_stats.as_deref().map(super::serve::status).unwrap_or_default();
+                        eprint!("{}{serve}", status_line(&live, &stats, kernel_drops(&sockets), &mut prev));
                         let _ = std::io::stderr().flush();
                     }
                 }

@@ -6,6 +6,7 @@ mod render;
 mod replay;
 mod run;
 mod sensors;
+mod serve;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -124,6 +125,12 @@ struct DecodeCmd {
     json: bool,
     #[command(flatten)]
     pipeline: pipeline::PipelineArgs,
+    #[command(flatten)]
+    serve: serve::ServeArgs,
+    /// With --serve: publish sweeps at this speed of their capture times (`1.0` = as recorded,
+    /// `2`, `0.5`, or `max` = as fast as they are decoded).
+    #[arg(long, value_name = "FACTOR|max", default_value = "1.0", value_parser = replay::parse_rate)]
+    serve_rate: ringscan::source::udp::Rate,
 }
 
 #[derive(clap::Args, Debug)]
@@ -218,6 +225,8 @@ struct ListenCmd {
     /// Print one JSON summary object on stdout at the end.
     #[arg(long)]
     json: bool,
+    #[command(flatten)]
+    serve: serve::ServeArgs,
 }
 
 #[derive(clap::Args, Debug)]
@@ -289,6 +298,8 @@ pub fn main() -> ExitCode {
                 json: c.json,
                 input_bytes: None,
                 pipeline: c.pipeline,
+                serve: c.serve,
+                serve_rate: c.serve_rate,
             };
             run::decode_command(&args)
         }
@@ -335,6 +346,7 @@ pub fn main() -> ExitCode {
                 duration,
                 strict: c.strict,
                 json: c.json,
+                serve: c.serve,
             };
             listen::listen_command(&args)
         }

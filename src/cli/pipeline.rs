@@ -144,6 +144,8 @@ pub struct PipelineRunner {
     clock_origin: Instant,
     /// IMU samples seen before a sensor's first sweep (the pipeline is made then).
     pending_imu: Vec<Vec<HeldImu>>,
+    /// `--serve`: outputs are published there too.
+    live: Option<super::serve::SharedPublisher>,
 }
 
 impl std::fmt::Debug for PipelineRunner {
@@ -231,7 +233,13 @@ impl PipelineRunner {
             tf_static: None,
             clock_origin: Instant::now(),
             pending_imu: Vec::new(),
+            live: None,
         }
+    }
+
+    /// Publishes the outputs to a live view too.
+    pub fn set_live(&mut self, live: Option<super::serve::SharedPublisher>) {
+        self.live = live;
     }
 
     /// Whether pipeline outputs are written (not only deskew).
@@ -375,6 +383,21 @@ impl PipelineRunner {
         if let Some(e) = &stats.deskew_error {
             sp.deskew_skipped += 1;
             sp.last_deskew_error = Some(e.to_string());
+        }
+        if let (Some(live), true) = (&self.live, outputs) {
+            let p = &sp.pipeline;
+            let (log_time, stamp) = (sweep.last_host_ns.max(0), sweep.timestamp_ns.max(0));
+            let (ground, obstacles) = (p.ground(), p.obstacles());
+            live.borrow_mut().pipeline(
+                idx,
+                &sp.frame_id,
+                log_time as u64,
+                stamp as u64,
+                ground,
+                obstacles,
+                p.obstacle_clusters(),
+                p.clusters(),
+            );
         }
         if let Some((sink, id)) = sink {
             let log_time = sweep.last_host_ns.max(0) as u64;

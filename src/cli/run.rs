@@ -52,6 +52,10 @@ pub struct DecodeArgs {
     pub json: bool,
     /// Decode these bytes instead of reading `input` (the demo).
     pub input_bytes: Option<&'static [u8]>,
+    /// `--serve`: the live view.
+    pub serve: super::serve::ServeArgs,
+    /// `--serve-rate`: publishing speed of the live view.
+    pub serve_rate: ringscan::source::udp::Rate,
     /// `--pipeline`, `--deskew`, `--extrinsics`.
     pub pipeline: PipelineArgs,
 }
@@ -122,6 +126,8 @@ struct Output {
     points: u64,
     imu_samples: u64,
     pipeline: Option<PipelineRunner>,
+    /// `--serve`: the live view, also fed by the pipeline.
+    live: Option<super::serve::SharedPublisher>,
 }
 
 impl Output {
@@ -196,6 +202,10 @@ impl Output {
             }
             self.sensors[idx].id = Some(id);
         }
+        if let Some(live) = &self.live {
+            live.borrow_mut()
+                .add_sensor(idx, &info.name, &info.topic_prefix);
+        }
         self.sensors[idx].registered = true;
         self.sensors[idx].info = Some(info);
         Ok(())
@@ -234,6 +244,9 @@ impl Output {
             }
             None => sweep,
         };
+        if let Some(live) = &self.live {
+            live.borrow_mut().sweep(idx, sweep);
+        }
         let (Some(sink), Some(id)) = (self.sink.as_mut(), self.sensors[idx].id) else {
             return;
         };
@@ -420,6 +433,7 @@ impl Session {
             points: 0,
             imu_samples: 0,
             pipeline,
+            live: None,
         };
         Ok(Self {
             demux,
@@ -473,8 +487,20 @@ impl Session {
         Ok(closed)
     }
 
-    /// Closes the output, if any.
+    /// Publishes the sweeps (and pipeline outputs) to a live view from now on (`--serve`).
+    pub fn set_live(&mut self, live: Option<super::serve::LivePublisher>) {
+        let live = live.map(|l| std::rc::Rc::new(std::cell::RefCell::new(l)));
+        if let Some(p) = self.out.pipeline.as_mut() {
+            p.set_live(live.clone());
+        }
+        self.out.live = live;
+    }
+
+    /// Closes the output, if any (and lets the live view's clients drain).
     pub fn close_sink(&mut self) -> Result<Option<SinkSummary>, SinkError> {
+        if let Some(live) = &self.out.live {
+            live.borrow_mut().close();
+        }
         match self.out.sink.take() {
             Some(s) => Ok(Some(s.finish()?)),
             None => Ok(None),
@@ -680,6 +706,9 @@ impl Session {
         if let Some(p) = out.pipeline.as_ref() {
             m.insert("pipeline".into(), p.summary());
         }
+        if let Some(live) = &out.live {
+            m.insert("serve".into(), live.borrow().summary());
+        }
         (m, dropped + malformed + missing)
     }
 }
@@ -806,6 +835,10 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
         None => None,
     };
     session.set_sink(sink);
+    session.set_live(super::serve::LivePublisher::start(
+        &args.serve,
+        Some(args.serve_rate),
+    )?);
     let result = match args.input_bytes {
         Some(b) => pump(PcapSource::new(b).map_err(serr)?, &mut session, None),
         None => {
@@ -943,6 +976,8 @@ pub fn info_command(
         json: json_out,
         input_bytes: None,
         pipeline: PipelineArgs::default(),
+        serve: Default::default(),
+        serve_rate: ringscan::source::udp::Rate::Max,
     };
     let s = decode_capture(&args)?;
     if json_out {
@@ -974,6 +1009,8 @@ pub fn demo_command(out: &Path, json_out: bool) -> Result<ExitCode, RunError> {
         json: json_out,
         input_bytes: Some(DEMO_PCAP),
         pipeline: PipelineArgs::default(),
+        serve: Default::default(),
+        serve_rate: ringscan::source::udp::Rate::Max,
     };
     let s = decode_capture(&args)?;
     if json_out {

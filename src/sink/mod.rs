@@ -17,11 +17,16 @@
 //! (zstd by default) and ends with a summary section (schemas, channels, statistics, chunk and
 //! attachment indexes), so readers seek instead of scanning.
 //!
+//! [`live_view`] (feature `serve`) publishes the same messages live over the Foxglove WebSocket
+//! protocol.
+//!
 //! [`create_file`] writes to `<path>.tmp-ringscan` and renames it into place only when
 //! [`McapSink::finish`] succeeds; a sink that is dropped or aborted removes its temporary file, so
 //! a half-written MCAP never appears at the target path.
 
 pub mod foxglove;
+#[cfg(feature = "serve")]
+pub mod live_view;
 pub mod mcap;
 pub mod ros2;
 pub mod scene;
