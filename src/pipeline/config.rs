@@ -47,9 +47,9 @@
 //! naming the key (`voxel.leaf_m`, …). The core holds only the plain struct and its checks;
 //! parsing TOML needs the `config` feature.
 
-use super::filter::{FilterConfig, FilterError};
 #[cfg(feature = "config")]
 use super::filter::CropBox;
+use super::filter::{FilterConfig, FilterError};
 use crate::deskew::Reference;
 
 /// Why a configuration was rejected.
