@@ -37,7 +37,7 @@ pub const METADATA_PATH: &str = "/api/v1/sensor/metadata";
 /// Datagrams the queue between the receive tasks and the decode thread holds at most.
 pub const QUEUE_DATAGRAMS: usize = 65_536;
 /// Payload bytes the queue holds at most (memory stays bounded under a flood).
-pub const QUEUE_BYTES: usize = 256 << 20;
+pub const QUEUE_BYTES: usize = 128 << 20;
 /// Time between two metadata requests to one sensor.
 const FETCH_RETRY: Duration = Duration::from_secs(5);
 
@@ -759,4 +759,44 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
         )));
     }
     Ok(ExitCode::SUCCESS)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn split_every_in_seconds_or_megabytes() {
+        assert_eq!(parse_split("60"), Ok(Split::Seconds(60.0)));
+        assert_eq!(parse_split("0.5s"), Ok(Split::Seconds(0.5)));
+        assert_eq!(parse_split("500MB"), Ok(Split::Bytes(500_000_000)));
+        assert_eq!(parse_split("2m"), Ok(Split::Bytes(2_000_000)));
+        for bad in ["", "0", "-1", "abc", "nanMB", "infs"] {
+            assert!(parse_split(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn sensor_with_or_without_port() {
+        assert_eq!(
+            parse_sensor("192.168.1.201"),
+            Ok((Ipv4Addr::new(192, 168, 1, 201), None))
+        );
+        assert_eq!(
+            parse_sensor("10.0.0.2:7502"),
+            Ok((Ipv4Addr::new(10, 0, 0, 2), Some(7502)))
+        );
+        assert!(parse_sensor("10.0.0.2:99999").is_err());
+        assert!(parse_sensor("sensor.local").is_err());
+    }
+
+    #[test]
+    fn split_file_names() {
+        let b = Path::new("/x/drive.mcap");
+        assert_eq!(Files::path_for(b, None, 3), PathBuf::from("/x/drive.mcap"));
+        assert_eq!(
+            Files::path_for(b, Some(Split::Seconds(1.0)), 12),
+            PathBuf::from("/x/drive_0012.mcap")
+        );
+    }
 }
