@@ -91,6 +91,8 @@ pub struct ListenArgs {
     pub interface: Ipv4Addr,
     /// Port of the sensors' HTTP API (Ouster metadata).
     pub api_port: u16,
+    /// Foxglove WebSocket server address (`--serve`).
+    pub serve: Option<SocketAddr>,
     pub recv_buffer: usize,
     /// Stop by itself after this long.
     pub duration: Option<Duration>,
@@ -548,6 +550,26 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
         a.len()
     };
 
+    // The live view, on its own runtime (started before ours: the SDK blocks on its own).
+    #[cfg(feature = "serve")]
+    let _view = match args.serve {
+        Some(addr) => {
+            let v = super::serve::start(addr).map_err(RunError::Live)?;
+            tracing::info!(
+                "serving sweeps over the Foxglove WebSocket protocol on port {}",
+                v.handle.port()
+            );
+            Some(v)
+        }
+        None => None,
+    };
+    #[cfg(not(feature = "serve"))]
+    if args.serve.is_some() {
+        return Err(RunError::Usage(
+            "--serve: this ringscan was built without the `serve` feature".into(),
+        ));
+    }
+
     // Sockets.
     let mut sockets = Vec::new();
     for &port in &ports {
@@ -596,12 +618,19 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
         let live = live.clone();
         let sensors = addrs.clone();
         let ev = ev_tx.clone();
+        let serve = args.serve.is_some();
         std::thread::Builder::new()
             .name("ringscan-decode".into())
             .spawn(move || -> Result<DecodeResult, RunError> {
                 let setup = (|| -> Result<(Session, Option<Files>), RunError> {
                     let mut session = Session::new(&opts)?;
                     session.set_sensor_hint(n_sensors);
+                    #[cfg(feature = "serve")]
+                    if serve {
+                        session.set_sweep_tap(super::serve::tap());
+                    }
+                    #[cfg(not(feature = "serve"))]
+                    let _ = serve;
                     let files = match out {
                         Some(base) => {
                             let current = Files::path_for(&base, split, 0);

@@ -4,6 +4,8 @@ mod listen;
 mod replay;
 mod run;
 mod sensors;
+#[cfg(feature = "serve")]
+mod serve;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -196,6 +198,10 @@ struct ListenCmd {
     /// Port of the sensors' HTTP API (Ouster metadata).
     #[arg(long, default_value_t = 80)]
     api_port: u16,
+    /// Publish every sweep live over the Foxglove WebSocket protocol at ADDR (e.g.
+    /// 127.0.0.1:8765; open it in Foxglove). Needs the `serve` feature.
+    #[arg(long, value_name = "ADDR")]
+    serve: Option<std::net::SocketAddr>,
     /// Receive buffer to ask for per socket, bytes (the kernel caps it at net.core.rmem_max).
     #[arg(long, default_value_t = ringscan::source::udp::DEFAULT_RECV_BUFFER)]
     recv_buffer: usize,
@@ -318,6 +324,7 @@ pub fn main() -> ExitCode {
                 multicast: c.multicast,
                 interface: c.interface,
                 api_port: c.api_port,
+                serve: c.serve,
                 recv_buffer: c.recv_buffer,
                 duration,
                 strict: c.strict,

@@ -116,7 +116,12 @@ struct Output {
     sweeps: u64,
     points: u64,
     imu_samples: u64,
+    /// Also given every sweep (`listen --serve`).
+    tap: Option<SweepTap>,
 }
+
+/// Receives every sweep with its sensor's name and points topic.
+pub type SweepTap = Box<dyn FnMut(&str, &str, &Sweep)>;
 
 impl Output {
     fn sensor(&mut self, idx: usize, addr: Ipv4Addr) -> &mut SensorOut {
@@ -213,6 +218,10 @@ impl Output {
                 self.error = Some(e);
                 return;
             }
+        }
+        if let Some(tap) = self.tap.as_mut() {
+            let s = &self.sensors[idx];
+            tap(&s.name, &s.topic, sweep);
         }
         let (Some(sink), Some(id)) = (self.sink.as_mut(), self.sensors[idx].id) else {
             return;
@@ -382,6 +391,7 @@ impl Session {
             sweeps: 0,
             points: 0,
             imu_samples: 0,
+            tap: None,
         };
         Ok(Self {
             demux,
@@ -398,6 +408,12 @@ impl Session {
     /// How many sensors are expected (one: topics without a sensor prefix).
     pub fn set_sensor_hint(&mut self, n: usize) {
         self.out.n_sensors_hint = n;
+    }
+
+    /// Every sweep also goes to `tap`.
+    #[cfg_attr(not(feature = "serve"), allow(dead_code))]
+    pub fn set_sweep_tap(&mut self, tap: SweepTap) {
+        self.out.tap = Some(tap);
     }
 
     /// Where sweeps go from now on (`None`: decode and count only).
