@@ -51,7 +51,9 @@
 
 pub mod calib;
 pub mod decode;
+pub mod deskew;
 pub mod model;
+pub mod pipeline;
 pub mod point;
 #[cfg(feature = "sim")]
 pub mod sim;

@@ -1,6 +1,8 @@
 //! Command-line front end: clap commands, progress, exit codes. No algorithms live here.
 
 mod listen;
+mod pipeline;
+mod render;
 mod replay;
 mod run;
 mod sensors;
@@ -37,6 +39,8 @@ enum Command {
     Listen(ListenCmd),
     /// Send a capture's UDP payloads again, paced by its timestamps.
     Replay(ReplayCmd),
+    /// Draw a bird's-eye picture of one sweep of an MCAP written with `--pipeline`.
+    Render(render::RenderCmd),
 }
 
 /// Point cloud message layout.
@@ -104,6 +108,10 @@ struct DecodeCmd {
     /// Message layout.
     #[arg(long, value_enum, default_value_t = FormatArg::Foxglove)]
     format: FormatArg,
+    /// MCAP chunk compression: `zstd` (level 1), `zstd:LEVEL` (−7 … 19; negative levels are
+    /// zstd's fast modes), `lz4` or `none`.
+    #[arg(long, default_value = "zstd")]
+    compression: run::ChunkCompression,
     /// Also write every UDP payload to `/raw`, so the drive can be decoded again later.
     #[arg(long)]
     raw: bool,
@@ -116,6 +124,8 @@ struct DecodeCmd {
     /// Print one JSON summary object on stdout at the end.
     #[arg(long)]
     json: bool,
+    #[command(flatten)]
+    pipeline: pipeline::PipelineArgs,
 }
 
 #[derive(clap::Args, Debug)]
@@ -277,6 +287,7 @@ pub fn main() -> ExitCode {
                 max_range: c.max_range,
                 fields_all: c.fields == FieldsArg::All,
                 format: c.format,
+                compression: c.compression,
                 raw: c.raw,
                 strict: c.strict,
                 crc: match c.crc {
@@ -286,6 +297,7 @@ pub fn main() -> ExitCode {
                 },
                 json: c.json,
                 input_bytes: None,
+                pipeline: c.pipeline,
             };
             run::decode_command(&args)
         }
@@ -319,6 +331,10 @@ pub fn main() -> ExitCode {
                         CrcArg::On => Some(true),
                         CrcArg::Off => Some(false),
                     },
+                    // The pipeline runs on decoded captures (`decode --pipeline`); live, the
+                    // sweeps are written as they come.
+                    pipeline: Default::default(),
+                    format: c.format,
                 },
                 format: c.format,
                 multicast: c.multicast,
@@ -349,6 +365,7 @@ pub fn main() -> ExitCode {
             per_source_loopback: c.per_source_loopback,
             json: c.json,
         }),
+        Command::Render(c) => render::render_command(&c),
     };
     match result {
         Ok(code) => code,

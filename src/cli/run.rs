@@ -16,6 +16,7 @@ use ringscan::source::pcap::{PcapSource, SourceError, SourceStats};
 use ringscan::sweep::{Demux, Facts, SensorStream, StreamError, Sweep};
 use serde_json::{json, Value};
 
+use super::pipeline::{PipelineArgs, PipelineRunner};
 use super::sensors::{self, load_calibs, CalibSpec, Chooser, Common};
 use super::FormatArg;
 
@@ -41,6 +42,8 @@ pub struct DecodeArgs {
     pub min_range: Option<f32>,
     pub max_range: Option<f32>,
     pub fields_all: bool,
+    /// `--compression`.
+    pub compression: ChunkCompression,
     pub format: FormatArg,
     pub raw: bool,
     pub strict: bool,
@@ -49,6 +52,8 @@ pub struct DecodeArgs {
     pub json: bool,
     /// Decode these bytes instead of reading `input` (the demo).
     pub input_bytes: Option<&'static [u8]>,
+    /// `--pipeline`, `--deskew`, `--extrinsics`.
+    pub pipeline: PipelineArgs,
 }
 
 /// Why a run failed.
@@ -116,7 +121,8 @@ struct Output {
     sweeps: u64,
     points: u64,
     imu_samples: u64,
-    /// Also given every sweep (`listen --serve`).
+    pipeline: Option<PipelineRunner>,
+    /// Also given every sweep as written (`listen --serve`).
     tap: Option<SweepTap>,
 }
 
@@ -219,6 +225,20 @@ impl Output {
                 return;
             }
         }
+        // The pipeline (when asked for) deskews a copy of the sweep, which is written instead.
+        let sweep = match self.pipeline.as_mut() {
+            Some(p) => {
+                let sink = self.sink.as_mut().zip(self.sensors[idx].id);
+                match p.process(idx, &self.sensors[idx].name, sweep, sink) {
+                    Ok(s) => s,
+                    Err(e) => {
+                        self.error = Some(e);
+                        return;
+                    }
+                }
+            }
+            None => sweep,
+        };
         if let Some(tap) = self.tap.as_mut() {
             let s = &self.sensors[idx];
             tap(&s.name, &s.topic, sweep);
@@ -301,6 +321,10 @@ pub struct SessionOptions {
     pub fields_all: bool,
     pub raw: bool,
     pub crc: Option<bool>,
+    /// `--pipeline`, `--deskew`, `--extrinsics`.
+    pub pipeline: PipelineArgs,
+    /// Points message layout (the pipeline's outputs need `foxglove`).
+    pub format: FormatArg,
 }
 
 impl DecodeArgs {
@@ -316,6 +340,8 @@ impl DecodeArgs {
             fields_all: self.fields_all,
             raw: self.raw,
             crc: self.crc,
+            pipeline: self.pipeline.clone(),
+            format: self.format,
         }
     }
 }
@@ -360,6 +386,17 @@ impl Session {
                 decode.min_range, decode.max_range
             )));
         }
+        let pipeline = opts
+            .pipeline
+            .setup()
+            .map_err(RunError::Usage)?
+            .map(PipelineRunner::new);
+        if pipeline.as_ref().is_some_and(PipelineRunner::outputs) && opts.format == FormatArg::Ros2
+        {
+            return Err(RunError::Usage(
+                "--pipeline: its outputs are written with --format foxglove only".into(),
+            ));
+        }
         let calibs = load_calibs(&opts.calib)?;
         let cut = (opts.cut_angle_deg * 100.0).round() as u16 % 36_000;
         let chooser = std::rc::Rc::new(std::cell::RefCell::new(Chooser::new(
@@ -391,6 +428,7 @@ impl Session {
             sweeps: 0,
             points: 0,
             imu_samples: 0,
+            pipeline,
             tap: None,
         };
         Ok(Self {
@@ -540,8 +578,12 @@ impl Session {
         }
         if let Some(SensorStream::Ouster(s)) = demux.stream_mut(idx) {
             let id = out.sensors.get(idx).and_then(|x| x.id);
+            let imu_to_sensor = s.info().imu_to_sensor;
             for smp in s.drain_imu() {
                 out.imu_samples += 1;
+                if let Some(p) = out.pipeline.as_mut() {
+                    p.push_imu(idx, &imu_to_sensor, &smp);
+                }
                 if let (Some(sink), Some(id)) = (out.sink.as_mut(), id) {
                     let msg = json!({
                         "timestamp_ns": smp.sensor_ns,
@@ -666,6 +708,9 @@ impl Session {
             }),
         );
         m.insert("sensors".into(), Value::Array(sensors));
+        if let Some(p) = out.pipeline.as_ref() {
+            m.insert("pipeline".into(), p.summary());
+        }
         (m, dropped + malformed + missing)
     }
 }
@@ -690,14 +735,75 @@ pub fn output_json(
 
 /// Sink options for `--format`.
 pub fn sink_options(format: FormatArg) -> SinkOptions {
+    sink_options_with(format, ChunkCompression::default())
+}
+
+/// The sink options of `--format` and `--compression`.
+pub fn sink_options_with(format: FormatArg, compression: ChunkCompression) -> SinkOptions {
     SinkOptions {
         format: if format == FormatArg::Ros2 {
             Format::Ros2
         } else {
             Format::Foxglove
         },
-        compression: Compression::Zstd,
+        compression: compression.kind,
+        zstd_level: compression.zstd_level,
         ..SinkOptions::default()
+    }
+}
+
+/// `--compression`: how MCAP chunks are compressed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ChunkCompression {
+    /// zstd, lz4 or none.
+    pub kind: Compression,
+    /// The zstd level (ignored otherwise).
+    pub zstd_level: i32,
+}
+
+impl Default for ChunkCompression {
+    fn default() -> Self {
+        Self {
+            kind: Compression::Zstd,
+            zstd_level: ringscan::sink::mcap::DEFAULT_ZSTD_LEVEL,
+        }
+    }
+}
+
+impl std::str::FromStr for ChunkCompression {
+    type Err = String;
+
+    /// `zstd`, `zstd:LEVEL`, `lz4` or `none`.
+    fn from_str(s: &str) -> Result<Self, String> {
+        let levels = ringscan::sink::mcap::ZSTD_LEVELS;
+        match s {
+            "zstd" => Ok(Self::default()),
+            "lz4" => Ok(Self {
+                kind: Compression::Lz4,
+                ..Self::default()
+            }),
+            "none" => Ok(Self {
+                kind: Compression::None,
+                ..Self::default()
+            }),
+            _ => {
+                let level = s
+                    .strip_prefix("zstd:")
+                    .and_then(|l| l.parse::<i32>().ok())
+                    .filter(|l| levels.contains(l) && *l != 0)
+                    .ok_or_else(|| {
+                        format!(
+                            "{s:?}: expected zstd, zstd:LEVEL (LEVEL {} … {}, not 0; negative levels are zstd's fast modes), lz4 or none",
+                            levels.start(),
+                            levels.end()
+                        )
+                    })?;
+                Ok(Self {
+                    kind: Compression::Zstd,
+                    zstd_level: level,
+                })
+            }
+        }
     }
 }
 
@@ -724,7 +830,10 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
     }
     session.set_sensor_hint(n_sensors_hint);
     let sink = match &args.out {
-        Some(p) => Some(create_file(p, sink_options(args.format))?),
+        Some(p) => Some(create_file(
+            p,
+            sink_options_with(args.format, args.compression),
+        )?),
         None => None,
     };
     session.set_sink(sink);
@@ -857,12 +966,14 @@ pub fn info_command(
         min_range: None,
         max_range: None,
         fields_all: false,
+        compression: ChunkCompression::default(),
         format: FormatArg::Foxglove,
         raw: false,
         strict: false,
         crc: None,
         json: json_out,
         input_bytes: None,
+        pipeline: PipelineArgs::default(),
     };
     let s = decode_capture(&args)?;
     if json_out {
@@ -886,12 +997,14 @@ pub fn demo_command(out: &Path, json_out: bool) -> Result<ExitCode, RunError> {
         min_range: None,
         max_range: None,
         fields_all: false,
+        compression: ChunkCompression::default(),
         format: FormatArg::Foxglove,
         raw: false,
         strict: false,
         crc: None,
         json: json_out,
         input_bytes: Some(DEMO_PCAP),
+        pipeline: PipelineArgs::default(),
     };
     let s = decode_capture(&args)?;
     if json_out {
