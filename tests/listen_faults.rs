@@ -327,3 +327,65 @@ fn ouster_metadata_from_its_http_api_and_again_after_a_new_init_id() {
     assert!(live[n - 3..] == truth[..], "run 3 differs from decode");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The `/diagnostics` messages with `"health": true`, in file order.
+fn health_messages(path: &Path) -> Vec<serde_json::Value> {
+    let bytes = std::fs::read(path).unwrap();
+    mcap::MessageStream::new(&bytes)
+        .unwrap()
+        .map(|m| m.unwrap())
+        .filter(|m| m.channel.topic.ends_with("/diagnostics"))
+        .map(|m| serde_json::from_slice::<serde_json::Value>(&m.data).unwrap())
+        .filter(|v| v["health"] == true)
+        .collect()
+}
+
+#[test]
+fn health_goes_to_diagnostics_once_a_second() {
+    let Some(c) = common::captures() else { return };
+    let _g = serial();
+    let dir = tmpdir("health");
+    let o = c.join("ouster-lidar__ouster-sdk/tests/pcaps");
+    let pcap = o.join("OS-1-128_v2.3.0_1024x10_lb_n3.pcap");
+    let meta = o.join("OS-1-128_v2.3.0_1024x10.json");
+    // The truth: alert_flags, byte 12 of each lidar packet's standard header.
+    let dgrams = common::datagrams(&pcap);
+    let seen = dgrams
+        .iter()
+        .filter(|d| d.2.len() == 8448)
+        .fold(0u8, |a, d| a | d.2[12]);
+    let offset = free_offset(&[7502, 7503]);
+    let out = dir.join("health.mcap");
+    let l = start_listen(&[
+        "--sensor".into(),
+        format!("127.0.0.1:{}", 7502 + offset),
+        "--sensor".into(),
+        format!("127.0.0.1:{}", 7503 + offset),
+        "--calib".into(),
+        meta.display().to_string(),
+        "--out".into(),
+        out.display().to_string(),
+    ]);
+    // 0.3 s of packets at a tenth of real time: 3 s.
+    replay(&pcap, offset, "0.1", &[]);
+    std::thread::sleep(Duration::from_millis(1200));
+    let (code, _, err) = l.stop("INT");
+    assert_eq!(code, Some(0), "{err}");
+    let h = health_messages(&out);
+    assert!(h.len() >= 2, "{} health messages", h.len());
+    let last = h.last().unwrap();
+    assert_eq!(last["kind"], "ouster");
+    assert_eq!(last["receive"]["datagrams"], dgrams.len());
+    assert_eq!(last["alert_flags"]["seen"], seen);
+    assert_eq!(last["lidar_packets"], 192);
+    for k in ["shot_limiting", "thermal_shutdown", "init_id"] {
+        assert!(!last[k].is_null(), "{k}: {last}");
+    }
+    // Counters only grow.
+    let n: Vec<u64> = h
+        .iter()
+        .map(|v| v["receive"]["datagrams"].as_u64().unwrap())
+        .collect();
+    assert!(n.windows(2).all(|w| w[0] <= w[1]), "{n:?}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -23,6 +23,7 @@ use ringscan::sink::mcap::SinkSummary;
 use ringscan::sink::{McapSink, SinkError};
 use ringscan::source::udp::{self, BoundSocket, Queue, ReceiveStats, Received, SocketOptions};
 use ringscan::sweep::SensorStream;
+use ringscan::wire::ouster::LidarPacket;
 use serde_json::{json, Value};
 
 use super::run::{output_json, sink_options, RunError, Session, SessionOptions, Sink};
@@ -37,7 +38,7 @@ pub const METADATA_PATH: &str = "/api/v1/sensor/metadata";
 /// Datagrams the queue between the receive tasks and the decode thread holds at most.
 pub const QUEUE_DATAGRAMS: usize = 65_536;
 /// Payload bytes the queue holds at most (memory stays bounded under a flood).
-pub const QUEUE_BYTES: usize = 256 << 20;
+pub const QUEUE_BYTES: usize = 128 << 20;
 /// Time between two metadata requests to one sensor.
 const FETCH_RETRY: Duration = Duration::from_secs(5);
 
@@ -214,6 +215,10 @@ struct DecodeThread {
     asked: HashMap<Ipv4Addr, Instant>,
     /// Ouster `init_id` epochs seen per sensor index.
     epochs: Vec<u64>,
+    /// Ouster alert flags per sensor index: (last, every flag seen, packets with a flag set).
+    alerts: Vec<(u8, u8, u64)>,
+    /// When the last health diagnostics were written.
+    last_health: Instant,
 }
 
 impl DecodeThread {
@@ -234,6 +239,7 @@ impl DecodeThread {
                     if self.session.demux().stats().ignored > ignored {
                         self.unclaimed(*r.src.ip(), r.payload.len());
                     }
+                    self.note_alerts(*r.src.ip(), &r.payload);
                     let (sweeps, points) = self.session.totals();
                     self.live.sweeps.store(sweeps, Ordering::Relaxed);
                     self.live.points.store(points, Ordering::Relaxed);
@@ -283,7 +289,75 @@ impl DecodeThread {
         let _ = self.events.send(Event::Fetch(addr));
     }
 
+    /// Ouster lidar packets carry alert flags in their header: kept for the health messages.
+    fn note_alerts(&mut self, addr: Ipv4Addr, payload: &[u8]) {
+        let found = self
+            .session
+            .demux()
+            .sensors()
+            .enumerate()
+            .find(|(_, (a, _, _))| *a == addr);
+        let Some((idx, (_, SensorStream::Ouster(s), _))) = found else {
+            return;
+        };
+        if payload.len() != s.info().lidar_packet_bytes() {
+            return;
+        }
+        let header = s.decoder().header_kind();
+        let Ok(p) = LidarPacket::with_header(payload, &s.info().format, header) else {
+            return;
+        };
+        let flags = p.alert_flags();
+        if self.alerts.len() <= idx {
+            self.alerts.resize(idx + 1, (0, 0, 0));
+        }
+        let a = &mut self.alerts[idx];
+        a.0 = flags;
+        a.1 |= flags;
+        if flags != 0 {
+            a.2 += 1;
+        }
+    }
+
+    /// Once a second, per sensor: its counters and health (Velodyne PPS and GPS; Ouster alert
+    /// flags, shot limiting, thermal shutdown, init_id) and the receive side's, to
+    /// `/diagnostics` with `"health": true`.
+    fn write_health(&mut self) -> Result<(), RunError> {
+        let now = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX));
+        let receive = json!({
+            "datagrams": self.stats.datagrams.load(Ordering::Relaxed),
+            "queue_dropped": self.stats.queue_dropped.load(Ordering::Relaxed),
+            "other_source": self.stats.other_source.load(Ordering::Relaxed),
+            "queued_bytes": self.stats.queued_bytes.load(Ordering::Relaxed),
+        });
+        let mut msgs = Vec::new();
+        for (idx, (_, stream, _)) in self.session.demux().sensors().enumerate() {
+            let (mut v, _) = super::sensors::sensor_summary(stream);
+            if let Some(o) = v.as_object_mut() {
+                o.insert("health".into(), json!(true));
+                o.insert("receive".into(), receive.clone());
+                if let Some(&(last, seen, n)) = self.alerts.get(idx) {
+                    o.insert(
+                        "alert_flags".into(),
+                        json!({"last": last, "seen": seen, "packets": n}),
+                    );
+                }
+            }
+            msgs.push((idx, v));
+        }
+        for (idx, v) in msgs {
+            self.session.write_diagnostics(idx, now, &v)?;
+        }
+        Ok(())
+    }
+
     fn housekeeping(&mut self) -> Result<(), RunError> {
+        if self.last_health.elapsed() >= Duration::from_secs(1) {
+            self.last_health = Instant::now();
+            self.write_health()?;
+        }
         while let Ok(c) = self.ctl.try_recv() {
             match c {
                 Control::Metadata(addr, name, bytes) => self.on_metadata(addr, name, bytes),
@@ -575,6 +649,8 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
                     live,
                     asked: HashMap::new(),
                     epochs: Vec::new(),
+                    alerts: Vec::new(),
+                    last_health: Instant::now(),
                 };
                 let r = t.run(rx);
                 if r.is_err() {
@@ -765,4 +841,44 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
         )));
     }
     Ok(ExitCode::SUCCESS)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn split_every_in_seconds_or_megabytes() {
+        assert_eq!(parse_split("60"), Ok(Split::Seconds(60.0)));
+        assert_eq!(parse_split("0.5s"), Ok(Split::Seconds(0.5)));
+        assert_eq!(parse_split("500MB"), Ok(Split::Bytes(500_000_000)));
+        assert_eq!(parse_split("2m"), Ok(Split::Bytes(2_000_000)));
+        for bad in ["", "0", "-1", "abc", "nanMB", "infs"] {
+            assert!(parse_split(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn sensor_with_or_without_port() {
+        assert_eq!(
+            parse_sensor("192.168.1.201"),
+            Ok((Ipv4Addr::new(192, 168, 1, 201), None))
+        );
+        assert_eq!(
+            parse_sensor("10.0.0.2:7502"),
+            Ok((Ipv4Addr::new(10, 0, 0, 2), Some(7502)))
+        );
+        assert!(parse_sensor("10.0.0.2:99999").is_err());
+        assert!(parse_sensor("sensor.local").is_err());
+    }
+
+    #[test]
+    fn split_file_names() {
+        let b = Path::new("/x/drive.mcap");
+        assert_eq!(Files::path_for(b, None, 3), PathBuf::from("/x/drive.mcap"));
+        assert_eq!(
+            Files::path_for(b, Some(Split::Seconds(1.0)), 12),
+            PathBuf::from("/x/drive_0012.mcap")
+        );
+    }
 }

@@ -249,6 +249,9 @@ struct ReplayCmd {
     /// (127.0.0.1, 127.0.0.2, … in order of appearance), so `listen` tells them apart.
     #[arg(long)]
     per_source_loopback: bool,
+    /// Stop sending after this many seconds.
+    #[arg(long, value_name = "S")]
+    duration: Option<f64>,
     /// Print a JSON summary.
     #[arg(long)]
     json: bool,
@@ -351,6 +354,14 @@ pub fn main() -> ExitCode {
             listen::listen_command(&args)
         }
         Command::Replay(c) => replay::replay_command(&replay::ReplayArgs {
+            duration: match c.duration {
+                Some(d) if d.is_finite() && d > 0.0 => Some(std::time::Duration::from_secs_f64(d)),
+                Some(d) => {
+                    eprintln!("error: --duration {d}: expected a positive number of seconds");
+                    return ExitCode::from(2);
+                }
+                None => None,
+            },
             input: c.input,
             to: c.to,
             port_offset: c.port_offset,

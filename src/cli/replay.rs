@@ -24,6 +24,8 @@ pub struct ReplayArgs {
     pub loops: u32,
     /// Send each original source's datagrams from its own loopback address 127.0.0.k.
     pub per_source_loopback: bool,
+    /// Stop sending after this long.
+    pub duration: Option<Duration>,
     pub json: bool,
 }
 
@@ -107,10 +109,14 @@ pub fn replay_command(args: &ReplayArgs) -> Result<ExitCode, RunError> {
     // Where each loop starts on the replay clock.
     let mut loop_base_ns: i64 = 0;
     let mut last_rel_ns: i64 = 0;
-    for _ in 0..args.loops.max(1) {
+    let over = |started: &Instant| args.duration.is_some_and(|d| started.elapsed() >= d);
+    'loops: for _ in 0..args.loops.max(1) {
         let mut src = PcapSource::open(&args.input).map_err(serr)?;
         let mut loop_first: Option<i64> = None;
         while let Some(d) = src.next_datagram().map_err(serr)? {
+            if over(&started) {
+                break 'loops;
+            }
             let lf = *loop_first.get_or_insert(d.time_ns);
             let rel = loop_base_ns + d.time_ns.saturating_sub(lf);
             last_rel_ns = last_rel_ns.max(rel);

@@ -507,6 +507,21 @@ impl Session {
         }
     }
 
+    /// Writes a diagnostics object for sensor `idx` (e.g. `listen`'s periodic health), if it
+    /// is registered in an output.
+    pub fn write_diagnostics(
+        &mut self,
+        idx: usize,
+        log_time_ns: u64,
+        json: &Value,
+    ) -> Result<(), SinkError> {
+        let id = self.out.sensors.get(idx).and_then(|s| s.id);
+        match (self.out.sink.as_mut(), id) {
+            (Some(sink), Some(id)) => sink.write_diagnostics(id, log_time_ns, json),
+            _ => Ok(()),
+        }
+    }
+
     /// Sweeps and points so far.
     pub fn totals(&self) -> (u64, u64) {
         (self.out.sweeps, self.out.points)

@@ -133,7 +133,6 @@ impl Chooser {
 
     /// Adds a calibration after the start (Ouster metadata fetched from a sensor); it serves
     /// sensors first seen from now on.
-    #[allow(dead_code)] // used by `listen`
     pub fn add(&mut self, c: &CalibSpec) {
         match &c.kind {
             CalibKind::Velodyne(v) => self.velodyne.push((c.addr, v.clone())),

@@ -100,9 +100,12 @@ pub fn bind(opts: &SocketOptions) -> Result<BoundSocket, UdpError> {
             .set_reuse_address(true)
             .map_err(io_err(ctx("SO_REUSEADDR")))?;
     }
-    // Ask for the whole buffer; the kernel silently caps it at net.core.rmem_max. Read back what
-    // was granted.
-    let _ = socket.set_recv_buffer_size(opts.recv_buffer);
+    // Ask for the whole buffer: past net.core.rmem_max where the process may (SO_RCVBUFFORCE,
+    // CAP_NET_ADMIN), else SO_RCVBUF, which the kernel silently caps at rmem_max. Read back
+    // what was granted.
+    if !force_recv_buffer(&socket, opts.recv_buffer) {
+        let _ = socket.set_recv_buffer_size(opts.recv_buffer);
+    }
     let granted = socket
         .recv_buffer_size()
         .map_err(io_err(ctx("reading SO_RCVBUF")))?;
@@ -129,6 +132,17 @@ pub fn bind(opts: &SocketOptions) -> Result<BoundSocket, UdpError> {
         granted_recv_buffer: granted,
         inode,
     })
+}
+
+#[cfg(target_os = "linux")]
+fn force_recv_buffer(socket: &Socket, size: usize) -> bool {
+    use nix::sys::socket::{setsockopt, sockopt::RcvBufForce};
+    setsockopt(socket, RcvBufForce, &size).is_ok()
+}
+
+#[cfg(not(target_os = "linux"))]
+fn force_recv_buffer(_: &Socket, _: usize) -> bool {
+    false
 }
 
 /// `net.core.rmem_max`, the largest receive buffer an unprivileged socket may ask for (Linux).

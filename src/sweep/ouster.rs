@@ -5,7 +5,7 @@
 //! each finished sweep (one sensor frame). A sweep is cut when a packet of a newer `frame_id`
 //! arrives (half-range signed difference, so the 16-bit — FUSA: 32-bit — counter wraps);
 //! one older frame stays open as a reorder window, and packets older than that are counted
-//! as late and dropped. The sweep's timestamp is its earliest column timestamp; `t` of every
+//! as late and dropped, as are duplicates (packets whose columns all arrived already). The sweep's timestamp is its earliest column timestamp; `t` of every
 //! point is measured from it (points already in the sweep are moved if an earlier column
 //! arrives late). Missing columns = columns of the metadata's column window that never
 //! arrived with status bit 0 set. A packet whose `init_id` differs from the metadata's (the
@@ -71,7 +71,8 @@ pub struct OusterStats {
     pub crc_failures: u64,
     /// Packets whose serial number is not the metadata's.
     pub wrong_sensor: u64,
-    /// Packets of a frame older than the reorder window.
+    /// Packets of a frame older than the reorder window, and duplicates (every valid column
+    /// of the packet already arrived in its open frame).
     pub late: u64,
     /// Times the sensor's `init_id` changed (re-initialisation).
     pub epochs: u64,
@@ -415,8 +416,24 @@ impl OusterStream {
                 self.open.len() - 1
             }
         };
-        // The earliest valid column of this packet.
         let w = self.cfg.info.columns_per_frame;
+        // A packet whose valid columns all arrived already (a duplicate datagram, a sender
+        // repeating itself) is dropped and counted as late: appended again, it would grow the
+        // open frame without bound.
+        {
+            let seen = &self.open[idx].seen;
+            let mut valid = packet
+                .columns()
+                .filter(|c| c.valid() && usize::from(c.measurement_id()) < w)
+                .peekable();
+            if valid.peek().is_some()
+                && valid.all(|c| seen.get(usize::from(c.measurement_id())) == Some(&true))
+            {
+                self.stats.late += 1;
+                return;
+            }
+        }
+        // The earliest valid column of this packet.
         let first_ts = packet
             .columns()
             .filter(|c| c.valid() && usize::from(c.measurement_id()) < w)
