@@ -841,7 +841,7 @@ fn single_sensor_topics_have_no_prefix() {
 fn every_zstd_level_reads_back_and_levels_trade_size() {
     // Fast (negative) and regular levels: zstd chunks that the official reader decompresses to
     // the same messages; a higher level never makes the file larger on these sweeps by more
-    // than noise, and the fastest is larger than the default (so the level reaches zstd).
+    // than noise, and the fastest is larger than level 1 (so the level reaches zstd).
     let mut sizes = Vec::new();
     for level in [-7, -3, -1, 1, 3, 9] {
         let w = write_file_at(Format::Foxglove, Compression::Zstd, level);

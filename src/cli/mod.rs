@@ -107,7 +107,7 @@ struct DecodeCmd {
     /// Message layout.
     #[arg(long, value_enum, default_value_t = FormatArg::Foxglove)]
     format: FormatArg,
-    /// MCAP chunk compression: `zstd` (level 1), `zstd:LEVEL` (−7 … 19; negative levels are
+    /// MCAP chunk compression: `zstd` (level −3, a fast level), `zstd:LEVEL` (−7 … 19; negative levels are
     /// zstd's fast modes), `lz4` or `none`.
     #[arg(long, default_value = "zstd")]
     compression: run::ChunkCompression,

@@ -45,8 +45,14 @@ pub enum Format {
     Ros2,
 }
 
-/// Zstandard level of [`Compression::Zstd`] unless [`SinkOptions::zstd_level`] says otherwise.
-pub const DEFAULT_ZSTD_LEVEL: i32 = 1;
+/// Zstandard level of [`Compression::Zstd`] unless [`SinkOptions::zstd_level`] says otherwise:
+/// −3, one of zstd's fast levels. A driver records beside the perception stack on the vehicle,
+/// so the default spends the least CPU that still compresses: on the HDL-32E capture level −3
+/// takes 0.59× the CPU of level 1 for files 1.30× as large (ratio 1.22 vs 1.59; LZ4 is both
+/// slower and larger, 1.29), which is what keeps `decode --out` above 50× real time on two
+/// cores (`tools/bench_mcap_e2e.sh`, BENCHMARKS.md). `--compression zstd:1` (or higher) when
+/// size matters more.
+pub const DEFAULT_ZSTD_LEVEL: i32 = -3;
 
 /// Zstandard levels [`SinkOptions::zstd_level`] accepts: zstd's "fast" levels down to −7 and the
 /// regular ones up to 19 (higher levels need more memory than a driver should take).
@@ -55,9 +61,9 @@ pub const ZSTD_LEVELS: core::ops::RangeInclusive<i32> = -7..=19;
 /// Chunk compression.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Compression {
-    /// Zstandard at [`SinkOptions::zstd_level`], multi-threaded (the default). Level 1 keeps 97 % of
-    /// level 3's ratio on point clouds (1.59 vs 1.64 on the HDL-32E capture) at twice the
-    /// speed: `tools/bench/mcap_compression.rs`, figures in BENCHMARKS.md.
+    /// Zstandard at [`SinkOptions::zstd_level`] ([`DEFAULT_ZSTD_LEVEL`] unless set),
+    /// multi-threaded (the default). Levels and what they cost: `tools/bench/mcap_compression.rs`,
+    /// `tools/bench_mcap_e2e.sh`, figures in BENCHMARKS.md.
     #[default]
     Zstd,
     /// LZ4 (faster, larger).
