@@ -52,6 +52,7 @@
 pub mod calib;
 pub mod decode;
 pub mod model;
+pub mod pipeline;
 pub mod point;
 #[cfg(feature = "sim")]
 pub mod sim;

@@ -1,0 +1,5 @@
+//! Point-cloud stages applied to sweeps after decoding: registration (ICP), the odometry's
+//! local map, LiDAR odometry and its degeneracy analysis. No I/O, no clock.
+
+pub mod icp;
+pub mod map;
