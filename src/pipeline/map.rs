@@ -1,7 +1,8 @@
 //! The local map of the odometry: a voxel hash of world points, bounded in points per voxel
 //! and in distance from the sensor, plus the voxel subsampling that prepares a sweep for ICP.
 //!
-//! - **Keys**: a point's voxel is `floor(p / voxel_size_m)` per axis, packed into one `u64`
+//! - **Keys**: a point's voxel is `floor(p / voxel_size_m)` per axis (divided, not multiplied
+//!   by the inverse, as KISS-ICP computes it), packed into one `u64`
 //!   (three 21-bit fields). Points whose voxel index is beyond ±2²⁰ on an axis (1 048 km at
 //!   1 m voxels) are rejected rather than aliased.
 //! - **Storage**: every voxel owns one fixed slot of `max_points_per_voxel` points in one flat
@@ -20,7 +21,7 @@
 //!
 //! No I/O, no clock.
 
-use std::collections::{HashMap, HashSet};
+use std::collections::HashMap;
 use std::hash::{BuildHasher, Hasher};
 
 use nalgebra::{Isometry3, Matrix3, Vector3};
@@ -45,13 +46,14 @@ fn pack(ix: i64, iy: i64, iz: i64) -> Option<u64> {
     )
 }
 
-/// Integer voxel coordinates of a point; `None` for non-finite or out-of-range points.
+/// Integer voxel coordinates `floor(p / size)` of a point (a division, as KISS-ICP does);
+/// `None` for non-finite or out-of-range points.
 #[inline]
-fn voxel_coords(p: &Vector3<f64>, inv_size: f64) -> Option<(i64, i64, i64)> {
+fn voxel_coords(p: &Vector3<f64>, size: f64) -> Option<(i64, i64, i64)> {
     let (x, y, z) = (
-        (p.x * inv_size).floor(),
-        (p.y * inv_size).floor(),
-        (p.z * inv_size).floor(),
+        (p.x / size).floor(),
+        (p.y / size).floor(),
+        (p.z / size).floor(),
     );
     // Also rejects NaN: every comparison with NaN is false.
     let lim = KEY_HALF as f64;
@@ -64,7 +66,7 @@ fn voxel_coords(p: &Vector3<f64>, inv_size: f64) -> Option<(i64, i64, i64)> {
 /// The voxel key of a point (see the module documentation), `None` when it cannot be keyed.
 #[inline]
 pub fn voxel_key(p: &Vector3<f64>, voxel_size_m: f64) -> Option<u64> {
-    let (x, y, z) = voxel_coords(p, 1.0 / voxel_size_m)?;
+    let (x, y, z) = voxel_coords(p, voxel_size_m)?;
     pack(x, y, z)
 }
 
@@ -106,11 +108,57 @@ impl BuildHasher for BuildKeyHasher {
     }
 }
 
-/// Keeps the first point of every voxel of a cloud, in input order (KISS-ICP's subsampling).
-/// Reuses its set between calls.
+/// One bucket of [`VoxelSampler`]'s open-addressing table; `dist < 0` = empty.
+#[derive(Clone, Copy, Debug)]
+struct Bucket {
+    dist: i32,
+    key: [i32; 3],
+    index: u32,
+}
+
+const EMPTY_BUCKET: Bucket = Bucket {
+    dist: -1,
+    key: [0; 3],
+    index: 0,
+};
+
+/// KISS-ICP's voxel hash: the coordinates' bits as `u32`, times three primes, XORed.
+#[inline]
+fn kiss_hash(k: &[i32; 3]) -> usize {
+    ((k[0] as u32).wrapping_mul(73_856_093)
+        ^ (k[1] as u32).wrapping_mul(19_349_669)
+        ^ (k[2] as u32).wrapping_mul(83_492_791)) as usize
+}
+
+/// Integer voxel coordinates `floor(p / size)` (a division, as KISS-ICP computes them, so
+/// points on a voxel boundary fall on the same side); `None` beyond the `i32` range or NaN.
+#[inline]
+fn voxel_coords_i32(p: &Vector3<f64>, size: f64) -> Option<[i32; 3]> {
+    let (x, y, z) = (
+        (p.x / size).floor(),
+        (p.y / size).floor(),
+        (p.z / size).floor(),
+    );
+    let lim = 2_147_483_647.0;
+    if !(x >= -lim && x <= lim && y >= -lim && y <= lim && z >= -lim && z <= lim) {
+        return None;
+    }
+    Some([x as i32, y as i32, z as i32])
+}
+
+/// Keeps the first point of every voxel of a cloud (KISS-ICP's subsampling).
+///
+/// The kept points come out in the order KISS-ICP's own implementation gives them: it
+/// deduplicates in a Robin Hood hash table (linear probing, power-of-two buckets reserved for
+/// twice the input size, its three-prime hash) and lists the table's buckets in order. That
+/// order decides which points enter a size-limited map voxel and which point of a coarser
+/// voxel is "first" in the next subsampling, so matching it lets ringscan's trajectory be
+/// compared with KISS-ICP's sweep by sweep. (Checked against `kiss_icp_pybind` 1.3.0 by
+/// `tools/odometry_kiss.py`, and against a naive first-point filter in the tests here.)
+/// The table is reused between calls.
 #[derive(Debug, Default, Clone)]
 pub struct VoxelSampler {
-    seen: HashSet<u64, BuildKeyHasher>,
+    table: Vec<Bucket>,
 }
 
 impl VoxelSampler {
@@ -120,7 +168,7 @@ impl VoxelSampler {
     }
 
     /// Appends to `out` (cleared first) the first point of every occupied voxel of edge
-    /// `voxel_size_m`; points that cannot be keyed (non-finite, beyond ±2²⁰ voxels) are
+    /// `voxel_size_m`; points that cannot be keyed (non-finite, beyond the `i32` range) are
     /// dropped. `voxel_size_m` must be finite and > 0 (otherwise nothing is kept).
     pub fn sample(
         &mut self,
@@ -129,21 +177,53 @@ impl VoxelSampler {
         out: &mut Vec<Vector3<f64>>,
     ) {
         out.clear();
-        self.seen.clear();
-        if !(voxel_size_m.is_finite() && voxel_size_m > 0.0) {
+        if input.is_empty() || !(voxel_size_m.is_finite() && voxel_size_m > 0.0) {
             return;
         }
-        self.seen.reserve(input.len());
-        let inv = 1.0 / voxel_size_m;
-        for p in input {
-            let Some((x, y, z)) = voxel_coords(p, inv) else {
+        // tsl::robin_map::reserve(n) with max load factor 0.5: ceil(n / 0.5f) buckets,
+        // rounded up to a power of two.
+        let buckets = (2 * input.len()).next_power_of_two();
+        let mask = buckets - 1;
+        self.table.clear();
+        self.table.resize(buckets, EMPTY_BUCKET);
+        let table = &mut self.table[..];
+        'points: for (i, p) in input.iter().enumerate() {
+            let Some(key) = voxel_coords_i32(p, voxel_size_m) else {
                 continue;
             };
-            let Some(k) = pack(x, y, z) else { continue };
-            if self.seen.insert(k) {
-                out.push(*p);
+            let mut ib = kiss_hash(&key) & mask;
+            let mut dist = 0i32;
+            while dist <= table[ib].dist {
+                if table[ib].key == key {
+                    continue 'points;
+                }
+                ib = (ib + 1) & mask;
+                dist += 1;
+            }
+            // Robin Hood insertion: take the bucket of any entry closer to its home.
+            let mut cur = Bucket {
+                dist,
+                key,
+                index: i as u32,
+            };
+            loop {
+                if table[ib].dist < 0 {
+                    table[ib] = cur;
+                    break;
+                }
+                if table[ib].dist < cur.dist {
+                    std::mem::swap(&mut cur, &mut table[ib]);
+                }
+                ib = (ib + 1) & mask;
+                cur.dist += 1;
             }
         }
+        out.extend(
+            table
+                .iter()
+                .filter(|b| b.dist >= 0)
+                .map(|b| input[b.index as usize]),
+        );
     }
 }
 
@@ -192,8 +272,7 @@ pub struct VoxelPlane {
 #[derive(Clone, Debug)]
 pub struct VoxelMap {
     cfg: VoxelMapConfig,
-    inv_voxel: f64,
-    min_spacing_sq: f64,
+    min_spacing_m: f64,
     index: HashMap<u64, u32, BuildKeyHasher>,
     /// Points of slot `s` at `s * max_points_per_voxel ..`.
     points: Vec<Vector3<f64>>,
@@ -216,11 +295,12 @@ impl VoxelMap {
                 expected: "1..=255",
             });
         }
-        let spacing = cfg.voxel_size_m / (cfg.max_points_per_voxel as f64).sqrt();
+        // As KISS-ICP computes it: sqrt(v² / n).
+        let spacing =
+            (cfg.voxel_size_m * cfg.voxel_size_m / cfg.max_points_per_voxel as f64).sqrt();
         Ok(Self {
             cfg,
-            inv_voxel: 1.0 / cfg.voxel_size_m,
-            min_spacing_sq: spacing * spacing,
+            min_spacing_m: spacing,
             index: HashMap::with_hasher(BuildKeyHasher),
             points: Vec::new(),
             lens: Vec::new(),
@@ -273,7 +353,7 @@ impl VoxelMap {
     pub fn add_points(&mut self, world_points: impl IntoIterator<Item = Vector3<f64>>) {
         let m = self.cfg.max_points_per_voxel;
         for p in world_points {
-            let Some((x, y, z)) = voxel_coords(&p, self.inv_voxel) else {
+            let Some((x, y, z)) = voxel_coords(&p, self.cfg.voxel_size_m) else {
                 continue;
             };
             let Some(key) = pack(x, y, z) else { continue };
@@ -286,7 +366,7 @@ impl VoxelMap {
                     }
                     let near = self.points[s * m..s * m + len]
                         .iter()
-                        .any(|q| (q - p).norm_squared() < self.min_spacing_sq);
+                        .any(|q| (q - p).norm() < self.min_spacing_m);
                     if near {
                         continue;
                     }
@@ -360,7 +440,7 @@ impl VoxelMap {
     /// distance and its voxel slot (for [`VoxelMap::slot_plane`]).
     #[inline]
     pub fn nearest_in_slot(&self, query: &Vector3<f64>) -> Option<(Vector3<f64>, f64, u32)> {
-        let (x, y, z) = voxel_coords(query, self.inv_voxel)?;
+        let (x, y, z) = voxel_coords(query, self.cfg.voxel_size_m)?;
         let m = self.cfg.max_points_per_voxel;
         let mut best: Option<(Vector3<f64>, f64, u32)> = None;
         let mut best_d = f64::INFINITY;
@@ -475,7 +555,7 @@ mod tests {
     }
 
     #[test]
-    fn sampler_keeps_first_point_per_voxel_in_order() {
+    fn sampler_keeps_the_first_point_of_every_voxel() {
         let pts = [
             v(0.1, 0.1, 0.1),
             v(0.2, 0.2, 0.2),
@@ -484,7 +564,50 @@ mod tests {
         ];
         let mut out = Vec::new();
         VoxelSampler::new().sample(&pts, 1.0, &mut out);
+        out.sort_by(|a, b| a.x.total_cmp(&b.x));
         assert_eq!(out, vec![pts[0], pts[2]]);
+        // Against a naive filter (a BTreeMap of voxels, first point wins) on a scatter dense
+        // enough to collide in the table.
+        let mut s = 777u64;
+        let mut rnd = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((s >> 11) as f64 / (1u64 << 53) as f64) * 40.0 - 20.0
+        };
+        let pts: Vec<_> = (0..20_000).map(|_| v(rnd(), rnd(), rnd() * 0.2)).collect();
+        let mut naive = std::collections::BTreeMap::new();
+        for p in &pts {
+            let k = [
+                (p.x / 0.7).floor() as i64,
+                (p.y / 0.7).floor() as i64,
+                (p.z / 0.7).floor() as i64,
+            ];
+            naive.entry(k).or_insert(*p);
+        }
+        let mut sampler = VoxelSampler::new();
+        sampler.sample(&pts, 0.7, &mut out);
+        assert_eq!(out.len(), naive.len());
+        let mut got: Vec<_> = out.iter().map(|p| (p.x, p.y, p.z)).collect();
+        let mut want: Vec<_> = naive.values().map(|p| (p.x, p.y, p.z)).collect();
+        got.sort_by(|a, b| a.partial_cmp(b).unwrap());
+        want.sort_by(|a, b| a.partial_cmp(b).unwrap());
+        assert_eq!(got, want);
+    }
+
+    #[test]
+    fn sampler_lists_voxels_in_robin_hood_table_order() {
+        // Hand-worked: 3 points → 8 buckets (2·3 rounded up); the voxels (0,0,0), (1,0,0) and
+        // (2,0,0) hash to 0, 73856093 and 147712186, i.e. buckets 0, 5 and 2 (mod 8).
+        let pts = [v(0.5, 0.5, 0.5), v(1.5, 0.5, 0.5), v(2.5, 0.5, 0.5)];
+        let mut out = Vec::new();
+        VoxelSampler::new().sample(&pts, 1.0, &mut out);
+        assert_eq!(out, vec![pts[0], pts[2], pts[1]]);
+        // A collision: (0,0,0) and (8,0,0) both hash to bucket 0 of 8 (8·73856093 ≡ 0), so
+        // the second probes on to bucket 1; (0,0,1) hashes to 83492791 ≡ 7. Order: 0, 1, 7.
+        let pts = [v(0.5, 0.5, 0.5), v(8.5, 0.5, 0.5), v(0.5, 0.5, 1.5)];
+        VoxelSampler::new().sample(&pts, 1.0, &mut out);
+        assert_eq!(out, vec![pts[0], pts[1], pts[2]]);
     }
 
     #[test]
