@@ -51,6 +51,7 @@
 
 pub mod calib;
 pub mod decode;
+pub mod deskew;
 pub mod model;
 pub mod pipeline;
 pub mod point;

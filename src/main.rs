@@ -1,4 +1,4 @@
-//! The `ringscan` command line: `decode`, `info` and `demo`.
+//! The `ringscan` command line: `decode`, `info`, `demo`, `listen` and `replay`.
 #![forbid(unsafe_code)]
 
 mod cli;

@@ -142,11 +142,16 @@ fn write_into<W: std::io::Write + std::io::Seek>(sink: &mut McapSink<W>) -> Vec<
 }
 
 fn write_file(format: Format, compression: Compression) -> Written {
+    write_file_at(format, compression, SinkOptions::default().zstd_level)
+}
+
+fn write_file_at(format: Format, compression: Compression, zstd_level: i32) -> Written {
     let buf = SharedBuf::default();
     let opts = SinkOptions {
         format,
         compression,
         chunk_size: 16 * 1024,
+        zstd_level,
     };
     let mut sink = McapSink::new(buf.clone(), opts).unwrap();
     let sweeps = write_into(&mut sink);
@@ -830,4 +835,25 @@ fn single_sensor_topics_have_no_prefix() {
     assert_eq!(summary.attachments[0].media_type, "application/json");
     let read = mcap::Summary::read(&buf.bytes()).unwrap().unwrap();
     assert_eq!(read.stats.unwrap().message_count, 2);
+}
+
+#[test]
+fn every_zstd_level_reads_back_and_levels_trade_size() {
+    // Fast (negative) and regular levels: zstd chunks that the official reader decompresses to
+    // the same messages; a higher level never makes the file larger on these sweeps by more
+    // than noise, and the fastest is larger than the default (so the level reaches zstd).
+    let mut sizes = Vec::new();
+    for level in [-7, -3, -1, 1, 3, 9] {
+        let w = write_file_at(Format::Foxglove, Compression::Zstd, level);
+        let summary = mcap::Summary::read(&w.bytes).unwrap().unwrap();
+        assert!(summary
+            .chunk_indexes
+            .iter()
+            .all(|c| c.compression == "zstd"));
+        check_common(&w, "foxglove.PointCloud", "protobuf", "protobuf");
+        sizes.push((level, w.bytes.len()));
+    }
+    let size = |l: i32| sizes.iter().find(|(x, _)| *x == l).unwrap().1;
+    assert!(size(-7) > size(1), "{sizes:?}");
+    assert!(size(9) <= size(-7), "{sizes:?}");
 }

@@ -22,6 +22,7 @@ const REGRESSIONS: &[(&str, Option<&str>)] = &[
     ("velodyne_packet-nmea-date-char-boundary.bin", None),
     ("velodyne_packet-nmea-time-char-boundary.bin", None),
     ("decode_to_mcap-nmea-char-boundary.bin", None),
+    ("ouster_packet-duplicate-measurement-id.bin", None),
 ];
 
 fn dir() -> PathBuf {
@@ -40,6 +41,9 @@ fn replay(file: &str) {
         "velodyne_stream" => harness::velodyne_stream(&data),
         "calib_velodyne" => harness::calib_velodyne(&data),
         "decode_to_mcap" => harness::decode_to_mcap(&data),
+        "calib_ouster" => harness::calib_ouster(&data),
+        "ouster_packet" => harness::ouster_packet(&data),
+        "ouster_stream" => harness::ouster_stream(&data),
         other => panic!("{file}: no fuzz target named {other:?}"),
     }
 }

@@ -11,6 +11,12 @@
 //! `intensity` (raw reflectivity), `ring`, `t` (µs after the packet stamp), `return` (0
 //! strongest / only, 1 last), `corrected intensity` (HDL-64E focal formula; single-return
 //! packets only, NaN otherwise or without an HDL-64E calibration). No range filter.
+//!
+//! Ouster (`tools/sim_reference.py`): `--metadata FILE.json --out points.f32 capture.pcap`
+//! decodes every datagram of the metadata's lidar packet size (IPv4 fragments reassembled)
+//! with `OusterDecoder::decode_with`. Record (10 × f32): `x, y, z` (m, sensor frame),
+//! `reflectivity`, `return` (0 / 1), `row`, `column` (measurement id), `frame_id`,
+//! `range_mm`, `signal`.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -32,6 +38,9 @@ fn arg(args: &[String], name: &str) -> Option<String> {
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
+    if let Some(meta) = arg(&args, "--metadata") {
+        return ouster(&args, &meta);
+    }
     let model = VelodyneModel::from_id(&arg(&args, "--model").ok_or("--model M is required")?)
         .ok_or("unknown --model")?;
     let mode = match arg(&args, "--mode").as_deref() {
@@ -106,5 +115,52 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "{out_path}: {points} points from {packets} packets ({} {mode})",
         model.name()
     );
+    Ok(())
+}
+
+fn ouster(args: &[String], meta: &str) -> Result<(), Box<dyn std::error::Error>> {
+    let info = ringscan::calib::ouster::parse(&std::fs::read_to_string(meta)?, meta)?;
+    let dec = ringscan::decode::OusterDecoder::new(&info)?;
+    let out_path = arg(args, "--out").ok_or("--out FILE is required")?;
+    let input = args
+        .last()
+        .filter(|a| !a.starts_with("--"))
+        .ok_or("the last argument is the pcap")?;
+    let mut src = PcapSource::open(Path::new(input))?;
+    let mut out = BufWriter::new(File::create(&out_path)?);
+    let (mut packets, mut points) = (0usize, 0usize);
+    let len = info.lidar_packet_bytes();
+    let mut recs: Vec<[f32; 10]> = Vec::new();
+    while let Some(d) = src.next_datagram()? {
+        if d.payload.len() != len {
+            continue;
+        }
+        let p = dec.packet(d.payload)?;
+        let frame = p.frame_id() as f32;
+        recs.clear();
+        dec.decode_with(&p, 0, |pt, x, row, col| {
+            recs.push([
+                pt.x,
+                pt.y,
+                pt.z,
+                pt.intensity,
+                f32::from(pt.ret),
+                row as f32,
+                col as f32,
+                frame,
+                x.range_mm as f32,
+                f32::from(x.signal),
+            ]);
+        })?;
+        for r in &recs {
+            for v in r {
+                out.write_all(&v.to_le_bytes())?;
+            }
+        }
+        packets += 1;
+        points += recs.len();
+    }
+    out.flush()?;
+    eprintln!("{out_path}: {points} points from {packets} Ouster packets");
     Ok(())
 }

@@ -1,5 +1,9 @@
 //! Command-line front end: clap commands, progress, exit codes. No algorithms live here.
 
+mod listen;
+mod pipeline;
+mod render;
+mod replay;
 mod run;
 mod sensors;
 
@@ -29,6 +33,12 @@ enum Command {
     Info(InfoCmd),
     /// Decode the built-in example capture (a simulated VLP-16) and write demo.mcap.
     Demo(DemoCmd),
+    /// Receive sensors' UDP packets live, decode them and write MCAP until SIGINT / SIGTERM.
+    Listen(ListenCmd),
+    /// Send a capture's UDP payloads again, paced by its timestamps.
+    Replay(ReplayCmd),
+    /// Draw a bird's-eye picture of one sweep of an MCAP written with `--pipeline`.
+    Render(render::RenderCmd),
 }
 
 /// Point cloud message layout.
@@ -96,6 +106,10 @@ struct DecodeCmd {
     /// Message layout.
     #[arg(long, value_enum, default_value_t = FormatArg::Foxglove)]
     format: FormatArg,
+    /// MCAP chunk compression: `zstd` (level 1), `zstd:LEVEL` (−7 … 19; negative levels are
+    /// zstd's fast modes), `lz4` or `none`.
+    #[arg(long, default_value = "zstd")]
+    compression: run::ChunkCompression,
     /// Also write every UDP payload to `/raw`, so the drive can be decoded again later.
     #[arg(long)]
     raw: bool,
@@ -108,6 +122,8 @@ struct DecodeCmd {
     /// Print one JSON summary object on stdout at the end.
     #[arg(long)]
     json: bool,
+    #[command(flatten)]
+    pipeline: pipeline::PipelineArgs,
 }
 
 #[derive(clap::Args, Debug)]
@@ -131,6 +147,100 @@ struct DemoCmd {
     #[arg(long, short, default_value = "demo.mcap")]
     out: PathBuf,
     /// Print the JSON summary instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(clap::Args, Debug)]
+struct ListenCmd {
+    /// A sensor's source address, optionally with the UDP port to listen on (repeatable; one
+    /// socket per port). Without a port: the ports its --calib metadata names, else 2368, 8308,
+    /// 7502 and 7503. Datagrams from other addresses are counted and ignored.
+    #[arg(long = "sensor", value_name = "IP[:PORT]", required = true, value_parser = listen::parse_sensor)]
+    sensors: Vec<(std::net::Ipv4Addr, Option<u16>)>,
+    /// Output MCAP file, written continuously and finalised on SIGINT / SIGTERM (omit to
+    /// decode and count only).
+    #[arg(long, short)]
+    out: Option<PathBuf>,
+    /// Start a new file (OUT_0000.mcap, OUT_0001.mcap, …) every S seconds (`60`, `60s`) or
+    /// every N megabytes (`500MB`); no packet is lost at the switch.
+    #[arg(long, value_name = "S|MB", value_parser = listen::parse_split)]
+    split_every: Option<listen::Split>,
+    /// Sensor model, overriding detection (Velodyne).
+    #[arg(long)]
+    model: Option<String>,
+    /// Calibration file(s), as for `decode`. Ouster sensors without one: their metadata is read
+    /// from http://SENSOR/api/v1/sensor/metadata (again after an init_id change).
+    #[arg(long = "calib", value_name = "[ADDR=]FILE")]
+    calib: Vec<String>,
+    /// Sensor name (frame id and topic prefix); only with a single sensor.
+    #[arg(long)]
+    name: Option<String>,
+    /// Join this multicast group on every port.
+    #[arg(long, value_name = "GROUP")]
+    multicast: Option<std::net::Ipv4Addr>,
+    /// Interface address for --multicast.
+    #[arg(long, value_name = "IP", default_value = "0.0.0.0")]
+    interface: std::net::Ipv4Addr,
+    /// Azimuth at which sweeps are cut, degrees.
+    #[arg(long, default_value_t = 0.0)]
+    cut_angle: f64,
+    /// Drop points closer than this, metres.
+    #[arg(long)]
+    min_range: Option<f32>,
+    /// Drop points farther than this, metres.
+    #[arg(long)]
+    max_range: Option<f32>,
+    /// Point fields written.
+    #[arg(long, value_enum, default_value_t = FieldsArg::Default)]
+    fields: FieldsArg,
+    /// Message layout.
+    #[arg(long, value_enum, default_value_t = FormatArg::Foxglove)]
+    format: FormatArg,
+    /// Also write every UDP payload to `/raw`.
+    #[arg(long)]
+    raw: bool,
+    /// Ouster footer CRC-64 check.
+    #[arg(long, value_enum, default_value_t = CrcArg::Auto)]
+    crc: CrcArg,
+    /// Port of the sensors' HTTP API (Ouster metadata).
+    #[arg(long, default_value_t = 80)]
+    api_port: u16,
+    /// Receive buffer to ask for per socket, bytes (the kernel caps it at net.core.rmem_max).
+    #[arg(long, default_value_t = ringscan::source::udp::DEFAULT_RECV_BUFFER)]
+    recv_buffer: usize,
+    /// Stop by itself after this many seconds.
+    #[arg(long, value_name = "S")]
+    duration: Option<f64>,
+    /// Exit with an error if any packet was missing, dropped or malformed.
+    #[arg(long)]
+    strict: bool,
+    /// Print one JSON summary object on stdout at the end.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(clap::Args, Debug)]
+struct ReplayCmd {
+    /// Input capture (.pcap or .pcapng).
+    input: PathBuf,
+    /// Destination IPv4 address; each datagram goes to its original destination port.
+    #[arg(long)]
+    to: std::net::Ipv4Addr,
+    /// Added to every destination port.
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
+    port_offset: i32,
+    /// Speed: a factor of real time (`1.0`, `10`) or `max`.
+    #[arg(long, default_value = "1.0", value_parser = replay::parse_rate)]
+    rate: ringscan::source::udp::Rate,
+    /// Send the capture this many times.
+    #[arg(long = "loop", default_value_t = 1)]
+    loops: u32,
+    /// Send each original source address's datagrams from its own loopback address
+    /// (127.0.0.1, 127.0.0.2, … in order of appearance), so `listen` tells them apart.
+    #[arg(long)]
+    per_source_loopback: bool,
+    /// Print a JSON summary.
     #[arg(long)]
     json: bool,
 }
@@ -168,6 +278,7 @@ pub fn main() -> ExitCode {
                 max_range: c.max_range,
                 fields_all: c.fields == FieldsArg::All,
                 format: c.format,
+                compression: c.compression,
                 raw: c.raw,
                 strict: c.strict,
                 crc: match c.crc {
@@ -177,11 +288,66 @@ pub fn main() -> ExitCode {
                 },
                 json: c.json,
                 input_bytes: None,
+                pipeline: c.pipeline,
             };
             run::decode_command(&args)
         }
         Command::Info(c) => run::info_command(&c.input, c.model.as_deref(), &c.calib, c.json),
         Command::Demo(c) => run::demo_command(&c.out, c.json),
+        Command::Listen(c) => {
+            let duration = match c.duration {
+                Some(d) if d.is_finite() && d > 0.0 => Some(std::time::Duration::from_secs_f64(d)),
+                Some(d) => {
+                    eprintln!("error: --duration {d}: expected a positive number of seconds");
+                    return ExitCode::from(2);
+                }
+                None => None,
+            };
+            let args = listen::ListenArgs {
+                sensors: c.sensors,
+                out: c.out,
+                split_every: c.split_every,
+                session: run::SessionOptions {
+                    model: c.model,
+                    calib: c.calib,
+                    name: c.name,
+                    port: None,
+                    cut_angle_deg: c.cut_angle,
+                    min_range: c.min_range,
+                    max_range: c.max_range,
+                    fields_all: c.fields == FieldsArg::All,
+                    raw: c.raw,
+                    crc: match c.crc {
+                        CrcArg::Auto => None,
+                        CrcArg::On => Some(true),
+                        CrcArg::Off => Some(false),
+                    },
+                    // The pipeline runs on decoded captures (`decode --pipeline`); live, the
+                    // sweeps are written as they come.
+                    pipeline: Default::default(),
+                    format: c.format,
+                },
+                format: c.format,
+                multicast: c.multicast,
+                interface: c.interface,
+                api_port: c.api_port,
+                recv_buffer: c.recv_buffer,
+                duration,
+                strict: c.strict,
+                json: c.json,
+            };
+            listen::listen_command(&args)
+        }
+        Command::Replay(c) => replay::replay_command(&replay::ReplayArgs {
+            input: c.input,
+            to: c.to,
+            port_offset: c.port_offset,
+            rate: c.rate,
+            loops: c.loops,
+            per_source_loopback: c.per_source_loopback,
+            json: c.json,
+        }),
+        Command::Render(c) => render::render_command(&c),
     };
     match result {
         Ok(code) => code,

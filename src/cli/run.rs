@@ -9,14 +9,15 @@ use std::time::Instant;
 use ringscan::decode::DecodeOptions;
 use ringscan::model::VelodyneModel;
 use ringscan::sink::mcap::{
-    create_file, Compression, Format, SensorId, SensorInfo, SinkOptions, SweepMsg,
+    create_file, Compression, Format, SensorId, SensorInfo, SinkOptions, SinkSummary, SweepMsg,
 };
 use ringscan::sink::{McapSink, SinkError};
 use ringscan::source::pcap::{PcapSource, SourceError, SourceStats};
 use ringscan::sweep::{Demux, Facts, SensorStream, StreamError, Sweep};
 use serde_json::{json, Value};
 
-use super::sensors::{self, load_calibs, Chooser, Common};
+use super::pipeline::{PipelineArgs, PipelineRunner};
+use super::sensors::{self, load_calibs, CalibSpec, Chooser, Common};
 use super::FormatArg;
 
 /// The example capture `ringscan demo` decodes: a simulated VLP-16 made by
@@ -41,6 +42,8 @@ pub struct DecodeArgs {
     pub min_range: Option<f32>,
     pub max_range: Option<f32>,
     pub fields_all: bool,
+    /// `--compression`.
+    pub compression: ChunkCompression,
     pub format: FormatArg,
     pub raw: bool,
     pub strict: bool,
@@ -49,6 +52,8 @@ pub struct DecodeArgs {
     pub json: bool,
     /// Decode these bytes instead of reading `input` (the demo).
     pub input_bytes: Option<&'static [u8]>,
+    /// `--pipeline`, `--deskew`, `--extrinsics`.
+    pub pipeline: PipelineArgs,
 }
 
 /// Why a run failed.
@@ -69,6 +74,9 @@ pub enum RunError {
     /// Writing the output failed.
     #[error("{0}")]
     Sink(#[from] SinkError),
+    /// The live listener could not go on (sockets, threads, the output file), with context.
+    #[error("{0}")]
+    Live(String),
     /// `--strict` and something was lost.
     #[error("{0}")]
     Strict(String),
@@ -95,10 +103,15 @@ struct SensorOut {
     calib_file: Option<String>,
     raw_hold: Vec<(i64, u16, u16, Vec<u8>)>,
     raw_dropped: u64,
+    /// How the sensor was registered in the sink (again in each file with `--split-every`).
+    info: Option<SensorInfo>,
 }
 
+/// The MCAP output of a run.
+pub type Sink = McapSink<std::io::BufWriter<std::fs::File>>;
+
 struct Output {
-    sink: Option<McapSink<std::io::BufWriter<std::fs::File>>>,
+    sink: Option<Sink>,
     sensors: Vec<SensorOut>,
     n_sensors_hint: usize,
     name: Option<String>,
@@ -108,6 +121,7 @@ struct Output {
     sweeps: u64,
     points: u64,
     imu_samples: u64,
+    pipeline: Option<PipelineRunner>,
 }
 
 impl Output {
@@ -122,6 +136,7 @@ impl Output {
                 calib_file: None,
                 raw_hold: Vec::new(),
                 raw_dropped: 0,
+                info: None,
             });
         }
         &mut self.sensors[idx]
@@ -161,13 +176,14 @@ impl Output {
         s.name = name.clone();
         s.topic = format!("{topic_prefix}/points");
         s.calib_file = calib.as_ref().map(|(n, _)| n.clone());
+        let info = SensorInfo {
+            name,
+            topic_prefix,
+            metadata: md,
+            calibration: calib,
+        };
         if let Some(sink) = self.sink.as_mut() {
-            let id = sink.add_sensor(&SensorInfo {
-                name,
-                topic_prefix,
-                metadata: md,
-                calibration: calib,
-            })?;
+            let id = sink.add_sensor(&info)?;
             let hold = std::mem::take(&mut self.sensors[idx].raw_hold);
             for (t, port, src_port, payload) in hold {
                 sink.write_raw(
@@ -181,6 +197,7 @@ impl Output {
             self.sensors[idx].id = Some(id);
         }
         self.sensors[idx].registered = true;
+        self.sensors[idx].info = Some(info);
         Ok(())
     }
 
@@ -203,6 +220,20 @@ impl Output {
                 return;
             }
         }
+        // The pipeline (when asked for) deskews a copy of the sweep, which is written instead.
+        let sweep = match self.pipeline.as_mut() {
+            Some(p) => {
+                let sink = self.sink.as_mut().zip(self.sensors[idx].id);
+                match p.process(idx, &self.sensors[idx].name, sweep, sink) {
+                    Ok(s) => s,
+                    Err(e) => {
+                        self.error = Some(e);
+                        return;
+                    }
+                }
+            }
+            None => sweep,
+        };
         let (Some(sink), Some(id)) = (self.sink.as_mut(), self.sensors[idx].id) else {
             return;
         };
@@ -268,244 +299,233 @@ fn prescan<R: Read>(mut src: PcapSource<R>, port: Option<u16>, sizes: &[usize]) 
     addrs.len()
 }
 
-/// Runs a decode: the library entry of `ringscan decode` (and of `info` with no output).
-pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
-    let started = Instant::now();
-    let path_s = args.input.display().to_string();
-    let serr = |err: SourceError| RunError::Source {
-        path: path_s.clone(),
-        err,
-    };
-    let model = parse_model(args.model.as_deref())?;
-    if !(0.0..360.0).contains(&args.cut_angle_deg) {
-        return Err(RunError::Usage(format!(
-            "--cut-angle {}: expected [0, 360) degrees",
-            args.cut_angle_deg
-        )));
-    }
-    let decode = DecodeOptions {
-        min_range: args.min_range.unwrap_or(0.0),
-        max_range: args.max_range.unwrap_or(f32::INFINITY),
-    };
-    if decode.min_range.is_nan()
-        || decode.max_range.is_nan()
-        || decode.min_range > decode.max_range
-        || decode.min_range < 0.0
-    {
-        return Err(RunError::Usage(format!(
-            "--min-range {} / --max-range {}: empty range",
-            decode.min_range, decode.max_range
-        )));
-    }
-    let calibs = load_calibs(&args.calib)?;
-    let cut = (args.cut_angle_deg * 100.0).round() as u16 % 36_000;
-    let mut chooser = Chooser::new(
-        &calibs,
-        Common {
-            model,
-            decode,
-            cut_angle: cut,
-            keep_extras: args.fields_all,
-            crc: args.crc,
-        },
-    );
-    let sizes = chooser.lidar_sizes();
-    let n_sensors_hint = match args.input_bytes {
-        Some(b) => prescan(PcapSource::new(b).map_err(serr)?, args.port, &sizes),
-        None => prescan(
-            PcapSource::open(&args.input).map_err(serr)?,
-            args.port,
-            &sizes,
-        ),
-    };
-    if args.name.is_some() && n_sensors_hint > 1 {
-        return Err(RunError::Usage(format!("--name: the capture holds {n_sensors_hint} sensors; names are given per sensor automatically")));
-    }
-    let config_for =
-        move |src: Ipv4Addr, port: u16, payload: &[u8]| chooser.choose(src, port, payload);
-    let mut demux = Demux::new(Box::new(config_for), args.port);
-    let sink = match &args.out {
-        Some(p) => {
-            let opts = SinkOptions {
-                format: if args.format == FormatArg::Ros2 {
-                    Format::Ros2
-                } else {
-                    Format::Foxglove
-                },
-                compression: Compression::Zstd,
-                ..SinkOptions::default()
-            };
-            Some(create_file(p, opts)?)
-        }
-        None => None,
-    };
-    let mut out = Output {
-        sink,
-        sensors: Vec::new(),
-        n_sensors_hint,
-        name: args.name.clone(),
-        raw: args.raw,
-        calibs: calibs
-            .into_iter()
-            .map(|c| (c.addr, c.file_name, c.bytes))
-            .collect(),
-        error: None,
-        sweeps: 0,
-        points: 0,
-        imu_samples: 0,
-    };
-    let result = match args.input_bytes {
-        Some(b) => pump(
-            PcapSource::new(b).map_err(serr)?,
-            &mut demux,
-            &mut out,
-            None,
-        ),
-        None => {
-            let total = std::fs::metadata(&args.input).map(|m| m.len()).ok();
-            pump(
-                PcapSource::open(&args.input).map_err(serr)?,
-                &mut demux,
-                &mut out,
-                total,
-            )
-        }
-    };
-    // Finalise the output on success and on error alike: the file is always a valid MCAP.
-    let source_stats = match result {
-        Ok(stats) => stats,
-        Err(e) => {
-            if let Some(sink) = out.sink.take() {
-                let _ = sink.finish();
-            }
-            return Err(match e {
-                PumpError::Source(err) => serr(err),
-                PumpError::Stream(idx, err) => RunError::Stream {
-                    addr: demux
-                        .stream(idx)
-                        .map(|(a, _)| a)
-                        .unwrap_or(Ipv4Addr::UNSPECIFIED),
-                    err,
-                },
-                PumpError::Sink(e) => RunError::Sink(e),
-            });
-        }
-    };
-    let sink_summary = match out.sink.take() {
-        Some(s) => Some(s.finish()?),
-        None => None,
-    };
-    let elapsed = started.elapsed().as_secs_f64();
-
-    // Summary.
-    let dstats = demux.stats().clone();
-    let mut sensors = Vec::new();
-    let (mut decoded, mut malformed, mut missing, mut position) = (0u64, 0u64, 0u64, 0u64);
-    let mut sensor_dropped = 0u64;
-    for (idx, (addr, stream, ports)) in demux.sensors().enumerate() {
-        let (mut v, c) = sensors::sensor_summary(stream);
-        decoded += c.decoded;
-        malformed += c.malformed;
-        missing += c.missing;
-        position += c.position;
-        sensor_dropped += c.dropped;
-        let so = out.sensors.get(idx);
-        if let Some(o) = v.as_object_mut() {
-            o.insert("name".into(), json!(so.map(|s| s.name.clone())));
-            o.insert("address".into(), json!(addr.to_string()));
-            o.insert("ports".into(), json!(ports));
-            let per_port: serde_json::Map<String, Value> = ports
-                .iter()
-                .zip(demux.port_packets(idx))
-                .map(|(p, n)| (p.to_string(), json!(n)))
-                .collect();
-            o.insert("packets_per_port".into(), Value::Object(per_port));
-            o.insert(
-                "calibration_file".into(),
-                json!(so.and_then(|s| s.calib_file.clone())),
-            );
-            o.insert("topic".into(), json!(so.map(|s| s.topic.clone())));
-            o.insert("raw_dropped".into(), json!(so.map(|s| s.raw_dropped)));
-        }
-        sensors.push(v);
-    }
-    let dropped = dstats.other_port + dstats.dropped_sensor_limit + sensor_dropped;
-    let cap = &source_stats;
-    let duration_s = match (cap.first_time_ns, cap.last_time_ns) {
-        (Some(a), Some(b)) => (b - a) as f64 * 1e-9,
-        _ => 0.0,
-    };
-    let json = json!({
-        "input": path_s,
-        "sweeps": out.sweeps,
-        "points": out.points,
-        "imu_samples": out.imu_samples,
-        "packets": {
-            "decoded": decoded,
-            "dropped": dropped,
-            "malformed": malformed,
-            "missing": missing,
-            "position": position,
-            "ignored": dstats.ignored,
-        },
-        "capture": {
-            "records": cap.records,
-            "bytes": cap.bytes,
-            "datagrams": cap.datagrams,
-            "non_udp": cap.non_udp,
-            "malformed_records": cap.malformed,
-            "fragments": cap.fragments,
-            "reassembled": cap.reassembled,
-            "fragments_expired": cap.fragments_expired,
-            "truncated_records": cap.truncated_records,
-            "truncated_tail_offset": cap.truncated_tail,
-            "duration_s": duration_s,
-        },
-        "sensors": sensors,
-        "output": sink_summary.as_ref().map(|s| json!({
-            "path": args.out.as_ref().map(|p| p.display().to_string()),
-            "format": if args.format == FormatArg::Ros2 { "ros2" } else { "foxglove" },
-            // Velodyne points have no extra fields: `--fields all` writes the default ones.
-            "fields": if args.fields_all { "all" } else { "default" },
-            "topics": s.messages,
-            "attachments": s.attachments.iter().map(|a| json!({"name": a.name, "media_type": a.media_type, "size": a.size})).collect::<Vec<_>>(),
-            "chunks": s.chunks,
-        })),
-        "elapsed_s": elapsed,
-    });
-    Ok(Summary {
-        json,
-        lost: dropped + malformed + missing,
-    })
+/// Settings of a [`Session`], whatever the datagrams come from.
+#[derive(Debug, Clone)]
+pub struct SessionOptions {
+    pub model: Option<String>,
+    pub calib: Vec<String>,
+    pub name: Option<String>,
+    pub port: Option<u16>,
+    pub cut_angle_deg: f64,
+    pub min_range: Option<f32>,
+    pub max_range: Option<f32>,
+    pub fields_all: bool,
+    pub raw: bool,
+    pub crc: Option<bool>,
+    /// `--pipeline`, `--deskew`, `--extrinsics`.
+    pub pipeline: PipelineArgs,
+    /// Points message layout (the pipeline's outputs need `foxglove`).
+    pub format: FormatArg,
 }
 
-enum PumpError {
+impl DecodeArgs {
+    fn session_options(&self) -> SessionOptions {
+        SessionOptions {
+            model: self.model.clone(),
+            calib: self.calib.clone(),
+            name: self.name.clone(),
+            port: self.port,
+            cut_angle_deg: self.cut_angle_deg,
+            min_range: self.min_range,
+            max_range: self.max_range,
+            fields_all: self.fields_all,
+            raw: self.raw,
+            crc: self.crc,
+            pipeline: self.pipeline.clone(),
+            format: self.format,
+        }
+    }
+}
+
+/// Datagrams → demultiplexer → streams → sink, independent of where the datagrams come from
+/// (a capture for `decode`, sockets for `listen`).
+pub struct Session {
+    demux: Demux,
+    out: Output,
+    chooser: std::rc::Rc<std::cell::RefCell<Chooser>>,
+}
+
+/// Why [`Session::push`] or [`Session::finish_streams`] stopped.
+pub enum PumpError {
     Source(SourceError),
     Stream(usize, StreamError),
     Sink(SinkError),
 }
 
-fn pump<R: Read>(
-    mut src: PcapSource<R>,
-    demux: &mut Demux,
-    out: &mut Output,
-    total_bytes: Option<u64>,
-) -> Result<SourceStats, PumpError> {
-    let progress = total_bytes.is_some() && std::io::stderr().is_terminal();
-    let mut last_progress = Instant::now();
-    loop {
-        let d = match src.next_datagram() {
-            Ok(Some(d)) => d,
-            Ok(None) => break,
-            Err(e) => return Err(PumpError::Source(e)),
+impl Session {
+    /// Checks the options, loads the calibrations and sets up the demultiplexer (no output yet:
+    /// [`Session::set_sink`]).
+    pub fn new(opts: &SessionOptions) -> Result<Self, RunError> {
+        let model = parse_model(opts.model.as_deref())?;
+        if !(0.0..360.0).contains(&opts.cut_angle_deg) {
+            return Err(RunError::Usage(format!(
+                "--cut-angle {}: expected [0, 360) degrees",
+                opts.cut_angle_deg
+            )));
+        }
+        let decode = DecodeOptions {
+            min_range: opts.min_range.unwrap_or(0.0),
+            max_range: opts.max_range.unwrap_or(f32::INFINITY),
         };
-        let (time, addr, port, src_port) = (d.time_ns, *d.src.ip(), d.dst.port(), d.src.port());
-        let routed = demux.push(time, addr, port, d.payload, &mut |idx, sweep, facts| {
+        if decode.min_range.is_nan()
+            || decode.max_range.is_nan()
+            || decode.min_range > decode.max_range
+            || decode.min_range < 0.0
+        {
+            return Err(RunError::Usage(format!(
+                "--min-range {} / --max-range {}: empty range",
+                decode.min_range, decode.max_range
+            )));
+        }
+        let pipeline = opts
+            .pipeline
+            .setup()
+            .map_err(RunError::Usage)?
+            .map(PipelineRunner::new);
+        if pipeline.as_ref().is_some_and(PipelineRunner::outputs) && opts.format == FormatArg::Ros2
+        {
+            return Err(RunError::Usage(
+                "--pipeline: its outputs are written with --format foxglove only".into(),
+            ));
+        }
+        let calibs = load_calibs(&opts.calib)?;
+        let cut = (opts.cut_angle_deg * 100.0).round() as u16 % 36_000;
+        let chooser = std::rc::Rc::new(std::cell::RefCell::new(Chooser::new(
+            &calibs,
+            Common {
+                model,
+                decode,
+                cut_angle: cut,
+                keep_extras: opts.fields_all,
+                crc: opts.crc,
+            },
+        )));
+        let shared = chooser.clone();
+        let config_for = move |src: Ipv4Addr, port: u16, payload: &[u8]| {
+            shared.borrow_mut().choose(src, port, payload)
+        };
+        let demux = Demux::new(Box::new(config_for), opts.port);
+        let out = Output {
+            sink: None,
+            sensors: Vec::new(),
+            n_sensors_hint: 1,
+            name: opts.name.clone(),
+            raw: opts.raw,
+            calibs: calibs
+                .into_iter()
+                .map(|c| (c.addr, c.file_name, c.bytes))
+                .collect(),
+            error: None,
+            sweeps: 0,
+            points: 0,
+            imu_samples: 0,
+            pipeline,
+        };
+        Ok(Self {
+            demux,
+            out,
+            chooser,
+        })
+    }
+
+    /// Payload sizes that start a sensor's main stream.
+    pub fn lidar_sizes(&self) -> Vec<usize> {
+        self.chooser.borrow().lidar_sizes()
+    }
+
+    /// How many sensors are expected (one: topics without a sensor prefix).
+    pub fn set_sensor_hint(&mut self, n: usize) {
+        self.out.n_sensors_hint = n;
+    }
+
+    /// Where sweeps go from now on (`None`: decode and count only).
+    pub fn set_sink(&mut self, sink: Option<Sink>) {
+        self.out.sink = sink;
+    }
+
+    /// Adds a calibration (e.g. Ouster metadata fetched from the sensor) for sensors not yet
+    /// seen; it is attached to the output like a `--calib` file.
+    pub fn add_calib(&mut self, spec: CalibSpec) {
+        self.chooser.borrow_mut().add(&spec);
+        self.out
+            .calibs
+            .push((spec.addr, spec.file_name, spec.bytes));
+    }
+
+    /// Closes the current output and continues into `next` (`--split-every`): every sensor
+    /// already known is registered again in the new file. Returns the closed file's summary.
+    pub fn rotate(&mut self, next: Sink) -> Result<Option<SinkSummary>, SinkError> {
+        let old = self.out.sink.replace(next);
+        let closed = match old {
+            Some(s) => Some(s.finish()?),
+            None => None,
+        };
+        let sink = self.out.sink.as_mut().ok_or_else(|| SinkError::Io {
+            context: "rotating the output".into(),
+            source: std::io::Error::other("no output"),
+        })?;
+        for s in self.out.sensors.iter_mut() {
+            s.id = match &s.info {
+                Some(info) => Some(sink.add_sensor(info)?),
+                None => None,
+            };
+        }
+        Ok(closed)
+    }
+
+    /// Closes the output, if any.
+    pub fn close_sink(&mut self) -> Result<Option<SinkSummary>, SinkError> {
+        match self.out.sink.take() {
+            Some(s) => Ok(Some(s.finish()?)),
+            None => Ok(None),
+        }
+    }
+
+    /// Sweeps and points so far.
+    pub fn totals(&self) -> (u64, u64) {
+        (self.out.sweeps, self.out.points)
+    }
+
+    /// The demultiplexer (per-sensor streams and counters).
+    pub fn demux(&self) -> &Demux {
+        &self.demux
+    }
+
+    /// The error a [`PumpError`] means for the user.
+    pub fn run_error(&self, e: PumpError, path: &str) -> RunError {
+        match e {
+            PumpError::Source(err) => RunError::Source {
+                path: path.to_string(),
+                err,
+            },
+            PumpError::Stream(idx, err) => RunError::Stream {
+                addr: self
+                    .demux
+                    .stream(idx)
+                    .map(|(a, _)| a)
+                    .unwrap_or(Ipv4Addr::UNSPECIFIED),
+                err,
+            },
+            PumpError::Sink(e) => RunError::Sink(e),
+        }
+    }
+
+    /// Feeds one datagram (`time` = host receive time, ns).
+    pub fn push(
+        &mut self,
+        time: i64,
+        src: std::net::SocketAddrV4,
+        port: u16,
+        payload: &[u8],
+    ) -> Result<(), PumpError> {
+        let (demux, out) = (&mut self.demux, &mut self.out);
+        let (addr, src_port) = (*src.ip(), src.port());
+        let routed = demux.push(time, addr, port, payload, &mut |idx, sweep, facts| {
             out.on_sweep(idx, addr, sweep, facts, &[port]);
         });
         let idx = match routed {
             Ok(Some(idx)) => idx,
-            Ok(None) => continue,
+            Ok(None) => return Ok(()),
             Err((idx, e)) => return Err(PumpError::Stream(idx, e)),
         };
         if let Some(e) = out.error.take() {
@@ -527,8 +547,12 @@ fn pump<R: Read>(
         }
         if let Some(SensorStream::Ouster(s)) = demux.stream_mut(idx) {
             let id = out.sensors.get(idx).and_then(|x| x.id);
+            let imu_to_sensor = s.info().imu_to_sensor;
             for smp in s.drain_imu() {
                 out.imu_samples += 1;
+                if let Some(p) = out.pipeline.as_mut() {
+                    p.push_imu(idx, &imu_to_sensor, &smp);
+                }
                 if let (Some(sink), Some(id)) = (out.sink.as_mut(), id) {
                     let msg = json!({
                         "timestamp_ns": smp.sensor_ns,
@@ -544,74 +568,332 @@ fn pump<R: Read>(
             let id = out.sensor(idx, addr).id;
             match (id, out.sink.as_mut()) {
                 (Some(id), Some(sink)) => {
-                    sink.write_raw(
-                        id,
-                        time.max(0) as u64,
-                        std::net::SocketAddrV4::new(addr, src_port),
-                        port,
-                        d.payload,
-                    )
-                    .map_err(PumpError::Sink)?;
+                    sink.write_raw(id, time.max(0) as u64, src, port, payload)
+                        .map_err(PumpError::Sink)?;
                 }
                 _ => {
                     let s = &mut out.sensors[idx];
                     if s.raw_hold.len() < RAW_HOLD {
-                        s.raw_hold.push((time, port, src_port, d.payload.to_vec()));
+                        s.raw_hold.push((time, port, src_port, payload.to_vec()));
                     } else {
                         s.raw_dropped += 1;
                     }
                 }
             }
         }
+        Ok(())
+    }
+
+    /// Ends every stream: their last sweeps, and raw packets still held.
+    pub fn finish_streams(&mut self) -> Result<(), PumpError> {
+        let (demux, out) = (&mut self.demux, &mut self.out);
+        let addrs: Vec<Ipv4Addr> = demux.sensors().map(|(a, _, _)| a).collect();
+        let ports: Vec<Vec<u16>> = demux.sensors().map(|(_, _, p)| p.to_vec()).collect();
+        let r = demux.finish(&mut |idx, sweep, facts| {
+            let addr = addrs.get(idx).copied().unwrap_or(Ipv4Addr::UNSPECIFIED);
+            out.on_sweep(
+                idx,
+                addr,
+                sweep,
+                facts,
+                ports.get(idx).map(|p| p.as_slice()).unwrap_or(&[]),
+            );
+        });
+        if let Err((idx, e)) = r {
+            return Err(PumpError::Stream(idx, e));
+        }
+        if let Some(e) = out.error.take() {
+            return Err(PumpError::Sink(e));
+        }
+        // Sensors whose raw packets are still held (model never known): write them anyway.
+        if out.raw {
+            for idx in 0..out.sensors.len() {
+                if !out.sensors[idx].registered && !out.sensors[idx].raw_hold.is_empty() {
+                    let addr = out.sensors[idx].addr;
+                    if let Some((_, stream)) = demux.stream(idx) {
+                        out.register(
+                            idx,
+                            addr,
+                            stream.facts(),
+                            ports.get(idx).map(|p| p.as_slice()).unwrap_or(&[]),
+                        )
+                        .map_err(PumpError::Sink)?;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The summary fields every command shares (`sweeps`, `points`, `imu_samples`, `packets`,
+    /// `sensors`), and the number of packets lost (dropped, malformed or missing).
+    pub fn summary(&self) -> (serde_json::Map<String, Value>, u64) {
+        let (demux, out) = (&self.demux, &self.out);
+        let dstats = demux.stats().clone();
+        let mut sensors = Vec::new();
+        let (mut decoded, mut malformed, mut missing, mut position) = (0u64, 0u64, 0u64, 0u64);
+        let mut sensor_dropped = 0u64;
+        for (idx, (addr, stream, ports)) in demux.sensors().enumerate() {
+            let (mut v, c) = sensors::sensor_summary(stream);
+            decoded += c.decoded;
+            malformed += c.malformed;
+            missing += c.missing;
+            position += c.position;
+            sensor_dropped += c.dropped;
+            let so = out.sensors.get(idx);
+            if let Some(o) = v.as_object_mut() {
+                o.insert("name".into(), json!(so.map(|s| s.name.clone())));
+                o.insert("address".into(), json!(addr.to_string()));
+                o.insert("ports".into(), json!(ports));
+                let per_port: serde_json::Map<String, Value> = ports
+                    .iter()
+                    .zip(demux.port_packets(idx))
+                    .map(|(p, n)| (p.to_string(), json!(n)))
+                    .collect();
+                o.insert("packets_per_port".into(), Value::Object(per_port));
+                o.insert(
+                    "calibration_file".into(),
+                    json!(so.and_then(|s| s.calib_file.clone())),
+                );
+                o.insert("topic".into(), json!(so.map(|s| s.topic.clone())));
+                o.insert("raw_dropped".into(), json!(so.map(|s| s.raw_dropped)));
+            }
+            sensors.push(v);
+        }
+        let dropped = dstats.other_port + dstats.dropped_sensor_limit + sensor_dropped;
+        let mut m = serde_json::Map::new();
+        m.insert("sweeps".into(), json!(out.sweeps));
+        m.insert("points".into(), json!(out.points));
+        m.insert("imu_samples".into(), json!(out.imu_samples));
+        m.insert(
+            "packets".into(),
+            json!({
+                "decoded": decoded,
+                "dropped": dropped,
+                "malformed": malformed,
+                "missing": missing,
+                "position": position,
+                "ignored": dstats.ignored,
+            }),
+        );
+        m.insert("sensors".into(), Value::Array(sensors));
+        if let Some(p) = out.pipeline.as_ref() {
+            m.insert("pipeline".into(), p.summary());
+        }
+        (m, dropped + malformed + missing)
+    }
+}
+
+/// The `output` object of a summary.
+pub fn output_json(
+    s: &SinkSummary,
+    path: Option<&Path>,
+    format: FormatArg,
+    fields_all: bool,
+) -> Value {
+    json!({
+        "path": path.map(|p| p.display().to_string()),
+        "format": if format == FormatArg::Ros2 { "ros2" } else { "foxglove" },
+        // Velodyne points have no extra fields: `--fields all` writes the default ones.
+        "fields": if fields_all { "all" } else { "default" },
+        "topics": s.messages,
+        "attachments": s.attachments.iter().map(|a| json!({"name": a.name, "media_type": a.media_type, "size": a.size})).collect::<Vec<_>>(),
+        "chunks": s.chunks,
+    })
+}
+
+/// Sink options for `--format`.
+pub fn sink_options(format: FormatArg) -> SinkOptions {
+    sink_options_with(format, ChunkCompression::default())
+}
+
+/// The sink options of `--format` and `--compression`.
+pub fn sink_options_with(format: FormatArg, compression: ChunkCompression) -> SinkOptions {
+    SinkOptions {
+        format: if format == FormatArg::Ros2 {
+            Format::Ros2
+        } else {
+            Format::Foxglove
+        },
+        compression: compression.kind,
+        zstd_level: compression.zstd_level,
+        ..SinkOptions::default()
+    }
+}
+
+/// `--compression`: how MCAP chunks are compressed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ChunkCompression {
+    /// zstd, lz4 or none.
+    pub kind: Compression,
+    /// The zstd level (ignored otherwise).
+    pub zstd_level: i32,
+}
+
+impl Default for ChunkCompression {
+    fn default() -> Self {
+        Self {
+            kind: Compression::Zstd,
+            zstd_level: ringscan::sink::mcap::DEFAULT_ZSTD_LEVEL,
+        }
+    }
+}
+
+impl std::str::FromStr for ChunkCompression {
+    type Err = String;
+
+    /// `zstd`, `zstd:LEVEL`, `lz4` or `none`.
+    fn from_str(s: &str) -> Result<Self, String> {
+        let levels = ringscan::sink::mcap::ZSTD_LEVELS;
+        match s {
+            "zstd" => Ok(Self::default()),
+            "lz4" => Ok(Self {
+                kind: Compression::Lz4,
+                ..Self::default()
+            }),
+            "none" => Ok(Self {
+                kind: Compression::None,
+                ..Self::default()
+            }),
+            _ => {
+                let level = s
+                    .strip_prefix("zstd:")
+                    .and_then(|l| l.parse::<i32>().ok())
+                    .filter(|l| levels.contains(l) && *l != 0)
+                    .ok_or_else(|| {
+                        format!(
+                            "{s:?}: expected zstd, zstd:LEVEL (LEVEL {} … {}, not 0; negative levels are zstd's fast modes), lz4 or none",
+                            levels.start(),
+                            levels.end()
+                        )
+                    })?;
+                Ok(Self {
+                    kind: Compression::Zstd,
+                    zstd_level: level,
+                })
+            }
+        }
+    }
+}
+
+/// Runs a decode: the library entry of `ringscan decode` (and of `info` with no output).
+pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
+    let started = Instant::now();
+    let path_s = args.input.display().to_string();
+    let serr = |err: SourceError| RunError::Source {
+        path: path_s.clone(),
+        err,
+    };
+    let mut session = Session::new(&args.session_options())?;
+    let sizes = session.lidar_sizes();
+    let n_sensors_hint = match args.input_bytes {
+        Some(b) => prescan(PcapSource::new(b).map_err(serr)?, args.port, &sizes),
+        None => prescan(
+            PcapSource::open(&args.input).map_err(serr)?,
+            args.port,
+            &sizes,
+        ),
+    };
+    if args.name.is_some() && n_sensors_hint > 1 {
+        return Err(RunError::Usage(format!("--name: the capture holds {n_sensors_hint} sensors; names are given per sensor automatically")));
+    }
+    session.set_sensor_hint(n_sensors_hint);
+    let sink = match &args.out {
+        Some(p) => Some(create_file(
+            p,
+            sink_options_with(args.format, args.compression),
+        )?),
+        None => None,
+    };
+    session.set_sink(sink);
+    let result = match args.input_bytes {
+        Some(b) => pump(PcapSource::new(b).map_err(serr)?, &mut session, None),
+        None => {
+            let total = std::fs::metadata(&args.input).map(|m| m.len()).ok();
+            pump(
+                PcapSource::open(&args.input).map_err(serr)?,
+                &mut session,
+                total,
+            )
+        }
+    };
+    // Finalise the output on success and on error alike: the file is always a valid MCAP.
+    let source_stats = match result {
+        Ok(stats) => stats,
+        Err(e) => {
+            let _ = session.close_sink();
+            return Err(session.run_error(e, &path_s));
+        }
+    };
+    let sink_summary = session.close_sink()?;
+    let elapsed = started.elapsed().as_secs_f64();
+
+    let (mut m, lost) = session.summary();
+    let cap = &source_stats;
+    let duration_s = match (cap.first_time_ns, cap.last_time_ns) {
+        (Some(a), Some(b)) => (b - a) as f64 * 1e-9,
+        _ => 0.0,
+    };
+    m.insert("input".into(), json!(path_s));
+    m.insert(
+        "capture".into(),
+        json!({
+            "records": cap.records,
+            "bytes": cap.bytes,
+            "datagrams": cap.datagrams,
+            "non_udp": cap.non_udp,
+            "malformed_records": cap.malformed,
+            "fragments": cap.fragments,
+            "reassembled": cap.reassembled,
+            "fragments_expired": cap.fragments_expired,
+            "truncated_records": cap.truncated_records,
+            "truncated_tail_offset": cap.truncated_tail,
+            "duration_s": duration_s,
+        }),
+    );
+    m.insert(
+        "output".into(),
+        match &sink_summary {
+            Some(s) => output_json(s, args.out.as_deref(), args.format, args.fields_all),
+            None => Value::Null,
+        },
+    );
+    m.insert("elapsed_s".into(), json!(elapsed));
+    Ok(Summary {
+        json: Value::Object(m),
+        lost,
+    })
+}
+
+fn pump<R: Read>(
+    mut src: PcapSource<R>,
+    session: &mut Session,
+    total_bytes: Option<u64>,
+) -> Result<SourceStats, PumpError> {
+    let progress = total_bytes.is_some() && std::io::stderr().is_terminal();
+    let mut last_progress = Instant::now();
+    loop {
+        let d = match src.next_datagram() {
+            Ok(Some(d)) => d,
+            Ok(None) => break,
+            Err(e) => return Err(PumpError::Source(e)),
+        };
+        session.push(d.time_ns, d.src, d.dst.port(), d.payload)?;
         if progress && last_progress.elapsed().as_millis() >= 500 {
             last_progress = Instant::now();
             let done = src.stats().bytes;
             let total = total_bytes.unwrap_or(1).max(1);
+            let (sweeps, points) = session.totals();
             eprint!(
                 "\r{:5.1} % · {} sweeps · {} points",
                 100.0 * done as f64 / total as f64,
-                out.sweeps,
-                out.points
+                sweeps,
+                points
             );
             let _ = std::io::stderr().flush();
         }
     }
-    let mut addrs: Vec<Ipv4Addr> = demux.sensors().map(|(a, _, _)| a).collect();
-    let ports: Vec<Vec<u16>> = demux.sensors().map(|(_, _, p)| p.to_vec()).collect();
-    let r = demux.finish(&mut |idx, sweep, facts| {
-        let addr = addrs.get(idx).copied().unwrap_or(Ipv4Addr::UNSPECIFIED);
-        out.on_sweep(
-            idx,
-            addr,
-            sweep,
-            facts,
-            ports.get(idx).map(|p| p.as_slice()).unwrap_or(&[]),
-        );
-    });
-    if let Err((idx, e)) = r {
-        return Err(PumpError::Stream(idx, e));
-    }
-    if let Some(e) = out.error.take() {
-        return Err(PumpError::Sink(e));
-    }
-    // Sensors whose raw packets are still held (model never known): write them anyway.
-    if out.raw {
-        for idx in 0..out.sensors.len() {
-            if !out.sensors[idx].registered && !out.sensors[idx].raw_hold.is_empty() {
-                let addr = out.sensors[idx].addr;
-                if let Some((_, stream)) = demux.stream(idx) {
-                    out.register(
-                        idx,
-                        addr,
-                        stream.facts(),
-                        ports.get(idx).map(|p| p.as_slice()).unwrap_or(&[]),
-                    )
-                    .map_err(PumpError::Sink)?;
-                }
-            }
-        }
-    }
-    addrs.clear();
+    session.finish_streams()?;
     if progress {
         eprintln!();
     }
@@ -653,12 +935,14 @@ pub fn info_command(
         min_range: None,
         max_range: None,
         fields_all: false,
+        compression: ChunkCompression::default(),
         format: FormatArg::Foxglove,
         raw: false,
         strict: false,
         crc: None,
         json: json_out,
         input_bytes: None,
+        pipeline: PipelineArgs::default(),
     };
     let s = decode_capture(&args)?;
     if json_out {
@@ -682,12 +966,14 @@ pub fn demo_command(out: &Path, json_out: bool) -> Result<ExitCode, RunError> {
         min_range: None,
         max_range: None,
         fields_all: false,
+        compression: ChunkCompression::default(),
         format: FormatArg::Foxglove,
         raw: false,
         strict: false,
         crc: None,
         json: json_out,
         input_bytes: Some(DEMO_PCAP),
+        pipeline: PipelineArgs::default(),
     };
     let s = decode_capture(&args)?;
     if json_out {

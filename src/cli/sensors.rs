@@ -131,6 +131,22 @@ impl Chooser {
         }
     }
 
+    /// Adds a calibration after the start (Ouster metadata fetched from a sensor); it serves
+    /// sensors first seen from now on.
+    #[allow(dead_code)] // used by `listen`
+    pub fn add(&mut self, c: &CalibSpec) {
+        match &c.kind {
+            CalibKind::Velodyne(v) => self.velodyne.push((c.addr, v.clone())),
+            CalibKind::Ouster(info) => {
+                if let Ok(d) = OusterDecoder::new(info) {
+                    self.ouster
+                        .push((c.addr, c.file_name.clone(), (**info).clone(), d));
+                    self.used.push(false);
+                }
+            }
+        }
+    }
+
     /// Payload sizes that start a sensor's main stream (Velodyne data, each Ouster lidar size).
     pub fn lidar_sizes(&self) -> Vec<usize> {
         let mut v = vec![DATA_PACKET_LEN];

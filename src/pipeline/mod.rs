@@ -1,7 +1,165 @@
-//! Point-cloud stages applied to sweeps after decoding: registration (ICP), the odometry's
-//! local map, LiDAR odometry and its degeneracy analysis. No I/O, no clock.
+//! Point-cloud stages applied to a sweep after decoding (and deskewing): voxel downsampling,
+//! ground segmentation, Euclidean clustering.
+//!
+//! Every stage is a reusable object built from validated parameters
+//! ([`voxel::VoxelGrid::new`], [`ground::GroundSegmenter::new`],
+//! [`cluster::Clusterer::new`]): a bad value is rejected once, at construction, with a
+//! [`PipelineError`] naming the parameter. Stages read flat `&[Point]` slices and write into
+//! caller-owned buffers; they keep their working buffers between calls, so once warm a sweep
+//! is processed without allocating. Nothing here performs I/O or reads a clock.
+//!
+//! A typical sweep: `VoxelGrid::downsample` → `GroundSegmenter::segment` (one label per
+//! point) → `Clusterer::cluster_excluding` (the non-ground points) → boxes per cluster.
+//!
+//! Registration and odometry: [`icp`] (point-to-point and point-to-plane ICP), [`map`] (the
+//! odometry's bounded voxel-hash local map and KISS-ICP's subsampling), [`odometry`]
+//! (scan-to-map LiDAR odometry) and [`degeneracy`] (which motions a sweep leaves free).
 
+pub mod cluster;
+pub mod config;
 pub mod degeneracy;
+pub mod filter;
+pub mod ground;
 pub mod icp;
 pub mod map;
 pub mod odometry;
+pub mod run;
+pub mod voxel;
+
+/// A stage parameter out of its valid range, found when the stage is built.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum PipelineError {
+    /// `name` has the value `value`, which is not `expected`.
+    #[error("invalid parameter {name} = {value}: expected {expected}")]
+    InvalidParameter {
+        /// The parameter, as spelled in its parameter struct (`leaf_size_m`, `min_points`, …).
+        name: &'static str,
+        /// The value given (integers converted to `f64`).
+        value: f64,
+        /// What a valid value is, e.g. `"finite and > 0"`.
+        expected: &'static str,
+    },
+}
+
+/// Checks that a parameter is finite and strictly positive.
+pub(crate) fn positive(name: &'static str, value: f64) -> Result<(), PipelineError> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(PipelineError::InvalidParameter {
+            name,
+            value,
+            expected: "finite and > 0",
+        })
+    }
+}
+
+/// Checks that a parameter lies in `[lo, hi]` (and is not NaN).
+pub(crate) fn within(
+    name: &'static str,
+    value: f64,
+    lo: f64,
+    hi: f64,
+    expected: &'static str,
+) -> Result<(), PipelineError> {
+    if value >= lo && value <= hi {
+        Ok(())
+    } else {
+        Err(PipelineError::InvalidParameter {
+            name,
+            value,
+            expected,
+        })
+    }
+}
+
+/// A reusable open-addressing map from a packed 63-bit integer key (a voxel or cell) to a
+/// dense id `0, 1, 2, …` in order of first insertion. Multiplicative (Fibonacci) hashing,
+/// linear probing, at most half full, so a lookup touches one or two slots on average.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct KeyTable {
+    slots: Vec<(u64, u32)>,
+    shift: u32,
+    len: u32,
+}
+
+/// Marks an empty [`KeyTable`] slot; packed keys use at most 63 bits, so never a key.
+pub(crate) const NO_KEY: u64 = u64::MAX;
+
+impl KeyTable {
+    /// Empties the table and sizes it for up to `expected` distinct keys.
+    pub(crate) fn reset(&mut self, expected: usize) {
+        let cap = (expected.max(8) * 2).next_power_of_two();
+        self.slots.clear();
+        self.slots.resize(cap, (NO_KEY, 0));
+        self.shift = 64 - cap.trailing_zeros();
+        self.len = 0;
+    }
+
+    fn home(&self, key: u64) -> usize {
+        (key.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> self.shift) as usize
+    }
+
+    /// The id of `key`, inserting it with the next id if absent; `true` if it was inserted.
+    /// The caller never inserts more keys than it reset the table for.
+    #[inline]
+    pub(crate) fn insert(&mut self, key: u64) -> (u32, bool) {
+        let mask = self.slots.len() - 1;
+        let mut h = self.home(key);
+        loop {
+            let Some(e) = self.slots.get_mut(h) else {
+                return (u32::MAX, false); // unreachable: h ≤ mask
+            };
+            if e.0 == key {
+                return (e.1, false);
+            }
+            if e.0 == NO_KEY {
+                *e = (key, self.len);
+                self.len += 1;
+                return (self.len - 1, true);
+            }
+            h = (h + 1) & mask;
+        }
+    }
+
+    /// The id of `key`, if present.
+    #[inline]
+    pub(crate) fn get(&self, key: u64) -> Option<u32> {
+        let mask = self.slots.len().checked_sub(1)?;
+        let mut h = self.home(key);
+        loop {
+            let e = self.slots.get(h)?;
+            if e.0 == key {
+                return Some(e.1);
+            }
+            if e.0 == NO_KEY {
+                return None;
+            }
+            h = (h + 1) & mask;
+        }
+    }
+}
+
+/// Half the index range of a packed key per axis: indices in `[-KEY_BIAS, KEY_BIAS)` fit.
+pub(crate) const KEY_BIAS: i64 = 1 << 20;
+
+/// Packs three grid indices, each in `[-KEY_BIAS, KEY_BIAS)`, into 21 bits each of a `u64`.
+#[inline]
+pub(crate) fn pack_key(i: i64, j: i64, k: i64) -> u64 {
+    let b = |v: i64| ((v + KEY_BIAS) as u64) & 0x1F_FFFF;
+    b(i) << 42 | b(j) << 21 | b(k)
+}
+
+/// The grid index `floor(v)` of a scaled coordinate if it fits a packed key. (Written with a
+/// truncating cast: `f64::floor` is a library call on baseline x86-64, without SSE4.1.)
+#[inline]
+pub(crate) fn grid_index(scaled: f64) -> Option<i64> {
+    let lim = KEY_BIAS as f64;
+    if scaled >= -lim && scaled < lim {
+        let t = scaled as i64; // truncates toward zero; exact for |scaled| < 2^20
+        Some(if (t as f64) > scaled { t - 1 } else { t })
+    } else {
+        None // also NaN
+    }
+}

@@ -60,6 +60,8 @@ pub struct Measurement {
     pub xyz: [f64; 3],
     /// Reflectivity to write.
     pub reflectivity: u8,
+    /// Label of the surface hit ([`GROUND`](super::scene::GROUND) or an object id).
+    pub label: u32,
 }
 
 /// Whether the two-point correction applies to a laser: both near corrections non-zero
@@ -174,6 +176,7 @@ pub fn measure(
             measured_m: m,
             xyz,
             reflectivity: hit.reflectivity,
+            label: hit.label,
         });
     }
     None
@@ -201,6 +204,7 @@ pub fn behind(
         measured_m: m,
         xyz: corrected_point(l, azimuth_rad, m, near),
         reflectivity: first.reflectivity / 3,
+        label: first.label,
     })
 }
 

@@ -1,12 +1,51 @@
-//! Packet encoders: points → byte-exact packets, for tests, the demo fixture and the simulator.
+//! The simulator: labelled ray-cast scenes, sensor motion, and packet encoders (points →
+//! byte-exact packets) for Velodyne and Ouster, with per-measurement ground truth.
 //!
 //! Knows nothing of decoding: it writes the wire formats from their specification, so a
 //! round trip through the decoder checks both against the scene's ground truth.
+//!
+//! - [`scene`]: the [`Scene`] trait, [`Hit`] (range, reflectivity, label — [`scene::GROUND`]
+//!   = 0 or an object id — and the surface normal), primitives and the grid-culled
+//!   [`scene::World`]; [`scenes`]: ready-made worlds (`urban`, `corridor`, `flat_floor`,
+//!   `flat`, `slope10`, `ramp`, `kerbs`).
+//! - [`motion`]: [`motion::Trajectory`] (`world_from_sensor` at any ns; constant twist, route,
+//!   TUM pose table) and IMU kinematics.
+//! - [`velodyne`]: [`velodyne::VelodyneSim`], every model and return mode, per-firing poses,
+//!   [`velodyne::Truth`]; [`hdl64`]: the HDL-64E correction model.
+//! - [`ouster`]: [`ouster::OusterEncoder`] and [`ouster::OusterSim`] (any metadata, profile
+//!   and mode; per-pixel [`ouster::OusterTruth`]; IMU packets from the motion).
+//! - [`truth`]: the compact binary truth file (writer and reader); [`net`]: UDP frames, pcap.
+//!
+//! A moving VLP-16 in the urban scene, one packet:
+//!
+//! ```
+//! use nalgebra::{Isometry3, Vector3};
+//! use ringscan::calib::builtin::builtin;
+//! use ringscan::model::{ReturnMode, VelodyneModel};
+//! use ringscan::sim::{motion::Trajectory, scenes, velodyne::VelodyneSim};
+//!
+//! let t0 = 1_714_564_800_000_000_000; // ns, the simulator's clock
+//! let model = VelodyneModel::Vlp16;
+//! let mut sim = VelodyneSim::new(model, ReturnMode::Strongest, builtin(model).unwrap(), t0);
+//! sim.trajectory = Trajectory::route(t0, ringscan::sim::motion::Route::urban());
+//! let world = scenes::urban();
+//! let mut truth = Vec::new();
+//! let (host_ns, payload) = sim.next_packet(&world, &mut truth);
+//! assert!(host_ns > t0 && payload.len() == 1206 && !truth.is_empty());
+//! // Per measurement: sensor-frame point, world point, label, absolute firing time.
+//! let t = &truth[0];
+//! let pose = sim.trajectory.pose(t.time_ns);
+//! let w = pose * nalgebra::Point3::from(t.xyz);
+//! assert!((w.coords - Vector3::from(t.world)).norm() < 1e-9);
+//! ```
 
 pub mod hdl64;
+pub mod motion;
 pub mod net;
 pub mod ouster;
 pub mod scene;
+pub mod scenes;
+pub mod truth;
 pub mod velodyne;
 
 pub use scene::{Hit, Scene};

@@ -6,11 +6,43 @@
 //! measurement next to the packet, so a decode can be checked against geometry, not against
 //! itself. Block azimuths are rounded to 0.01° as a sensor reports them; distances to the
 //! model's unit.
+//!
+//! The sensor moves along [`VelodyneSim::trajectory`] (default: the identity, a static sensor
+//! at the world origin): each firing is cast from the pose at that firing's exact time, so a
+//! sweep shows the motion distortion a real one does. [`Truth`] records, per measurement, the
+//! point in the sensor frame at its firing time (what a decoder must reproduce), the same point
+//! in the world, its label and its absolute firing time; the pose is
+//! `trajectory.pose(truth.time_ns)`.
+//!
+//! ```
+//! use nalgebra::{Isometry3, Vector3};
+//! use ringscan::calib::builtin::builtin;
+//! use ringscan::model::{ReturnMode, VelodyneModel};
+//! use ringscan::sim::{motion::Trajectory, scenes, velodyne::VelodyneSim};
+//! let t0 = 1_714_564_800_000_000_000;
+//! let calib = builtin(VelodyneModel::Vlp16).unwrap();
+//! let mut sim = VelodyneSim::new(VelodyneModel::Vlp16, ReturnMode::Strongest, calib, t0);
+//! sim.trajectory = Trajectory::twist(
+//!     t0,
+//!     Isometry3::translation(0.0, 0.0, 1.8),
+//!     Vector3::new(15.0, 0.0, 0.0),
+//!     Vector3::new(0.0, 0.0, 60f64.to_radians()),
+//! );
+//! let scene = scenes::named("flat").unwrap();
+//! let mut truth = Vec::new();
+//! let (_host_ns, packet) = sim.next_packet(&scene, &mut truth);
+//! assert_eq!(packet.len(), 1206);
+//! let t = &truth[0];
+//! let p = sim.trajectory.pose(t.time_ns) * nalgebra::Point3::from(t.xyz);
+//! assert!((p.coords - Vector3::from(t.world)).norm() < 1e-9);
+//! ```
 
-use super::scene::Scene;
+use super::motion::Trajectory;
+use super::scene::{Hit, Scene};
 use crate::calib::VelodyneCalibration;
 use crate::model::velodyne::{ReturnMode, VelodyneModel, BLOCKS, DATA_PACKET_LEN, SLOTS};
 use crate::wire::velodyne::{FLAG_BANK2, FLAG_BANK3, FLAG_LOWER, FLAG_UPPER};
+use nalgebra::{Isometry3, Point3, Vector3};
 
 /// One block's content.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -75,8 +107,19 @@ pub struct Truth {
     pub slot: usize,
     /// Laser id.
     pub laser: usize,
-    /// The scene point hit, REP 103 sensor frame, metres.
+    /// The scene point hit, REP 103 sensor frame at the firing time, metres: what the
+    /// decoder must reproduce.
     pub xyz: [f64; 3],
+    /// The same point in the world frame, metres.
+    pub world: [f64; 3],
+    /// [`GROUND`](super::scene::GROUND) (0) or the id of the object hit. A dual-return last
+    /// return (a surface 1.5 m behind, which the scene does not hold) keeps the first's label.
+    pub label: u32,
+    /// Absolute firing time on the simulator's clock, ns (`host0_ns` + offset from the first
+    /// packet's first firing, rounded to the ns); the pose is `trajectory.pose(time_ns)`. The
+    /// packet's top-of-hour stamp is its first firing's time rounded to the µs (`toh0_us` at
+    /// `host0_ns`), so a decoder's absolute point time differs from this by < 0.5 µs.
+    pub time_ns: i64,
     /// Range along the beam, metres.
     pub range: f64,
     /// Reflectivity sent.
@@ -108,6 +151,46 @@ pub struct VelodyneSim {
     pub product_id: Option<u8>,
     /// Packets generated so far.
     pub packet_index: u64,
+    /// `world_from_sensor` over time (default: the identity, a static sensor).
+    pub trajectory: Trajectory,
+}
+
+/// A scene seen from a sensor pose: rays given in the sensor frame are cast in the world, the
+/// hit normal comes back in the sensor frame.
+pub struct Posed<'a> {
+    /// The world.
+    pub scene: &'a dyn Scene,
+    /// `world_from_sensor` (`None`: the identity, no transform).
+    pub pose: Option<Isometry3<f64>>,
+}
+
+impl<'a> Posed<'a> {
+    /// `scene` seen from `pose` (the identity skips the transform).
+    pub fn new(scene: &'a dyn Scene, pose: Isometry3<f64>) -> Self {
+        let pose = (pose != Isometry3::identity()).then_some(pose);
+        Self { scene, pose }
+    }
+
+    /// A sensor-frame point in the world.
+    pub fn to_world(&self, p: [f64; 3]) -> [f64; 3] {
+        match &self.pose {
+            None => p,
+            Some(t) => (t * Point3::from(p)).coords.into(),
+        }
+    }
+}
+
+impl Scene for Posed<'_> {
+    fn cast(&self, origin: [f64; 3], dir: [f64; 3]) -> Option<Hit> {
+        let Some(t) = &self.pose else {
+            return self.scene.cast(origin, dir);
+        };
+        let o = t * Point3::from(origin);
+        let d = t.rotation * Vector3::from(dir);
+        let mut h = self.scene.cast(o.coords.into(), d.into())?;
+        h.normal = (t.rotation.inverse() * Vector3::from(h.normal)).into();
+        Some(h)
+    }
 }
 
 impl VelodyneSim {
@@ -128,6 +211,7 @@ impl VelodyneSim {
             host0_ns,
             product_id: None,
             packet_index: 0,
+            trajectory: Trajectory::identity(),
         }
     }
 
@@ -180,11 +264,13 @@ impl VelodyneSim {
                     continue;
                 };
                 let az = self.azimuth_at(t_packet_ns + t_rel).to_radians() - l.rot_correction;
+                let time_ns = self.host0_ns + (t_packet_ns + t_rel).round() as i64;
+                let posed = Posed::new(scene, self.trajectory.pose(time_ns));
                 let second_surface = (self.packet_index as usize * 7 + b / bpf * 3 + s) % 5 == 0;
                 if self.calib.advanced {
                     // HDL-64E corrections: the raw distance whose corrected point is on the
                     // scene (sim::hdl64); dual: a weaker surface 1.5 m behind, as below.
-                    let Some(first) = super::hdl64::measure(l, az, res, scene) else {
+                    let Some(first) = super::hdl64::measure(l, az, res, &posed) else {
                         continue;
                     };
                     let (m, ret) = if dual && is_last_block {
@@ -206,6 +292,10 @@ impl VelodyneSim {
                         slot: s,
                         laser,
                         xyz: m.xyz,
+                        world: posed.to_world(m.xyz),
+                        // The surface behind is imaginary: it keeps the first hit's label.
+                        label: m.label,
+                        time_ns,
                         range,
                         reflectivity: m.reflectivity,
                         t_ns: t_rel,
@@ -217,7 +307,7 @@ impl VelodyneSim {
                 let (sa, ca) = az.sin_cos();
                 let dir = [cw * ca, -cw * sa, sw];
                 let origin = [0.0, 0.0, l.vert_offset_correction];
-                let Some(hit) = scene.cast(origin, dir) else {
+                let Some(hit) = posed.cast(origin, dir) else {
                     continue;
                 };
                 // Dual: every 5th ray also sees a surface 1.5 m behind, weaker: the last return.
@@ -253,6 +343,9 @@ impl VelodyneSim {
                     slot: s,
                     laser,
                     xyz,
+                    world: posed.to_world(xyz),
+                    label: hit.label,
+                    time_ns,
                     range,
                     reflectivity: refl,
                     t_ns: t_rel,

@@ -79,25 +79,25 @@ pub fn varint_len(v: u64) -> usize {
     bits.div_ceil(7)
 }
 
-fn put_key(buf: &mut Vec<u8>, field: u32, wire: u32) {
+pub(super) fn put_key(buf: &mut Vec<u8>, field: u32, wire: u32) {
     put_varint(buf, u64::from((field << 3) | wire));
 }
 
-fn put_varint_field(buf: &mut Vec<u8>, field: u32, v: u64) {
+pub(super) fn put_varint_field(buf: &mut Vec<u8>, field: u32, v: u64) {
     if v != 0 {
         put_key(buf, field, WIRE_VARINT);
         put_varint(buf, v);
     }
 }
 
-fn put_fixed32_field(buf: &mut Vec<u8>, field: u32, v: u32) {
+pub(super) fn put_fixed32_field(buf: &mut Vec<u8>, field: u32, v: u32) {
     if v != 0 {
         put_key(buf, field, WIRE_FIXED32);
         buf.extend_from_slice(&v.to_le_bytes());
     }
 }
 
-fn put_double_field(buf: &mut Vec<u8>, field: u32, v: f64) {
+pub(super) fn put_double_field(buf: &mut Vec<u8>, field: u32, v: f64) {
     if v.to_bits() != 0 {
         put_key(buf, field, WIRE_FIXED64);
         buf.extend_from_slice(&v.to_le_bytes());
@@ -106,20 +106,20 @@ fn put_double_field(buf: &mut Vec<u8>, field: u32, v: f64) {
 
 /// Writes a length-delimited field (string, bytes or an encoded sub-message), even when empty:
 /// for a sub-message an empty body still marks the field as present.
-fn put_len_field(buf: &mut Vec<u8>, field: u32, bytes: &[u8]) {
+pub(super) fn put_len_field(buf: &mut Vec<u8>, field: u32, bytes: &[u8]) {
     put_key(buf, field, WIRE_LEN);
     put_varint(buf, bytes.len() as u64);
     buf.extend_from_slice(bytes);
 }
 
-fn put_string_field(buf: &mut Vec<u8>, field: u32, s: &str) {
+pub(super) fn put_string_field(buf: &mut Vec<u8>, field: u32, s: &str) {
     if !s.is_empty() {
         put_len_field(buf, field, s.as_bytes());
     }
 }
 
 /// Writes field `field` as a `google.protobuf.Timestamp` for `ns` nanoseconds since the epoch.
-fn put_timestamp_field(buf: &mut Vec<u8>, field: u32, ns: u64) {
+pub(super) fn put_timestamp_field(buf: &mut Vec<u8>, field: u32, ns: u64) {
     let seconds = ns / 1_000_000_000;
     let nanos = ns % 1_000_000_000;
     let mut len = 0;
@@ -265,7 +265,7 @@ pub fn encode_raw_packet(
 // ---------------------------------------------------------------------------------------------
 // Schemas as FileDescriptorSets.
 
-fn field(
+pub(super) fn field(
     name: &str,
     json_name: &str,
     number: i32,
@@ -283,12 +283,12 @@ fn field(
     }
 }
 
-fn repeated(mut f: FieldDescriptorProto) -> FieldDescriptorProto {
+pub(super) fn repeated(mut f: FieldDescriptorProto) -> FieldDescriptorProto {
     f.label = Some(Label::Repeated as i32);
     f
 }
 
-fn message(name: &str, fields: Vec<FieldDescriptorProto>) -> DescriptorProto {
+pub(super) fn message(name: &str, fields: Vec<FieldDescriptorProto>) -> DescriptorProto {
     DescriptorProto {
         name: Some(name.to_owned()),
         field: fields,
@@ -296,7 +296,7 @@ fn message(name: &str, fields: Vec<FieldDescriptorProto>) -> DescriptorProto {
     }
 }
 
-fn file(
+pub(super) fn file(
     name: &str,
     package: &str,
     deps: &[&str],
@@ -313,7 +313,7 @@ fn file(
 }
 
 /// `google/protobuf/timestamp.proto`.
-fn timestamp_file() -> FileDescriptorProto {
+pub(super) fn timestamp_file() -> FileDescriptorProto {
     file(
         "google/protobuf/timestamp.proto",
         "google.protobuf",
@@ -330,7 +330,7 @@ fn timestamp_file() -> FileDescriptorProto {
 
 /// The files of `foxglove.PointCloud`, dependencies first (as `protoc --include_imports` orders
 /// them).
-fn point_cloud_files() -> Vec<FileDescriptorProto> {
+pub(super) fn point_cloud_files() -> Vec<FileDescriptorProto> {
     let vector3 = file(
         "foxglove/Vector3.proto",
         "foxglove",

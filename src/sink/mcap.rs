@@ -45,13 +45,17 @@ pub enum Format {
     Ros2,
 }
 
-/// Zstandard level of [`Compression::Zstd`].
-pub const ZSTD_LEVEL: u32 = 1;
+/// Zstandard level of [`Compression::Zstd`] unless [`SinkOptions::zstd_level`] says otherwise.
+pub const DEFAULT_ZSTD_LEVEL: i32 = 1;
+
+/// Zstandard levels [`SinkOptions::zstd_level`] accepts: zstd's "fast" levels down to −7 and the
+/// regular ones up to 19 (higher levels need more memory than a driver should take).
+pub const ZSTD_LEVELS: core::ops::RangeInclusive<i32> = -7..=19;
 
 /// Chunk compression.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Compression {
-    /// Zstandard at level [`ZSTD_LEVEL`], multi-threaded (the default). Level 1 keeps 97 % of
+    /// Zstandard at [`SinkOptions::zstd_level`], multi-threaded (the default). Level 1 keeps 97 % of
     /// level 3's ratio on point clouds (1.59 vs 1.64 on the HDL-32E capture) at twice the
     /// speed: `tools/bench/mcap_compression.rs`, figures in BENCHMARKS.md.
     #[default]
@@ -72,6 +76,9 @@ pub struct SinkOptions {
     /// Target uncompressed chunk size in bytes: a chunk is closed once it has grown past this.
     /// 0 means [`DEFAULT_CHUNK_SIZE`].
     pub chunk_size: u64,
+    /// Zstandard level (with [`Compression::Zstd`]), within [`ZSTD_LEVELS`]; negative levels are
+    /// zstd's fast modes.
+    pub zstd_level: i32,
 }
 
 impl Default for SinkOptions {
@@ -80,6 +87,7 @@ impl Default for SinkOptions {
             format: Format::Foxglove,
             compression: Compression::Zstd,
             chunk_size: DEFAULT_CHUNK_SIZE,
+            zstd_level: DEFAULT_ZSTD_LEVEL,
         }
     }
 }
@@ -179,6 +187,28 @@ impl SensorChannels {
     pub fn imu_topic(&self) -> String {
         format!("{}/imu", self.prefix)
     }
+
+    /// The topic prefix: `""` for a single sensor, `"/<name>"` when there are several.
+    pub fn prefix(&self) -> &str {
+        &self.prefix
+    }
+}
+
+/// Handle of a channel made by [`McapSink::add_topic`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct TopicId(usize);
+
+/// The schema of a channel made by [`McapSink::add_topic`].
+#[derive(Clone, Copy)]
+pub struct TopicSchema<'a> {
+    /// Schema name, e.g. `foxglove.SceneUpdate`.
+    pub name: &'a str,
+    /// Schema encoding, e.g. `protobuf`.
+    pub encoding: &'a str,
+    /// Makes the schema data (called once per schema name).
+    pub data: &'a dyn Fn() -> Vec<u8>,
+    /// Message encoding of the channel, e.g. `protobuf`.
+    pub message_encoding: &'a str,
 }
 
 /// One attachment written to the file.
@@ -327,6 +357,10 @@ pub struct McapSink<W: Write + Seek> {
     attached: Vec<(String, Vec<u8>)>,
     first_log_time: Option<u64>,
     commit: Option<FileCommit<W>>,
+    /// Schemas of [`McapSink::add_topic`] channels, by name.
+    extra_schemas: Vec<(String, u16)>,
+    /// Channels made by [`McapSink::add_topic`]: topic and channel.
+    extra_channels: Vec<(String, Channel)>,
 }
 
 impl<W: Write + Seek> std::fmt::Debug for McapSink<W> {
@@ -357,8 +391,11 @@ impl<W: Write + Seek> McapSink<W> {
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get().min(4)) as u32;
         let mut writer = WriteOptions::new()
             .compression(compression)
+            // The mcap crate takes the level as a u32 and hands it to zstd as an i32: a negative
+            // (fast) level travels as its two's complement.
             .compression_level(if opts.compression == Compression::Zstd {
-                ZSTD_LEVEL
+                opts.zstd_level
+                    .clamp(*ZSTD_LEVELS.start(), *ZSTD_LEVELS.end()) as u32
             } else {
                 0
             })
@@ -402,6 +439,8 @@ impl<W: Write + Seek> McapSink<W> {
             attached: Vec::new(),
             first_log_time: None,
             commit: None,
+            extra_schemas: Vec::new(),
+            extra_channels: Vec::new(),
         })
     }
 
@@ -727,6 +766,56 @@ impl<W: Write + Seek> McapSink<W> {
                 "writing diagnostics to {}",
                 sensor.diagnostics_topic()
             )))
+    }
+
+    /// Adds a channel on `topic` with `schema` (the schema is written once per name) and
+    /// `metadata`: for outputs beyond a sensor's own channels (pipeline outputs, transforms).
+    pub fn add_topic(
+        &mut self,
+        topic: &str,
+        schema: TopicSchema<'_>,
+        metadata: &BTreeMap<String, String>,
+    ) -> Result<TopicId, SinkError> {
+        let writer = self.writer.as_mut().ok_or_else(finished_error)?;
+        let schema_id = match self.extra_schemas.iter().find(|(n, _)| n == schema.name) {
+            Some(&(_, id)) => id,
+            None => {
+                let id = writer
+                    .add_schema(schema.name, schema.encoding, &(schema.data)())
+                    .map_err(mcap_err(format!("writing the {} schema", schema.name)))?;
+                self.extra_schemas.push((schema.name.to_string(), id));
+                id
+            }
+        };
+        let id = writer
+            .add_channel(schema_id, topic, schema.message_encoding, metadata)
+            .map_err(mcap_err(format!("adding channel {topic}")))?;
+        self.extra_channels
+            .push((topic.to_string(), Channel { id, sequence: 0 }));
+        Ok(TopicId(self.extra_channels.len() - 1))
+    }
+
+    /// Writes one already encoded message to a channel made by [`add_topic`](Self::add_topic).
+    pub fn write_message(
+        &mut self,
+        topic: TopicId,
+        log_time_ns: u64,
+        data: &[u8],
+    ) -> Result<(), SinkError> {
+        self.before_message(log_time_ns)?;
+        let registered = self.extra_channels.len();
+        let (name, channel) =
+            self.extra_channels
+                .get_mut(topic.0)
+                .ok_or(SinkError::UnknownSensor {
+                    id: topic.0,
+                    registered,
+                })?;
+        let header = channel.next_header(log_time_ns);
+        let writer = self.writer.as_mut().ok_or_else(finished_error)?;
+        writer
+            .write_to_known_channel(&header, data)
+            .map_err(mcap_err(format!("writing a message to {name}")))
     }
 
     /// Writes the summary section and footer. For a sink made by [`create_file`], then flushes,

@@ -8,6 +8,9 @@
 //! | `<prefix>/points` | `foxglove.PointCloud` (protobuf) or `sensor_msgs/msg/PointCloud2` (`ros2msg`) | `protobuf` / `cdr` |
 //! | `<prefix>/diagnostics` | `ringscan.Diagnostics` (`jsonschema`) | `json` |
 //! | `<prefix>/raw` | `ringscan.RawPacket` (protobuf, see [`foxglove::RAW_PACKET_SCHEMA`]) | `protobuf` |
+//! | `<prefix>/ground`, `<prefix>/obstacles` | `foxglove.PointCloud` (protobuf; obstacles add a `cluster` field) | `protobuf` |
+//! | `<prefix>/clusters` | `foxglove.SceneUpdate` (protobuf, one cube per cluster, see [`scene`]) | `protobuf` |
+//! | `/tf_static` | `foxglove.FrameTransform` (protobuf: `base_link` → each sensor with `--extrinsics`) | `protobuf` |
 //!
 //! `<prefix>` is [`SensorInfo::topic_prefix`]: empty for a single sensor, `/<name>` when there are
 //! several. Calibration files are stored as MCAP attachments. The file is chunked, compressed
@@ -21,8 +24,10 @@
 pub mod foxglove;
 pub mod mcap;
 pub mod ros2;
+pub mod scene;
 
 pub use self::mcap::{
     create_file, temp_path, AttachmentSummary, Compression, Format, McapSink, SensorChannels,
-    SensorId, SensorInfo, SinkError, SinkOptions, SinkSummary, SweepMsg, DEFAULT_CHUNK_SIZE,
+    SensorId, SensorInfo, SinkError, SinkOptions, SinkSummary, SweepMsg, TopicId, TopicSchema,
+    DEFAULT_CHUNK_SIZE,
 };

@@ -1,4 +1,4 @@
-//! Edge: where datagrams come from (pcap / pcapng captures; live UDP later).
+//! Edge: where datagrams come from (pcap / pcapng captures, live UDP sockets).
 //!
 //! Knows nothing of packet formats: it yields [`Datagram`]s.
 
@@ -8,6 +8,8 @@ pub mod link;
 #[cfg(feature = "pcap")]
 pub mod pcap;
 pub mod reassembly;
+#[cfg(feature = "udp")]
+pub mod udp;
 
 /// One UDP datagram as it arrived: capture (host) time, addresses, payload.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -78,13 +78,21 @@ fn main() {
     println!("| compression | threads | time (s) | MB/s of points | real-time factor (writing only) | ratio |");
     println!("|---|---:|---:|---:|---:|---:|");
     let out = std::env::temp_dir().join("bench_mcap_compression.mcap");
-    // (name, compression, level (0 = the library default; u32::MAX = zstd level -1), threads)
-    let settings: [(&str, Option<mcap::Compression>, u32, u32); 7] = [
+    // (name, compression, level (0 = the library default; a negative zstd level is passed as
+    // its two's complement, which the mcap crate hands to zstd as an i32), threads)
+    let neg = |l: i32| l as u32;
+    let settings: Vec<(&str, Option<mcap::Compression>, u32, u32)> = vec![
         ("none", None, 0, 0),
         ("lz4", Some(mcap::Compression::Lz4), 0, 0),
-        ("zstd -1 (fast)", Some(mcap::Compression::Zstd), u32::MAX, 0),
+        ("zstd -5 (fast)", Some(mcap::Compression::Zstd), neg(-5), 0),
+        ("zstd -3 (fast)", Some(mcap::Compression::Zstd), neg(-3), 0),
+        ("zstd -2 (fast)", Some(mcap::Compression::Zstd), neg(-2), 0),
+        ("zstd -1 (fast)", Some(mcap::Compression::Zstd), neg(-1), 0),
         ("zstd 1", Some(mcap::Compression::Zstd), 1, 0),
         ("zstd 3 (mcap default)", Some(mcap::Compression::Zstd), 0, 0),
+        ("zstd -5 (fast)", Some(mcap::Compression::Zstd), neg(-5), 2),
+        ("zstd -3 (fast)", Some(mcap::Compression::Zstd), neg(-3), 2),
+        ("zstd -1 (fast)", Some(mcap::Compression::Zstd), neg(-1), 2),
         ("zstd 1", Some(mcap::Compression::Zstd), 1, 2),
         ("zstd 3 (mcap default)", Some(mcap::Compression::Zstd), 0, 2),
     ];

@@ -29,7 +29,7 @@ use ringscan::source::pcap::PcapSource;
 use ringscan::source::reassembly::{
     FragmentKey, Push, Reassembler, ReassemblyConfig, MAX_IPV4_PAYLOAD,
 };
-use ringscan::sweep::{Demux, Organized, SensorFacts, StreamConfig, Sweep};
+use ringscan::sweep::{Demux, Facts, Organized, SensorConfig, SensorFacts, StreamConfig, Sweep};
 use ringscan::wire::nmea::parse_rmc;
 use ringscan::wire::velodyne::{
     DataPacket, PositionPacket, FLAG_BANK2, FLAG_BANK3, FLAG_LOWER, FLAG_UPPER,
@@ -1144,33 +1144,29 @@ struct Out {
 }
 
 impl Out {
+    /// Registers a sensor with the name and metadata `ringscan decode` gives it.
+    fn register_any(&mut self, idx: usize, addr: Ipv4Addr, facts: Facts<'_>, ports: &[u16]) {
+        match facts {
+            Facts::Velodyne(f) => self.register(idx, addr, f, ports),
+            Facts::Ouster(f) => {
+                let mut md = BTreeMap::new();
+                md.insert("source_address".to_string(), addr.to_string());
+                md.insert("serial".to_string(), f.serial.to_string());
+                md.insert("profile".to_string(), f.profile.clone());
+                md.insert("mode".to_string(), f.mode.clone());
+                md.insert("clock".to_string(), f.clock.name().to_string());
+                let base = format!("os-{}", addr.octets()[3]);
+                self.register_named(idx, addr, base, md);
+            }
+        }
+    }
+
     fn register(&mut self, idx: usize, addr: Ipv4Addr, facts: &SensorFacts, ports: &[u16]) {
-        while self.sensors.len() <= idx {
-            self.sensors.push(OutSensor {
-                id: None,
-                registered: false,
-                name: String::new(),
-            });
-        }
-        if self.sensors[idx].registered || self.error.is_some() {
-            return;
-        }
         // The names and metadata `ringscan decode` gives a sensor (src/cli/sensors.rs
-        // `default_name`, made unique by the whole address in src/cli/run.rs `register`).
-        let mut name = match facts.model {
+        // `default_name`).
+        let name = match facts.model {
             Some(m) => format!("{}-{}", m.id(), addr.octets()[3]),
             None => format!("velodyne-{}", addr.octets()[3]),
-        };
-        if self.sensors.iter().any(|s| s.registered && s.name == name) {
-            let o = addr.octets();
-            name = format!("{name}-{}-{}-{}", o[0], o[1], o[2]);
-        }
-        self.sensors[idx].name = name.clone();
-        let single = self.single && idx == 0;
-        let topic_prefix = if single {
-            String::new()
-        } else {
-            format!("/{name}")
         };
         let mut md = BTreeMap::new();
         md.insert("source_address".to_string(), addr.to_string());
@@ -1191,6 +1187,38 @@ impl Out {
         md.insert("model_detection".to_string(), facts.detection.clone());
         md.insert("clock".to_string(), facts.clock.name().to_string());
         md.insert("calibration".to_string(), facts.calibration.clone());
+        self.register_named(idx, addr, name, md);
+    }
+
+    fn register_named(
+        &mut self,
+        idx: usize,
+        addr: Ipv4Addr,
+        mut name: String,
+        md: BTreeMap<String, String>,
+    ) {
+        while self.sensors.len() <= idx {
+            self.sensors.push(OutSensor {
+                id: None,
+                registered: false,
+                name: String::new(),
+            });
+        }
+        if self.sensors[idx].registered || self.error.is_some() {
+            return;
+        }
+        // Made unique by the whole address, as src/cli/run.rs `register` does.
+        if self.sensors.iter().any(|s| s.registered && s.name == name) {
+            let o = addr.octets();
+            name = format!("{name}-{}-{}-{}", o[0], o[1], o[2]);
+        }
+        self.sensors[idx].name = name.clone();
+        let single = self.single && idx == 0;
+        let topic_prefix = if single {
+            String::new()
+        } else {
+            format!("/{name}")
+        };
         let info = SensorInfo {
             name,
             topic_prefix: topic_prefix.clone(),
@@ -1211,11 +1239,11 @@ impl Out {
         *self.written.entry(topic).or_insert(0) += 1;
     }
 
-    fn on_sweep(&mut self, idx: usize, addr: Ipv4Addr, sweep: &Sweep, facts: &SensorFacts) {
+    fn on_sweep(&mut self, idx: usize, addr: Ipv4Addr, sweep: &Sweep, facts: Facts<'_>) {
         if self.error.is_some() {
             return;
         }
-        self.register(idx, addr, facts, &[]);
+        self.register_any(idx, addr, facts, &[]);
         let Some(id) = self.sensors.get(idx).and_then(|s| s.id) else {
             return;
         };
@@ -1225,7 +1253,12 @@ impl Out {
             points: &sweep.points,
         };
         let topic = self.sink.channels(id).map(|c| c.points_topic());
-        match self.sink.write_sweep(id, &msg) {
+        let written = if sweep.extras.len() == sweep.points.len() && !sweep.extras.is_empty() {
+            self.sink.write_sweep_extended(id, &msg, &sweep.extras)
+        } else {
+            self.sink.write_sweep(id, &msg)
+        };
+        match written {
             Ok(()) => self.count(topic.unwrap_or_default()),
             Err(e) => {
                 self.error = Some(e);
@@ -1286,15 +1319,22 @@ pub fn decode_to_mcap(data: &[u8]) {
         },
         compression: [Compression::Zstd, Compression::Lz4, Compression::None][variant / 2 % 3],
         chunk_size: if variant >= 6 { 64 * 1024 } else { 0 },
+        zstd_level: [1, -3, 3][variant % 3],
     };
     let raw = variant % 4 == 3;
+    // An Ouster sensor beside the Velodyne ones: datagrams of its lidar or IMU size go to it.
+    let ouster = decode_to_mcap_ouster(variant);
+    let ouster_lidar = ouster.info.lidar_packet_bytes();
+    let ouster_imu = OusterStreamConfig::imu_len_of(&ouster.info);
+    let is_ouster = move |n: usize| n == ouster_lidar || Some(n) == ouster_imu;
     // The sensor count first, as the CLI's pre-scan does.
     let Ok(mut pre) = PcapSource::new(data) else {
         return;
     };
     let mut addrs: Vec<Ipv4Addr> = Vec::new();
     while let Ok(Some(d)) = pre.next_datagram() {
-        if d.payload.len() == DATA_PACKET_LEN && !addrs.contains(d.src.ip()) {
+        let n = d.payload.len();
+        if (n == DATA_PACKET_LEN || is_ouster(n)) && !addrs.contains(d.src.ip()) {
             addrs.push(*d.src.ip());
         }
     }
@@ -1309,10 +1349,14 @@ pub fn decode_to_mcap(data: &[u8]) {
         written: BTreeMap::new(),
         topics: Vec::new(),
     };
-    let mut demux = Demux::new(
-        ringscan::sweep::velodyne_only(|_| StreamConfig::default()),
-        None,
-    );
+    let config_for = move |_src: Ipv4Addr, _port: u16, payload: &[u8]| match payload.len() {
+        DATA_PACKET_LEN | POSITION_PACKET_LEN => {
+            Some(SensorConfig::Velodyne(StreamConfig::default()))
+        }
+        n if is_ouster(n) => Some(SensorConfig::Ouster(Box::new(ouster.clone()))),
+        _ => None,
+    };
+    let mut demux = Demux::new(Box::new(config_for), None);
     let mut src = PcapSource::new(data).expect("opened once already");
     // A source error ends the input, as in the CLI (which then reports it).
     while let Ok(Some(d)) = src.next_datagram() {
@@ -1324,9 +1368,7 @@ pub fn decode_to_mcap(data: &[u8]) {
             continue;
         }
         let routed = demux.push(time, addr, port, d.payload, &mut |idx, sweep, facts| {
-            if let ringscan::sweep::Facts::Velodyne(facts) = facts {
-                out.on_sweep(idx, addr, sweep, facts);
-            }
+            out.on_sweep(idx, addr, sweep, facts);
         });
         let idx = match routed {
             Ok(Some(idx)) => idx,
@@ -1337,15 +1379,35 @@ pub fn decode_to_mcap(data: &[u8]) {
             break;
         }
         if !out.sensors.get(idx).is_some_and(|s| s.registered) {
-            if let Some(stream) = demux.stream(idx).and_then(|(_, s)| s.as_velodyne()) {
-                if stream.decoder().is_some() {
-                    let facts = stream.facts().clone();
+            if let Some((_, stream)) = demux.stream(idx) {
+                if stream.ready() {
                     let ports: Vec<u16> = demux
                         .sensors()
                         .nth(idx)
                         .map(|(_, _, p)| p.to_vec())
                         .unwrap_or_default();
-                    out.register(idx, addr, &facts, &ports);
+                    out.register_any(idx, addr, stream.facts(), &ports);
+                }
+            }
+        }
+        // IMU samples, as `ringscan decode` writes them.
+        if let Some(ringscan::sweep::SensorStream::Ouster(s)) = demux.stream_mut(idx) {
+            let id = out.sensors.get(idx).and_then(|x| x.id);
+            let samples: Vec<_> = s.drain_imu().collect();
+            for smp in samples {
+                let Some(id) = id else { continue };
+                if out.error.is_some() {
+                    break;
+                }
+                let msg = serde_json::json!({
+                    "timestamp_ns": smp.sensor_ns,
+                    "linear_acceleration": smp.accel,
+                    "angular_velocity": smp.gyro,
+                });
+                let topic = out.sink.channels(id).map(|c| c.imu_topic());
+                match out.sink.write_imu(id, smp.host_ns.max(0) as u64, &msg) {
+                    Ok(()) => out.count(topic.unwrap_or_default()),
+                    Err(e) => out.error = Some(e),
                 }
             }
         }
@@ -1372,9 +1434,7 @@ pub fn decode_to_mcap(data: &[u8]) {
         let addrs: Vec<Ipv4Addr> = demux.sensors().map(|(a, _, _)| a).collect();
         let _ = demux.finish(&mut |idx, sweep, facts| {
             let addr = addrs.get(idx).copied().unwrap_or(Ipv4Addr::UNSPECIFIED);
-            if let ringscan::sweep::Facts::Velodyne(facts) = facts {
-                out.on_sweep(idx, addr, sweep, facts);
-            }
+            out.on_sweep(idx, addr, sweep, facts);
         });
     }
     if let Some(e) = &out.error {
@@ -1412,5 +1472,437 @@ pub fn decode_to_mcap(data: &[u8]) {
             *n,
             "sink summary for {topic}"
         );
+    }
+}
+
+// ----- Ouster ----------------------------------------------------------------------------------
+
+use ringscan::calib::ouster::{parse as parse_ouster, OusterInfo};
+use ringscan::decode::OusterDecoder;
+use ringscan::model::ouster::{Profile, ALL_PROFILES};
+use ringscan::sweep::ouster::{OusterStream, OusterStreamConfig};
+use ringscan::wire::ouster::{ImuPacketLegacy, ImuPacketNmea, LidarPacket};
+
+/// Largest range, metres, the range field of a profile can carry (its width and shift).
+fn ouster_max_range_m(profile: Profile) -> f64 {
+    let f = profile.layout().range;
+    let raw_max = if f.width >= 32 {
+        f64::from(u32::MAX)
+    } else {
+        f64::from((1u32 << f.width) - 1)
+    };
+    raw_max * f64::from(1u32 << f.shift) / 1000.0
+}
+
+/// Bound on any decoded coordinate, metres: the parser keeps rotation entries in [−1, 1]
+/// (a 3 × 3 matrix of those stretches a vector at most 3×) and translations within 10 m, and
+/// the point is `lidar_to_sensor · (range · direction + beam offset)`.
+fn ouster_coordinate_bound(info: &OusterInfo) -> f64 {
+    let beam = info.lidar_origin_to_beam_origin_mm.abs() / 1000.0
+        + info.beam_to_lidar[3].abs() / 1000.0
+        + info.beam_to_lidar[7].abs() / 1000.0
+        + info.beam_to_lidar[11].abs() / 1000.0;
+    3.0 * (ouster_max_range_m(info.format.profile) + beam) + 10.0 + 1e-3
+}
+
+/// Metadata JSON (the current nested form) for a sensor chosen by the fuzzer's bytes: profile,
+/// lidar mode, beam count, IMU profile, beam angles, beam-origin offset, firmware. Returns the
+/// text; the parser decides whether it is valid (the angles come from the input).
+fn ouster_metadata(b: &mut Bytes<'_>) -> String {
+    let profile = ALL_PROFILES[usize::from(b.u8()) % ALL_PROFILES.len()];
+    let (w, fps) = [
+        (512, 10),
+        (1024, 10),
+        (2048, 10),
+        (512, 20),
+        (1024, 20),
+        (4096, 5),
+    ][usize::from(b.u8()) % 6];
+    let h = [16usize, 32, 64, 128][usize::from(b.u8()) % 4];
+    let cpp = [16usize, 8, 4, 32][usize::from(b.u8()) % 4];
+    let sel = b.u8();
+    let imu = if profile == Profile::Legacy || sel & 1 == 0 {
+        "LEGACY"
+    } else {
+        "ACCEL32_GYRO32_NMEA"
+    };
+    let firmware = ["v2.5.2", "v2.3.0", "v3.1.0", "v2.0.0"][usize::from(sel >> 1) % 4];
+    let scale = |v: u8, lim: f64| (f64::from(v) / 255.0 * 2.0 - 1.0) * lim;
+    let alt: Vec<f64> = (0..h).map(|_| scale(b.u8(), 45.0)).collect();
+    let az: Vec<f64> = (0..h).map(|_| scale(b.u8(), 10.0)).collect();
+    let shift: Vec<i64> = (0..h).map(|_| i64::from(b.u8() % 64) - 32).collect();
+    let offset_mm = scale(b.u8(), 100.0);
+    let first = usize::from(b.u16()) % w;
+    let last = usize::from(b.u16()) % w;
+    serde_json::json!({
+        "sensor_info": {
+            "prod_line": format!("OS-1-{h}"),
+            "prod_sn": "992210000957",
+            "build_rev": firmware,
+            "image_rev": format!("ousteros-image-prod-aries-{firmware}+20230101000000"),
+            "initialization_id": 5_431_293,
+        },
+        "beam_intrinsics": {
+            "beam_altitude_angles": alt,
+            "beam_azimuth_angles": az,
+            "lidar_origin_to_beam_origin_mm": offset_mm,
+        },
+        "imu_intrinsics": {
+            "imu_to_sensor_transform": [1, 0, 0, 6.253, 0, 1, 0, -11.775, 0, 0, 1, 7.645, 0, 0, 0, 1],
+        },
+        "lidar_intrinsics": {
+            "lidar_to_sensor_transform": [-1, 0, 0, 0, 0, -1, 0, 0, 0, 0, 1, 36.18, 0, 0, 0, 1],
+        },
+        "config_params": {
+            "lidar_mode": format!("{w}x{fps}"),
+            "udp_port_lidar": 7502,
+            "udp_port_imu": 7503,
+            "udp_dest": "10.0.0.1",
+            "udp_profile_lidar": profile.name(),
+            "udp_profile_imu": imu,
+        },
+        "lidar_data_format": {
+            "columns_per_frame": w,
+            "columns_per_packet": cpp,
+            "pixels_per_column": h,
+            "pixel_shift_by_row": shift,
+            "column_window": [first, last],
+            "udp_profile_lidar": profile.name(),
+            "udp_profile_imu": imu,
+        },
+        "imu_data_format": { "imu_measurements_per_packet": 8 },
+        "calibration_status": { "reflectivity": { "valid": true } },
+    })
+    .to_string()
+}
+
+/// Invariants of a parsed Ouster calibration, and of the decoder and stream built from it.
+pub fn check_ouster_info(info: &OusterInfo) {
+    let h = info.pixels_per_column();
+    let w = info.columns_per_frame;
+    assert!([16, 32, 64, 128].contains(&h), "H = {h}");
+    assert!([512, 1024, 2048, 4096].contains(&w), "W = {w}");
+    assert_eq!(info.beam_altitude_angles.len(), h);
+    assert_eq!(info.beam_azimuth_angles.len(), h);
+    assert_eq!(info.pixel_shift_by_row.len(), h);
+    assert!(info
+        .pixel_shift_by_row
+        .iter()
+        .all(|s| s.unsigned_abs() < w as u32));
+    assert!(info.columns_per_packet() > 0 && w % info.columns_per_packet() == 0);
+    assert!(info.column_window.0 < w && info.column_window.1 < w);
+    assert!(info.lidar_packet_bytes() <= MAX_UDP_PAYLOAD);
+    let in_window = (0..w).filter(|&c| info.is_column_in_window(c)).count();
+    assert_eq!(in_window, info.columns_in_window());
+    assert!(info.expected_packets_per_frame() <= w);
+    for m in [
+        &info.beam_to_lidar,
+        &info.lidar_to_sensor,
+        &info.imu_to_sensor,
+    ] {
+        assert!(m.iter().all(|v| v.is_finite()));
+    }
+    assert!(info.beam_altitude_angles.iter().all(|a| a.is_finite()));
+    assert!(info.beam_azimuth_angles.iter().all(|a| a.is_finite()));
+    if let Some(n) = OusterStreamConfig::imu_len_of(info) {
+        assert!(n <= MAX_UDP_PAYLOAD);
+    }
+    if info.lidar_off {
+        return;
+    }
+    // A valid calibration makes a decoder whose every pixel direction is finite and unit-ish.
+    let dec = OusterDecoder::new(info).expect("a parsed calibration makes a decoder");
+    let bound = ouster_coordinate_bound(info);
+    for row in 0..h {
+        for col in [0, w / 3, w - 1] {
+            let (d, o) = dec.lut(row, col).expect("inside the frame");
+            assert!(d.iter().chain(&o).all(|v| v.is_finite()));
+            let far = dec
+                .xyz(
+                    row,
+                    col,
+                    (ouster_max_range_m(info.format.profile) * 1000.0) as u32,
+                )
+                .expect("inside the frame");
+            assert!(far
+                .iter()
+                .all(|v| v.is_finite() && f64::from(v.abs()) <= bound));
+        }
+    }
+    assert!(dec.rings().iter().all(|&r| usize::from(r) < h));
+    let mut rings = dec.rings().to_vec();
+    rings.sort_unstable();
+    rings.dedup();
+    assert_eq!(rings.len(), h, "rings are a permutation of 0..H");
+}
+
+/// `calib_ouster`: any bytes as Ouster metadata JSON. Never a panic; a file that parses is
+/// internally consistent and makes a decoder with finite, bounded geometry. The first input
+/// byte can also select a generated, mostly valid file mutated by the rest.
+pub fn calib_ouster(data: &[u8]) {
+    let generated;
+    let text = match data.split_first() {
+        Some((&0xA5, rest)) => {
+            generated = ouster_metadata(&mut Bytes::new(rest));
+            generated.as_str()
+        }
+        _ => match core::str::from_utf8(data) {
+            Ok(t) => t,
+            Err(_) => return,
+        },
+    };
+    if let Ok(info) = parse_ouster(text, "fuzz.json") {
+        check_ouster_info(&info);
+    }
+}
+
+/// Checks one decoded Ouster point.
+fn check_ouster_point(p: &Point, h: usize, returns: usize, bound: f64) {
+    for v in [p.x, p.y, p.z] {
+        assert!(
+            v.is_finite() && f64::from(v.abs()) <= bound,
+            "coordinate {v} > {bound}"
+        );
+    }
+    assert!(p.intensity.is_finite() && p.intensity >= 0.0 && p.intensity <= 255.0);
+    assert!(usize::from(p.ring) < h);
+    assert!(usize::from(p.ret) < returns);
+}
+
+/// `ouster_packet`: a generated calibration (as `calib_ouster`'s) and the rest of the bytes as
+/// one lidar packet of its format (cut or zero-padded to the size), and as IMU packets. Every
+/// decode path (`decode`, `decode_with`, `decode_packet_into_frame`) agrees on the point count,
+/// emits at most columns × rows × returns points, each finite, within the largest range the
+/// format can encode plus the calibration offsets, ring < H, return < returns; rows and
+/// columns inside the frame.
+pub fn ouster_packet(data: &[u8]) {
+    let mut b = Bytes::new(data);
+    let text = ouster_metadata(&mut b);
+    let flags = b.u8();
+    let Ok(info) = parse_ouster(&text, "fuzz.json") else {
+        return;
+    };
+    check_ouster_info(&info);
+    let rest = b.take(usize::MAX);
+    // IMU views over the same bytes: any length, never a panic.
+    if let Ok(p) = ImuPacketLegacy::new(rest) {
+        let _ = (
+            p.sys_ts_ns(),
+            p.accel_ts_ns(),
+            p.gyro_ts_ns(),
+            p.accel_g(),
+            p.gyro_dps(),
+        );
+    }
+    for m in [1, 8, info.imu_measurements_per_packet] {
+        if let Ok(p) = ImuPacketNmea::new(rest, m) {
+            let _ = (
+                p.packet_type(),
+                p.frame_id(),
+                p.init_id(),
+                p.serial(),
+                p.nmea_ts_ns(),
+            );
+            let _ = (p.alert_flags(), p.nmea(), p.crc(), p.computed_crc());
+            assert!(p.measurements().count() <= m);
+        }
+    }
+    let Ok(dec) = OusterDecoder::new(&info) else {
+        panic!("a parsed calibration makes a decoder");
+    };
+    let dec = dec.with_crc_check(flags & 1 != 0);
+    let len = info.lidar_packet_bytes();
+    let mut buf = vec![0u8; len];
+    let n = rest.len().min(len);
+    buf[..n].copy_from_slice(&rest[..n]);
+    // The exact input too: a wrong length is an error, never a panic.
+    let _ = dec.packet(rest);
+    let Ok(p) = LidarPacket::new(&buf, &info.format) else {
+        panic!("a buffer of the format's size is a packet");
+    };
+    let _ = dec.packet(&buf);
+    let _ = dec.check_sensor(&p);
+    let _ = (
+        p.crc_ok(),
+        p.frame_id(),
+        p.init_id(),
+        p.serial(),
+        p.packet_type(),
+    );
+    let _ = (p.alert_flags(), p.thermal_shutdown(), p.shot_limiting());
+    let (h, w, returns) = (
+        dec.pixels_per_column(),
+        dec.columns_per_frame(),
+        dec.returns(),
+    );
+    let max_points = info.columns_per_packet() * h * returns;
+    let bound = ouster_coordinate_bound(&info);
+    let start = u64::from_le_bytes(
+        rest.get(..8)
+            .and_then(|s| s.try_into().ok())
+            .unwrap_or([0; 8]),
+    );
+    let mut points = Vec::new();
+    let d = dec
+        .decode(&p, start, &mut points)
+        .expect("the packet is in the format");
+    assert_eq!(d.points, points.len());
+    assert!(points.len() <= max_points);
+    for pt in &points {
+        check_ouster_point(pt, h, returns, bound);
+    }
+    let mut with = Vec::new();
+    dec.decode_with(&p, start, |pt, extra, row, col| {
+        assert!(row < h && col < w, "pixel ({row}, {col}) outside {h} × {w}");
+        assert!(f64::from(extra.range_mm) / 1000.0 <= ouster_max_range_m(info.format.profile));
+        with.push(pt);
+    })
+    .expect("the packet is in the format");
+    assert_eq!(with, points, "decode and decode_with emit the same points");
+    let mut frame = dec.new_frame();
+    let f = dec
+        .decode_packet_into_frame(&p, &mut frame)
+        .expect("a cleared frame takes any packet of the format");
+    assert_eq!(f.points, points.len(), "the frame holds the same points");
+    assert!(frame.valid_columns() <= info.columns_per_packet());
+    // Two columns of one packet with the same measurement id land on the same frame column
+    // (the later one wins, as in ouster-sdk's batcher): the frame then holds fewer points.
+    let mut ids: Vec<u16> = p.columns().map(|c| c.measurement_id()).collect();
+    ids.sort_unstable();
+    let distinct = ids.windows(2).all(|w| w[0] != w[1]);
+    let staggered: usize = (0..returns).map(|r| frame.points(r)).sum();
+    if distinct {
+        assert_eq!(staggered, points.len(), "every point is in the frame");
+    } else {
+        assert!(staggered <= points.len());
+    }
+    let de = frame.destagger();
+    let destaggered: usize = (0..returns).map(|r| de.points(r)).sum();
+    assert_eq!(destaggered, staggered, "destaggering keeps every point");
+}
+
+/// `ouster_stream`: a generated calibration, then datagrams (u16 length, u8 kind, u64 host
+/// time delta, bytes; kind picks lidar-sized, IMU-sized or raw) through an `OusterStream`.
+/// Every datagram is counted once (decoded, malformed, CRC, wrong sensor or late); sweeps
+/// never hold more points than a frame's pixels × returns, and every point is bounded; IMU
+/// samples stay within the queue bound and finite when the packet's floats are.
+pub fn ouster_stream(data: &[u8]) {
+    let mut b = Bytes::new(data);
+    let text = ouster_metadata(&mut b);
+    let flags = b.u8();
+    let Ok(info) = parse_ouster(&text, "fuzz.json") else {
+        return;
+    };
+    let cfg = OusterStreamConfig {
+        info: info.clone(),
+        metadata_name: "fuzz.json".into(),
+        crc: Some(flags & 1 != 0),
+        decode: DecodeOptions::default(),
+        keep_extras: flags & 2 != 0,
+        keep_columns: flags & 4 != 0,
+    };
+    let Ok(mut stream) = OusterStream::new(cfg) else {
+        panic!("a parsed calibration makes a stream");
+    };
+    let h = info.pixels_per_column();
+    let returns = if info.format.profile.is_dual() { 2 } else { 1 };
+    let frame_points = info.columns_per_frame * h * returns;
+    let bound = ouster_coordinate_bound(&info);
+    let lidar_len = info.lidar_packet_bytes();
+    let imu_len = OusterStreamConfig::imu_len_of(&info);
+    let mut host: i64 = 1_700_000_000_000_000_000;
+    let mut pushed = 0u64;
+    let mut sweeps = 0u64;
+    let mut points = 0u64;
+    let mut template: Vec<u8> = Vec::new();
+    let mut on_sweep = |s: &Sweep, _: &ringscan::sweep::ouster::OusterFacts| {
+        sweeps += 1;
+        points += s.points.len() as u64;
+        assert!(
+            s.points.len() <= frame_points,
+            "{} > {frame_points}",
+            s.points.len()
+        );
+        if !s.extras.is_empty() {
+            assert_eq!(s.extras.len(), s.points.len());
+        }
+        if !s.columns.is_empty() {
+            assert_eq!(s.columns.len(), s.points.len());
+        }
+        for p in &s.points {
+            check_ouster_point(p, h, returns, bound);
+        }
+    };
+    while !b.is_empty() && pushed < 4096 {
+        let n = usize::from(b.u16());
+        let kind = b.u8();
+        host = host.saturating_add(i64::from(b.u32()));
+        let body = b.take(n);
+        let payload: Vec<u8> = match kind % 4 {
+            // A lidar packet: the body patches the previous one (frame ids, columns…).
+            0 | 1 => {
+                template.resize(lidar_len, 0);
+                let at = usize::from(kind) * 7 % lidar_len.max(1);
+                let m = body.len().min(lidar_len - at);
+                template[at..at + m].copy_from_slice(&body[..m]);
+                template.clone()
+            }
+            2 => {
+                let len = imu_len.unwrap_or(48);
+                let mut v = body.to_vec();
+                v.resize(len, 0);
+                v
+            }
+            _ => body.to_vec(),
+        };
+        stream.push(host, &payload, &mut on_sweep);
+        pushed += 1;
+        let imu: Vec<_> = stream.drain_imu().collect();
+        assert!(imu.len() <= ringscan::sweep::ouster::MAX_IMU_QUEUE);
+    }
+    stream.finish(&mut on_sweep);
+    let st = stream.stats().clone();
+    let counted =
+        st.lidar_packets + st.imu_packets + st.malformed + st.crc_failures + st.wrong_sensor;
+    assert!(counted <= pushed, "{st:?}, {pushed} pushed");
+    assert!(
+        pushed - counted <= st.late,
+        "every datagram is counted: {st:?}, {pushed} pushed"
+    );
+    assert_eq!(st.sweeps, sweeps);
+    assert_eq!(st.points, points);
+}
+
+/// The Ouster sensor of `decode_to_mcap`: a small OS-1-16 in one of three profiles (single,
+/// dual, LEGACY), extra fields on or off, by the input length.
+fn decode_to_mcap_ouster(variant: usize) -> OusterStreamConfig {
+    let profile = ["RNG19_RFL8_SIG16_NIR16", "RNG15_RFL8_NIR8_DUAL", "LEGACY"][variant % 3];
+    let alt: Vec<f64> = (0..16).map(|i| 15.0 - 2.0 * f64::from(i)).collect();
+    let text = serde_json::json!({
+        "prod_line": "OS-1-16",
+        "prod_sn": "992210000957",
+        "build_rev": "v2.3.0",
+        "lidar_mode": "512x10",
+        "beam_altitude_angles": alt,
+        "beam_azimuth_angles": vec![1.5; 16],
+        "data_format": {
+            "pixels_per_column": 16,
+            "columns_per_packet": 16,
+            "columns_per_frame": 512,
+            "pixel_shift_by_row": vec![0; 16],
+            "column_window": [0, 511],
+            "udp_profile_lidar": profile,
+            "udp_profile_imu": "LEGACY",
+        },
+    })
+    .to_string();
+    let info = parse_ouster(&text, "fuzz.json").expect("the fixed metadata parses");
+    OusterStreamConfig {
+        info,
+        metadata_name: "fuzz.json".into(),
+        crc: Some(false),
+        decode: DecodeOptions::default(),
+        keep_extras: variant % 2 == 1,
+        keep_columns: false,
     }
 }

@@ -125,6 +125,73 @@ def synth_ops(rng, n, model_sel, az0, step):
     return bytes(out)
 
 
+
+# ----- Ouster seeds ----------------------------------------------------------------------------
+
+# (profile index in harness order, pixel bytes, legacy header?) as ringscan's model tables say.
+OUSTER_PROFILES = [(0, 12, True), (1, 12, False), (2, 16, False), (3, 4, False), (4, 8, False),
+                   (5, 8, False), (6, 20, False), (7, 4, False)]
+
+
+def ouster_packet_len(pixel_bytes, legacy, h, cpp=16):
+    if legacy:
+        return cpp * (16 + h * pixel_bytes + 4)
+    return 32 + cpp * (12 + h * pixel_bytes) + 32
+
+
+def ouster_header(profile, mode, h_index, cpp_index):
+    """The bytes harness::ouster_metadata reads: a valid sensor of that profile and size."""
+    h = [16, 32, 64, 128][h_index]
+    alt = bytes(int(170 - 85 * i / (h - 1)) for i in range(h))
+    return (bytes([profile, mode, h_index, cpp_index, 0]) + alt + bytes([128]) * h
+            + bytes([32]) * h + bytes([128]) + struct.pack("<HH", 0, 0xFFFF))
+
+
+def ouster_header_for(n):
+    for prof, pb, legacy in OUSTER_PROFILES:
+        for hi, h in enumerate([16, 32, 64, 128]):
+            if ouster_packet_len(pb, legacy, h) == n:
+                return ouster_header(prof, 1, hi, 0)
+    return None
+
+
+def reassembled_udp(recs, linktype):
+    """UDP payloads of Ethernet IPv4 records, fragments put back together (in capture order)."""
+    out, pending = [], {}
+    for _sec, _frac, _cap, _orig, f in recs:
+        if linktype != 1 or len(f) < 34 or f[12:14] != b"\x08\x00" or f[23] != 17:
+            continue
+        ihl = (f[14] & 15) * 4
+        total = struct.unpack(">H", f[16:18])[0]
+        ident = struct.unpack(">H", f[18:20])[0]
+        fl = struct.unpack(">H", f[20:22])[0]
+        more, off = bool(fl & 0x2000), (fl & 0x1FFF) * 8
+        body = f[14 + ihl : 14 + total]
+        key = (f[26:30], ident)
+        if off == 0 and not more:
+            out.append(body[8:])
+            continue
+        parts = pending.setdefault(key, {})
+        parts[off] = body
+        if not more:
+            parts["end"] = off + len(body)
+        if "end" in parts:
+            data, at = bytearray(), 0
+            while at in parts:
+                data += parts[at]
+                at += len(parts[at])
+            if at == parts["end"]:
+                out.append(bytes(data[8:]))
+                del pending[key]
+    return out
+
+
+def udp_eth(src_ip, dport, payload, ident):
+    """An Ethernet / IPv4 / UDP frame (unfragmented, checksum 0) from src_ip to 10.5.5.1."""
+    udp = struct.pack(">HHHH", 7502, dport, 8 + len(payload), 0) + payload
+    ip = struct.pack(">BBHHHBBH4s4s", 0x45, 0, 20 + len(udp), ident & 0xFFFF, 0, 64, 17, 0, src_ip, b"\x0a\x05\x05\x01")
+    return b"\xff" * 6 + b"\x02" * 6 + b"\x08\x00" + ip + udp
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--captures", default=str(REPO.parent / "shared" / "captures"))
@@ -197,6 +264,40 @@ def main():
     gps = bytes([2]) + struct.pack("<h", 0) + bytes([0x41]) + struct.pack("<I", 1000) + struct.pack("<I", 79_200) + b"\x0b\x0c\x0c"
     put("velodyne_stream", bytes([0, 0, 0, 0, 0, 0, 0, 0]) + gps + synth_ops(rng, 60, 0, 0, 20), "gps")
 
+    # decode_to_mcap: its Ouster sensor (an OS-1-16, 512x10, by the input length: RNG19,
+    # RNG15 dual or LEGACY) needs datagrams of that size; a few frames of each, with IMU packets.
+    for variant in range(3):
+        recs = []
+        t = 1_700_000_000_000_000
+        for k in range(48):
+            if variant == 2:
+                pkt = bytearray()
+                for c in range(16):
+                    mid = (k * 16 + c) % 512
+                    pkt += struct.pack("<QHHI", t * 1000 + c * 97_656, mid, k // 32, mid * 176)
+                    pkt += bytes(rng.randrange(256) for _ in range(16 * 12))
+                    pkt += b"\xff\xff\xff\xff"
+            else:
+                pb = 12 if variant == 0 else 8
+                pkt = bytearray(struct.pack("<HH", 1, k // 32) + bytes(3) + (992210000957).to_bytes(5, "little"))
+                pkt += bytes(32 - len(pkt))
+                for c in range(16):
+                    mid = (k * 16 + c) % 512
+                    pkt += struct.pack("<QHHI", t * 1000 + c * 97_656, mid, 1, 0)[:12]
+                    pkt += bytes(rng.randrange(256) for _ in range(16 * pb))
+                pkt += bytes(32)
+            size = len(pkt)
+            recs.append((t // 1_000_000, t % 1_000_000, 0, 0, udp_eth(b"\x0a\x05\x05\x57", 7502, bytes(pkt), k)))
+            if k % 4 == 0:
+                imu = struct.pack("<QQQ", t * 1000, t * 1000, t * 1000) + struct.pack("<6f", 0.01, 0.0, 1.0, 0.5, -0.2, 3.0)
+                recs.append((t // 1_000_000, t % 1_000_000, 0, 0, udp_eth(b"\x0a\x05\x05\x57", 7503, imu, 1000 + k)))
+            t += 6250
+        recs = [(a, b, len(f), len(f), f) for a, b, _c, _o, f in recs]
+        data = classic_bytes("<", False, 1, recs)
+        # The harness picks the Ouster profile by the input length (len % 3).
+        data += bytes((variant - len(data)) % 3)
+        put("decode_to_mcap", data, f"ouster{variant}-{size}")
+
     # calib_velodyne: the calibration files as they are.
     for c in calibs:
         put("calib_velodyne", c.read_bytes(), c.suffix[1:])
@@ -224,6 +325,44 @@ def main():
             ops += data[off : off + ln]
             off += ln
         put("reassembly", cfg + bytes(ops), "bytes")
+
+    # Ouster: calib_ouster takes metadata files as they are (and generated ones: first byte
+    # 0xA5); ouster_packet / ouster_stream take a generated calibration (header below) then
+    # real lidar and IMU payloads whose size fits it.
+    ouster = caps / "ouster-lidar__ouster-sdk"
+    if ouster and ouster.is_dir():
+        for m in sorted(ouster.rglob("*.json")):
+            if m.stat().st_size <= 200_000:
+                put("calib_ouster", m.read_bytes(), "meta")
+        seen = set()
+        for pc in sorted(ouster.rglob("*.pcap")):
+            parsed = read_classic(pc.read_bytes()[:3_000_000])
+            if not parsed:
+                continue
+            _e, _n, lt, recs = parsed
+            for payload in reassembled_udp(recs, lt)[:400]:
+                hdr = ouster_header_for(len(payload))
+                if hdr is None or (len(payload), pc.name) in seen:
+                    continue
+                seen.add((len(payload), pc.name))
+                put("ouster_packet", hdr + bytes([0]) + payload, "real")
+                put("ouster_packet", hdr + bytes([1]) + payload, "realcrc")
+            stream_ops = bytearray()
+            hdr0 = None
+            for payload in reassembled_udp(recs, lt)[:40]:
+                hdr = ouster_header_for(len(payload))
+                if hdr is not None and hdr0 is None:
+                    hdr0 = hdr
+                kind = 0 if len(payload) > 100 else 2
+                stream_ops += struct.pack("<HBI", len(payload), kind, 100_000) + payload
+            if hdr0 is not None:
+                put("ouster_stream", hdr0 + bytes([6]) + bytes(stream_ops[:60000]), "real")
+    put("calib_ouster", b"\xa5" + ouster_header(1, 1, 0, 0), "gen")
+    for prof in range(8):
+        for hi in range(4):
+            put("ouster_packet", ouster_header(prof, 1, hi, 0) + b"\0" + bytes(rng.randrange(256) for _ in range(3000)), "rand")
+            put("ouster_stream", ouster_header(prof, 0, hi, 0) + b"\0" + b"".join(
+                struct.pack("<HBI", 600, k % 3, 50_000_000) + bytes(rng.randrange(256) for _ in range(600)) for k in range(12)), "rand")
 
     for t in sorted(os.listdir(CORPUS)):
         print(f"{t}: {len(os.listdir(CORPUS / t))} seeds")

@@ -15,7 +15,7 @@ set -euo pipefail
 
 SECONDS_PER_TARGET=${1:-20}
 shift || true
-ALL_TARGETS=(pcap reassembly velodyne_packet velodyne_stream calib_velodyne decode_to_mcap)
+ALL_TARGETS=(pcap reassembly velodyne_packet velodyne_stream calib_velodyne decode_to_mcap calib_ouster ouster_packet ouster_stream)
 if [ $# -gt 0 ]; then TARGETS=("$@"); else TARGETS=("${ALL_TARGETS[@]}"); fi
 SANITIZER=${FUZZ_SANITIZER:-none}
 
@@ -37,6 +37,9 @@ max_len() {
     velodyne_stream) echo 32768 ;;
     calib_velodyne) echo 65536 ;;
     decode_to_mcap) echo 65536 ;;
+    calib_ouster) echo 65536 ;;
+    ouster_packet) echo 70000 ;;
+    ouster_stream) echo 131072 ;;
     *) echo 4096 ;;
   esac
 }

@@ -1,0 +1,762 @@
+//! `ringscan listen`: sensors on the network → the same [`Session`] as `decode` → MCAP.
+//!
+//! Threads: the main thread runs a single-threaded tokio runtime with one receive task per
+//! port, the signal handlers, the status line and the Ouster metadata fetches; one decode
+//! thread owns the [`Session`] (demultiplexer, streams, MCAP sink). Between them a bounded
+//! queue with a byte budget: the receive side never waits for the decode thread or the disk;
+//! what does not fit is dropped and counted.
+
+use std::collections::{BTreeSet, HashMap};
+use std::io::{IsTerminal, Write};
+use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, RecvTimeoutError};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use ringscan::calib::ouster::parse as parse_ouster;
+use ringscan::decode::ouster::OusterDecoder;
+use ringscan::model::velodyne::{DATA_PACKET_LEN, POSITION_PACKET_LEN};
+use ringscan::sink::mcap::SinkSummary;
+use ringscan::sink::{McapSink, SinkError};
+use ringscan::source::udp::{self, BoundSocket, Queue, ReceiveStats, Received, SocketOptions};
+use ringscan::sweep::SensorStream;
+use serde_json::{json, Value};
+
+use super::run::{output_json, sink_options, RunError, Session, SessionOptions, Sink};
+use super::sensors::{load_calibs, CalibKind, CalibSpec};
+use super::FormatArg;
+
+/// Ports listened on for a `--sensor IP` given without a port and without metadata naming its
+/// ports: Velodyne data and position, Ouster lidar and IMU defaults.
+pub const DEFAULT_PORTS: [u16; 4] = [2368, 8308, 7502, 7503];
+/// The Ouster HTTP API path of the sensor metadata.
+pub const METADATA_PATH: &str = "/api/v1/sensor/metadata";
+/// Datagrams the queue between the receive tasks and the decode thread holds at most.
+pub const QUEUE_DATAGRAMS: usize = 65_536;
+/// Payload bytes the queue holds at most (memory stays bounded under a flood).
+pub const QUEUE_BYTES: usize = 256 << 20;
+/// Time between two metadata requests to one sensor.
+const FETCH_RETRY: Duration = Duration::from_secs(5);
+
+/// When `--split-every` starts a new file.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Split {
+    /// Every so many seconds.
+    Seconds(f64),
+    /// Once the file holds so many bytes.
+    Bytes(u64),
+}
+
+/// Parses `--split-every`: `S`, `Ss` (seconds) or `NMB` / `NM` (megabytes, 10^6 bytes).
+pub fn parse_split(s: &str) -> Result<Split, String> {
+    let t = s.trim();
+    let lower = t.to_ascii_lowercase();
+    let num = |x: &str| {
+        x.trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite() && *v > 0.0)
+            .ok_or_else(|| format!("`{s}`: expected seconds (`60`, `60s`) or megabytes (`500MB`)"))
+    };
+    if let Some(m) = lower.strip_suffix("mb").or_else(|| lower.strip_suffix('m')) {
+        return Ok(Split::Bytes((num(m)? * 1e6) as u64));
+    }
+    let secs = lower.strip_suffix('s').unwrap_or(&lower);
+    Ok(Split::Seconds(num(secs)?))
+}
+
+/// Parses `--sensor IP[:PORT]`.
+pub fn parse_sensor(s: &str) -> Result<(Ipv4Addr, Option<u16>), String> {
+    if let Ok(a) = s.parse::<SocketAddrV4>() {
+        return Ok((*a.ip(), Some(a.port())));
+    }
+    s.parse::<Ipv4Addr>()
+        .map(|ip| (ip, None))
+        .map_err(|_| format!("`{s}`: expected IPv4[:PORT]"))
+}
+
+/// Everything `listen` needs.
+#[derive(Debug, Clone)]
+pub struct ListenArgs {
+    pub sensors: Vec<(Ipv4Addr, Option<u16>)>,
+    pub out: Option<PathBuf>,
+    pub split_every: Option<Split>,
+    pub session: SessionOptions,
+    pub format: FormatArg,
+    pub multicast: Option<Ipv4Addr>,
+    pub interface: Ipv4Addr,
+    /// Port of the sensors' HTTP API (Ouster metadata).
+    pub api_port: u16,
+    pub recv_buffer: usize,
+    /// Stop by itself after this long.
+    pub duration: Option<Duration>,
+    pub strict: bool,
+    pub json: bool,
+}
+
+/// From the decode thread to the main thread.
+enum Event {
+    /// Fetch this sensor's metadata.
+    Fetch(Ipv4Addr),
+    /// The decode thread stopped on an error.
+    Failed,
+}
+
+/// From the main thread to the decode thread.
+enum Control {
+    /// Metadata fetched from a sensor: (address, file name, bytes).
+    Metadata(Ipv4Addr, String, Vec<u8>),
+}
+
+/// Counters the decode thread publishes for the status line.
+#[derive(Default)]
+struct Live {
+    sweeps: AtomicU64,
+    points: AtomicU64,
+}
+
+/// The output files of a run.
+struct Files {
+    base: PathBuf,
+    split: Option<Split>,
+    format: FormatArg,
+    index: usize,
+    current: PathBuf,
+    opened: Instant,
+    closed: Vec<(PathBuf, SinkSummary)>,
+}
+
+impl Files {
+    fn path_for(base: &Path, split: Option<Split>, index: usize) -> PathBuf {
+        if split.is_none() {
+            return base.to_path_buf();
+        }
+        let stem = base
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let ext = base
+            .extension()
+            .map(|e| format!(".{}", e.to_string_lossy()))
+            .unwrap_or_default();
+        base.with_file_name(format!("{stem}_{index:04}{ext}"))
+    }
+
+    /// Creates the file at its path (not a temporary one: a recording killed outright keeps
+    /// the chunks written so far).
+    fn create(&self, path: &Path) -> Result<Sink, SinkError> {
+        let f = std::fs::File::create(path).map_err(|source| SinkError::Io {
+            context: format!("creating {}", path.display()),
+            source,
+        })?;
+        McapSink::new(std::io::BufWriter::new(f), sink_options(self.format))
+    }
+
+    fn due(&self) -> bool {
+        match self.split {
+            None => false,
+            Some(Split::Seconds(s)) => self.opened.elapsed().as_secs_f64() >= s,
+            Some(Split::Bytes(b)) => std::fs::metadata(&self.current).is_ok_and(|m| m.len() >= b),
+        }
+    }
+}
+
+/// Parses fetched Ouster metadata into a calibration bound to `addr`.
+fn metadata_spec(addr: Ipv4Addr, name: String, bytes: Vec<u8>) -> Result<CalibSpec, String> {
+    let text = std::str::from_utf8(&bytes).map_err(|e| format!("not UTF-8 ({e})"))?;
+    let info = parse_ouster(text, &name).map_err(|e| e.to_string())?;
+    OusterDecoder::new(&info).map_err(|e| e.to_string())?;
+    Ok(CalibSpec {
+        addr: Some(addr),
+        file_name: name,
+        bytes,
+        kind: CalibKind::Ouster(Box::new(info)),
+    })
+}
+
+/// An output error with the file's path and every cause (down to the OS error, e.g. "No space
+/// left on device").
+fn file_error(path: &Path, e: &SinkError) -> RunError {
+    let mut msg = format!("{}: {e}", path.display());
+    let mut cause = std::error::Error::source(e);
+    while let Some(c) = cause {
+        let s = c.to_string();
+        if !msg.contains(&s) {
+            msg.push_str(": ");
+            msg.push_str(&s);
+        }
+        cause = c.source();
+    }
+    RunError::Live(msg)
+}
+
+/// What the decode thread hands back.
+struct DecodeResult {
+    summary: serde_json::Map<String, Value>,
+    lost: u64,
+    files: Vec<(PathBuf, SinkSummary)>,
+}
+
+struct DecodeThread {
+    session: Session,
+    files: Option<Files>,
+    sensors: Vec<Ipv4Addr>,
+    events: tokio::sync::mpsc::UnboundedSender<Event>,
+    ctl: Receiver<Control>,
+    stats: Arc<ReceiveStats>,
+    live: Arc<Live>,
+    /// Last metadata request per address.
+    asked: HashMap<Ipv4Addr, Instant>,
+    /// Ouster `init_id` epochs seen per sensor index.
+    epochs: Vec<u64>,
+}
+
+impl DecodeThread {
+    fn run(mut self, rx: Receiver<Received>) -> Result<DecodeResult, RunError> {
+        let mut last_check = Instant::now();
+        loop {
+            match rx.recv_timeout(Duration::from_millis(100)) {
+                Ok(r) => {
+                    self.stats
+                        .queued_bytes
+                        .fetch_sub(r.payload.len(), Ordering::Relaxed);
+                    let ignored = self.session.demux().stats().ignored;
+                    if let Err(e) = self.session.push(r.time_ns, r.src, r.port, &r.payload) {
+                        let err = self.session.run_error(e, "listen");
+                        let _ = self.session.close_sink();
+                        return Err(self.with_path(err));
+                    }
+                    if self.session.demux().stats().ignored > ignored {
+                        self.unclaimed(*r.src.ip(), r.payload.len());
+                    }
+                    let (sweeps, points) = self.session.totals();
+                    self.live.sweeps.store(sweeps, Ordering::Relaxed);
+                    self.live.points.store(points, Ordering::Relaxed);
+                }
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => break,
+            }
+            if last_check.elapsed() >= Duration::from_millis(100) {
+                last_check = Instant::now();
+                if let Err(e) = self.housekeeping() {
+                    let _ = self.session.close_sink();
+                    return Err(self.with_path(e));
+                }
+            }
+        }
+        match self.finish() {
+            Ok(r) => Ok(r),
+            Err((e, path)) => Err(match (e, path) {
+                (RunError::Sink(e), Some(p)) => file_error(&p, &e),
+                (e, _) => e,
+            }),
+        }
+    }
+
+    /// Output errors name the file.
+    fn with_path(&self, e: RunError) -> RunError {
+        match (e, &self.files) {
+            (RunError::Sink(e), Some(f)) => RunError::Live(format!("{}: {e}", f.current.display())),
+            (e, _) => e,
+        }
+    }
+
+    /// A datagram from a sensor address that no configuration claimed: an Ouster sensor whose
+    /// metadata is not known yet; ask the sensor for it.
+    fn unclaimed(&mut self, addr: Ipv4Addr, len: usize) {
+        if matches!(len, DATA_PACKET_LEN | POSITION_PACKET_LEN) || !self.sensors.contains(&addr) {
+            return;
+        }
+        if self
+            .asked
+            .get(&addr)
+            .is_some_and(|t| t.elapsed() < FETCH_RETRY)
+        {
+            return;
+        }
+        self.asked.insert(addr, Instant::now());
+        let _ = self.events.send(Event::Fetch(addr));
+    }
+
+    fn housekeeping(&mut self) -> Result<(), RunError> {
+        while let Ok(c) = self.ctl.try_recv() {
+            match c {
+                Control::Metadata(addr, name, bytes) => self.on_metadata(addr, name, bytes),
+            }
+        }
+        // Ouster re-initialised (new init_id): read its metadata again.
+        let mut refetch = Vec::new();
+        for (idx, (addr, stream, _)) in self.session.demux().sensors().enumerate() {
+            if let SensorStream::Ouster(s) = stream {
+                let e = s.stats().epochs;
+                if self.epochs.len() <= idx {
+                    self.epochs.resize(idx + 1, 0);
+                }
+                if e > self.epochs[idx] {
+                    self.epochs[idx] = e;
+                    tracing::info!(
+                        "sensor {addr}: new init_id {}; reading its metadata again",
+                        s.facts().init_id
+                    );
+                    refetch.push(addr);
+                }
+            }
+        }
+        for addr in refetch {
+            self.asked.insert(addr, Instant::now());
+            let _ = self.events.send(Event::Fetch(addr));
+        }
+        let due = self.files.as_ref().is_some_and(Files::due);
+        if due {
+            self.rotate()?;
+        }
+        Ok(())
+    }
+
+    fn on_metadata(&mut self, addr: Ipv4Addr, name: String, bytes: Vec<u8>) {
+        let spec = match metadata_spec(addr, name.clone(), bytes) {
+            Ok(s) => s,
+            Err(e) => {
+                tracing::warn!("sensor {addr}: metadata from its HTTP API not usable: {e}");
+                return;
+            }
+        };
+        // A sensor already decoding: compare what changed.
+        let existing = self
+            .session
+            .demux()
+            .sensors()
+            .find(|(a, _, _)| *a == addr)
+            .and_then(|(_, s, _)| s.as_ouster().map(|o| o.info().clone()));
+        match (existing, &spec.kind) {
+            (Some(old), CalibKind::Ouster(new)) => {
+                let same = old.format == new.format
+                    && old.columns_per_frame == new.columns_per_frame
+                    && old.serial == new.serial;
+                if same {
+                    tracing::info!("sensor {addr}: metadata re-read; lidar format unchanged");
+                } else {
+                    tracing::warn!(
+                        "sensor {addr}: its lidar configuration changed (mode or profile); its packets are counted as malformed until ringscan restarts"
+                    );
+                }
+            }
+            _ => {
+                tracing::info!("sensor {addr}: metadata read from http://{addr}{METADATA_PATH}");
+                self.session.add_calib(spec);
+            }
+        }
+    }
+
+    fn rotate(&mut self) -> Result<(), RunError> {
+        let Some(files) = self.files.as_mut() else {
+            return Ok(());
+        };
+        let next_path = Files::path_for(&files.base, files.split, files.index + 1);
+        let next = files.create(&next_path)?;
+        let closed = self.session.rotate(next)?;
+        let prev = std::mem::replace(&mut files.current, next_path);
+        files.index += 1;
+        files.opened = Instant::now();
+        if let Some(s) = closed {
+            tracing::info!("closed {}", prev.display());
+            files.closed.push((prev, s));
+        }
+        Ok(())
+    }
+
+    fn finish(mut self) -> Result<DecodeResult, (RunError, Option<PathBuf>)> {
+        let path = self.files.as_ref().map(|f| f.current.clone());
+        if let Err(e) = self.session.finish_streams() {
+            let err = self.session.run_error(e, "listen");
+            let _ = self.session.close_sink();
+            return Err((err, path));
+        }
+        let last = self
+            .session
+            .close_sink()
+            .map_err(|e| (RunError::Sink(e), path))?;
+        let mut files = Vec::new();
+        if let Some(f) = self.files.take() {
+            files = f.closed;
+            if let Some(s) = last {
+                files.push((f.current, s));
+            }
+        }
+        let (summary, lost) = self.session.summary();
+        Ok(DecodeResult {
+            summary,
+            lost,
+            files,
+        })
+    }
+}
+
+/// The ports to listen on.
+fn ports_for(args: &ListenArgs, calibs: &[CalibSpec]) -> BTreeSet<u16> {
+    let mut ports = BTreeSet::new();
+    for (ip, port) in &args.sensors {
+        if let Some(p) = port {
+            ports.insert(*p);
+            continue;
+        }
+        let mut found = false;
+        for c in calibs {
+            if let CalibKind::Ouster(info) = &c.kind {
+                if c.addr.is_none() || c.addr == Some(*ip) {
+                    for p in [info.udp_port_lidar, info.udp_port_imu] {
+                        if p != 0 {
+                            ports.insert(p);
+                            found = true;
+                        }
+                    }
+                }
+            }
+        }
+        if !found {
+            ports.extend(DEFAULT_PORTS);
+        }
+    }
+    ports
+}
+
+fn status_line(
+    live: &Live,
+    stats: &ReceiveStats,
+    kernel: u64,
+    prev: &mut (Instant, u64, u64, u64),
+) -> String {
+    let (t0, sw0, pt0, dg0) = *prev;
+    let dt = t0.elapsed().as_secs_f64().max(1e-3);
+    let sw = live.sweeps.load(Ordering::Relaxed);
+    let pt = live.points.load(Ordering::Relaxed);
+    let dg = stats.datagrams.load(Ordering::Relaxed);
+    *prev = (Instant::now(), sw, pt, dg);
+    format!(
+        "\r{:6.1} sweeps/s · {:9.0} points/s · {:7.0} packets/s · lost: queue {} kernel {} · other sources {}   ",
+        (sw - sw0) as f64 / dt,
+        (pt - pt0) as f64 / dt,
+        (dg - dg0) as f64 / dt,
+        stats.queue_dropped.load(Ordering::Relaxed),
+        kernel,
+        stats.other_source.load(Ordering::Relaxed),
+    )
+}
+
+fn kernel_drops(sockets: &[BoundSocket]) -> u64 {
+    sockets.iter().filter_map(BoundSocket::kernel_drops).sum()
+}
+
+/// `ringscan listen`.
+pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
+    if args.sensors.is_empty() {
+        return Err(RunError::Usage(
+            "listen: give at least one --sensor IP[:PORT]".into(),
+        ));
+    }
+    if args.split_every.is_some() && args.out.is_none() {
+        return Err(RunError::Usage("--split-every needs --out".into()));
+    }
+    let started = Instant::now();
+    // Options and calibrations are checked here, before any socket is opened.
+    Session::new(&args.session)?;
+    let calibs = load_calibs(&args.session.calib)?;
+    let ports = ports_for(args, &calibs);
+    let mut addrs: Vec<Ipv4Addr> = args.sensors.iter().map(|(ip, _)| *ip).collect();
+    addrs.dedup();
+    let n_sensors = {
+        let mut a = addrs.clone();
+        a.sort();
+        a.dedup();
+        a.len()
+    };
+
+    // Sockets.
+    let mut sockets = Vec::new();
+    for &port in &ports {
+        let s = udp::bind(&SocketOptions {
+            port,
+            multicast: args.multicast,
+            interface: args.interface,
+            recv_buffer: args.recv_buffer,
+        })
+        .map_err(|e| RunError::Live(e.to_string()))?;
+        // Linux reports twice the usable size; the kernel's cap is net.core.rmem_max.
+        if s.granted_recv_buffer < s.requested_recv_buffer {
+            tracing::warn!(
+                "UDP port {port}: receive buffer {} bytes granted of {} asked (net.core.rmem_max = {}); raise it with `sysctl -w net.core.rmem_max={}`",
+                s.granted_recv_buffer,
+                s.requested_recv_buffer,
+                udp::rmem_max().map_or("?".into(), |v| v.to_string()),
+                s.requested_recv_buffer
+            );
+        } else {
+            tracing::info!(
+                "UDP port {port}: receive buffer {} bytes",
+                s.granted_recv_buffer
+            );
+        }
+        sockets.push(s);
+    }
+    let kernel_base: Vec<u64> = sockets
+        .iter()
+        .map(|s| s.kernel_drops().unwrap_or(0))
+        .collect();
+
+    // The decode thread.
+    let stats = Arc::new(ReceiveStats::default());
+    let live = Arc::new(Live::default());
+    let (tx, rx) = std::sync::mpsc::sync_channel::<Received>(QUEUE_DATAGRAMS);
+    let (ev_tx, mut ev_rx) = tokio::sync::mpsc::unbounded_channel::<Event>();
+    let (ctl_tx, ctl_rx) = std::sync::mpsc::channel::<Control>();
+    let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), RunError>>();
+    let decode = {
+        let opts = args.session.clone();
+        let out = args.out.clone();
+        let split = args.split_every;
+        let format = args.format;
+        let stats = stats.clone();
+        let live = live.clone();
+        let sensors = addrs.clone();
+        let ev = ev_tx.clone();
+        std::thread::Builder::new()
+            .name("ringscan-decode".into())
+            .spawn(move || -> Result<DecodeResult, RunError> {
+                let setup = (|| -> Result<(Session, Option<Files>), RunError> {
+                    let mut session = Session::new(&opts)?;
+                    session.set_sensor_hint(n_sensors);
+                    let files = match out {
+                        Some(base) => {
+                            let current = Files::path_for(&base, split, 0);
+                            let files = Files {
+                                base,
+                                split,
+                                format,
+                                index: 0,
+                                current: current.clone(),
+                                opened: Instant::now(),
+                                closed: Vec::new(),
+                            };
+                            let sink = files
+                                .create(&current)
+                                .map_err(|e| file_error(&current, &e))?;
+                            session.set_sink(Some(sink));
+                            Some(files)
+                        }
+                        None => None,
+                    };
+                    Ok((session, files))
+                })();
+                let (session, files) = match setup {
+                    Ok(x) => {
+                        let _ = ready_tx.send(Ok(()));
+                        x
+                    }
+                    Err(e) => {
+                        let _ = ready_tx.send(Err(e));
+                        return Err(RunError::Live("decode thread setup failed".into()));
+                    }
+                };
+                let t = DecodeThread {
+                    session,
+                    files,
+                    sensors,
+                    events: ev.clone(),
+                    ctl: ctl_rx,
+                    stats,
+                    live,
+                    asked: HashMap::new(),
+                    epochs: Vec::new(),
+                };
+                let r = t.run(rx);
+                if r.is_err() {
+                    let _ = ev.send(Event::Failed);
+                }
+                r
+            })
+            .map_err(|e| RunError::Live(format!("starting the decode thread: {e}")))?
+    };
+    match ready_rx.recv() {
+        Ok(Ok(())) => {}
+        Ok(Err(e)) => {
+            let _ = decode.join();
+            return Err(e);
+        }
+        Err(_) => return Err(RunError::Live("the decode thread did not start".into())),
+    }
+
+    tracing::info!(
+        "listening on UDP ports {:?} for {:?}",
+        ports.iter().collect::<Vec<_>>(),
+        addrs
+    );
+
+    // The receive side.
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| RunError::Live(format!("starting the runtime: {e}")))?;
+    let sources = Arc::new(addrs.clone());
+    let terminal = std::io::stderr().is_terminal();
+    let reason = rt.block_on(async {
+        let mut tasks = Vec::new();
+        for s in &sockets {
+            let sock = match s.socket.try_clone() {
+                Ok(x) => x,
+                Err(e) => return Err(RunError::Live(format!("UDP port {}: {e}", s.port))),
+            };
+            let q = Queue {
+                tx: tx.clone(),
+                byte_budget: QUEUE_BYTES,
+                stats: stats.clone(),
+            };
+            tasks.push(tokio::spawn(udp::receive(sock, s.port, sources.clone(), q)));
+        }
+        drop(tx);
+        let mut sigterm = match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(s) => s,
+            Err(e) => return Err(RunError::Live(format!("installing the SIGTERM handler: {e}"))),
+        };
+        let deadline = args.duration.map(|d| tokio::time::Instant::now() + d);
+        let mut tick = tokio::time::interval(Duration::from_secs(1));
+        let mut prev = (Instant::now(), 0, 0, 0);
+        let api_port = args.api_port;
+        let reason = loop {
+            tokio::select! {
+                _ = tokio::signal::ctrl_c() => break "SIGINT",
+                _ = sigterm.recv() => break "SIGTERM",
+                _ = async { match deadline { Some(d) => tokio::time::sleep_until(d).await, None => std::future::pending().await } } => break "duration reached",
+                ev = ev_rx.recv() => match ev {
+                    Some(Event::Fetch(addr)) => {
+                        let ctl = ctl_tx.clone();
+                        tokio::spawn(async move {
+                            let at = SocketAddr::V4(SocketAddrV4::new(addr, api_port));
+                            match udp::http_get(at, METADATA_PATH, Duration::from_secs(5)).await {
+                                Ok(body) => {
+                                    let _ = ctl.send(Control::Metadata(addr, format!("metadata-{addr}.json"), body));
+                                }
+                                Err(e) => tracing::warn!("sensor {addr}: {e}"),
+                            }
+                        });
+                    }
+                    Some(Event::Failed) | None => break "decode thread stopped",
+                },
+                _ = tick.tick() => {
+                    if terminal {
+                        eprint!("{}", status_line(&live, &stats, kernel_drops(&sockets), &mut prev));
+                        let _ = std::io::stderr().flush();
+                    }
+                }
+            }
+        };
+        for t in &tasks {
+            t.abort();
+        }
+        for t in tasks {
+            let _ = t.await;
+        }
+        Ok(reason)
+    });
+    drop(rt);
+    if terminal {
+        eprintln!();
+    }
+    let reason = reason?;
+    tracing::info!("stopping: {reason}");
+    let result = match decode.join() {
+        Ok(r) => r?,
+        Err(_) => return Err(RunError::Live("the decode thread panicked".into())),
+    };
+    let elapsed = started.elapsed().as_secs_f64();
+
+    // Summary.
+    let socket_json: Vec<Value> = sockets
+        .iter()
+        .zip(&kernel_base)
+        .map(|(s, base)| {
+            json!({
+                "port": s.port,
+                "recv_buffer_requested": s.requested_recv_buffer,
+                "recv_buffer_granted": s.granted_recv_buffer,
+                "kernel_drops": s.kernel_drops().map(|d| d.saturating_sub(*base)),
+            })
+        })
+        .collect();
+    let kernel: u64 = sockets
+        .iter()
+        .zip(&kernel_base)
+        .filter_map(|(s, b)| s.kernel_drops().map(|d| d.saturating_sub(*b)))
+        .sum();
+    let queue_dropped = stats.queue_dropped.load(Ordering::Relaxed);
+    let mut m = result.summary;
+    if let Some(p) = m.get_mut("packets").and_then(Value::as_object_mut) {
+        let d = p.get("dropped").and_then(Value::as_u64).unwrap_or(0);
+        p.insert("dropped".into(), json!(d + queue_dropped + kernel));
+    }
+    m.insert("input".into(), json!("udp"));
+    m.insert("stop".into(), json!(reason));
+    m.insert(
+        "receive".into(),
+        json!({
+            "datagrams": stats.datagrams.load(Ordering::Relaxed),
+            "bytes": stats.bytes.load(Ordering::Relaxed),
+            "other_source": stats.other_source.load(Ordering::Relaxed),
+            "queue_dropped": queue_dropped,
+            "queue_peak_bytes": stats.queued_bytes_peak.load(Ordering::Relaxed),
+            "kernel_dropped": kernel,
+            "errors": stats.errors.load(Ordering::Relaxed),
+            "sockets": socket_json,
+        }),
+    );
+    let fields_all = args.session.fields_all;
+    m.insert(
+        "output".into(),
+        match result.files.last() {
+            Some((p, s)) => output_json(s, Some(p), args.format, fields_all),
+            None => Value::Null,
+        },
+    );
+    m.insert(
+        "files".into(),
+        Value::Array(
+            result
+                .files
+                .iter()
+                .map(|(p, s)| output_json(s, Some(p), args.format, fields_all))
+                .collect(),
+        ),
+    );
+    m.insert("elapsed_s".into(), json!(elapsed));
+    let lost = result.lost + queue_dropped + kernel;
+    let json_out = Value::Object(m);
+    if args.json {
+        println!("{json_out}");
+    } else {
+        let g = |v: &Value| v.as_u64().unwrap_or(0);
+        let p = &json_out["packets"];
+        println!(
+            "listened {:.1} s ({reason}): {} datagrams, {} sweeps, {} points; packets decoded {}, dropped {} (queue {queue_dropped}, kernel {kernel}), malformed {}, missing {}, from other sources {}",
+            elapsed,
+            g(&json_out["receive"]["datagrams"]),
+            g(&json_out["sweeps"]),
+            g(&json_out["points"]),
+            g(&p["decoded"]),
+            g(&p["dropped"]),
+            g(&p["malformed"]),
+            g(&p["missing"]),
+            g(&json_out["receive"]["other_source"]),
+        );
+        for (path, s) in &result.files {
+            println!("  wrote {}: {:?}", path.display(), s.messages);
+        }
+    }
+    if args.strict && lost > 0 {
+        return Err(RunError::Strict(format!(
+            "--strict: {lost} packets missing, dropped or malformed"
+        )));
+    }
+    Ok(ExitCode::SUCCESS)
+}

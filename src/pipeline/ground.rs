@@ -1,0 +1,735 @@
+//! Ground segmentation: one label per point, `true` for ground.
+//!
+//! Two methods ([`GroundMethod`]):
+//!
+//! - **RANSAC** (`Ransac`): the single plane with the most points within
+//!   `distance_threshold_m`, from `iterations` random triples drawn by a seeded generator
+//!   (SplitMix64), so a run is reproducible; the inliers of the best plane are ground. This is
+//!   what Open3D's `segment_plane` does, and it is right only when the ground is one plane: on a
+//!   slope change, a ramp or a kerb part of the ground lies outside the plane.
+//!
+//! - **Polar grid with local planes** (`PolarGrid`), robust to slopes, ramps and kerbs. The
+//!   xy plane around the sensor is cut into sectors (equal angles) and rings (at least
+//!   `radial_bin_m` wide, growing with range so bins stay roughly square). In each bin a plane
+//!   is fitted to the lowest points (the mean of the lowest few plus a margin gives the seeds;
+//!   then least squares by principal components, refitted twice on the points within
+//!   `distance_threshold_m`). Walking each sector outwards, a bin's plane is accepted as ground
+//!   if it is no steeper than `max_slope_deg` and continues the last accepted ground of that
+//!   sector: at the bin's inner edge it is within `max_step_m` of it (plus the height a
+//!   `max_slope_deg` slope gains over any skipped bins). For the first bins, the reference is
+//!   the plane `z = −sensor_height_m` when given. A point is ground when it lies at most
+//!   `distance_threshold_m` above its bin's accepted plane (or, if the bin's own plane was
+//!   rejected, above the sector's last accepted ground plane, extended). Local planes follow
+//!   slopes and ramps; the continuity test keeps the roofs of cars and the tops of walls (flat,
+//!   but far above the ground before them) out; a kerb is a step of ≤ `max_step_m`, so the
+//!   pavement beyond it is ground while its vertical face, steeper than `max_slope_deg`, is not
+//!   part of any accepted plane.
+//!
+//! Points with a NaN or infinite coordinate are labelled not ground.
+
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+
+use super::{positive, within, PipelineError};
+use crate::point::Point;
+
+/// Parameters of the polar-grid method. See the module docs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PolarGridParams {
+    /// Angular sectors around the sensor; 4 ..= 4096.
+    pub sectors: u32,
+    /// Smallest radial extent of a bin, metres; finite, > 0.
+    pub radial_bin_m: f64,
+    /// Points farther than this in xy, metres, are not ground; finite, > 0.
+    pub max_range_m: f64,
+    /// A point at most this far above its local ground plane is ground, metres; finite, > 0.
+    pub distance_threshold_m: f64,
+    /// Steepest slope still ground, degrees; in (0, 90).
+    pub max_slope_deg: f64,
+    /// Largest height step between neighbouring ground bins (a kerb), metres; finite, ≥ 0.
+    pub max_step_m: f64,
+    /// Height of the sensor above the ground under it, metres, if known (finite); anchors the
+    /// first bins of every sector.
+    pub sensor_height_m: Option<f64>,
+}
+
+impl Default for PolarGridParams {
+    /// 64 sectors, 1 m bins, 100 m, 0.15 m above the plane, 15°, 0.25 m steps, no sensor
+    /// height.
+    fn default() -> Self {
+        Self {
+            sectors: 64,
+            radial_bin_m: 1.0,
+            max_range_m: 100.0,
+            distance_threshold_m: 0.15,
+            max_slope_deg: 15.0,
+            max_step_m: 0.25,
+            sensor_height_m: None,
+        }
+    }
+}
+
+/// How ground is found. See the module docs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum GroundMethod {
+    /// One plane by RANSAC.
+    Ransac {
+        /// Inlier distance to the plane, metres; finite, > 0.
+        distance_threshold_m: f64,
+        /// Random triples tried; ≥ 1.
+        iterations: u32,
+        /// Seed of the random generator: the same seed gives the same labels.
+        seed: u64,
+    },
+    /// Local planes on a polar grid, grown outwards from the sensor.
+    PolarGrid(PolarGridParams),
+}
+
+/// What one call found.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct GroundStats {
+    /// Points labelled ground.
+    pub ground: usize,
+    /// RANSAC: the best plane `[a, b, c, d]` with `a x + b y + c z + d = 0`, `(a, b, c)` a unit
+    /// normal with `c ≥ 0`; `None` for the polar grid or when no plane was found.
+    pub plane: Option<[f64; 4]>,
+    /// Polar grid: bins whose own plane was accepted as ground.
+    pub ground_bins: usize,
+}
+
+/// A reusable ground segmenter. See the module docs.
+#[derive(Clone, Debug)]
+pub struct GroundSegmenter {
+    method: GroundMethod,
+    /// Finite points as structure-of-arrays (RANSAC) or bin-ordered (polar grid).
+    xs: Vec<f32>,
+    ys: Vec<f32>,
+    zs: Vec<f32>,
+    /// Original index of each entry of `xs`/`ys`/`zs`.
+    idx: Vec<u32>,
+    /// Polar grid: bin of each point, bin starts, ring edges, per-bin planes.
+    bin_of: Vec<u32>,
+    bin_start: Vec<u32>,
+    cursor: Vec<u32>,
+    ring_edges: Vec<f64>,
+    ring_lut: Vec<u16>,
+    planes: Vec<Option<[f64; 4]>>,
+    scratch: Vec<f32>,
+}
+
+impl GroundSegmenter {
+    /// A segmenter with validated parameters (see each field's doc for its range).
+    pub fn new(method: GroundMethod) -> Result<Self, PipelineError> {
+        match method {
+            GroundMethod::Ransac {
+                distance_threshold_m,
+                iterations,
+                ..
+            } => {
+                positive("distance_threshold_m", distance_threshold_m)?;
+                if iterations == 0 {
+                    return Err(PipelineError::InvalidParameter {
+                        name: "iterations",
+                        value: 0.0,
+                        expected: "≥ 1",
+                    });
+                }
+            }
+            GroundMethod::PolarGrid(p) => {
+                within("sectors", f64::from(p.sectors), 4.0, 4096.0, "4 ..= 4096")?;
+                positive("radial_bin_m", p.radial_bin_m)?;
+                positive("max_range_m", p.max_range_m)?;
+                positive("distance_threshold_m", p.distance_threshold_m)?;
+                within(
+                    "max_slope_deg",
+                    p.max_slope_deg,
+                    f64::MIN_POSITIVE,
+                    89.999,
+                    "in (0, 90)",
+                )?;
+                within("max_step_m", p.max_step_m, 0.0, f64::MAX, "finite, ≥ 0")?;
+                if let Some(h) = p.sensor_height_m {
+                    within("sensor_height_m", h, f64::MIN, f64::MAX, "finite")?;
+                }
+                if p.max_range_m / p.radial_bin_m > 100_000.0 {
+                    return Err(PipelineError::InvalidParameter {
+                        name: "radial_bin_m",
+                        value: p.radial_bin_m,
+                        expected: "≥ max_range_m / 100000",
+                    });
+                }
+            }
+        }
+        let mut s = Self {
+            method,
+            xs: Vec::new(),
+            ys: Vec::new(),
+            zs: Vec::new(),
+            idx: Vec::new(),
+            bin_of: Vec::new(),
+            bin_start: Vec::new(),
+            cursor: Vec::new(),
+            ring_edges: Vec::new(),
+            ring_lut: Vec::new(),
+            planes: Vec::new(),
+            scratch: Vec::new(),
+        };
+        if let GroundMethod::PolarGrid(p) = method {
+            s.build_rings(&p);
+        }
+        Ok(s)
+    }
+
+    /// The method and its parameters.
+    pub fn method(&self) -> &GroundMethod {
+        &self.method
+    }
+
+    /// Labels every point of `points`: `labels` is cleared and gets one entry per point,
+    /// `true` for ground.
+    pub fn segment(&mut self, points: &[Point], labels: &mut Vec<bool>) -> GroundStats {
+        labels.clear();
+        labels.resize(points.len(), false);
+        let mut stats = match self.method {
+            GroundMethod::Ransac {
+                distance_threshold_m,
+                iterations,
+                seed,
+            } => self.ransac(points, distance_threshold_m, iterations, seed, labels),
+            GroundMethod::PolarGrid(p) => self.polar(points, &p, labels),
+        };
+        stats.ground = labels.iter().filter(|&&g| g).count();
+        stats
+    }
+
+    fn load_finite(&mut self, points: &[Point]) {
+        self.xs.clear();
+        self.ys.clear();
+        self.zs.clear();
+        self.idx.clear();
+        for (i, p) in points.iter().enumerate().take(u32::MAX as usize) {
+            if p.x.is_finite() && p.y.is_finite() && p.z.is_finite() {
+                self.xs.push(p.x);
+                self.ys.push(p.y);
+                self.zs.push(p.z);
+                self.idx.push(i as u32);
+            }
+        }
+    }
+
+    fn ransac(
+        &mut self,
+        points: &[Point],
+        thr: f64,
+        iterations: u32,
+        seed: u64,
+        labels: &mut [bool],
+    ) -> GroundStats {
+        self.load_finite(points);
+        let n = self.xs.len();
+        if n < 3 {
+            return GroundStats::default();
+        }
+        let mut rng = SplitMix64(seed);
+        let mut best: Option<([f32; 4], usize)> = None;
+        let thr32 = thr as f32;
+        for _ in 0..iterations {
+            let i = rng.below(n);
+            let j = rng.below(n);
+            let k = rng.below(n);
+            let p = |t: usize| {
+                Vector3::new(
+                    f64::from(self.xs[t]),
+                    f64::from(self.ys[t]),
+                    f64::from(self.zs[t]),
+                )
+            };
+            let (a, b, c) = (p(i), p(j), p(k));
+            let nrm = (b - a).cross(&(c - a));
+            let len = nrm.norm();
+            if len.is_nan() || len <= 1e-12 {
+                continue;
+            }
+            let nrm = nrm / len;
+            let d = -nrm.dot(&a);
+            let plane = [nrm.x as f32, nrm.y as f32, nrm.z as f32, d as f32];
+            let count = count_within(&self.xs, &self.ys, &self.zs, plane, thr32);
+            if best.is_none_or(|(_, c)| count > c) {
+                best = Some((plane, count));
+            }
+        }
+        let Some((plane, _)) = best else {
+            return GroundStats::default();
+        };
+        for t in 0..n {
+            let d =
+                plane[0] * self.xs[t] + plane[1] * self.ys[t] + plane[2] * self.zs[t] + plane[3];
+            if d.abs() <= thr32 {
+                labels[self.idx[t] as usize] = true;
+            }
+        }
+        let s = if plane[2] < 0.0 { -1.0 } else { 1.0 };
+        GroundStats {
+            plane: Some(plane.map(|v| f64::from(v) * s)),
+            ..GroundStats::default()
+        }
+    }
+
+    /// Ring edges: each ring is `max(radial_bin_m, r · 2π / sectors)` wide (square-ish bins);
+    /// a lookup table at `radial_bin_m / 8` resolution gives the ring of a range.
+    fn build_rings(&mut self, p: &PolarGridParams) {
+        self.ring_edges.clear();
+        let mut r = 0.0;
+        let arc = core::f64::consts::TAU / f64::from(p.sectors);
+        self.ring_edges.push(0.0);
+        while r < p.max_range_m {
+            r += (r * arc).max(p.radial_bin_m);
+            self.ring_edges.push(r.min(p.max_range_m));
+        }
+        let step = p.radial_bin_m / 8.0;
+        let cells = (p.max_range_m / step).ceil() as usize + 1;
+        self.ring_lut.clear();
+        let mut ring = 0usize;
+        for c in 0..cells {
+            let r = (c as f64 + 0.5) * step;
+            while ring + 2 < self.ring_edges.len() && r >= self.ring_edges[ring + 1] {
+                ring += 1;
+            }
+            self.ring_lut.push(ring as u16);
+        }
+    }
+
+    fn polar(&mut self, points: &[Point], p: &PolarGridParams, labels: &mut [bool]) -> GroundStats {
+        let rings = self.ring_edges.len() - 1;
+        let sectors = p.sectors as usize;
+        let bins = rings * sectors;
+        let step = p.radial_bin_m / 8.0;
+        let sector_scale = sectors as f64 / core::f64::consts::TAU;
+        let max_r2 = p.max_range_m * p.max_range_m;
+
+        // 1. Bin of every finite point within range; counting sort into bin order.
+        self.bin_of.clear();
+        self.bin_start.clear();
+        self.bin_start.resize(bins + 1, 0);
+        for pt in points.iter().take(u32::MAX as usize) {
+            let (x, y) = (f64::from(pt.x), f64::from(pt.y));
+            let r2 = x * x + y * y;
+            let bin = if pt.z.is_finite() && r2 <= max_r2 {
+                let r = r2.sqrt();
+                let ring = self
+                    .ring_lut
+                    .get((r / step) as usize)
+                    .map_or(rings - 1, |&v| usize::from(v));
+                let a = y.atan2(x) + core::f64::consts::PI;
+                let sector = ((a * sector_scale) as usize).min(sectors - 1);
+                (sector * rings + ring) as u32
+            } else {
+                u32::MAX
+            };
+            self.bin_of.push(bin);
+            if bin != u32::MAX {
+                self.bin_start[bin as usize + 1] += 1;
+            }
+        }
+        for b in 0..bins {
+            self.bin_start[b + 1] += self.bin_start[b];
+        }
+        let total = self.bin_start[bins] as usize;
+        for v in [&mut self.xs, &mut self.ys, &mut self.zs] {
+            v.clear();
+            v.resize(total, 0.0);
+        }
+        self.idx.clear();
+        self.idx.resize(total, 0);
+        let cursor = &mut self.cursor;
+        cursor.clear();
+        cursor.extend_from_slice(&self.bin_start[..bins]);
+        for (i, (&b, pt)) in self.bin_of.iter().zip(points).enumerate() {
+            if b == u32::MAX {
+                continue;
+            }
+            let at = cursor[b as usize] as usize;
+            cursor[b as usize] += 1;
+            self.xs[at] = pt.x;
+            self.ys[at] = pt.y;
+            self.zs[at] = pt.z;
+            self.idx[at] = i as u32;
+        }
+
+        // 2. A plane per bin from its lowest points.
+        self.planes.clear();
+        self.planes.resize(bins, None);
+        for b in 0..bins {
+            let (s, e) = (self.bin_start[b] as usize, self.bin_start[b + 1] as usize);
+            self.planes[b] = fit_lowest(
+                &self.xs[s..e],
+                &self.ys[s..e],
+                &self.zs[s..e],
+                p.distance_threshold_m,
+                &mut self.scratch,
+            );
+        }
+
+        // 3. Walk each sector outwards: accept planes that are flat enough and continue the
+        //    ground; label the points above their plane by at most the threshold.
+        let cos_max = p.max_slope_deg.to_radians().cos();
+        let tan_max = p.max_slope_deg.to_radians().tan();
+        let mut stats = GroundStats::default();
+        for sec in 0..sectors {
+            let mid = (sec as f64 + 0.5) / sector_scale - core::f64::consts::PI;
+            let (cs, sn) = (mid.cos(), mid.sin());
+            // Reference: last accepted plane and the range where it was last accepted.
+            let mut reference: Option<([f64; 4], f64)> =
+                p.sensor_height_m.map(|h| ([0.0, 0.0, 1.0, h], 0.0));
+            for ring in 0..rings {
+                let b = sec * rings + ring;
+                let r_in = self.ring_edges[ring];
+                let r_out = self.ring_edges[ring + 1];
+                let (px, py) = (r_in * cs, r_in * sn);
+                let mut used = reference.map(|(pl, _)| pl);
+                if let Some(pl) = self.planes[b] {
+                    let flat = pl[2] >= cos_max;
+                    let continues = match reference {
+                        None => true,
+                        Some((rp, r_ref)) => {
+                            let allowed = p.max_step_m + (r_in - r_ref).max(0.0) * tan_max;
+                            (height_at(&pl, px, py) - height_at(&rp, px, py)).abs() <= allowed
+                        }
+                    };
+                    if flat && continues {
+                        used = Some(pl);
+                        reference = Some((pl, r_out));
+                        stats.ground_bins += 1;
+                    }
+                }
+                let Some(pl) = used else { continue };
+                let (s, e) = (self.bin_start[b] as usize, self.bin_start[b + 1] as usize);
+                for t in s..e {
+                    let d = pl[0] * f64::from(self.xs[t])
+                        + pl[1] * f64::from(self.ys[t])
+                        + pl[2] * f64::from(self.zs[t])
+                        + pl[3];
+                    if d <= p.distance_threshold_m {
+                        labels[self.idx[t] as usize] = true;
+                    }
+                }
+            }
+        }
+        stats
+    }
+}
+
+/// Height `z` of the plane `a x + b y + c z + d = 0` (`c > 0`) above `(x, y)`.
+fn height_at(pl: &[f64; 4], x: f64, y: f64) -> f64 {
+    -(pl[0] * x + pl[1] * y + pl[3]) / pl[2]
+}
+
+/// Points of the SoA arrays within `thr` of the plane (vectorises).
+fn count_within(xs: &[f32], ys: &[f32], zs: &[f32], pl: [f32; 4], thr: f32) -> usize {
+    let mut n = 0usize;
+    for ((&x, &y), &z) in xs.iter().zip(ys).zip(zs) {
+        let d = pl[0] * x + pl[1] * y + pl[2] * z + pl[3];
+        n += usize::from(d.abs() <= thr);
+    }
+    n
+}
+
+/// Seeds = points below the mean of the lowest `LOWEST` points plus `thr`; plane by
+/// principal components; refitted twice on the points within `thr`. Normal with `c > 0`.
+fn fit_lowest(
+    xs: &[f32],
+    ys: &[f32],
+    zs: &[f32],
+    thr: f64,
+    scratch: &mut Vec<f32>,
+) -> Option<[f64; 4]> {
+    const LOWEST: usize = 10;
+    if xs.len() < 3 {
+        return None;
+    }
+    scratch.clear();
+    scratch.extend_from_slice(zs);
+    let k = LOWEST.min(scratch.len());
+    scratch.select_nth_unstable_by(k - 1, f32::total_cmp);
+    let low = scratch[..k].iter().map(|&z| f64::from(z)).sum::<f64>() / k as f64;
+    let seed_top = low + thr;
+    let mut plane = fit(xs, ys, zs, |_, _, z| z <= seed_top)?;
+    for _ in 0..2 {
+        let pl = plane;
+        plane = fit(xs, ys, zs, |x, y, z| {
+            (pl[0] * x + pl[1] * y + pl[2] * z + pl[3]).abs() <= thr
+        })
+        .unwrap_or(pl);
+    }
+    Some(plane)
+}
+
+/// Least-squares plane (smallest principal axis) of the selected points; `None` if fewer than
+/// three or degenerate.
+fn fit(
+    xs: &[f32],
+    ys: &[f32],
+    zs: &[f32],
+    keep: impl Fn(f64, f64, f64) -> bool,
+) -> Option<[f64; 4]> {
+    let mut n = 0usize;
+    let mut sum = Vector3::zeros();
+    for ((&x, &y), &z) in xs.iter().zip(ys).zip(zs) {
+        let (x, y, z) = (f64::from(x), f64::from(y), f64::from(z));
+        if keep(x, y, z) {
+            n += 1;
+            sum += Vector3::new(x, y, z);
+        }
+    }
+    if n < 3 {
+        return None;
+    }
+    let mean = sum / n as f64;
+    let mut cov = Matrix3::zeros();
+    for ((&x, &y), &z) in xs.iter().zip(ys).zip(zs) {
+        let (x, y, z) = (f64::from(x), f64::from(y), f64::from(z));
+        if keep(x, y, z) {
+            let d = Vector3::new(x, y, z) - mean;
+            cov += d * d.transpose();
+        }
+    }
+    let eig = SymmetricEigen::new(cov);
+    let mut order = [0usize, 1, 2];
+    order.sort_unstable_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
+    let [small, middle, _] = order;
+    // Points along one line (a single scan line crossing the bin) fix only that line: of the
+    // planes containing it, take the most horizontal one rather than the noise's choice.
+    let mut nrm: Vector3<f64> = if eig.eigenvalues[middle] / (n as f64) < LINE_SPREAD_M2 {
+        let dir: Vector3<f64> = eig.eigenvectors.column(order[2]).into_owned();
+        Vector3::z() - dir * dir.z
+    } else {
+        eig.eigenvectors.column(small).into_owned()
+    };
+    let len = nrm.norm();
+    if len.is_nan() || len <= 1e-9 {
+        return None;
+    }
+    nrm /= len;
+    if nrm.z < 0.0 {
+        nrm = -nrm;
+    }
+    Some([nrm.x, nrm.y, nrm.z, -nrm.dot(&mean)])
+}
+
+/// Variance (m²) across the main direction below which a bin's points count as one line.
+const LINE_SPREAD_M2: f64 = 0.05 * 0.05;
+
+/// SplitMix64 (Steele, Lea, Flood 2014): a small, seedable, reproducible generator.
+struct SplitMix64(u64);
+
+impl SplitMix64 {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in `0..n` (`n > 0`), by the multiply-shift method.
+    fn below(&mut self, n: usize) -> usize {
+        ((u128::from(self.next()) * n as u128) >> 64) as usize
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pt(x: f64, y: f64, z: f64) -> Point {
+        Point {
+            x: x as f32,
+            y: y as f32,
+            z: z as f32,
+            ..Point::default()
+        }
+    }
+
+    /// A sensor-like pattern over a ground height field `h(x, y)` (metres, sensor at the
+    /// origin `sensor_h` above `h(0, 0)`): rings at the ranges where beams 2°…25° below the
+    /// horizon meet flat ground, 720 azimuths each; plus the four walls of a box (2 × 2 × 1.5 m,
+    /// centred 8 m ahead, standing on the ground). Returns the points and the truth.
+    fn scene(h: impl Fn(f64, f64) -> f64, sensor_h: f64) -> (Vec<Point>, Vec<bool>) {
+        let (mut pts, mut truth) = (Vec::new(), Vec::new());
+        for beam in 2..=25 {
+            let r = sensor_h / (f64::from(beam)).to_radians().tan();
+            for a in 0..720 {
+                let az = f64::from(a) * 0.5f64.to_radians();
+                let (x, y) = (r * az.cos(), r * az.sin());
+                if (x - 8.0).abs() <= 1.0 && y.abs() <= 1.0 {
+                    continue; // under the box
+                }
+                pts.push(pt(x, y, h(x, y) - sensor_h));
+                truth.push(true);
+            }
+        }
+        for i in 0..=20 {
+            for k in 0..=15 {
+                let (s, z) = (f64::from(i) * 0.1 - 1.0, f64::from(k) * 0.1);
+                for (x, y) in [(7.0, s), (9.0, s), (8.0 + s, -1.0), (8.0 + s, 1.0)] {
+                    pts.push(pt(x, y, h(8.0, 0.0) - sensor_h + z));
+                    truth.push(k as f64 * 0.1 < 0.0); // never ground
+                }
+            }
+        }
+        (pts, truth)
+    }
+
+    /// (precision, recall) of `labels` against `truth`.
+    fn score(labels: &[bool], truth: &[bool]) -> (f64, f64) {
+        let tp = labels.iter().zip(truth).filter(|(l, t)| **l && **t).count() as f64;
+        let fp = labels
+            .iter()
+            .zip(truth)
+            .filter(|(l, t)| **l && !**t)
+            .count() as f64;
+        let fneg = labels
+            .iter()
+            .zip(truth)
+            .filter(|(l, t)| !**l && **t)
+            .count() as f64;
+        (tp / (tp + fp), tp / (tp + fneg))
+    }
+
+    const RANSAC: GroundMethod = GroundMethod::Ransac {
+        distance_threshold_m: 0.15,
+        iterations: 200,
+        seed: 42,
+    };
+
+    #[test]
+    fn flat_ground_with_a_box_both_methods() {
+        let (pts, truth) = scene(|_, _| 0.0, 1.8);
+        let mut labels = Vec::new();
+        for m in [RANSAC, GroundMethod::PolarGrid(PolarGridParams::default())] {
+            let mut g = GroundSegmenter::new(m).unwrap();
+            let stats = g.segment(&pts, &mut labels);
+            let (p, r) = score(&labels, &truth);
+            // The box's two lowest rows (0 and 0.1 m) are within the 0.15 m threshold.
+            assert!(p > 0.98 && r > 0.999, "{m:?}: precision {p}, recall {r}");
+            assert_eq!(stats.ground, labels.iter().filter(|&&l| l).count());
+        }
+    }
+
+    #[test]
+    fn ransac_is_reproducible_and_finds_the_plane() {
+        let (pts, _) = scene(|_, _| 0.0, 1.8);
+        let mut g = GroundSegmenter::new(RANSAC).unwrap();
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        let sa = g.segment(&pts, &mut a);
+        let sb = g.segment(&pts, &mut b);
+        assert_eq!(a, b);
+        assert_eq!(sa, sb);
+        let pl = sa.plane.unwrap();
+        assert!(pl[2] > 0.999 && (pl[3] - 1.8).abs() < 0.15, "{pl:?}");
+    }
+
+    #[test]
+    fn polar_grid_follows_a_ten_percent_slope_where_ransac_cannot() {
+        // Ground rising at 10 % along x beyond x = 5 m (a ramp), flat before.
+        let h = |x: f64, _y: f64| if x > 5.0 { 0.1 * (x - 5.0) } else { 0.0 };
+        let (pts, truth) = scene(h, 1.8);
+        let mut labels = Vec::new();
+        let mut g =
+            GroundSegmenter::new(GroundMethod::PolarGrid(PolarGridParams::default())).unwrap();
+        g.segment(&pts, &mut labels);
+        let (p, r) = score(&labels, &truth);
+        assert!(
+            p > 0.98 && r > 0.97,
+            "polar grid: precision {p}, recall {r}"
+        );
+        // One plane cannot hold both the flat part and the ramp.
+        GroundSegmenter::new(RANSAC)
+            .unwrap()
+            .segment(&pts, &mut labels);
+        let (rp, rr) = score(&labels, &truth);
+        eprintln!("10 % ramp: polar grid precision {p:.4} recall {r:.4}; RANSAC {rp:.4} {rr:.4}");
+        assert!(rr < 0.9, "RANSAC: precision {rp}, recall {rr}");
+    }
+
+    #[test]
+    fn invalid_parameters_are_named() {
+        let bad = |m: GroundMethod, name: &str| match GroundSegmenter::new(m) {
+            Err(PipelineError::InvalidParameter { name: n, .. }) => assert_eq!(n, name),
+            other => panic!("{m:?}: {other:?}"),
+        };
+        bad(
+            GroundMethod::Ransac {
+                distance_threshold_m: 0.0,
+                iterations: 10,
+                seed: 0,
+            },
+            "distance_threshold_m",
+        );
+        bad(
+            GroundMethod::Ransac {
+                distance_threshold_m: 0.1,
+                iterations: 0,
+                seed: 0,
+            },
+            "iterations",
+        );
+        let d = PolarGridParams::default();
+        bad(
+            GroundMethod::PolarGrid(PolarGridParams { sectors: 2, ..d }),
+            "sectors",
+        );
+        bad(
+            GroundMethod::PolarGrid(PolarGridParams {
+                radial_bin_m: f64::NAN,
+                ..d
+            }),
+            "radial_bin_m",
+        );
+        bad(
+            GroundMethod::PolarGrid(PolarGridParams {
+                max_slope_deg: 90.0,
+                ..d
+            }),
+            "max_slope_deg",
+        );
+        bad(
+            GroundMethod::PolarGrid(PolarGridParams {
+                max_step_m: -0.1,
+                ..d
+            }),
+            "max_step_m",
+        );
+        bad(
+            GroundMethod::PolarGrid(PolarGridParams {
+                sensor_height_m: Some(f64::INFINITY),
+                ..d
+            }),
+            "sensor_height_m",
+        );
+        bad(
+            GroundMethod::PolarGrid(PolarGridParams {
+                max_range_m: 1e9,
+                ..d
+            }),
+            "radial_bin_m",
+        );
+    }
+
+    #[test]
+    fn no_points_and_non_finite_points() {
+        let mut labels = vec![true; 3];
+        for m in [RANSAC, GroundMethod::PolarGrid(PolarGridParams::default())] {
+            let mut g = GroundSegmenter::new(m).unwrap();
+            assert_eq!(g.segment(&[], &mut labels).ground, 0);
+            assert!(labels.is_empty());
+            let pts = [
+                pt(f64::NAN, 0.0, 0.0),
+                pt(1.0, 0.0, -1.0),
+                pt(0.0, 1.0, f64::INFINITY),
+            ];
+            g.segment(&pts, &mut labels);
+            assert_eq!(labels.len(), 3);
+            assert!(!labels[0] && !labels[2]);
+        }
+    }
+}

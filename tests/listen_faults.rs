@@ -1,0 +1,329 @@
+//! Faults of the live path: SIGINT / SIGTERM mid-run, a full disk, a sensor that stops and
+//! starts again (Velodyne gap, Ouster re-initialised with a new init_id), `--split-every`.
+
+mod common;
+mod listen_util;
+
+use std::net::{Ipv4Addr, SocketAddrV4, UdpSocket};
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use listen_util::*;
+
+fn tmpdir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("ringscan-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn hdl32(c: &Path) -> PathBuf {
+    c.join("jerry73204__rust-lidar-utils/test_files/hdl32_example.pcap")
+}
+
+/// Reads an MCAP completely: every message, and the summary section (finalised files only).
+/// Returns (messages per topic, point records in all `…/points` messages).
+fn read_finalised(path: &Path) -> (std::collections::BTreeMap<String, u64>, u64) {
+    let bytes = std::fs::read(path).unwrap();
+    let summary = mcap::Summary::read(&bytes)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .unwrap_or_else(|| panic!("{}: no summary section (not finalised)", path.display()));
+    let mut per_topic = std::collections::BTreeMap::new();
+    let mut points = 0u64;
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        *per_topic.entry(m.channel.topic.clone()).or_insert(0u64) += 1;
+        if m.channel.topic.ends_with("/points") {
+            points += (point_cloud_data(&m.data).len() / 24) as u64;
+        }
+    }
+    let stats = summary.stats.expect("statistics record");
+    assert_eq!(
+        stats.message_count,
+        per_topic.values().sum::<u64>(),
+        "{}: statistics vs messages read",
+        path.display()
+    );
+    (per_topic, points)
+}
+
+fn sensor_args(offset: i32, out: Option<&Path>) -> Vec<String> {
+    let mut a = vec![
+        "--sensor".to_string(),
+        format!("127.0.0.1:{}", 2368 + offset),
+        "--sensor".to_string(),
+        format!("127.0.0.1:{}", 8308 + offset),
+    ];
+    if let Some(o) = out {
+        a.push("--out".into());
+        a.push(o.display().to_string());
+    }
+    a
+}
+
+#[test]
+fn sigint_and_sigterm_mid_run_leave_a_finalised_mcap() {
+    let Some(c) = common::captures() else { return };
+    let _g = serial();
+    let dir = tmpdir("signals");
+    for sig in ["INT", "TERM"] {
+        let offset = free_offset(&[2368, 8308]);
+        let out = dir.join(format!("{sig}.mcap"));
+        let l = start_listen(&sensor_args(offset, Some(&out)));
+        let pcap = hdl32(&c);
+        // About 3 s of packets; the signal comes after 1.2 s, in the middle.
+        let sender = std::thread::spawn(move || replay(&pcap, offset, "1", &["--loop", "6"]));
+        std::thread::sleep(Duration::from_millis(1200));
+        let (code, stdout, err) = l.stop(sig);
+        sender.join().unwrap();
+        assert_eq!(code, Some(0), "SIG{sig}: {err}");
+        let j: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+        assert_eq!(j["stop"], format!("SIG{sig}"));
+        let (topics, points) = read_finalised(&out);
+        assert!(
+            j["sweeps"].as_u64().unwrap() > 0,
+            "SIG{sig}: no sweep before the signal"
+        );
+        assert!(
+            j["receive"]["datagrams"].as_u64().unwrap() < 6 * 976,
+            "not mid-run"
+        );
+        // What the file holds is what the summary says was written.
+        for (t, n) in j["output"]["topics"].as_object().unwrap() {
+            assert_eq!(topics.get(t).copied(), n.as_u64(), "SIG{sig}: {t}");
+        }
+        assert_eq!(points, j["points"].as_u64().unwrap(), "SIG{sig}: points");
+        eprintln!("SIG{sig}: {topics:?}, {points} points, file finalised");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_full_disk_is_a_clear_error() {
+    let Some(c) = common::captures() else { return };
+    let _g = serial();
+    let offset = free_offset(&[2368, 8308]);
+    // /dev/full takes the file's creation and fails every write with ENOSPC: at the start
+    // (the header and schemas fill the write buffer) or at the latest when a chunk is written.
+    let child = std::process::Command::new(BIN)
+        .args(["listen", "--duration", "3", "--out", "/dev/full"])
+        .args(sensor_args(offset, None))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(300));
+    replay(&hdl32(&c), offset, "max", &[]);
+    let o = child.wait_with_output().unwrap();
+    let (code, stdout, err) = (
+        o.status.code(),
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr),
+    );
+    assert_eq!(code, Some(1), "stdout {stdout}\nstderr {err}");
+    assert!(
+        err.contains("/dev/full") && err.contains("No space left on device"),
+        "error does not say what and where: {err}"
+    );
+}
+
+#[test]
+fn a_velodyne_that_stops_and_starts_again_resumes() {
+    let Some(c) = common::captures() else { return };
+    let _g = serial();
+    let dir = tmpdir("gap");
+    let pcap = hdl32(&c);
+    let decoded = decode(&pcap, &dir.join("d.mcap"), &[]);
+    let offset = free_offset(&[2368, 8308]);
+    let l = start_listen(&sensor_args(offset, None));
+    replay(&pcap, offset, "1", &[]);
+    // The sensor is silent for 1.5 s, then sends again (its clock starts over).
+    std::thread::sleep(Duration::from_millis(1500));
+    replay(&pcap, offset, "1", &[]);
+    std::thread::sleep(Duration::from_millis(300));
+    let (code, stdout, err) = l.stop("INT");
+    assert_eq!(code, Some(0), "{err}");
+    let j: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(j["receive"]["datagrams"], 2 * 976);
+    assert_eq!(j["receive"]["queue_dropped"], 0);
+    assert_eq!(j["receive"]["kernel_dropped"], 0);
+    let d = |k: &str| decoded["packets"][k].as_u64().unwrap();
+    // Every data packet of both runs decoded, every point of both runs emitted.
+    assert_eq!(j["packets"]["decoded"].as_u64().unwrap(), 2 * d("decoded"));
+    assert_eq!(
+        j["points"].as_u64().unwrap(),
+        2 * decoded["points"].as_u64().unwrap()
+    );
+    assert!(j["sweeps"].as_u64().unwrap() >= 2 * decoded["sweeps"].as_u64().unwrap() - 1);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn split_every_rotates_files_without_losing_a_sweep() {
+    let Some(c) = common::captures() else { return };
+    let _g = serial();
+    let dir = tmpdir("split");
+    let pcap = hdl32(&c);
+    let decoded = decode(&pcap, &dir.join("d.mcap"), &[]);
+    let offset = free_offset(&[2368, 8308]);
+    let base = dir.join("drive.mcap");
+    let mut args = sensor_args(offset, Some(&base));
+    args.extend(["--split-every".to_string(), "0.7s".to_string()]);
+    let l = start_listen(&args);
+    // 4 × 0.5 s of packets.
+    replay(&pcap, offset, "1", &["--loop", "4"]);
+    std::thread::sleep(Duration::from_millis(300));
+    let (code, stdout, err) = l.stop("INT");
+    assert_eq!(code, Some(0), "{err}");
+    let j: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(j["receive"]["queue_dropped"], 0);
+    assert_eq!(j["receive"]["kernel_dropped"], 0);
+    let files = j["files"].as_array().unwrap();
+    assert!(files.len() >= 2, "{} files", files.len());
+    let (mut points, mut sweeps) = (0u64, 0u64);
+    for (i, f) in files.iter().enumerate() {
+        let p = PathBuf::from(f["path"].as_str().unwrap());
+        assert_eq!(p, dir.join(format!("drive_{i:04}.mcap")));
+        let (topics, n) = read_finalised(&p);
+        points += n;
+        sweeps += topics.get("/points").copied().unwrap_or(0);
+    }
+    assert_eq!(points, j["points"].as_u64().unwrap());
+    assert_eq!(sweeps, j["sweeps"].as_u64().unwrap());
+    assert_eq!(points, 4 * decoded["points"].as_u64().unwrap());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Sends datagrams to 127.0.0.1 at about the capture's pace.
+fn send_all(sock: &UdpSocket, dgrams: &[(i64, u16, Vec<u8>)], port_of: impl Fn(u16) -> u16) {
+    let t0 = dgrams.first().map_or(0, |d| d.0);
+    let start = std::time::Instant::now();
+    for (t, port, payload) in dgrams {
+        let due = Duration::from_nanos((t - t0).max(0) as u64);
+        if let Some(w) = due.checked_sub(start.elapsed()) {
+            std::thread::sleep(w);
+        }
+        sock.send_to(
+            payload,
+            SocketAddrV4::new(Ipv4Addr::LOCALHOST, port_of(*port)),
+        )
+        .unwrap();
+    }
+}
+
+/// A minimal HTTP server serving `body` at the Ouster metadata path; counts the requests.
+fn serve_metadata(body: Vec<u8>) -> (u16, std::sync::Arc<std::sync::atomic::AtomicUsize>) {
+    use std::io::{Read, Write};
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = listener.local_addr().unwrap().port();
+    let count = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
+    let n = count.clone();
+    std::thread::spawn(move || {
+        for stream in listener.incoming() {
+            let Ok(mut s) = stream else { continue };
+            let mut req = Vec::new();
+            let mut buf = [0u8; 1024];
+            while !req.windows(4).any(|w| w == b"\r\n\r\n") {
+                match s.read(&mut buf) {
+                    Ok(0) | Err(_) => break,
+                    Ok(k) => req.extend_from_slice(&buf[..k]),
+                }
+            }
+            let line = String::from_utf8_lossy(&req)
+                .lines()
+                .next()
+                .unwrap_or("")
+                .to_string();
+            if line.starts_with("GET /api/v1/sensor/metadata ") {
+                n.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+                // Chunked, as some sensor firmware sends it.
+                let mut resp = b"HTTP/1.1 200 OK\r\nContent-Type: application/json\r\nTransfer-Encoding: chunked\r\n\r\n".to_vec();
+                for part in body.chunks(3000) {
+                    resp.extend_from_slice(format!("{:x}\r\n", part.len()).as_bytes());
+                    resp.extend_from_slice(part);
+                    resp.extend_from_slice(b"\r\n");
+                }
+                resp.extend_from_slice(b"0\r\n\r\n");
+                let _ = s.write_all(&resp);
+            } else {
+                let _ = s.write_all(b"HTTP/1.1 404 Not Found\r\nContent-Length: 0\r\n\r\n");
+            }
+        }
+    });
+    (port, count)
+}
+
+#[test]
+fn ouster_metadata_from_its_http_api_and_again_after_a_new_init_id() {
+    let Some(c) = common::captures() else { return };
+    let _g = serial();
+    let dir = tmpdir("ouster-http");
+    let o = c.join("ouster-lidar__ouster-sdk/tests/pcaps");
+    // v2.3.0: no CRC in the packets, so the init_id can be rewritten.
+    let pcap = o.join("OS-1-128_v2.3.0_1024x10_lb_n3.pcap");
+    let meta = o.join("OS-1-128_v2.3.0_1024x10.json");
+    let decoded_path = dir.join("d.mcap");
+    let decoded = decode(
+        &pcap,
+        &decoded_path,
+        &["--calib".into(), meta.display().to_string()],
+    );
+    let truth = points_by_topic(&std::fs::read(&decoded_path).unwrap())["/points"].clone();
+    assert_eq!(truth.len(), 3);
+
+    let (api_port, requests) = serve_metadata(std::fs::read(&meta).unwrap());
+    let dgrams = common::datagrams(&pcap);
+    let offset = free_offset(&[7502, 7503]);
+    let out = dir.join("live.mcap");
+    let args = vec![
+        "--sensor".to_string(),
+        format!("127.0.0.1:{}", 7502 + offset),
+        "--sensor".to_string(),
+        format!("127.0.0.1:{}", 7503 + offset),
+        "--api-port".to_string(),
+        api_port.to_string(),
+        "--out".to_string(),
+        out.display().to_string(),
+    ];
+    let l = start_listen(&args);
+    let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let port_of = |p: u16| (i32::from(p) + offset) as u16;
+    // Run 1: no metadata yet; the first packets start the request.
+    send_all(&sock, &dgrams, port_of);
+    // Runs 2 and 3: the sensor re-initialised (init_id u24 @4 of each lidar packet changed).
+    for k in 1..=2u32 {
+        std::thread::sleep(Duration::from_millis(700));
+        let mut changed = dgrams.clone();
+        for (_, _, p) in changed.iter_mut().filter(|d| d.2.len() > 48) {
+            let id = u32::from_le_bytes([p[4], p[5], p[6], 0]) ^ (0x5a5a00 + k);
+            p[4..7].copy_from_slice(&id.to_le_bytes()[..3]);
+        }
+        send_all(&sock, &changed, port_of);
+    }
+    std::thread::sleep(Duration::from_millis(700));
+    let (code, stdout, err) = l.stop("INT");
+    assert_eq!(code, Some(0), "{err}");
+    let j: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(j["receive"]["queue_dropped"], 0);
+    assert_eq!(j["receive"]["kernel_dropped"], 0);
+    assert_eq!(j["receive"]["datagrams"], 3 * dgrams.len());
+    let s = &j["sensors"][0];
+    assert_eq!(s["serial"], decoded["sensors"][0]["serial"]);
+    assert_eq!(s["epochs"], 2, "{s}");
+    assert_eq!(s["calibration_file"], "metadata-127.0.0.1.json");
+    // Once at the start, once after each init_id change.
+    assert_eq!(
+        requests.load(std::sync::atomic::Ordering::SeqCst),
+        3,
+        "{err}"
+    );
+    // The metadata is attached to the file like a --calib file.
+    let att = &j["output"]["attachments"];
+    assert_eq!(att[0]["name"], "metadata-127.0.0.1.json", "{att}");
+    // Runs 2 and 3 decode to exactly the sweeps of `decode` with the metadata file.
+    let live = points_by_topic(&std::fs::read(&out).unwrap())["/points"].clone();
+    let n = live.len();
+    assert!(n >= 6, "{n} sweeps");
+    assert!(live[n - 6..n - 3] == truth[..], "run 2 differs from decode");
+    assert!(live[n - 3..] == truth[..], "run 3 differs from decode");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1,0 +1,418 @@
+//! `ringscan decode --pipeline default` on a real capture (the HDL-32E Monterey drive): every
+//! pipeline channel is written, the `--json` summary has per-stage timings and counts, and the
+//! file agrees with itself and with the summary:
+//! - per sweep, the clusters' point counts (SceneUpdate metadata) sum to the obstacle points,
+//!   every obstacle point's `cluster` names one of that sweep's cubes, and lies inside that
+//!   cube (the cube is the cluster's minimum-area box);
+//! - over the run, ground + obstacles + unclustered = points after voxel, and the ground,
+//!   obstacle and cluster totals read back from the file equal the summary's.
+//!
+//! Also: `--extrinsics` puts the outputs in `base_link` and writes `/tf_static`; bad
+//! configuration is refused (exit 2) naming the key; `ringscan render` draws a PNG.
+
+mod common;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use prost::Message as _;
+
+#[derive(Clone, PartialEq, prost::Message)]
+struct Field {
+    #[prost(string, tag = "1")]
+    name: String,
+    #[prost(fixed32, tag = "2")]
+    offset: u32,
+    #[prost(int32, tag = "3")]
+    r#type: i32,
+}
+#[derive(Clone, PartialEq, prost::Message)]
+struct PointCloud {
+    #[prost(string, tag = "2")]
+    frame_id: String,
+    #[prost(fixed32, tag = "4")]
+    point_stride: u32,
+    #[prost(message, repeated, tag = "5")]
+    fields: Vec<Field>,
+    #[prost(bytes = "vec", tag = "6")]
+    data: Vec<u8>,
+}
+#[derive(Clone, PartialEq, prost::Message)]
+struct V3 {
+    #[prost(double, tag = "1")]
+    x: f64,
+    #[prost(double, tag = "2")]
+    y: f64,
+    #[prost(double, tag = "3")]
+    z: f64,
+}
+#[derive(Clone, PartialEq, prost::Message)]
+struct Q {
+    #[prost(double, tag = "1")]
+    x: f64,
+    #[prost(double, tag = "2")]
+    y: f64,
+    #[prost(double, tag = "3")]
+    z: f64,
+    #[prost(double, tag = "4")]
+    w: f64,
+}
+#[derive(Clone, PartialEq, prost::Message)]
+struct Pose {
+    #[prost(message, optional, tag = "1")]
+    position: Option<V3>,
+    #[prost(message, optional, tag = "2")]
+    orientation: Option<Q>,
+}
+#[derive(Clone, PartialEq, prost::Message)]
+struct Cube {
+    #[prost(message, optional, tag = "1")]
+    pose: Option<Pose>,
+    #[prost(message, optional, tag = "2")]
+    size: Option<V3>,
+}
+#[derive(Clone, PartialEq, prost::Message)]
+struct Kv {
+    #[prost(string, tag = "1")]
+    key: String,
+    #[prost(string, tag = "2")]
+    value: String,
+}
+#[derive(Clone, PartialEq, prost::Message)]
+struct Entity {
+    #[prost(string, tag = "2")]
+    frame_id: String,
+    #[prost(string, tag = "3")]
+    id: String,
+    #[prost(message, repeated, tag = "6")]
+    metadata: Vec<Kv>,
+    #[prost(message, repeated, tag = "8")]
+    cubes: Vec<Cube>,
+}
+#[derive(Clone, PartialEq, prost::Message)]
+struct Deletion {
+    #[prost(int32, tag = "2")]
+    r#type: i32,
+}
+#[derive(Clone, PartialEq, prost::Message)]
+struct SceneUpdate {
+    #[prost(message, repeated, tag = "1")]
+    deletions: Vec<Deletion>,
+    #[prost(message, repeated, tag = "2")]
+    entities: Vec<Entity>,
+}
+#[derive(Clone, PartialEq, prost::Message)]
+struct FrameTransform {
+    #[prost(string, tag = "2")]
+    parent_frame_id: String,
+    #[prost(string, tag = "3")]
+    child_frame_id: String,
+    #[prost(message, optional, tag = "4")]
+    translation: Option<V3>,
+}
+
+fn ringscan(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_ringscan"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn inputs() -> Option<(PathBuf, PathBuf)> {
+    let root = common::captures()?;
+    Some((
+        root.join("Kitware__VeloView/Testing/Data/monterey-first-100-packets.pcap"),
+        root.join("ros-drivers__velodyne/velodyne_pointcloud/params/32db.yaml"),
+    ))
+}
+
+fn out_path(name: &str) -> PathBuf {
+    std::env::temp_dir().join(format!(
+        "ringscan-pipeline-cli-{}-{name}",
+        std::process::id()
+    ))
+}
+
+/// Points of a cloud as (x, y, z, cluster).
+fn points(pc: &PointCloud) -> Vec<(f32, f32, f32, Option<u32>)> {
+    let off = |n: &str| {
+        pc.fields
+            .iter()
+            .find(|f| f.name == n)
+            .map(|f| f.offset as usize)
+    };
+    let (x, y, z) = (off("x").unwrap(), off("y").unwrap(), off("z").unwrap());
+    let c = off("cluster");
+    let f = |r: &[u8], o: usize| f32::from_le_bytes(r[o..o + 4].try_into().unwrap());
+    pc.data
+        .chunks_exact(pc.point_stride as usize)
+        .map(|r| {
+            (
+                f(r, x),
+                f(r, y),
+                f(r, z),
+                c.map(|o| u32::from_le_bytes(r[o..o + 4].try_into().unwrap())),
+            )
+        })
+        .collect()
+}
+
+/// Message bodies per topic, in file order.
+type ByTopic = BTreeMap<String, Vec<Vec<u8>>>;
+
+/// Messages per topic, in file order, and each channel's schema name.
+fn read(path: &Path) -> (ByTopic, BTreeMap<String, String>) {
+    let bytes = std::fs::read(path).unwrap();
+    let mut by_topic: BTreeMap<String, Vec<Vec<u8>>> = BTreeMap::new();
+    let mut schemas = BTreeMap::new();
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        let topic = m.channel.topic.clone();
+        if let Some(s) = &m.channel.schema {
+            schemas.insert(topic.clone(), s.name.clone());
+        }
+        by_topic.entry(topic).or_default().push(m.data.to_vec());
+    }
+    (by_topic, schemas)
+}
+
+#[test]
+fn default_pipeline_on_a_real_capture_writes_consistent_channels() {
+    let Some((pcap, calib)) = inputs() else {
+        return;
+    };
+    let out = out_path("default.mcap");
+    let o = ringscan(&[
+        "decode",
+        pcap.to_str().unwrap(),
+        "--calib",
+        calib.to_str().unwrap(),
+        "--pipeline",
+        "default",
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let p = &j["pipeline"];
+    let sweeps = j["sweeps"].as_u64().unwrap();
+    assert!(sweeps >= 15, "{j}");
+    assert_eq!(p["sweeps"].as_u64(), Some(sweeps));
+    for stage in ["deskew", "filter", "voxel", "ground", "cluster", "total"] {
+        let t = &p["timings"][stage];
+        let (med, max) = (
+            t["median_ms"].as_f64().unwrap(),
+            t["max_ms"].as_f64().unwrap(),
+        );
+        assert!(med >= 0.0 && max >= med, "{stage}: {t}");
+    }
+    let c = &p["counts"];
+    let n = |k: &str| c[k].as_u64().unwrap();
+    assert_eq!(n("points_in"), j["points"].as_u64().unwrap());
+    assert_eq!(
+        n("ground") + n("obstacles") + n("unclustered"),
+        n("after_voxel"),
+        "{c}"
+    );
+    assert!(n("after_voxel") < n("after_filter") && n("after_filter") <= n("points_in"));
+    assert!(
+        n("ground") > 0 && n("obstacles") > 0 && n("clusters") > 0,
+        "{c}"
+    );
+
+    let (msgs, schemas) = read(&out);
+    for (topic, schema) in [
+        ("/points", "foxglove.PointCloud"),
+        ("/ground", "foxglove.PointCloud"),
+        ("/obstacles", "foxglove.PointCloud"),
+        ("/clusters", "foxglove.SceneUpdate"),
+    ] {
+        assert_eq!(
+            schemas.get(topic).map(String::as_str),
+            Some(schema),
+            "{topic}"
+        );
+        assert_eq!(
+            msgs[topic].len() as u64,
+            sweeps,
+            "{topic}: one message per sweep"
+        );
+    }
+    let (mut ground, mut obstacles, mut clusters) = (0u64, 0u64, 0u64);
+    for ((g, o), u) in msgs["/ground"]
+        .iter()
+        .zip(&msgs["/obstacles"])
+        .zip(&msgs["/clusters"])
+    {
+        let g = PointCloud::decode(&g[..]).unwrap();
+        let o = PointCloud::decode(&o[..]).unwrap();
+        let u = SceneUpdate::decode(&u[..]).unwrap();
+        assert_eq!(g.frame_id, "hdl32e-201");
+        assert_eq!(
+            u.deletions.len(),
+            1,
+            "each update first deletes the previous boxes"
+        );
+        ground += points(&g).len() as u64;
+        let obs = points(&o);
+        obstacles += obs.len() as u64;
+        clusters += u.entities.len() as u64;
+        // The clusters' point counts sum to the obstacle points.
+        let mut per_cluster = vec![0u64; u.entities.len()];
+        let mut sum = 0u64;
+        for (k, e) in u.entities.iter().enumerate() {
+            assert_eq!(e.id, k.to_string());
+            assert_eq!(e.cubes.len(), 1);
+            let pts: u64 = e
+                .metadata
+                .iter()
+                .find(|kv| kv.key == "points")
+                .unwrap()
+                .value
+                .parse()
+                .unwrap();
+            sum += pts;
+            per_cluster[k] = pts;
+        }
+        assert_eq!(sum, obs.len() as u64);
+        // Every obstacle point is in its cluster's cube (a cube is the minimum-area box).
+        let mut seen = vec![0u64; u.entities.len()];
+        for &(x, y, z, k) in &obs {
+            let k = k.expect("obstacles carry a cluster field") as usize;
+            assert!(k < u.entities.len());
+            seen[k] += 1;
+            let cube = &u.entities[k].cubes[0];
+            let pose = cube.pose.clone().unwrap();
+            let c = pose.position.unwrap_or_default();
+            let q = pose.orientation.unwrap();
+            let yaw = 2.0 * q.z.atan2(q.w);
+            let s = cube.size.clone().unwrap();
+            let (dx, dy, dz) = (f64::from(x) - c.x, f64::from(y) - c.y, f64::from(z) - c.z);
+            let (a, b) = (
+                dx * yaw.cos() + dy * yaw.sin(),
+                -dx * yaw.sin() + dy * yaw.cos(),
+            );
+            let tol = 1e-3;
+            assert!(
+                a.abs() <= s.x / 2.0 + tol
+                    && b.abs() <= s.y / 2.0 + tol
+                    && dz.abs() <= s.z / 2.0 + tol,
+                "point ({x}, {y}, {z}) outside cube {k}"
+            );
+        }
+        assert_eq!(seen, per_cluster);
+    }
+    assert_eq!(ground, n("ground"));
+    assert_eq!(obstacles, n("obstacles"));
+    assert_eq!(clusters, n("clusters"));
+
+    // render: a PNG of the requested size.
+    let png = out_path("bev.png");
+    let r = ringscan(&[
+        "render",
+        out.to_str().unwrap(),
+        "--sweep",
+        "3",
+        "--out",
+        png.to_str().unwrap(),
+        "--size-px",
+        "400",
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let bytes = std::fs::read(&png).unwrap();
+    assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
+    assert_eq!(&bytes[16..24], &[0, 0, 1, 144, 0, 0, 1, 144], "400 × 400");
+    let r = ringscan(&[
+        "render",
+        out.to_str().unwrap(),
+        "--sweep",
+        "999",
+        "--out",
+        png.to_str().unwrap(),
+    ]);
+    assert!(!r.status.success());
+    assert!(String::from_utf8_lossy(&r.stderr).contains("sweep 999"));
+    let _ = std::fs::remove_file(&out);
+    let _ = std::fs::remove_file(&png);
+}
+
+#[test]
+fn extrinsics_write_tf_static_and_base_link_outputs() {
+    let Some((pcap, calib)) = inputs() else {
+        return;
+    };
+    let out = out_path("extrinsics.mcap");
+    let o = ringscan(&[
+        "decode",
+        pcap.to_str().unwrap(),
+        "--calib",
+        calib.to_str().unwrap(),
+        "--pipeline",
+        "default",
+        "--extrinsics",
+        "hdl32e-201=0.5,0,1.9,0,0,0",
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (msgs, schemas) = read(&out);
+    assert_eq!(
+        schemas.get("/tf_static").map(String::as_str),
+        Some("foxglove.FrameTransform")
+    );
+    let tf = FrameTransform::decode(&msgs["/tf_static"][0][..]).unwrap();
+    assert_eq!(
+        (tf.parent_frame_id.as_str(), tf.child_frame_id.as_str()),
+        ("base_link", "hdl32e-201")
+    );
+    let t = tf.translation.unwrap();
+    assert_eq!((t.x, t.y, t.z), (0.5, 0.0, 1.9));
+    let g = PointCloud::decode(&msgs["/ground"][2][..]).unwrap();
+    assert_eq!(g.frame_id, "base_link");
+    // The sensor is 1.9 m up: the ground it sees lies near z = 0 in base_link.
+    let pts = points(&g);
+    let mut z: Vec<f32> = pts.iter().map(|p| p.2).collect();
+    z.sort_by(f32::total_cmp);
+    let median = z[z.len() / 2];
+    assert!(median.abs() < 0.5, "median ground z in base_link {median}");
+    let _ = std::fs::remove_file(&out);
+}
+
+#[test]
+fn bad_pipeline_settings_are_refused_with_the_key() {
+    let dir = out_path("cfg");
+    std::fs::create_dir_all(&dir).unwrap();
+    let cfg = dir.join("bad.toml");
+    std::fs::write(&cfg, "[voxel]\nleaf_m = -1\n").unwrap();
+    let pcap = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo-vlp16.pcap");
+    for (args, needle) in [
+        (vec!["--pipeline", cfg.to_str().unwrap()], "voxel.leaf_m"),
+        (
+            vec!["--pipeline", "default", "--deskew", "odometry"],
+            "odometry",
+        ),
+        (
+            vec!["--pipeline", "default", "--deskew", "gps"],
+            "--deskew gps",
+        ),
+        (
+            vec!["--pipeline", "default", "--extrinsics", "a=1,2,3"],
+            "found 3",
+        ),
+        (
+            vec!["--pipeline", "default", "--format", "ros2"],
+            "--format foxglove",
+        ),
+    ] {
+        let mut all = vec!["decode", pcap.to_str().unwrap()];
+        all.extend(args);
+        let o = ringscan(&all);
+        assert_eq!(o.status.code(), Some(2), "{all:?}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(needle), "{all:?}: {err}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
