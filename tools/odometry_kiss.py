@@ -5,7 +5,10 @@ Usage: odometry_kiss.py SWEEPS.bin RINGSCAN.tum RINGSCAN_REPORT.json [--max-rang
        [--repeat 5] [--out-tum kiss.tum]
 
 - SWEEPS.bin: the dump of `cargo run --release --example odometry -- --dump` (per sweep: i64
-  stamp_ns, u64 n, n x 3 float32 x, y, z).
+  stamp_ns, u64 n, n records of float32 x, y, z and uint32 t, ns after the sweep's stamp).
+- --deskew: KISS-ICP gets each point's time (s) and deskews itself (data.deskew = True; it
+  refers each sweep to its last point, so its poses are stamped stamp + max t). Without it,
+  no per-point times are given and data.deskew = False.
 - KISS-ICP (PyPI kiss-icp) runs its own pipeline (kiss_icp.kiss_icp.KissICP.register_frame) on
   the same points, converted to float64 as ringscan does, with its default configuration except
   data.deskew = False (no per-point times are given to either side), data.max_range as given
@@ -34,9 +37,9 @@ def read_sweeps(path):
             data, dtype="<u8", count=1, offset=at + 8
         )[0]
         at += 16
-        pts = np.frombuffer(data, dtype="<f4", count=int(n) * 3, offset=at).reshape(-1, 3)
-        at += int(n) * 12
-        out.append((int(stamp), pts.astype(np.float64)))
+        rec = np.frombuffer(data, dtype=[("xyz", "<f4", 3), ("t", "<u4")], count=int(n), offset=at)
+        at += int(n) * 16
+        out.append((int(stamp), rec["xyz"].astype(np.float64), rec["t"].astype(np.float64) * 1e-9))
     return out
 
 
@@ -78,12 +81,12 @@ def rot_deg(r):
     return math.degrees(math.acos(max(-1.0, min(1.0, c))))
 
 
-def run_kiss(sweeps, max_range, repeat):
+def run_kiss(sweeps, max_range, repeat, deskew=False):
     from kiss_icp.config import KISSConfig
     from kiss_icp.kiss_icp import KissICP
 
     cfg = KISSConfig()
-    cfg.data.deskew = False
+    cfg.data.deskew = deskew
     cfg.data.max_range = max_range
     cfg.mapping.voxel_size = max_range / 100.0
     cfg.registration.max_num_threads = 1
@@ -92,8 +95,8 @@ def run_kiss(sweeps, max_range, repeat):
     for _ in range(max(1, repeat)):
         kiss = KissICP(cfg)
         run = []
-        for i, (_, pts) in enumerate(sweeps):
-            ts = np.array([], dtype=np.float64)
+        for i, (_, pts, t) in enumerate(sweeps):
+            ts = t if deskew else np.array([], dtype=np.float64)
             t0 = time.perf_counter()
             kiss.register_frame(pts, ts)
             times[i].append((time.perf_counter() - t0) * 1e3)
@@ -112,6 +115,7 @@ def main():
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--out-tum")
     ap.add_argument("--name", default="")
+    ap.add_argument("--deskew", action="store_true")
     a = ap.parse_args()
 
     sweeps = read_sweeps(a.sweeps)
@@ -119,16 +123,17 @@ def main():
     report = json.load(open(a.ringscan_report))["sweeps"]
     if len(ours) != len(sweeps) or len(report) != len(sweeps):
         sys.exit(f"{len(sweeps)} sweeps but {len(ours)} ringscan poses / {len(report)} report rows")
-    kiss_poses, kiss_ms, cfg = run_kiss(sweeps, a.max_range, a.repeat)
+    kiss_poses, kiss_ms, cfg = run_kiss(sweeps, a.max_range, a.repeat, a.deskew)
     if a.out_tum:
         with open(a.out_tum, "w") as f:
-            for (stamp, _), m in zip(sweeps, kiss_poses):
+            for (stamp, _, t), m in zip(sweeps, kiss_poses):
                 qx, qy, qz, qw = to_quat(m[:3, :3])
-                f.write(f"{stamp * 1e-9:.9f} {m[0,3]:.9f} {m[1,3]:.9f} {m[2,3]:.9f} {qx:.9f} {qy:.9f} {qz:.9f} {qw:.9f}\n")
+                when = stamp * 1e-9 + (float(t.max()) if a.deskew and len(t) else 0.0)
+                f.write(f"{when:.9f} {m[0,3]:.9f} {m[1,3]:.9f} {m[2,3]:.9f} {qx:.9f} {qy:.9f} {qz:.9f} {qw:.9f}\n")
 
     import kiss_icp
 
-    print(f"== {a.name}: {len(sweeps)} sweeps, {np.mean([len(p) for _, p in sweeps]):.0f} points per sweep")
+    print(f"== {a.name}: {len(sweeps)} sweeps, {np.mean([len(p) for _, p, _ in sweeps]):.0f} points per sweep")
     print(
         f"KISS-ICP {getattr(kiss_icp, '__version__', '?')}: deskew={cfg.data.deskew} max_range={cfg.data.max_range} "
         f"voxel={cfg.mapping.voxel_size} max_points_per_voxel={cfg.mapping.max_points_per_voxel} "

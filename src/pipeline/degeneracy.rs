@@ -19,14 +19,16 @@
 //!
 //! Only map voxels with at least `min_voxel_points` points and a planar spread (smallest
 //! variance ≤ `max_flatness` × the middle one, middle one ≥ `min_spread_m²`) give a normal:
-//! a voxel crossed by one scan line is a line, not a plane.
+//! a voxel crossed by one scan line is a line, not a plane. For such a voxel the points of
+//! the 27 voxels around it are fitted instead (the next scan lines are there), under the
+//! same tests.
 //!
 //! No I/O, no clock.
 
 use nalgebra::{Isometry3, Matrix6, SymmetricEigen, Vector3, Vector6};
 
 use super::icp::RegistrationConfigError;
-use super::map::VoxelMap;
+use super::map::{VoxelMap, VoxelPlane};
 
 /// Parameters of the degeneracy analysis.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -152,13 +154,19 @@ pub fn analyse(
         if d2 >= gate_sq {
             continue;
         }
-        let Some(plane) = map.slot_plane(slot) else {
-            continue;
+        let usable = |p: &VoxelPlane| {
+            let [l0, l1, _] = p.eigenvalues;
+            p.points >= cfg.min_voxel_points && l1 >= min_spread_sq && l0 <= cfg.max_flatness * l1
         };
-        let [l0, l1, _] = plane.eigenvalues;
-        if plane.points < cfg.min_voxel_points || l1 < min_spread_sq || l0 > cfg.max_flatness * l1 {
-            continue;
-        }
+        // The voxel's own plane, else the plane of the 27 voxels around it (a voxel crossed
+        // by a single scan line is a line; its neighbours hold the next lines).
+        let plane = match map.slot_plane(slot).filter(usable) {
+            Some(p) => p,
+            None => match map.neighbourhood_plane(&q).filter(usable) {
+                Some(p) => p,
+                None => continue,
+            },
+        };
         let ns = rot_t * plane.normal;
         let pn = p.cross(&ns);
         let j = Vector6::new(ns.x, ns.y, ns.z, pn.x, pn.y, pn.z);

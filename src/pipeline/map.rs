@@ -280,6 +280,11 @@ pub struct VoxelMap {
     moments: Vec<Moments>,
     free: Vec<u32>,
     live_points: usize,
+    /// Per slot: the unit normal of its plane when usable (see [`VoxelMap::refresh_normals`]).
+    normals: Vec<Option<Vector3<f64>>>,
+    /// Slots changed since the last [`VoxelMap::refresh_normals`], and a flag per slot.
+    dirty: Vec<u32>,
+    is_dirty: Vec<bool>,
 }
 
 impl VoxelMap {
@@ -307,6 +312,9 @@ impl VoxelMap {
             moments: Vec::new(),
             free: Vec::new(),
             live_points: 0,
+            normals: Vec::new(),
+            dirty: Vec::new(),
+            is_dirty: Vec::new(),
         })
     }
 
@@ -323,6 +331,9 @@ impl VoxelMap {
         self.moments.clear();
         self.free.clear();
         self.live_points = 0;
+        self.normals.clear();
+        self.dirty.clear();
+        self.is_dirty.clear();
     }
 
     /// Whether the map holds no point.
@@ -379,6 +390,8 @@ impl VoxelMap {
                             let s = self.lens.len();
                             self.lens.push(0);
                             self.moments.push(Moments::default());
+                            self.normals.push(None);
+                            self.is_dirty.push(false);
                             self.points.resize((s + 1) * m, Vector3::zeros());
                             s
                         }
@@ -392,6 +405,10 @@ impl VoxelMap {
             let len = usize::from(self.lens[slot]);
             self.points[slot * m + len] = p;
             self.lens[slot] += 1;
+            if !self.is_dirty[slot] {
+                self.is_dirty[slot] = true;
+                self.dirty.push(slot as u32);
+            }
             let mo = &mut self.moments[slot];
             mo.sum += p;
             mo.outer[0] += p.x * p.x;
@@ -467,36 +484,92 @@ impl VoxelMap {
         best
     }
 
+    /// Recomputes the normal of every voxel changed since the last call: kept when the voxel
+    /// holds at least `min_points` points, its middle standard deviation is at least
+    /// `min_spread_m` and its smallest variance at most `max_flatness` times the middle one.
+    pub fn refresh_normals(&mut self, min_points: usize, max_flatness: f64, min_spread_m: f64) {
+        let spread_sq = min_spread_m * min_spread_m;
+        for &s in &self.dirty {
+            let su = s as usize;
+            self.is_dirty[su] = false;
+            let n = usize::from(self.lens[su]);
+            self.normals[su] = plane_of(&self.moments[su], n)
+                .filter(|p| {
+                    let [l0, l1, _] = p.eigenvalues;
+                    p.points >= min_points && l1 >= spread_sq && l0 <= max_flatness * l1
+                })
+                .map(|p| p.normal);
+        }
+        self.dirty.clear();
+    }
+
+    /// A view of the map whose neighbours carry their voxel's normal (for point-to-plane
+    /// ICP), as of the last [`VoxelMap::refresh_normals`].
+    pub fn with_normals(&self) -> PlanarView<'_> {
+        PlanarView(self)
+    }
+
     /// The plane of the points of a voxel slot (from [`VoxelMap::nearest_in_slot`]); `None`
     /// for fewer than 3 points or a freed slot.
     pub fn slot_plane(&self, slot: u32) -> Option<VoxelPlane> {
         let s = slot as usize;
         let n = usize::from(*self.lens.get(s)?);
-        if n < 3 {
-            return None;
-        }
-        let mo = &self.moments[s];
-        let nf = n as f64;
-        let mean = mo.sum / nf;
-        let o = &mo.outer;
-        let cov = Matrix3::new(
-            o[0] / nf - mean.x * mean.x,
-            o[1] / nf - mean.x * mean.y,
-            o[2] / nf - mean.x * mean.z,
-            o[1] / nf - mean.x * mean.y,
-            o[3] / nf - mean.y * mean.y,
-            o[4] / nf - mean.y * mean.z,
-            o[2] / nf - mean.x * mean.z,
-            o[4] / nf - mean.y * mean.z,
-            o[5] / nf - mean.z * mean.z,
-        );
-        let (normal, eigenvalues) = smallest_eigenvector(&cov)?;
-        Some(VoxelPlane {
-            normal,
-            eigenvalues,
-            points: n,
-        })
+        plane_of(&self.moments[s], n)
     }
+
+    /// The plane of all the points in the 27 voxels around `query`'s voxel; `None` for fewer
+    /// than 3 points.
+    pub fn neighbourhood_plane(&self, query: &Vector3<f64>) -> Option<VoxelPlane> {
+        let (x, y, z) = voxel_coords(query, self.cfg.voxel_size_m)?;
+        let mut total = Moments::default();
+        let mut n = 0usize;
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    let Some(key) = pack(x + dx, y + dy, z + dz) else {
+                        continue;
+                    };
+                    let Some(&s) = self.index.get(&key) else {
+                        continue;
+                    };
+                    let mo = &self.moments[s as usize];
+                    total.sum += mo.sum;
+                    for (t, o) in total.outer.iter_mut().zip(mo.outer) {
+                        *t += o;
+                    }
+                    n += usize::from(self.lens[s as usize]);
+                }
+            }
+        }
+        plane_of(&total, n)
+    }
+}
+
+/// The plane of `n` points from their moments; `None` for fewer than 3.
+fn plane_of(mo: &Moments, n: usize) -> Option<VoxelPlane> {
+    if n < 3 {
+        return None;
+    }
+    let nf = n as f64;
+    let mean = mo.sum / nf;
+    let o = &mo.outer;
+    let cov = Matrix3::new(
+        o[0] / nf - mean.x * mean.x,
+        o[1] / nf - mean.x * mean.y,
+        o[2] / nf - mean.x * mean.z,
+        o[1] / nf - mean.x * mean.y,
+        o[3] / nf - mean.y * mean.y,
+        o[4] / nf - mean.y * mean.z,
+        o[2] / nf - mean.x * mean.z,
+        o[4] / nf - mean.y * mean.z,
+        o[5] / nf - mean.z * mean.z,
+    );
+    let (normal, eigenvalues) = smallest_eigenvector(&cov)?;
+    Some(VoxelPlane {
+        normal,
+        eigenvalues,
+        points: n,
+    })
 }
 
 /// The unit eigenvector of the smallest eigenvalue of a symmetric 3×3 matrix, and the
@@ -521,6 +594,23 @@ pub fn smallest_eigenvector(m: &Matrix3<f64>) -> Option<(Vector3<f64>, [f64; 3])
             eig.eigenvalues[order[2]],
         ],
     ))
+}
+
+/// A [`VoxelMap`] answering with normals: see [`VoxelMap::with_normals`].
+#[derive(Clone, Copy, Debug)]
+pub struct PlanarView<'a>(&'a VoxelMap);
+
+impl NearestNeighbors for PlanarView<'_> {
+    #[inline]
+    fn nearest(&self, query: &Vector3<f64>) -> Option<Neighbor> {
+        self.0
+            .nearest_in_slot(query)
+            .map(|(point, dist_sq, slot)| Neighbor {
+                point,
+                dist_sq,
+                normal: self.0.normals.get(slot as usize).copied().flatten(),
+            })
+    }
 }
 
 impl NearestNeighbors for VoxelMap {
