@@ -19,7 +19,9 @@
 //!    voxel, and voxels dropped beyond `max_range_m` of the sensor) when the sensor has moved at
 //!    least `keyframe_translation_m` or turned `keyframe_rotation_rad` since the last keyframe
 //!    (both 0: every sweep, as KISS-ICP);
-//! 7. optionally, the **degeneracy** of the registration ([`super::degeneracy`]).
+//! 7. optionally, the **degeneracy** of the registration ([`super::degeneracy`]), analysed at
+//!    the point-to-point pose; with [`OdometryMethod::PointToPlane`] a degenerate sweep is
+//!    not refined on planes (nothing holds a plane fit along a free direction).
 //!
 //! A registration that fails (too few correspondences, singular system) keeps the predicted
 //! pose, says so in [`OdometryStep::status`], and leaves the map and the threshold untouched:
@@ -421,6 +423,7 @@ impl Odometry {
             prediction.rotation = p.rotation;
         }
 
+        let mut coarse_degeneracy: Option<(Option<Degeneracy>, bool)> = None;
         let (pose, status, icp) = if self.map.is_empty() {
             (prediction, TrackStatus::Initialized, None)
         } else {
@@ -434,7 +437,16 @@ impl Odometry {
             let mut aligned =
                 self.icp
                     .align_with_prior(&self.source, &self.map, &prediction, prior.as_ref());
-            if let (OdometryMethod::PointToPlane, Ok(coarse)) = (self.cfg.method, &aligned) {
+            // The degeneracy of the point-to-point pose decides whether planes may refine it:
+            // along a free direction a plane fit has nothing to hold it.
+            if let (Some(dc), Ok(coarse)) = (&self.cfg.degeneracy, &aligned) {
+                let d = analyse(dc, &self.map, &self.source, &coarse.target_from_source);
+                coarse_degeneracy = Some((d, d.as_ref().is_some_and(|d| d.is_degenerate(dc))));
+            }
+            let free = coarse_degeneracy.as_ref().is_some_and(|(_, flag)| *flag);
+            if let (OdometryMethod::PointToPlane, Ok(coarse), false) =
+                (self.cfg.method, &aligned, free)
+            {
                 // Refine on the planes, from the point-to-point pose, with a gate of one voxel.
                 if let Ok(fine) = self.refine.align_with_prior(
                     &self.source,
@@ -469,12 +481,8 @@ impl Odometry {
         if !lost && status != TrackStatus::Initialized {
             self.threshold.update(&(prediction.inverse() * pose));
         }
-        let (degeneracy, degenerate) = match (&self.cfg.degeneracy, lost || icp.is_none()) {
-            (Some(dc), false) => {
-                let d = analyse(dc, &self.map, &self.source, &pose);
-                let flag = d.as_ref().is_some_and(|d| d.is_degenerate(dc));
-                (d, flag)
-            }
+        let (degeneracy, degenerate) = match (coarse_degeneracy, lost || icp.is_none()) {
+            (Some(d), false) => d,
             _ => (None, false),
         };
         let keyframe = !lost
