@@ -5,7 +5,7 @@
 //! ```text
 //! cargo run --release --example odometry -- --model vlp16 --calib VLP16db.yaml \
 //!     [--max-range 100] [--dump sweeps.bin] [--repeat 5] [--no-degeneracy] [--deskew] \
-//!     [--point-to-plane] \
+//!     [--point-to-plane] [--voxel M] \
 //!     [--keyframe-m 0] [--trajectory out.tum] [--report out.json] capture.pcap
 //! cargo run --release --example odometry -- --sweeps sweeps.bin [...]   # read a dump instead
 //! ```
@@ -160,6 +160,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let max_range: f64 = arg(&args, "--max-range").map_or(Ok(100.0), |s| s.parse())?;
     let repeat: usize = arg(&args, "--repeat").map_or(Ok(1), |s| s.parse())?;
     let mut cfg = OdometryConfig::for_max_range(max_range);
+    if let Some(v) = arg(&args, "--voxel") {
+        cfg.voxel_size_m = v.parse()?;
+    }
     if args.iter().any(|a| a == "--point-to-plane") {
         cfg.method = OdometryMethod::PointToPlane;
     }
