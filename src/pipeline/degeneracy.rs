@@ -279,6 +279,29 @@ mod tests {
     }
 
     #[test]
+    fn a_floor_seen_as_scan_lines_is_still_named() {
+        // A VLP-16's floor rings from 1.8 m: circles of radius 1.8 / tan(15°, 13°, 11°, 9°, 7°),
+        // 0.2° apart: a 1 m voxel holds one arc (a line); its neighbourhood holds the next.
+        let mut floor = Vec::new();
+        for deg in [15.0f64, 13.0, 11.0, 9.0, 7.0] {
+            let r = 1.8 / deg.to_radians().tan();
+            for k in 0..1800 {
+                let a = f64::from(k) * 0.2f64.to_radians();
+                floor.push(Vector3::new(r * a.cos(), r * a.sin(), 0.0));
+            }
+        }
+        let pose =
+            Isometry3::from_parts(Translation3::new(0.0, 0.0, 1.8), UnitQuaternion::identity());
+        let d = analyse_world(&floor, &pose);
+        assert_eq!(d.degenerate_names(), "x,y,yaw");
+        // The voxels alone are lines: without the neighbourhood there would be no sample.
+        let map = map_of(&floor);
+        let (_, _, slot) = map.nearest_in_slot(&floor[0]).unwrap();
+        let own = map.slot_plane(slot).unwrap();
+        assert!(own.eigenvalues[1] < 0.05 * 0.05, "{:?}", own.eigenvalues);
+    }
+
+    #[test]
     fn corridor_leaves_its_axis_free_in_the_sensor_frame() {
         // A corridor along world x, 3 m wide, 2.5 m high, 80 m long (no end walls in range).
         let mut world = grid(-40.0, 40.0, -1.5, 1.5, 0.2, |x, y| Vector3::new(x, y, 0.0));

@@ -722,6 +722,64 @@ mod tests {
     }
 
     #[test]
+    fn an_imu_rotation_prior_holds_the_rotation() {
+        let world = street();
+        let mut odo = Odometry::new(OdometryConfig::for_max_range(100.0)).unwrap();
+        let mut pose = Isometry3::from_parts(
+            Translation3::new(-20.0, 0.0, 1.8),
+            UnitQuaternion::identity(),
+        );
+        let step = Isometry3::from_parts(
+            Translation3::new(0.3, 0.0, 0.0),
+            UnitQuaternion::from_scaled_axis(Vector3::z() * 4f64.to_radians()),
+        );
+        let first = pose;
+        for i in 0..8 {
+            // The gyro's increment since the previous sweep, 0.01° (1σ) on each axis.
+            let imu = (i > 0).then(|| ImuRotation {
+                previous_from_current: step.rotation,
+                covariance_rad2: Matrix3::identity() * 0.01f64.to_radians().powi(2),
+            });
+            let st = odo.register(
+                observe(&world, &pose, i),
+                i as i64 * 100_000_000,
+                imu.as_ref(),
+            );
+            let truth = first.inverse() * pose;
+            let err = truth
+                .rotation
+                .angle_to(&st.world_from_sensor.rotation)
+                .to_degrees();
+            // 8 increments of 4° each held to the prior's 0.01°: well under 0.1° at the end.
+            assert!(err < 0.1, "sweep {i}: {err}°");
+            pose *= step;
+        }
+        // A gyro biased by +0.5° per sweep with an overconfident covariance (1e-4°) pulls the
+        // estimate with it: the prior really enters the normal equations.
+        let mut odo = Odometry::new(OdometryConfig::for_max_range(100.0)).unwrap();
+        let mut pose = first;
+        let biased = UnitQuaternion::from_scaled_axis(Vector3::z() * 4.5f64.to_radians());
+        let mut last = Isometry3::identity();
+        for i in 0..8 {
+            let imu = (i > 0).then(|| ImuRotation {
+                previous_from_current: biased,
+                covariance_rad2: Matrix3::identity() * 1e-4f64.to_radians().powi(2),
+            });
+            last = odo
+                .register(
+                    observe(&world, &pose, i),
+                    i as i64 * 100_000_000,
+                    imu.as_ref(),
+                )
+                .world_from_sensor;
+            pose *= step;
+        }
+        let truth = first.inverse() * pose * step.inverse();
+        let err = truth.rotation.angle_to(&last.rotation).to_degrees();
+        assert!((err - 3.5).abs() < 0.1, "{err}° (7 × 0.5° expected)");
+    }
+
+    #[test]
     fn a_sweep_with_no_overlap_is_lost_not_guessed() {
         let world = street();
         let mut odo = Odometry::new(OdometryConfig::for_max_range(100.0)).unwrap();
