@@ -1,0 +1,46 @@
+#!/usr/bin/env bash
+# Odometry accuracy on simulated drives with ground truth, ringscan beside KISS-ICP, and the
+# degeneracy figures:
+# - urban: the 482 m urban loop (Route::urban: 9-18 m/s, four 90° turns), VLP-16 at 10 Hz;
+#   KITTI-style relative errors over 100 m segments (tools/odometry_eval.py); no sweep of it
+#   may be flagged degenerate;
+# - corridor (walls at y = ±2.5 m, ceiling at 3 m) at 5 m/s along x: the flag and the name
+#   `x` on >= 95 % of sweeps;
+# - flat floor at 5 m/s turning 10°/s: the flag and the names `x,y,yaw` on >= 95 %.
+# ringscan runs deskewed (constant velocity from its last motion, to mid-sweep), point-to-point
+# as KISS-ICP and with the point-to-plane refinement; KISS-ICP 1.3.0 runs with its own deskew
+# (per-point times given). Single thread on both sides.
+#
+#   tools/odometry_eval.sh            (outputs in target/odometry-eval/)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+OUT=target/odometry-eval
+VENV=tools/.venv-kiss
+if [ ! -x "$VENV/bin/python" ] || ! "$VENV/bin/python" -c "import kiss_icp" 2>/dev/null; then
+    python3 -m venv "$VENV"
+    "$VENV/bin/pip" install -q "kiss-icp==1.3.0" "numpy<3"
+fi
+export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
+PY="$VENV/bin/python"
+mkdir -p "$OUT"
+cargo build --release --example simulate --example odometry
+SIM=target/release/examples/simulate
+ODO=target/release/examples/odometry
+$SIM --model vlp16 --scene urban --route urban --rate 0 --out "$OUT/urban.pcap" --poses-out "$OUT/urban.truth.tum"
+$SIM --model vlp16 --scene corridor --speed 5 --seconds 6 --rate 0 --out "$OUT/corridor.pcap" --poses-out "$OUT/corridor.truth.tum"
+$SIM --model vlp16 --scene flat_floor --speed 5 --yaw-rate 10 --seconds 6 --rate 0 --out "$OUT/flat.pcap" --poses-out "$OUT/flat.truth.tum"
+for seq in urban corridor flat; do
+    "$ODO" --model vlp16 --dump "$OUT/$seq.bin" "$OUT/$seq.pcap" >/dev/null 2>&1
+    "$ODO" --sweeps "$OUT/$seq.bin" --deskew --trajectory "$OUT/$seq.p2p.tum" --report "$OUT/$seq.p2p.json"
+    "$ODO" --sweeps "$OUT/$seq.bin" --deskew --point-to-plane --trajectory "$OUT/$seq.p2l.tum" --report "$OUT/$seq.p2l.json"
+done
+"$PY" tools/odometry_kiss.py "$OUT/urban.bin" "$OUT/urban.p2p.tum" "$OUT/urban.p2p.json" --deskew \
+    --repeat 1 --out-tum "$OUT/urban.kiss.tum" --name urban > "$OUT/urban.kiss.txt"
+tail -n 1 "$OUT/urban.kiss.txt"
+"$PY" tools/odometry_eval.py "$OUT/urban.truth.tum" --name "urban loop, VLP-16" \
+    --est "ringscan-p2l=$OUT/urban.p2l.tum" --est "ringscan-p2p=$OUT/urban.p2p.tum" \
+    --est "kiss-icp=$OUT/urban.kiss.tum" --report "$OUT/urban.p2l.json" --expect none
+"$PY" tools/odometry_eval.py "$OUT/urban.truth.tum" --name "urban loop, degeneracy of the point-to-point run" \
+    --report "$OUT/urban.p2p.json" --expect none | tail -n 2
+"$PY" tools/odometry_eval.py "$OUT/corridor.truth.tum" --name "corridor" --report "$OUT/corridor.p2l.json" --expect x | tail -n 2
+"$PY" tools/odometry_eval.py "$OUT/flat.truth.tum" --name "flat floor" --report "$OUT/flat.p2l.json" --expect x,y,yaw | tail -n 2
