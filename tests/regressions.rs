@@ -44,6 +44,8 @@ fn replay(file: &str) {
         "calib_ouster" => harness::calib_ouster(&data),
         "ouster_packet" => harness::ouster_packet(&data),
         "ouster_stream" => harness::ouster_stream(&data),
+        "pipeline_config" => harness::pipeline_config(&data),
+        "tum_poses" => harness::tum_poses(&data),
         other => panic!("{file}: no fuzz target named {other:?}"),
     }
 }

@@ -1906,3 +1906,106 @@ fn decode_to_mcap_ouster(variant: usize) -> OusterStreamConfig {
         keep_columns: false,
     }
 }
+
+// ----- pipeline configuration and poses files --------------------------------------------------
+
+use ringscan::deskew::PoseTable as DeskewPoses;
+use ringscan::pipeline::config::PipelineConfig;
+use ringscan::pipeline::run::Pipeline;
+
+/// `pipeline_config`: bytes up to the first NUL as a pipeline TOML file
+/// (`PipelineConfig::from_toml`), the rest as points (x, y, z as i16 centimetres, t as u16 µs,
+/// ring byte; at most 4 096). A configuration that loads validates again and builds a
+/// `Pipeline`, which runs every stage on the points (twice: buffers reused) without a panic:
+/// ground + obstacles + unclustered = voxels ≤ points after the filters ≤ input, clusters'
+/// points = obstacles, every output coordinate finite.
+pub fn pipeline_config(data: &[u8]) {
+    let cut = data.iter().position(|&b| b == 0).unwrap_or(data.len());
+    let Ok(text) = core::str::from_utf8(&data[..cut]) else {
+        return;
+    };
+    let Ok(cfg) = PipelineConfig::from_toml(text) else {
+        return;
+    };
+    cfg.validate()
+        .expect("a loaded configuration validates again");
+    let Ok(mut pipeline) = Pipeline::new(&cfg, nalgebra::Isometry3::identity()) else {
+        panic!("a loaded configuration builds a pipeline");
+    };
+    let mut b = Bytes::new(data.get(cut + 1..).unwrap_or_default());
+    let mut sweep = Sweep::default();
+    while !b.is_empty() && sweep.points.len() < 4096 {
+        let c = |v: u16| f32::from(v as i16) / 100.0;
+        let (x, y, z) = (c(b.u16()), c(b.u16()), c(b.u16()));
+        let t = u32::from(b.u16()) * 1000;
+        let ring = u16::from(b.u8() % 32);
+        sweep.points.push(Point {
+            x,
+            y,
+            z,
+            intensity: 10.0,
+            t,
+            ring,
+            ..Point::default()
+        });
+    }
+    let input = sweep.points.clone();
+    for _ in 0..2 {
+        sweep.points.clone_from(&input);
+        let mut now = 0u64;
+        let st = pipeline.run(&mut sweep, &mut || {
+            now += 1;
+            now
+        });
+        assert_eq!(st.input, input.len());
+        assert!(st.filtered <= st.input, "{st:?}");
+        assert!(st.voxels <= st.filtered, "{st:?}");
+        assert_eq!(
+            st.ground + st.obstacles + st.unclustered,
+            st.voxels,
+            "{st:?}"
+        );
+        assert_eq!(st.clusters, pipeline.clusters().len());
+        let in_clusters: usize = pipeline.clusters().iter().map(|c| c.point_count).sum();
+        assert_eq!(in_clusters, st.obstacles, "{st:?}");
+        for p in pipeline.ground().iter().chain(pipeline.obstacles()) {
+            assert!(p.x.is_finite() && p.y.is_finite() && p.z.is_finite());
+        }
+    }
+}
+
+/// `tum_poses`: any bytes as a TUM poses file, through both parsers (`deskew::PoseTable`, the
+/// one `--deskew poses:FILE` reads, and the simulator's). A table that parses has ≥ 2 poses
+/// strictly increasing in time; interpolating it anywhere (inside, at the ends, outside) gives
+/// an error or a finite pose with a unit rotation, never a panic.
+pub fn tum_poses(data: &[u8]) {
+    let Ok(text) = core::str::from_utf8(data) else {
+        return;
+    };
+    let _ = ringscan::sim::motion::PoseTable::parse_tum(text);
+    let Ok(table) = DeskewPoses::from_tum(text) else {
+        return;
+    };
+    assert!(table.len() >= 2);
+    let (a, z) = table.time_range_ns();
+    assert!(a < z);
+    let mid = a + (z - a) / 2;
+    let probes = [
+        a,
+        z,
+        mid,
+        a.saturating_sub(1),
+        z.saturating_add(1),
+        i64::MIN,
+        i64::MAX,
+        a + (z - a) / 3,
+    ];
+    for t in probes {
+        if let Ok(pose) = table.world_from_sensor(t) {
+            let v = pose.translation.vector;
+            assert!(v.iter().all(|x| x.is_finite()), "pose at {t}: {pose:?}");
+            let q = pose.rotation.quaternion();
+            assert!((q.norm() - 1.0).abs() < 1e-6, "pose at {t}: {pose:?}");
+        }
+    }
+}

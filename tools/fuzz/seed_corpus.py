@@ -298,6 +298,18 @@ def main():
         data += bytes((variant - len(data)) % 3)
         put("decode_to_mcap", data, f"ouster{variant}-{size}")
 
+    # pipeline_config: TOML texts (as in src/pipeline/config.rs), NUL, points; tum_poses: TUM.
+    pts = b"".join(struct.pack("<hhhHB", rng.randrange(-3000, 3000), rng.randrange(-3000, 3000),
+                               rng.randrange(-200, 300), rng.randrange(0, 100), rng.randrange(32))
+                   for _ in range(600))
+    for toml in [b"", b"[voxel]\nleaf_m = 0.2\n", b"[ground]\nmethod = \"ransac\"\niterations = 50\nseed = 7\n",
+                 b"[deskew]\nmode = \"constant-velocity\"\nlinear_mps = [5.0, 0.0, 0.0]\nangular_degps = [0.0, 0.0, 30.0]\n",
+                 b"[filter]\nmin_range_m = 1.0\nmax_range_m = 60.0\ncrop_box_min_m = [-2.0, -1.0, -1.0]\ncrop_box_max_m = [2.0, 1.0, 1.0]\n[cluster]\ntolerance_m = 0.5\nmin_points = 3\nmax_points = 5000\n"]:
+        put("pipeline_config", toml + b"\0" + pts, "cfg")
+    tum = "".join(f"{1700000000 + i * 0.1:.6f} {i * 0.5:.3f} {i * 0.01:.3f} 0.0 0.0 0.0 {0.05 * i:.4f} 1.0\n" for i in range(20))
+    put("tum_poses", ("# t x y z qx qy qz qw\n" + tum).encode(), "tum")
+    put("tum_poses", b"1.0 0 0 0 0 0 0 1\n2.0 1 0 0 0 0 0.7071068 0.7071068\n", "two")
+
     # calib_velodyne: the calibration files as they are.
     for c in calibs:
         put("calib_velodyne", c.read_bytes(), c.suffix[1:])
