@@ -35,22 +35,10 @@
 //!   the ground before them) out. Measured on simulated scenes (`tests/pipeline_sim.rs`,
 //!   HDL-32E and OS-1-128): precision ≥ 0.986 and recall ≥ 0.984 on flat ground, a 10 %
 //!   slope and a 15 % ramp to a plateau, where RANSAC's recall falls to 0.85–0.89 on the ramp.
-//!
-//!   Face test: a point labelled ground but off its bin's plane by more than half of
-//!   `FACE_RISE_M` (0.03 m) is relabelled not ground when, within 0.3 m in xy, it rises
-//!   above the lowest point of some cell of a 0.1 m grid (±16 m around the sensor) and lies
-//!   below the highest point of some cell, both by more than `FACE_RISE_M` plus the rise a
-//!   `max_slope_deg` slope allows over their xy distance: it is in the middle of a step, on
-//!   a face. Requiring both sides keeps the pavement above a kerb and the road below it
-//!   (one side only cost 2.7 % recall on the kerb scene); it also drops the lowest rows of
-//!   object sides. On the simulated scenes it moved kerb precision from 0.951 to 0.952
-//!   (HDL-32E) and from 0.958 to 0.970 (OS-1-128), flat/slope/ramp precision up by up to
-//!   0.005, recall unchanged.
-//!   Limit: a kerb face lower than the threshold (15 cm against 0.15 m) is still mostly
-//!   called ground at the HDL-32E's ring spacing (precision 0.95 on the kerb scene): a face
-//!   crossed by a single scan line looks like a gentle ramp along that line (its rise along
-//!   the line is `tan` of the beam's depression angle, under 15° beyond about 7 m), and the
-//!   next rings are too far apart to show the step; the 0.98 target is not met there.
+//!   Limit: a kerb face lower than the threshold (15 cm against 0.15 m) is called ground
+//!   (precision 0.95 on the kerb scene, 0.96–0.97 with a 0.03 m threshold on noise-free
+//!   points); a face crossed by a single scan line looks like a gentle ramp along that line,
+//!   which no per-point test on sparse rings can tell from a slope.
 //!
 //! Points with a NaN or infinite coordinate are labelled not ground.
 
@@ -143,14 +131,6 @@ pub struct GroundSegmenter {
     /// direction.
     planes: Vec<Option<Fit>>,
     scratch: Vec<f32>,
-    /// Face test: bin-order indices of the ground points off their plane, and the lowest
-    /// point of each cell of a fine grid around the sensor, valid where `cell_stamp` is
-    /// `stamp`.
-    check: Vec<u32>,
-    cell_low: Vec<[f32; 3]>,
-    cell_high: Vec<[f32; 3]>,
-    cell_stamp: Vec<u32>,
-    stamp: u32,
 }
 
 impl GroundSegmenter {
@@ -209,11 +189,6 @@ impl GroundSegmenter {
             ring_lut: Vec::new(),
             planes: Vec::new(),
             scratch: Vec::new(),
-            check: Vec::new(),
-            cell_low: Vec::new(),
-            cell_high: Vec::new(),
-            cell_stamp: Vec::new(),
-            stamp: 0,
         };
         if let GroundMethod::PolarGrid(p) = method {
             s.build_rings(&p);
@@ -421,8 +396,6 @@ impl GroundSegmenter {
         //    ground; label the points above their plane by at most the threshold.
         let cos_max = p.max_slope_deg.to_radians().cos();
         let mut stats = GroundStats::default();
-        self.check.clear();
-        let off_plane = FACE_RISE_M * 0.5;
         for sec in 0..sectors {
             let mid = (sec as f64 + 0.5) / sector_scale - core::f64::consts::PI;
             let (cs, sn) = (mid.cos(), mid.sin());
@@ -461,114 +434,15 @@ impl GroundSegmenter {
                         f64::from(self.ys[t]),
                         f64::from(self.zs[t]),
                     );
-                    let h = dist(&pl, x, y, z);
-                    if h <= thr {
+                    if dist(&pl, x, y, z) <= thr {
                         labels[self.idx[t] as usize] = true;
-                        if h.abs() > off_plane {
-                            self.check.push(t as u32);
-                        }
                     }
                 }
             }
         }
-        self.faces(tan_max, labels);
         stats
     }
-
-    /// 4. Face test: a ground point off its plane that rises above a lower point within
-    ///    `FACE_RADIUS_M` more steeply than `max_slope_deg` allows (plus `FACE_RISE_M`) is on
-    ///    a face, not ground.
-    fn faces(&mut self, tan_max: f64, labels: &mut [bool]) {
-        if self.check.is_empty() {
-            return;
-        }
-        let n = FACE_GRID_CELLS;
-        if self.cell_low.len() != n * n {
-            self.cell_low = vec![[0.0; 3]; n * n];
-            self.cell_high = vec![[0.0; 3]; n * n];
-            self.cell_stamp = vec![0; n * n];
-        }
-        self.stamp = self.stamp.wrapping_add(1);
-        if self.stamp == 0 {
-            self.cell_stamp.iter_mut().for_each(|s| *s = 0);
-            self.stamp = 1;
-        }
-        let half = FACE_CELL_M * n as f64 * 0.5;
-        let cell_of = |x: f32, y: f32| -> Option<(usize, usize)> {
-            let i = (f64::from(x) + half) / FACE_CELL_M;
-            let j = (f64::from(y) + half) / FACE_CELL_M;
-            if i >= 0.0 && j >= 0.0 && i < n as f64 && j < n as f64 {
-                Some((i as usize, j as usize))
-            } else {
-                None
-            }
-        };
-        for t in 0..self.xs.len() {
-            let (x, y, z) = (self.xs[t], self.ys[t], self.zs[t]);
-            if let Some((i, j)) = cell_of(x, y) {
-                let c = i * n + j;
-                if self.cell_stamp[c] != self.stamp {
-                    self.cell_stamp[c] = self.stamp;
-                    self.cell_low[c] = [x, y, z];
-                    self.cell_high[c] = [x, y, z];
-                } else if z < self.cell_low[c][2] {
-                    self.cell_low[c] = [x, y, z];
-                } else if z > self.cell_high[c][2] {
-                    self.cell_high[c] = [x, y, z];
-                }
-            }
-        }
-        let k = (FACE_RADIUS_M / FACE_CELL_M).ceil() as isize;
-        for &t in &self.check {
-            let t = t as usize;
-            let (x, y, z) = (self.xs[t], self.ys[t], self.zs[t]);
-            let Some((i, j)) = cell_of(x, y) else {
-                continue;
-            };
-            // Steeply above a lower point, steeply below a higher one.
-            let (mut below, mut above) = (false, false);
-            'cells: for di in -k..=k {
-                let ii = i as isize + di;
-                if ii < 0 || ii >= n as isize {
-                    continue;
-                }
-                for dj in -k..=k {
-                    let jj = j as isize + dj;
-                    if jj < 0 || jj >= n as isize {
-                        continue;
-                    }
-                    let c = ii as usize * n + jj as usize;
-                    if self.cell_stamp[c] != self.stamp {
-                        continue;
-                    }
-                    let steep = |[lx, ly, lz]: [f32; 3], sign: f64| {
-                        let rise = sign * (f64::from(z) - f64::from(lz)) - FACE_RISE_M;
-                        rise > 0.0 && {
-                            let d =
-                                (f64::from(x) - f64::from(lx)).hypot(f64::from(y) - f64::from(ly));
-                            d <= FACE_RADIUS_M && rise > tan_max * d
-                        }
-                    };
-                    below |= steep(self.cell_low[c], 1.0);
-                    above |= steep(self.cell_high[c], -1.0);
-                    if below && above {
-                        break 'cells;
-                    }
-                }
-            }
-            let face = below && above;
-            if face {
-                labels[self.idx[t] as usize] = false;
-            }
-        }
-    }
 }
-
-/// Face test: rise margin, neighbourhood radius and grid (cell size, cells per side).
-const FACE_RISE_M: f64 = 0.03;
-const FACE_RADIUS_M: f64 = 0.3;
-const FACE_CELL_M: f64 = 0.1;
-const FACE_GRID_CELLS: usize = 320;
 
 /// Height `z` of the plane `a x + b y + c z + d = 0` (`c > 0`) above `(x, y)`.
 fn height_at(pl: &[f64; 4], x: f64, y: f64) -> f64 {
