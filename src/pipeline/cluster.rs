@@ -173,6 +173,8 @@ pub struct Clusterer {
     col_start: Vec<u32>,
     /// Cells grouped by column, each column's cells by ascending z.
     col_cells: Vec<u32>,
+    /// z index of each entry of `col_cells` (read sequentially by the z windows).
+    col_z: Vec<i32>,
     /// Column of each cell.
     col_of: Vec<u32>,
     /// Candidate point indices, ascending.
@@ -223,6 +225,7 @@ impl Clusterer {
             columns: KeyTable::default(),
             col_start: Vec::new(),
             col_cells: Vec::new(),
+            col_z: Vec::new(),
             col_of: Vec::new(),
             cand: Vec::new(),
             cell_of: Vec::new(),
@@ -361,10 +364,14 @@ impl Clusterer {
             let ijk = &self.cell_ijk;
             self.col_cells[s..e].sort_unstable_by_key(|&c| ijk[c as usize][2]);
         }
+        self.col_z.clear();
+        self.col_z
+            .extend(self.col_cells.iter().map(|&c| self.cell_ijk[c as usize][2]));
 
         // 4. Union–find over cells: within a column, cells up to two apart in z; between a
         //    column and its 12 forward neighbours, cells up to two apart in z. A pair already
-        //    in one component is skipped without looking at its points.
+        //    in one component is skipped without looking at its points; the root of the
+        //    first cell of a pair is kept across its partners and updated on a join.
         self.parent.clear();
         self.parent.extend(0..cells as u32);
         for col in 0..ncols {
@@ -375,13 +382,13 @@ impl Clusterer {
             let [ci, cj, _] = self.cell_ijk[first as usize];
             for x in own.clone() {
                 let a = self.col_cells[x];
-                let za = self.cell_ijk[a as usize][2];
+                let za = self.col_z[x];
+                let mut ra = find(&mut self.parent, a);
                 for y in x + 1..own.end {
-                    let b = self.col_cells[y];
-                    if self.cell_ijk[b as usize][2] - za > 2 {
+                    if self.col_z[y] - za > 2 {
                         break;
                     }
-                    self.link(a, b, tol2);
+                    ra = self.link(a, ra, self.col_cells[y], tol2);
                 }
             }
             for [di, dj] in COLUMN_NEIGHBOURS {
@@ -398,17 +405,19 @@ impl Clusterer {
                 let mut lo = theirs.start;
                 for x in own.clone() {
                     let a = self.col_cells[x];
-                    let za = self.cell_ijk[a as usize][2];
-                    while lo < theirs.end && self.cell_ijk[self.col_cells[lo] as usize][2] < za - 2
-                    {
+                    let za = self.col_z[x];
+                    while lo < theirs.end && self.col_z[lo] < za - 2 {
                         lo += 1;
                     }
+                    if lo == theirs.end {
+                        break;
+                    }
+                    let mut ra = find(&mut self.parent, a);
                     for y in lo..theirs.end {
-                        let b = self.col_cells[y];
-                        if self.cell_ijk[b as usize][2] > za + 2 {
+                        if self.col_z[y] > za + 2 {
                             break;
                         }
-                        self.link(a, b, tol2);
+                        ra = self.link(a, ra, self.col_cells[y], tol2);
                     }
                 }
             }
@@ -487,13 +496,13 @@ impl Clusterer {
 }
 
 impl Clusterer {
-    /// Joins cells `a` and `b` if they are in different components and some pair of their
-    /// points is within the tolerance.
+    /// Joins cells `a` (whose root is `ra`) and `b` if they are in different components and
+    /// some pair of their points is within the tolerance; returns `a`'s root afterwards.
     #[inline]
-    fn link(&mut self, a: u32, b: u32, tol2: f64) {
-        let (ra, rb) = (find(&mut self.parent, a), find(&mut self.parent, b));
+    fn link(&mut self, a: u32, ra: u32, b: u32, tol2: f64) -> u32 {
+        let rb = find(&mut self.parent, b);
         if ra == rb {
-            return;
+            return ra;
         }
         let span =
             |c: u32| self.cell_start[c as usize] as usize..self.cell_start[c as usize + 1] as usize;
@@ -501,6 +510,9 @@ impl Clusterer {
             // The smaller id becomes the root (any rule would do).
             let (lo, hi) = if ra < rb { (ra, rb) } else { (rb, ra) };
             self.parent[hi as usize] = lo;
+            lo
+        } else {
+            ra
         }
     }
 }
