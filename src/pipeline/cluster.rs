@@ -16,8 +16,10 @@
 //! A pair of cells already in one component is skipped without looking at its points;
 //! otherwise point pairs are scanned until one is within the tolerance. The result is exact:
 //! the same partition as a brute-force search (tests check this on real sweeps). Cells and
-//! columns are found through a hash of their packed integer coordinates, points are grouped
-//! by cell with a counting sort, and all buffers are kept between calls.
+//! columns are found through a hash of their packed integer coordinates, cells are renumbered
+//! in column order (z ascending within a column) so the union–find and the points of
+//! neighbouring cells are close in memory, points are grouped by cell with a counting sort,
+//! and all buffers are kept between calls.
 //!
 //! Distances are computed in `f64` from the `f32` coordinates, so ties at exactly the
 //! tolerance are decided as a double-precision reference decides them.
@@ -173,6 +175,10 @@ pub struct Clusterer {
     col_start: Vec<u32>,
     /// Cells grouped by column, each column's cells by ascending z.
     col_cells: Vec<u32>,
+    /// z index of each entry of `col_cells` (read sequentially by the z windows).
+    col_z: Vec<i32>,
+    /// Column-order position of each cell (its id from step 3 on).
+    rank: Vec<u32>,
     /// Column of each cell.
     col_of: Vec<u32>,
     /// Candidate point indices, ascending.
@@ -223,6 +229,8 @@ impl Clusterer {
             columns: KeyTable::default(),
             col_start: Vec::new(),
             col_cells: Vec::new(),
+            col_z: Vec::new(),
+            rank: Vec::new(),
             col_of: Vec::new(),
             cand: Vec::new(),
             cell_of: Vec::new(),
@@ -302,30 +310,6 @@ impl Clusterer {
         stats.candidates = self.cand.len();
         let cells = self.cell_ijk.len();
 
-        // 2. Counting sort of the candidates by cell.
-        self.cell_start.clear();
-        self.cell_start.resize(cells + 1, 0);
-        for &c in &self.cell_of {
-            self.cell_start[c as usize + 1] += 1;
-        }
-        for k in 0..cells {
-            self.cell_start[k + 1] += self.cell_start[k];
-        }
-        self.xyz.clear();
-        self.xyz.resize(self.cand.len(), [0.0; 3]);
-        self.order.clear();
-        self.order.resize(self.cand.len(), 0);
-        // `parent` doubles as the fill cursor here.
-        self.parent.clear();
-        self.parent.extend_from_slice(&self.cell_start[..cells]);
-        for (&i, &c) in self.cand.iter().zip(&self.cell_of) {
-            let at = self.parent[c as usize] as usize;
-            self.parent[c as usize] += 1;
-            let p = &points[i as usize];
-            self.xyz[at] = [p.x, p.y, p.z];
-            self.order[at] = i;
-        }
-
         // 3. Cells grouped by column (x, y), each column sorted by z.
         self.columns.reset(cells);
         self.col_of.clear();
@@ -361,10 +345,49 @@ impl Clusterer {
             let ijk = &self.cell_ijk;
             self.col_cells[s..e].sort_unstable_by_key(|&c| ijk[c as usize][2]);
         }
+        self.col_z.clear();
+        self.col_z
+            .extend(self.col_cells.iter().map(|&c| self.cell_ijk[c as usize][2]));
+
+        // Cells renumbered in column order, so that the union–find and the point spans of
+        // neighbouring cells are close in memory.
+        self.rank.clear();
+        self.rank.resize(cells, 0);
+        for (pos, &c) in self.col_cells.iter().enumerate() {
+            self.rank[c as usize] = pos as u32;
+        }
+        for c in &mut self.cell_of {
+            *c = self.rank[*c as usize];
+        }
+
+        // 3b. Counting sort of the candidates by cell.
+        self.cell_start.clear();
+        self.cell_start.resize(cells + 1, 0);
+        for &c in &self.cell_of {
+            self.cell_start[c as usize + 1] += 1;
+        }
+        for k in 0..cells {
+            self.cell_start[k + 1] += self.cell_start[k];
+        }
+        self.xyz.clear();
+        self.xyz.resize(self.cand.len(), [0.0; 3]);
+        self.order.clear();
+        self.order.resize(self.cand.len(), 0);
+        // `parent` doubles as the fill cursor here.
+        self.parent.clear();
+        self.parent.extend_from_slice(&self.cell_start[..cells]);
+        for (&i, &c) in self.cand.iter().zip(&self.cell_of) {
+            let at = self.parent[c as usize] as usize;
+            self.parent[c as usize] += 1;
+            let p = &points[i as usize];
+            self.xyz[at] = [p.x, p.y, p.z];
+            self.order[at] = i;
+        }
 
         // 4. Union–find over cells: within a column, cells up to two apart in z; between a
         //    column and its 12 forward neighbours, cells up to two apart in z. A pair already
-        //    in one component is skipped without looking at its points.
+        //    in one component is skipped without looking at its points; the root of the
+        //    first cell of a pair is kept across its partners and updated on a join.
         self.parent.clear();
         self.parent.extend(0..cells as u32);
         for col in 0..ncols {
@@ -374,14 +397,14 @@ impl Clusterer {
             };
             let [ci, cj, _] = self.cell_ijk[first as usize];
             for x in own.clone() {
-                let a = self.col_cells[x];
-                let za = self.cell_ijk[a as usize][2];
+                let a = x as u32;
+                let za = self.col_z[x];
+                let mut ra = find(&mut self.parent, a);
                 for y in x + 1..own.end {
-                    let b = self.col_cells[y];
-                    if self.cell_ijk[b as usize][2] - za > 2 {
+                    if self.col_z[y] - za > 2 {
                         break;
                     }
-                    self.link(a, b, tol2);
+                    ra = self.link(a, ra, y as u32, tol2);
                 }
             }
             for [di, dj] in COLUMN_NEIGHBOURS {
@@ -397,18 +420,20 @@ impl Clusterer {
                 // Both columns are sorted by z: slide a window of cells within ±2 in z.
                 let mut lo = theirs.start;
                 for x in own.clone() {
-                    let a = self.col_cells[x];
-                    let za = self.cell_ijk[a as usize][2];
-                    while lo < theirs.end && self.cell_ijk[self.col_cells[lo] as usize][2] < za - 2
-                    {
+                    let a = x as u32;
+                    let za = self.col_z[x];
+                    while lo < theirs.end && self.col_z[lo] < za - 2 {
                         lo += 1;
                     }
+                    if lo == theirs.end {
+                        break;
+                    }
+                    let mut ra = find(&mut self.parent, a);
                     for y in lo..theirs.end {
-                        let b = self.col_cells[y];
-                        if self.cell_ijk[b as usize][2] > za + 2 {
+                        if self.col_z[y] > za + 2 {
                             break;
                         }
-                        self.link(a, b, tol2);
+                        ra = self.link(a, ra, y as u32, tol2);
                     }
                 }
             }
@@ -487,13 +512,13 @@ impl Clusterer {
 }
 
 impl Clusterer {
-    /// Joins cells `a` and `b` if they are in different components and some pair of their
-    /// points is within the tolerance.
+    /// Joins cells `a` (whose root is `ra`) and `b` if they are in different components and
+    /// some pair of their points is within the tolerance; returns `a`'s root afterwards.
     #[inline]
-    fn link(&mut self, a: u32, b: u32, tol2: f64) {
-        let (ra, rb) = (find(&mut self.parent, a), find(&mut self.parent, b));
+    fn link(&mut self, a: u32, ra: u32, b: u32, tol2: f64) -> u32 {
+        let rb = find(&mut self.parent, b);
         if ra == rb {
-            return;
+            return ra;
         }
         let span =
             |c: u32| self.cell_start[c as usize] as usize..self.cell_start[c as usize + 1] as usize;
@@ -501,6 +526,9 @@ impl Clusterer {
             // The smaller id becomes the root (any rule would do).
             let (lo, hi) = if ra < rb { (ra, rb) } else { (rb, ra) };
             self.parent[hi as usize] = lo;
+            lo
+        } else {
+            ra
         }
     }
 }
