@@ -5,7 +5,9 @@
 //!   registered sweep (the `--json` count) and each equals the `/tf` message of that stamp;
 //!   `/map` (a point cloud in `odom`) is written every `--map-every` sweeps; every
 //!   `/diagnostics` message carries the sweep's `odometry` object; `--json` has the
-//!   `odometry` object with its counts adding up;
+//!   `odometry` object with its counts adding up; with `--extrinsics` `/tf` is
+//!   `odom → base_link`, the sensor's poses conjugated by the extrinsics (checked by hand for a
+//!   90° yaw);
 //! - on a simulated VLP-16 drive (`ringscan::sim`, the urban scene, 10 m/s turning 15 °/s,
 //!   3 s) decoded with `--deskew odometry`, the trajectory ends within 1 % of the distance
 //!   travelled of the simulator's true pose at the same time (the truth taken relative to
@@ -185,7 +187,11 @@ fn real_vlp16_capture_writes_tf_map_trajectory_and_summary() {
     assert_eq!(first_cloud.frame_id, frame);
 
     let traj = read_tum(&tum);
-    assert_eq!(traj.len() as u64, registered, "one TUM pose per registered sweep");
+    assert_eq!(
+        traj.len() as u64,
+        registered,
+        "one TUM pose per registered sweep"
+    );
     let by_stamp: BTreeMap<i64, &FrameTransform> =
         tf.iter().map(|m| (stamp_ns(&m.timestamp), m)).collect();
     for (t, pose) in &traj {
@@ -229,6 +235,49 @@ fn real_vlp16_capture_writes_tf_map_trajectory_and_summary() {
         }
     }
     assert_eq!(flagged, odo["degenerate"].as_u64().unwrap());
+
+    // With --extrinsics (the sensor turned 90° left on the vehicle, no lever arm) /tf is
+    // odom → base_link, and a pose B·T·B⁻¹ with B = Rz(90°) moves (x, y, z) to (−y, x, z).
+    let extr = format!("{frame}=0,0,0,0,0,90");
+    let (out_b, tum_b) = (out_path("base.mcap"), out_path("base.tum"));
+    let o = ringscan(&[
+        "decode",
+        pcap.to_str().unwrap(),
+        "--model",
+        "vlp16",
+        "--calib",
+        calib.to_str().unwrap(),
+        "--pipeline",
+        "default",
+        "--extrinsics",
+        &extr,
+        "--odometry",
+        "--trajectory",
+        tum_b.to_str().unwrap(),
+        "--out",
+        out_b.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let tf_b: Vec<FrameTransform> = read(&out_b)["/tf"]
+        .iter()
+        .map(|b| FrameTransform::decode(b.as_slice()).unwrap())
+        .collect();
+    assert_eq!(tf_b.len(), tf.len());
+    for (a, b) in tf.iter().zip(&tf_b) {
+        assert_eq!(b.child_frame_id, "base_link");
+        let (ta, tb) = (
+            a.translation.as_ref().unwrap(),
+            b.translation.as_ref().unwrap(),
+        );
+        assert!(
+            (tb.x + ta.y).abs() < 1e-6 && (tb.y - ta.x).abs() < 1e-6 && (tb.z - ta.z).abs() < 1e-6,
+            "sensor {ta:?} vs base_link {tb:?}"
+        );
+    }
+    assert_eq!(read_tum(&tum_b).len(), traj.len());
+    for p in [&out_b, &tum_b] {
+        let _ = std::fs::remove_file(p);
+    }
 
     // A trajectory without --odometry is refused.
     let o = ringscan(&[

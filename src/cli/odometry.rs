@@ -10,6 +10,11 @@
 //! - in `--json`, an `odometry` object (sweeps registered, failed, degenerate, ms per sweep,
 //!   final pose).
 //!
+//! With `--extrinsics` for the sensor, `/tf` and the trajectory are `base_link`'s instead
+//! (`odom` = `base_link` at the first sweep, `odom ← base_link` = B·T·B⁻¹ with B the
+//! extrinsics and T the sensor's odometry pose), so the tree stays `odom → base_link → sensor`
+//! with `/tf_static`.
+//!
 //! With several sensors each has its own odometry: frame `<name>/odom`, topic `/<name>/map`
 //! and `FILE_<name>.tum`.
 //!
@@ -164,7 +169,8 @@ struct Topics {
     map_prefix: PointCloudPrefix,
 }
 
-/// Per-sensor state.
+/// Per-sensor state. The poses kept and written are `odom_from_sensor`, or with `--extrinsics`
+/// for the sensor `odom_from_base` (`odom` = `base_link` at the first sweep).
 struct SensorOdometry {
     name: String,
     odom_frame: String,
@@ -361,6 +367,7 @@ impl OdometryRunner {
         several: bool,
         sweep: &Sweep,
         deskew: Option<(Twist, i64)>,
+        base_from_sensor: Option<&Isometry3<f64>>,
         sink: Option<(&mut McapSink<W>, SensorId)>,
     ) -> Result<Option<Value>, SinkError> {
         let map_every = self.setup.map_every;
@@ -398,12 +405,17 @@ impl OdometryRunner {
             so.times.push(ns);
         }
         so.max_ns = so.max_ns.max(ns);
+        // With extrinsics the poses are the vehicle's: odom = `base_link` at the first sweep.
+        let pose = match base_from_sensor {
+            Some(b) => b * step.world_from_sensor * b.inverse(),
+            None => step.world_from_sensor,
+        };
         let lost = matches!(step.status, TrackStatus::Lost(_));
         if lost {
             so.failed += 1;
         } else {
             so.registered += 1;
-            so.last_registered = Some((step.world_from_sensor, step.stamp_ns));
+            so.last_registered = Some((pose, step.stamp_ns));
         }
         if step.status == TrackStatus::NotConverged {
             so.not_converged += 1;
@@ -411,7 +423,6 @@ impl OdometryRunner {
         if step.degenerate {
             so.degenerate += 1;
         }
-        let pose = step.world_from_sensor;
         let position = pose.translation.vector;
         if let Some(last) = so.last_position {
             so.distance_m += (position - last).norm();
@@ -477,10 +488,13 @@ impl OdometryRunner {
         let Some(so) = self.sensors.get_mut(idx).and_then(Option::as_mut) else {
             return Ok(Some(diag));
         };
-        let frame = sink
-            .channels(id)
-            .map(|c| c.name().to_string())
-            .unwrap_or_else(|| so.name.clone());
+        let frame = match base_from_sensor {
+            Some(_) => "base_link".to_string(),
+            None => sink
+                .channels(id)
+                .map(|c| c.name().to_string())
+                .unwrap_or_else(|| so.name.clone()),
+        };
         scene::encode_frame_transform(&mut self.buf, stamp, &so.odom_frame, &frame, &pose);
         sink.write_message(tf, log_time, &self.buf)?;
         if so.sweeps % map_every == 0 {
@@ -507,14 +521,21 @@ impl OdometryRunner {
                 });
             }
             if let Some(t) = &so.topics {
+                // The map is in the first sweep's sensor frame; `odom` is `base_link` there
+                // with extrinsics.
+                let odom_from_map = base_from_sensor
+                    .copied()
+                    .unwrap_or_else(Isometry3::identity);
                 so.map_points.clear();
-                so.map_points
-                    .extend(so.odometry.map().points().map(|p| Point {
-                        x: p.x as f32,
-                        y: p.y as f32,
-                        z: p.z as f32,
+                so.map_points.extend(so.odometry.map().points().map(|p| {
+                    let q = odom_from_map * Point3::from(*p);
+                    Point {
+                        x: q.x as f32,
+                        y: q.y as f32,
+                        z: q.z as f32,
                         ..Point::default()
-                    }));
+                    }
+                }));
                 foxglove::encode_point_cloud(&mut self.buf, stamp, &t.map_prefix, &so.map_points)
                     .ok_or_else(|| SinkError::TooLarge {
                     topic: "map".to_string(),

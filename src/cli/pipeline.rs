@@ -240,6 +240,19 @@ impl PipelineRunner {
         self.setup.outputs
     }
 
+    /// Sensor `name`'s placement on the vehicle (`--extrinsics`), if given and written to
+    /// `/tf_static` (with pipeline outputs).
+    pub fn base_from_sensor(&self, name: &str) -> Option<Isometry3<f64>> {
+        if !self.setup.outputs {
+            return None;
+        }
+        self.setup
+            .extrinsics
+            .iter()
+            .find(|e| e.name == name)
+            .map(|e| e.base_from_sensor)
+    }
+
     /// Whether sweeps are deskewed with the odometry's motion (`--deskew odometry`).
     pub fn deskews_with_odometry(&self) -> bool {
         self.setup.config.deskew.mode == DeskewMode::Odometry

@@ -260,6 +260,10 @@ impl Output {
                 }
             }
         }
+        let base_from_sensor = self
+            .pipeline
+            .as_ref()
+            .and_then(|p| p.base_from_sensor(&self.sensors[idx].name));
         // The pipeline (when asked for) deskews a copy of the sweep, which is written instead.
         let sweep = match self.pipeline.as_mut() {
             Some(p) => {
@@ -286,6 +290,7 @@ impl Output {
                     several,
                     sweep,
                     odometry_deskew,
+                    base_from_sensor.as_ref(),
                     sink,
                 ) {
                     Ok(d) => d,
