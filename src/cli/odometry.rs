@@ -368,6 +368,7 @@ impl OdometryRunner {
         sweep: &Sweep,
         deskew: Option<(Twist, i64)>,
         base_from_sensor: Option<&Isometry3<f64>>,
+        live: Option<&super::serve::SharedPublisher>,
         sink: Option<(&mut McapSink<W>, SensorId)>,
     ) -> Result<Option<Value>, SinkError> {
         let map_every = self.setup.map_every;
@@ -462,11 +463,28 @@ impl OdometryRunner {
             "min_eigenvalue": step.degeneracy.map(|d| d.eigenvalues[0]),
             "pose": pose_json(&pose),
         });
-        let Some((sink, id)) = sink else {
-            return Ok(Some(diag));
+        let frame = match (base_from_sensor, &sink) {
+            (Some(_), _) => "base_link".to_string(),
+            (None, Some((sink, id))) => sink
+                .channels(*id)
+                .map(|c| c.name().to_string())
+                .unwrap_or_else(|| name.to_string()),
+            (None, None) => name.to_string(),
         };
         let log_time = sweep.last_host_ns.max(0) as u64;
         let stamp = step.stamp_ns.max(0) as u64;
+        let odom_frame = self
+            .sensors
+            .get(idx)
+            .and_then(Option::as_ref)
+            .map_or_else(|| "odom".to_string(), |s| s.odom_frame.clone());
+        scene::encode_frame_transform(&mut self.buf, stamp, &odom_frame, &frame, &pose);
+        if let Some(live) = live {
+            live.borrow_mut().tf(log_time, &self.buf);
+        }
+        let Some((sink, id)) = sink else {
+            return Ok(Some(diag));
+        };
         let tf = match self.tf {
             Some(t) => t,
             None => {
@@ -488,14 +506,6 @@ impl OdometryRunner {
         let Some(so) = self.sensors.get_mut(idx).and_then(Option::as_mut) else {
             return Ok(Some(diag));
         };
-        let frame = match base_from_sensor {
-            Some(_) => "base_link".to_string(),
-            None => sink
-                .channels(id)
-                .map(|c| c.name().to_string())
-                .unwrap_or_else(|| so.name.clone()),
-        };
-        scene::encode_frame_transform(&mut self.buf, stamp, &so.odom_frame, &frame, &pose);
         sink.write_message(tf, log_time, &self.buf)?;
         if so.sweeps % map_every == 0 {
             if so.topics.is_none() {

@@ -291,6 +291,7 @@ impl Output {
                     sweep,
                     odometry_deskew,
                     base_from_sensor.as_ref(),
+                    self.live.as_ref(),
                     sink,
                 ) {
                     Ok(d) => d,
