@@ -12,6 +12,8 @@
 //!   3 s) decoded with `--deskew odometry`, the trajectory ends within 1 % of the distance
 //!   travelled of the simulator's true pose at the same time (the truth taken relative to
 //!   the pose at the trajectory's first stamp, the odometry's `odom`).
+//! - with `--serve`, a Foxglove WebSocket subscriber to `/tf` receives the MCAP's last `/tf`
+//!   messages byte for byte.
 
 mod common;
 
@@ -376,4 +378,107 @@ fn simulated_drive_ends_within_one_percent_of_the_truth() {
     for p in [&pcap, &tum] {
         let _ = std::fs::remove_file(p);
     }
+}
+
+/// `decode --odometry --serve`: the live view advertises `/tf` and a subscriber receives the
+/// same FrameTransform bytes the MCAP file holds (a Foxglove WebSocket client, `tungstenite`).
+#[test]
+fn live_view_publishes_the_tf_of_the_mcap() {
+    use std::io::{BufRead, BufReader};
+    use std::process::Stdio;
+    use std::time::{Duration, Instant};
+    use tungstenite::client::IntoClientRequest;
+    use tungstenite::Message;
+
+    let pcap = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo-vlp16.pcap");
+    let out = out_path("live.mcap");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_ringscan"))
+        .args([
+            "decode",
+            pcap.to_str().unwrap(),
+            "--odometry",
+            "--out",
+            out.to_str().unwrap(),
+            "--serve",
+            "127.0.0.1:0",
+            "--serve-rate",
+            "1",
+        ])
+        .env("RINGSCAN_LOG", "info")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let err = child.stderr.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel::<String>();
+    std::thread::spawn(move || {
+        for line in BufReader::new(err).lines().map_while(Result::ok) {
+            if let Some(at) = line.find("ws://") {
+                let _ = tx.send(
+                    line[at + 5..]
+                        .split_whitespace()
+                        .next()
+                        .unwrap_or("")
+                        .into(),
+                );
+            }
+        }
+    });
+    let addr = rx
+        .recv_timeout(Duration::from_secs(30))
+        .expect("no live view address");
+    let stream = std::net::TcpStream::connect(&addr).unwrap();
+    stream
+        .set_read_timeout(Some(Duration::from_secs(20)))
+        .unwrap();
+    let mut req = format!("ws://{addr}/").into_client_request().unwrap();
+    req.headers_mut().insert(
+        "sec-websocket-protocol",
+        "foxglove.websocket.v1".parse().unwrap(),
+    );
+    let (mut ws, _) = tungstenite::client::client(req, stream).unwrap();
+    let started = Instant::now();
+    let mut tf_channel = None;
+    let mut received: Vec<Vec<u8>> = Vec::new();
+    loop {
+        match ws.read() {
+            Ok(Message::Text(t)) => {
+                let v: serde_json::Value = serde_json::from_str(t.as_str()).unwrap();
+                if v["op"] == "advertise" {
+                    for c in v["channels"].as_array().unwrap() {
+                        if c["topic"] == "/tf" && tf_channel.is_none() {
+                            assert_eq!(c["schemaName"], "foxglove.FrameTransform");
+                            let id = c["id"].as_u64().unwrap();
+                            tf_channel = Some(id);
+                            let sub = serde_json::json!({"op": "subscribe",
+                                "subscriptions": [{"id": 7, "channelId": id}]});
+                            ws.send(Message::text(sub.to_string())).unwrap();
+                        }
+                    }
+                }
+            }
+            Ok(Message::Binary(b)) => {
+                assert_eq!(b[0], 0x01);
+                assert_eq!(u32::from_le_bytes(b[1..5].try_into().unwrap()), 7);
+                received.push(b[13..].to_vec());
+            }
+            Ok(_) => {}
+            Err(_) => break,
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "live view did not end"
+        );
+    }
+    assert!(child.wait().unwrap().success());
+    assert!(tf_channel.is_some(), "/tf was not advertised");
+    let file = read(&out).remove("/tf").unwrap();
+    assert!(
+        received.len() >= 2,
+        "{} /tf messages received",
+        received.len()
+    );
+    // The last messages of the file, byte for byte.
+    assert_eq!(received[..], file[file.len() - received.len()..]);
+    let _ = std::fs::remove_file(&out);
 }
