@@ -409,9 +409,17 @@ fn bad_pipeline_settings_are_refused_with_the_key() {
     for (args, needle) in [
         (vec!["--pipeline", cfg.to_str().unwrap()], "voxel.leaf_m"),
         (
-            vec!["--pipeline", "default", "--deskew", "odometry"],
-            "odometry",
+            vec![
+                "--pipeline",
+                "default",
+                "--deskew",
+                "odometry",
+                "--map-every",
+                "0",
+            ],
+            "--map-every 0",
         ),
+        (vec!["--odometry", "--format", "ros2"], "--format foxglove"),
         (
             vec!["--pipeline", "default", "--deskew", "gps"],
             "--deskew gps",

@@ -1,6 +1,7 @@
 //! Command-line front end: clap commands, progress, exit codes. No algorithms live here.
 
 mod listen;
+mod odometry;
 mod pipeline;
 mod render;
 mod replay;
@@ -125,6 +126,8 @@ struct DecodeCmd {
     json: bool,
     #[command(flatten)]
     pipeline: pipeline::PipelineArgs,
+    #[command(flatten)]
+    odometry: odometry::OdometryArgs,
     #[command(flatten)]
     serve: serve::ServeArgs,
     /// With --serve: publish sweeps at this speed of their capture times (`1.0` = as recorded,
@@ -301,6 +304,7 @@ pub fn main() -> ExitCode {
                 json: c.json,
                 input_bytes: None,
                 pipeline: c.pipeline,
+                odometry: c.odometry,
                 serve: c.serve,
                 serve_rate: c.serve_rate,
             };
@@ -340,6 +344,7 @@ pub fn main() -> ExitCode {
                     // sweeps are written as they come.
                     pipeline: Default::default(),
                     format: c.format,
+                    odometry: Default::default(),
                 },
                 format: c.format,
                 multicast: c.multicast,

@@ -82,13 +82,6 @@ impl PipelineArgs {
                 },
             };
         }
-        if config.deskew.mode == DeskewMode::Odometry {
-            return Err(
-                "--deskew odometry: needs odometry, which this build does not run yet; \
-                 use constant-velocity (with deskew.linear_mps / angular_degps), imu or poses:FILE"
-                    .to_string(),
-            );
-        }
         let poses = match &config.deskew.mode {
             DeskewMode::Poses(file) => {
                 let text = std::fs::read_to_string(file)
@@ -245,6 +238,65 @@ impl PipelineRunner {
     /// Whether pipeline outputs are written (not only deskew).
     pub fn outputs(&self) -> bool {
         self.setup.outputs
+    }
+
+    /// Sensor `name`'s placement on the vehicle (`--extrinsics`), if given and written to
+    /// `/tf_static` (with pipeline outputs).
+    pub fn base_from_sensor(&self, name: &str) -> Option<Isometry3<f64>> {
+        if !self.setup.outputs {
+            return None;
+        }
+        self.setup
+            .extrinsics
+            .iter()
+            .find(|e| e.name == name)
+            .map(|e| e.base_from_sensor)
+    }
+
+    /// Whether sweeps are deskewed with the odometry's motion (`--deskew odometry`).
+    pub fn deskews_with_odometry(&self) -> bool {
+        self.setup.config.deskew.mode == DeskewMode::Odometry
+    }
+
+    /// Feeds sensor `idx`'s odometry motion (`previous_from_current`, `dt_s` apart) to its
+    /// deskew (`--deskew odometry`), before its next sweep is processed.
+    pub fn set_relative_motion(
+        &mut self,
+        idx: usize,
+        name: &str,
+        previous_from_current: &Isometry3<f64>,
+        dt_s: f64,
+    ) -> Result<(), SinkError> {
+        let sp = Self::sensor(
+            &mut self.sensors,
+            &self.setup,
+            &mut self.pending_imu,
+            idx,
+            name,
+        )
+        .map_err(|reason| SinkError::InvalidSensor {
+            name: name.to_string(),
+            reason,
+        })?;
+        sp.pipeline.set_relative_motion(previous_from_current, dt_s);
+        Ok(())
+    }
+
+    /// The constant twist sensor `idx` (named `name`) deskews with (modes
+    /// `constant-velocity`, `odometry`).
+    pub fn twist(&mut self, idx: usize, name: &str) -> Result<ringscan::deskew::Twist, SinkError> {
+        Self::sensor(
+            &mut self.sensors,
+            &self.setup,
+            &mut self.pending_imu,
+            idx,
+            name,
+        )
+        .map(|sp| sp.pipeline.twist())
+        .map_err(|reason| SinkError::InvalidSensor {
+            name: name.to_string(),
+            reason,
+        })
     }
 
     fn sensor<'a>(

@@ -16,6 +16,7 @@ use ringscan::source::pcap::{PcapSource, SourceError, SourceStats};
 use ringscan::sweep::{Demux, Facts, SensorStream, StreamError, Sweep};
 use serde_json::{json, Value};
 
+use super::odometry::{OdometryArgs, OdometryRunner};
 use super::pipeline::{PipelineArgs, PipelineRunner};
 use super::sensors::{self, load_calibs, CalibSpec, Chooser, Common};
 use super::FormatArg;
@@ -58,6 +59,8 @@ pub struct DecodeArgs {
     pub serve_rate: ringscan::source::udp::Rate,
     /// `--pipeline`, `--deskew`, `--extrinsics`.
     pub pipeline: PipelineArgs,
+    /// `--odometry`, `--trajectory`, `--map-every`.
+    pub odometry: OdometryArgs,
 }
 
 /// Why a run failed.
@@ -126,6 +129,8 @@ struct Output {
     points: u64,
     imu_samples: u64,
     pipeline: Option<PipelineRunner>,
+    /// `--odometry` (also with `--deskew odometry`).
+    odometry: Option<OdometryRunner>,
     /// `--serve`: the live view, also fed by the pipeline.
     live: Option<super::serve::SharedPublisher>,
 }
@@ -230,6 +235,35 @@ impl Output {
                 return;
             }
         }
+        let several = !(self.n_sensors_hint <= 1 && idx == 0);
+        // `--deskew odometry`: the odometry's last motion deskews this sweep; the twist used is
+        // kept to refer the deskewed points to mid-sweep for the odometry.
+        let mut odometry_deskew = None;
+        if let (Some(p), Some(o)) = (self.pipeline.as_mut(), self.odometry.as_ref()) {
+            if p.deskews_with_odometry() {
+                let name = &self.sensors[idx].name;
+                let fed = match o.last_motion(idx) {
+                    Some(m) => p.set_relative_motion(
+                        idx,
+                        name,
+                        &m.previous_from_current,
+                        m.dt_ns as f64 * 1e-9,
+                    ),
+                    None => Ok(()),
+                };
+                match fed.and_then(|()| p.twist(idx, name)) {
+                    Ok(t) => odometry_deskew = Some((t, sweep.timestamp_ns)),
+                    Err(e) => {
+                        self.error = Some(e);
+                        return;
+                    }
+                }
+            }
+        }
+        let base_from_sensor = self
+            .pipeline
+            .as_ref()
+            .and_then(|p| p.base_from_sensor(&self.sensors[idx].name));
         // The pipeline (when asked for) deskews a copy of the sweep, which is written instead.
         let sweep = match self.pipeline.as_mut() {
             Some(p) => {
@@ -247,6 +281,28 @@ impl Output {
         if let Some(live) = &self.live {
             live.borrow_mut().sweep(idx, sweep);
         }
+        let odometry_diag = match self.odometry.as_mut() {
+            Some(o) => {
+                let sink = self.sink.as_mut().zip(self.sensors[idx].id);
+                match o.process(
+                    idx,
+                    &self.sensors[idx].name,
+                    several,
+                    sweep,
+                    odometry_deskew,
+                    base_from_sensor.as_ref(),
+                    self.live.as_ref(),
+                    sink,
+                ) {
+                    Ok(d) => d,
+                    Err(e) => {
+                        self.error = Some(e);
+                        return;
+                    }
+                }
+            }
+            None => None,
+        };
         let (Some(sink), Some(id)) = (self.sink.as_mut(), self.sensors[idx].id) else {
             return;
         };
@@ -281,6 +337,9 @@ impl Output {
             (diag.as_object_mut(), sensors::diagnostics_extra(facts))
         {
             d.extend(extra);
+        }
+        if let (Some(d), Some(o)) = (diag.as_object_mut(), odometry_diag) {
+            d.insert("odometry".into(), o);
         }
         if let Err(e) = sink.write_diagnostics(id, sweep.last_host_ns.max(0) as u64, &diag) {
             self.error = Some(e);
@@ -329,6 +388,8 @@ pub struct SessionOptions {
     pub pipeline: PipelineArgs,
     /// Points message layout (the pipeline's outputs need `foxglove`).
     pub format: FormatArg,
+    /// `--odometry`, `--trajectory`, `--map-every`.
+    pub odometry: OdometryArgs,
 }
 
 impl DecodeArgs {
@@ -346,6 +407,7 @@ impl DecodeArgs {
             crc: self.crc,
             pipeline: self.pipeline.clone(),
             format: self.format,
+            odometry: self.odometry.clone(),
         }
     }
 }
@@ -401,6 +463,19 @@ impl Session {
                 "--pipeline: its outputs are written with --format foxglove only".into(),
             ));
         }
+        let odometry_deskew = pipeline
+            .as_ref()
+            .is_some_and(PipelineRunner::deskews_with_odometry);
+        let odometry = opts
+            .odometry
+            .setup(odometry_deskew)
+            .map_err(RunError::Usage)?
+            .map(OdometryRunner::new);
+        if odometry.is_some() && opts.format == FormatArg::Ros2 {
+            return Err(RunError::Usage(
+                "--odometry: its outputs are written with --format foxglove only".into(),
+            ));
+        }
         let calibs = load_calibs(&opts.calib)?;
         let cut = (opts.cut_angle_deg * 100.0).round() as u16 % 36_000;
         let chooser = std::rc::Rc::new(std::cell::RefCell::new(Chooser::new(
@@ -433,6 +508,7 @@ impl Session {
             points: 0,
             imu_samples: 0,
             pipeline,
+            odometry,
             live: None,
         };
         Ok(Self {
@@ -494,6 +570,14 @@ impl Session {
             p.set_live(live.clone());
         }
         self.out.live = live;
+    }
+
+    /// Flushes the odometry's trajectory files (`--trajectory`).
+    pub fn finish_odometry(&mut self) -> Result<(), RunError> {
+        match self.out.odometry.as_mut() {
+            Some(o) => o.finish().map_err(RunError::Live),
+            None => Ok(()),
+        }
     }
 
     /// Closes the output, if any (and lets the live view's clients drain).
@@ -721,6 +805,9 @@ impl Session {
         if let Some(p) = out.pipeline.as_ref() {
             m.insert("pipeline".into(), p.summary());
         }
+        if let Some(o) = out.odometry.as_ref() {
+            m.insert("odometry".into(), o.summary());
+        }
         if let Some(live) = &out.live {
             m.insert("serve".into(), live.borrow().summary());
         }
@@ -874,6 +961,7 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
         }
     };
     let sink_summary = session.close_sink()?;
+    session.finish_odometry()?;
     let elapsed = started.elapsed().as_secs_f64();
 
     let (mut m, lost) = session.summary();
@@ -991,6 +1079,7 @@ pub fn info_command(
         json: json_out,
         input_bytes: None,
         pipeline: PipelineArgs::default(),
+        odometry: OdometryArgs::default(),
         serve: Default::default(),
         serve_rate: ringscan::source::udp::Rate::Max,
     };
@@ -1024,6 +1113,7 @@ pub fn demo_command(out: &Path, json_out: bool) -> Result<ExitCode, RunError> {
         json: json_out,
         input_bytes: Some(DEMO_PCAP),
         pipeline: PipelineArgs::default(),
+        odometry: OdometryArgs::default(),
         serve: Default::default(),
         serve_rate: ringscan::source::udp::Rate::Max,
     };

@@ -86,6 +86,8 @@ pub struct LivePublisher {
     closed: Option<Value>,
     /// Messages not published because they exceed the protobuf size limit.
     too_large: u64,
+    /// `/tf` (`--odometry`), made on the first pose.
+    tf: Option<ChannelId>,
 }
 
 impl std::fmt::Debug for LivePublisher {
@@ -135,6 +137,7 @@ impl LivePublisher {
             scene: SceneEncoder::default(),
             closed: None,
             too_large: 0,
+            tf: None,
         }))
     }
 
@@ -214,6 +217,24 @@ impl LivePublisher {
                 view.publish(s.points, log_time, &self.buf);
             }
             None => self.too_large += 1,
+        }
+    }
+
+    /// Publishes one encoded `foxglove.FrameTransform` on `/tf` (`--odometry`).
+    pub fn tf(&mut self, log_time_ns: u64, frame_transform: &[u8]) {
+        let Some(view) = self.view.as_ref() else {
+            return;
+        };
+        let tf = *self.tf.get_or_insert_with(|| {
+            view.add_channel(&ChannelSpec {
+                topic: "/tf",
+                encoding: "protobuf",
+                schema_name: scene::FRAME_TRANSFORM_SCHEMA,
+                schema: &scene::frame_transform_descriptor_set(),
+            })
+        });
+        if view.has_subscribers(tf) {
+            view.publish(tf, log_time_ns, frame_transform);
         }
     }
 

@@ -1,0 +1,484 @@
+//! `ringscan decode --odometry`:
+//! - on the real VLP-16 capture (`vlp-16-test-90deg-1-50-frames.pcap`, VLP16db.yaml), `/tf`
+//!   holds one `foxglove.FrameTransform` per sweep, parent `odom`, child the sensor's frame
+//!   (the frame of its point clouds); the `--trajectory` TUM file holds one pose per
+//!   registered sweep (the `--json` count) and each equals the `/tf` message of that stamp;
+//!   `/map` (a point cloud in `odom`) is written every `--map-every` sweeps; every
+//!   `/diagnostics` message carries the sweep's `odometry` object; `--json` has the
+//!   `odometry` object with its counts adding up; with `--extrinsics` `/tf` is
+//!   `odom → base_link`, the sensor's poses conjugated by the extrinsics (checked by hand for a
+//!   90° yaw);
+//! - on a simulated VLP-16 drive (`ringscan::sim`, the urban scene, 10 m/s turning 15 °/s,
+//!   3 s) decoded with `--deskew odometry`, the trajectory ends within 1 % of the distance
+//!   travelled of the simulator's true pose at the same time (the truth taken relative to
+//!   the pose at the trajectory's first stamp, the odometry's `odom`).
+//! - with `--serve`, a Foxglove WebSocket subscriber to `/tf` receives the MCAP's last `/tf`
+//!   messages byte for byte.
+
+mod common;
+
+use std::collections::BTreeMap;
+use std::net::{Ipv4Addr, SocketAddrV4};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use prost::Message as _;
+use ringscan::calib::builtin::builtin;
+use ringscan::model::{ReturnMode, VelodyneModel};
+use ringscan::sim::motion::Trajectory;
+use ringscan::sim::net::{udp_frame, PcapWriter};
+use ringscan::sim::scenes;
+use ringscan::sim::velodyne::VelodyneSim;
+
+#[derive(Clone, PartialEq, prost::Message)]
+struct V3 {
+    #[prost(double, tag = "1")]
+    x: f64,
+    #[prost(double, tag = "2")]
+    y: f64,
+    #[prost(double, tag = "3")]
+    z: f64,
+}
+#[derive(Clone, PartialEq, prost::Message)]
+struct Q {
+    #[prost(double, tag = "1")]
+    x: f64,
+    #[prost(double, tag = "2")]
+    y: f64,
+    #[prost(double, tag = "3")]
+    z: f64,
+    #[prost(double, tag = "4")]
+    w: f64,
+}
+#[derive(Clone, PartialEq, prost::Message)]
+struct FrameTransform {
+    #[prost(message, optional, tag = "1")]
+    timestamp: Option<prost_types::Timestamp>,
+    #[prost(string, tag = "2")]
+    parent_frame_id: String,
+    #[prost(string, tag = "3")]
+    child_frame_id: String,
+    #[prost(message, optional, tag = "4")]
+    translation: Option<V3>,
+    #[prost(message, optional, tag = "5")]
+    rotation: Option<Q>,
+}
+#[derive(Clone, PartialEq, prost::Message)]
+struct PointCloud {
+    #[prost(message, optional, tag = "1")]
+    timestamp: Option<prost_types::Timestamp>,
+    #[prost(string, tag = "2")]
+    frame_id: String,
+    #[prost(fixed32, tag = "4")]
+    point_stride: u32,
+    #[prost(bytes = "vec", tag = "6")]
+    data: Vec<u8>,
+}
+
+fn ringscan(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_ringscan"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn out_path(name: &str) -> PathBuf {
+    std::env::temp_dir().join(format!(
+        "ringscan-odometry-cli-{}-{name}",
+        std::process::id()
+    ))
+}
+
+/// Message bodies per topic, in file order.
+fn read(path: &Path) -> BTreeMap<String, Vec<Vec<u8>>> {
+    let bytes = std::fs::read(path).unwrap();
+    let mut by_topic: BTreeMap<String, Vec<Vec<u8>>> = BTreeMap::new();
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        by_topic
+            .entry(m.channel.topic.clone())
+            .or_default()
+            .push(m.data.to_vec());
+    }
+    by_topic
+}
+
+/// TUM lines: (t s, pose).
+fn read_tum(path: &Path) -> Vec<(f64, Isometry3<f64>)> {
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .filter(|l| !l.trim().is_empty() && !l.starts_with('#'))
+        .map(|l| {
+            let v: Vec<f64> = l.split_whitespace().map(|s| s.parse().unwrap()).collect();
+            assert_eq!(v.len(), 8, "TUM line {l:?}");
+            (
+                v[0],
+                Isometry3::from_parts(
+                    Translation3::new(v[1], v[2], v[3]),
+                    UnitQuaternion::from_quaternion(Quaternion::new(v[7], v[4], v[5], v[6])),
+                ),
+            )
+        })
+        .collect()
+}
+
+fn stamp_ns(t: &Option<prost_types::Timestamp>) -> i64 {
+    let t = t.as_ref().unwrap();
+    t.seconds * 1_000_000_000 + i64::from(t.nanos)
+}
+
+#[test]
+fn real_vlp16_capture_writes_tf_map_trajectory_and_summary() {
+    let Some(root) = common::captures() else {
+        return;
+    };
+    let pcap = root.join("Kitware__VeloView/Testing/Data/vlp-16-test-90deg-1-50-frames.pcap");
+    let calib = root.join("ros-drivers__velodyne/velodyne_pointcloud/params/VLP16db.yaml");
+    let (out, tum) = (out_path("real.mcap"), out_path("real.tum"));
+    let o = ringscan(&[
+        "decode",
+        pcap.to_str().unwrap(),
+        "--model",
+        "vlp16",
+        "--calib",
+        calib.to_str().unwrap(),
+        "--odometry",
+        "--trajectory",
+        tum.to_str().unwrap(),
+        "--map-every",
+        "10",
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let odo = &summary["odometry"];
+    let sweeps = summary["sweeps"].as_u64().unwrap();
+    let registered = odo["registered"].as_u64().unwrap();
+    let failed = odo["failed"].as_u64().unwrap();
+    assert_eq!(odo["sweeps"].as_u64(), Some(sweeps), "{odo}");
+    assert_eq!(registered + failed, sweeps, "{odo}");
+    // The capture's last sweep is a fragment of a few hundred points; the full ones register.
+    assert!(registered + 1 >= sweeps && registered >= 50, "{odo}");
+    assert!(odo["degenerate"].as_u64().unwrap() <= sweeps, "{odo}");
+    let (med, max) = (
+        odo["median_ms"].as_f64().unwrap(),
+        odo["max_ms"].as_f64().unwrap(),
+    );
+    assert!(med > 0.0 && med <= max, "{odo}");
+    for k in ["x", "y", "z", "qx", "qy", "qz", "qw", "t_s"] {
+        assert!(odo["final_pose"][k].is_f64(), "final_pose.{k}: {odo}");
+    }
+
+    let topics = read(&out);
+    let frame = summary["sensors"][0]["name"].as_str().unwrap().to_string();
+    let tf: Vec<FrameTransform> = topics["/tf"]
+        .iter()
+        .map(|b| FrameTransform::decode(b.as_slice()).unwrap())
+        .collect();
+    assert_eq!(tf.len() as u64, sweeps, "one /tf message per sweep");
+    for m in &tf {
+        assert_eq!(m.parent_frame_id, "odom");
+        assert_eq!(m.child_frame_id, frame);
+    }
+    // The child frame is the frame of the sensor's point clouds.
+    let first_cloud = PointCloud::decode(topics["/points"][0].as_slice()).unwrap();
+    assert_eq!(first_cloud.frame_id, frame);
+
+    let traj = read_tum(&tum);
+    assert_eq!(
+        traj.len() as u64,
+        registered,
+        "one TUM pose per registered sweep"
+    );
+    let by_stamp: BTreeMap<i64, &FrameTransform> =
+        tf.iter().map(|m| (stamp_ns(&m.timestamp), m)).collect();
+    for (t, pose) in &traj {
+        let ns = (t * 1e9).round() as i64;
+        // TUM seconds carry 9 decimals; an f64 of 1.4e9 s holds them to ~0.2 µs.
+        let m = by_stamp
+            .range(ns - 1_000..=ns + 1_000)
+            .next()
+            .unwrap_or_else(|| panic!("no /tf message at {t}"))
+            .1;
+        let tr = m.translation.as_ref().unwrap();
+        let p = pose.translation.vector;
+        assert!(
+            (p - Vector3::new(tr.x, tr.y, tr.z)).norm() < 1e-6,
+            "TUM {p:?} vs /tf {tr:?} at {t}"
+        );
+        let r = m.rotation.as_ref().unwrap();
+        let q = UnitQuaternion::from_quaternion(Quaternion::new(r.w, r.x, r.y, r.z));
+        assert!(q.angle_to(&pose.rotation) < 1e-6);
+    }
+
+    let maps = &topics["/map"];
+    assert_eq!(maps.len() as u64, sweeps / 10, "/map every 10 sweeps");
+    for b in maps {
+        let pc = PointCloud::decode(b.as_slice()).unwrap();
+        assert_eq!(pc.frame_id, "odom");
+        assert!(!pc.data.is_empty() && pc.data.len() % pc.point_stride as usize == 0);
+    }
+
+    let diags = &topics["/diagnostics"];
+    assert_eq!(diags.len() as u64, sweeps);
+    let mut flagged = 0;
+    for b in diags {
+        let d: serde_json::Value = serde_json::from_slice(b).unwrap();
+        let od = &d["odometry"];
+        assert!(od["status"].is_string(), "{d}");
+        let deg = od["degenerate"].as_bool().unwrap();
+        if deg {
+            flagged += 1;
+            assert!(od["degenerate_axes"].is_array(), "{d}");
+        }
+    }
+    assert_eq!(flagged, odo["degenerate"].as_u64().unwrap());
+
+    // With --extrinsics (the sensor turned 90° left on the vehicle, no lever arm) /tf is
+    // odom → base_link, and a pose B·T·B⁻¹ with B = Rz(90°) moves (x, y, z) to (−y, x, z).
+    let extr = format!("{frame}=0,0,0,0,0,90");
+    let (out_b, tum_b) = (out_path("base.mcap"), out_path("base.tum"));
+    let o = ringscan(&[
+        "decode",
+        pcap.to_str().unwrap(),
+        "--model",
+        "vlp16",
+        "--calib",
+        calib.to_str().unwrap(),
+        "--pipeline",
+        "default",
+        "--extrinsics",
+        &extr,
+        "--odometry",
+        "--trajectory",
+        tum_b.to_str().unwrap(),
+        "--out",
+        out_b.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let tf_b: Vec<FrameTransform> = read(&out_b)["/tf"]
+        .iter()
+        .map(|b| FrameTransform::decode(b.as_slice()).unwrap())
+        .collect();
+    assert_eq!(tf_b.len(), tf.len());
+    for (a, b) in tf.iter().zip(&tf_b) {
+        assert_eq!(b.child_frame_id, "base_link");
+        let (ta, tb) = (
+            a.translation.as_ref().unwrap(),
+            b.translation.as_ref().unwrap(),
+        );
+        assert!(
+            (tb.x + ta.y).abs() < 1e-6 && (tb.y - ta.x).abs() < 1e-6 && (tb.z - ta.z).abs() < 1e-6,
+            "sensor {ta:?} vs base_link {tb:?}"
+        );
+    }
+    assert_eq!(read_tum(&tum_b).len(), traj.len());
+    for p in [&out_b, &tum_b] {
+        let _ = std::fs::remove_file(p);
+    }
+
+    // A trajectory without --odometry is refused.
+    let o = ringscan(&[
+        "decode",
+        pcap.to_str().unwrap(),
+        "--trajectory",
+        tum.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--odometry"));
+    for p in [&out, &tum] {
+        let _ = std::fs::remove_file(p);
+    }
+}
+
+/// The simulated drive's start time (a top of the hour) and motion.
+const T0_NS: i64 = 1_714_564_800_000_000_000;
+
+fn drive() -> Trajectory {
+    let start = Isometry3::from_parts(
+        Translation3::new(40.0, 0.0, scenes::SENSOR_HEIGHT_M),
+        UnitQuaternion::identity(),
+    );
+    Trajectory::twist(
+        T0_NS,
+        start,
+        Vector3::new(10.0, 0.0, 0.0),
+        Vector3::new(0.0, 0.0, 15f64.to_radians()),
+    )
+}
+
+/// `seconds` of a VLP-16 (built-in calibration, 10 Hz) on `drive()` through the urban scene.
+fn simulated_capture(seconds: f64) -> Vec<u8> {
+    let calib = builtin(VelodyneModel::Vlp16).unwrap();
+    let mut sim = VelodyneSim::new(VelodyneModel::Vlp16, ReturnMode::Strongest, calib, T0_NS);
+    sim.trajectory = drive();
+    let scene = scenes::urban();
+    let mut w = PcapWriter::new(Vec::new()).unwrap();
+    let src = SocketAddrV4::new(Ipv4Addr::new(192, 168, 1, 201), 2368);
+    let dst = SocketAddrV4::new(Ipv4Addr::new(192, 168, 1, 100), 2368);
+    let mut truth = Vec::new();
+    let packets = (seconds * 1e9 / sim.period_ns()).ceil() as usize;
+    for i in 0..packets {
+        truth.clear();
+        let (t, p) = sim.next_packet(&scene, &mut truth);
+        w.write(t, &udp_frame(src, dst, i as u16, &p)).unwrap();
+    }
+    w.into_inner().unwrap()
+}
+
+#[test]
+fn simulated_drive_ends_within_one_percent_of_the_truth() {
+    let pcap = out_path("sim.pcap");
+    std::fs::write(&pcap, simulated_capture(3.0)).unwrap();
+    let tum = out_path("sim.tum");
+    let o = ringscan(&[
+        "decode",
+        pcap.to_str().unwrap(),
+        "--model",
+        "vlp16",
+        "--deskew",
+        "odometry",
+        "--trajectory",
+        tum.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let odo = &summary["odometry"];
+    assert_eq!(odo["deskew"], true, "{odo}");
+    let traj = read_tum(&tum);
+    assert!(traj.len() >= 25, "{} poses: {odo}", traj.len());
+
+    let truth = drive();
+    let pose_at = |t: f64| truth.pose((t * 1e9).round() as i64);
+    let (t_first, _) = traj[0];
+    let (t_last, est_last) = *traj.last().unwrap();
+    let odom_from_world = pose_at(t_first).inverse();
+    let true_last = odom_from_world * pose_at(t_last);
+    let travelled: f64 = traj
+        .windows(2)
+        .map(|w| (pose_at(w[1].0).translation.vector - pose_at(w[0].0).translation.vector).norm())
+        .sum();
+    let err = (est_last.translation.vector - true_last.translation.vector).norm();
+    let rot_err = est_last.rotation.angle_to(&true_last.rotation).to_degrees();
+    println!(
+        "simulated drive: {} poses over {travelled:.2} m; end error {err:.3} m ({:.3} %), {rot_err:.3}°",
+        traj.len(),
+        100.0 * err / travelled
+    );
+    assert!(travelled > 20.0, "travelled {travelled} m");
+    assert!(
+        err <= 0.01 * travelled,
+        "end error {err:.3} m over {travelled:.2} m"
+    );
+    for p in [&pcap, &tum] {
+        let _ = std::fs::remove_file(p);
+    }
+}
+
+/// `decode --odometry --serve`: the live view advertises `/tf` and a subscriber receives the
+/// same FrameTransform bytes the MCAP file holds (a Foxglove WebSocket client, `tungstenite`).
+#[test]
+fn live_view_publishes_the_tf_of_the_mcap() {
+    use std::io::{BufRead, BufReader};
+    use std::process::Stdio;
+    use std::time::{Duration, Instant};
+    use tungstenite::client::IntoClientRequest;
+    use tungstenite::Message;
+
+    let pcap = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo-vlp16.pcap");
+    let out = out_path("live.mcap");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_ringscan"))
+        .args([
+            "decode",
+            pcap.to_str().unwrap(),
+            "--odometry",
+            "--out",
+            out.to_str().unwrap(),
+            "--serve",
+            "127.0.0.1:0",
+            "--serve-rate",
+            "1",
+        ])
+        .env("RINGSCAN_LOG", "info")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let err = child.stderr.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel::<String>();
+    std::thread::spawn(move || {
+        for line in BufReader::new(err).lines().map_while(Result::ok) {
+            if let Some(at) = line.find("ws://") {
+                let _ = tx.send(
+                    line[at + 5..]
+                        .split_whitespace()
+                        .next()
+                        .unwrap_or("")
+                        .into(),
+                );
+            }
+        }
+    });
+    let addr = rx
+        .recv_timeout(Duration::from_secs(30))
+        .expect("no live view address");
+    let stream = std::net::TcpStream::connect(&addr).unwrap();
+    stream
+        .set_read_timeout(Some(Duration::from_secs(20)))
+        .unwrap();
+    let mut req = format!("ws://{addr}/").into_client_request().unwrap();
+    req.headers_mut().insert(
+        "sec-websocket-protocol",
+        "foxglove.websocket.v1".parse().unwrap(),
+    );
+    let (mut ws, _) = tungstenite::client::client(req, stream).unwrap();
+    let started = Instant::now();
+    let mut tf_channel = None;
+    let mut received: Vec<Vec<u8>> = Vec::new();
+    loop {
+        match ws.read() {
+            Ok(Message::Text(t)) => {
+                let v: serde_json::Value = serde_json::from_str(t.as_str()).unwrap();
+                if v["op"] == "advertise" {
+                    for c in v["channels"].as_array().unwrap() {
+                        if c["topic"] == "/tf" && tf_channel.is_none() {
+                            assert_eq!(c["schemaName"], "foxglove.FrameTransform");
+                            let id = c["id"].as_u64().unwrap();
+                            tf_channel = Some(id);
+                            let sub = serde_json::json!({"op": "subscribe",
+                                "subscriptions": [{"id": 7, "channelId": id}]});
+                            ws.send(Message::text(sub.to_string())).unwrap();
+                        }
+                    }
+                }
+            }
+            Ok(Message::Binary(b)) => {
+                assert_eq!(b[0], 0x01);
+                assert_eq!(u32::from_le_bytes(b[1..5].try_into().unwrap()), 7);
+                received.push(b[13..].to_vec());
+            }
+            Ok(_) => {}
+            Err(_) => break,
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "live view did not end"
+        );
+    }
+    assert!(child.wait().unwrap().success());
+    assert!(tf_channel.is_some(), "/tf was not advertised");
+    let file = read(&out).remove("/tf").unwrap();
+    assert!(
+        received.len() >= 2,
+        "{} /tf messages received",
+        received.len()
+    );
+    // The last messages of the file, byte for byte.
+    assert_eq!(received[..], file[file.len() - received.len()..]);
+    let _ = std::fs::remove_file(&out);
+}
