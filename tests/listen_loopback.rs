@@ -94,13 +94,6 @@ const CAPTURES: &[(&str, &[&str])] = &[
     ),
 ];
 
-/// Velodyne captures whose position packets carry a valid GPS fix (see the loop below).
-const GPS_CAPTURES: &[&str] = &[
-    "monterey-first-100-packets",
-    "hdl32_example",
-    "velodyne_vlp32",
-];
-
 /// Sources (in order of appearance), destination ports and the number of datagrams.
 fn layout(pcap: &Path) -> (Vec<Ipv4Addr>, Vec<u16>, u64) {
     let mut src = ringscan::source::pcap::PcapSource::open(pcap).unwrap();
@@ -191,19 +184,9 @@ fn loopback(c: &Path, rel: &str, calibs: &[&str], tmp: &Path) {
             assert_eq!(x.len(), y.len(), "{name} {topic}: sweep {i} sizes");
             let diff: Vec<usize> = (0..x.len()).filter(|&j| x[j] != y[j]).collect();
             let fields: std::collections::BTreeSet<usize> = diff.iter().map(|j| j % 24).collect();
-            // Known core issue, not of the live path: a Velodyne sweep that starts before the
-            // first position packet has its device time completed from the host clock, and its
-            // later packets from the GPS time; the point times `t` (record bytes 16..20) of
-            // that first sweep then depend on the host clock (the capture's in `decode`, now in
-            // `listen`). Everything else must be identical.
-            let t_only = fields.iter().all(|f| (16..20).contains(f));
-            assert!(
-                i == 0 && t_only && GPS_CAPTURES.contains(&name.as_str()),
+            panic!(
                 "{name} {topic}: sweep {i} differs ({} bytes differ at record offsets {fields:?})",
                 diff.len()
-            );
-            eprintln!(
-                "{name} {topic}: sweep 0: point times differ (host-clock start before the first GPS fix, a known core issue); x, y, z, intensity, ring, return identical"
             );
         }
         sweeps += sa.len();

@@ -224,3 +224,51 @@ fn organized_image_has_one_cell_per_ring_and_column() {
         assert!(elev(r) > elev(r - 1));
     }
 }
+
+#[test]
+fn a_gps_fix_arriving_mid_sweep_does_not_shift_point_times() {
+    // The host clock (2023-11-14) is months away from the GPS time (2024-05-01 12:00): the
+    // first sweep opens on the host clock and the fix arrives in its 10th packet. Every point
+    // of every sweep must stay within its sweep's own span (at 10 Hz, < 0.1 s plus a packet).
+    // Before the fix, the packets after the fix were timed by the GPS clock: sweep 0 was cut
+    // there as "too long" and sweep 1 began mid-turn (and, live, `t` could jump).
+    let mut sim = vlp16_sim();
+    let rmc = "$GPRMC,120000,A,3707.8324,N,12139.2864,W,000.0,144.7,010524,013.8,E,D";
+    let cs = rmc[1..].bytes().fold(0u8, |a, c| a ^ c);
+    let sentence = format!("{rmc}*{cs:02X}\r\n");
+    let pos = move |i: usize| (i == 10).then(|| encode_position_packet(0, 2, &sentence));
+    let (out, _) = run(
+        &mut sim,
+        300,
+        StreamConfig::default(),
+        &|_| false,
+        Some(&pos),
+    );
+    assert!(out.sweeps.len() >= 3);
+    assert_eq!(out.sweeps[0].clock, ClockSource::Host);
+    assert_eq!(out.sweeps[1].clock, ClockSource::SensorGps);
+    // Sweep 0 runs from the start azimuth (123.4°) to the wrap: 236.6° at 3600 °/s = 65.72 ms
+    // (to within a packet); it is not cut where the clock changed source. Sweep 1 is a whole
+    // turn on the GPS clock.
+    let first = out.sweeps[0].span_ns() as i64;
+    assert!(
+        (first - 65_722_222).abs() < 1_400_000,
+        "sweep 0 spans {first} ns"
+    );
+    assert!(
+        out.sweeps[1].span_ns() > 99_000_000,
+        "sweep 1 spans {}",
+        out.sweeps[1].span_ns()
+    );
+    let bound = 100_000_000 + 1_400_000;
+    for s in &out.sweeps {
+        let max_t = s.points.iter().map(|p| p.t).max().unwrap_or(0);
+        assert!(max_t <= bound, "sweep {}: t up to {max_t} ns", s.index);
+        assert!(
+            max_t <= s.span_ns(),
+            "sweep {}: t {max_t} > span {}",
+            s.index,
+            s.span_ns()
+        );
+    }
+}

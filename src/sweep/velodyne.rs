@@ -162,6 +162,10 @@ pub struct VelodyneStream {
     /// Host-time minus device-time offset of the current sweep's first packet (for host-clock
     /// timestamps).
     sweep_open: bool,
+    /// Top-of-hour stamp and first-firing time of the packet that opened the current sweep:
+    /// later packets of the sweep are timed from it by their stamp difference, so a clock that
+    /// changes source mid-sweep (the first GPS fix) cannot shift the points' `t`.
+    anchor: (u32, i64),
 }
 
 impl VelodyneStream {
@@ -178,6 +182,7 @@ impl VelodyneStream {
             facts: SensorFacts::default(),
             next_index: 0,
             sweep_open: false,
+            anchor: (0, 0),
         }
     }
 
@@ -432,7 +437,9 @@ impl VelodyneStream {
         let block_t: [u32; BLOCKS] = core::array::from_fn(|b| dec.block_time_ns(b));
         let toh = p.timestamp_us();
         let (stamp_ns, clock) = self.device_time(toh, host_ns);
-        let first_firing_ns = stamp_ns.saturating_add(model.stamp_to_first_firing_ns());
+        // A new sweep takes the packet's time from the current clock; a sweep already open
+        // goes on from the time of the packet that opened it (see `anchor`).
+        let fresh_first_firing_ns = stamp_ns.saturating_add(model.stamp_to_first_firing_ns());
         let period_ns = model.packet_period_ns(mode);
 
         // Loss and discontinuities.
@@ -453,6 +460,15 @@ impl VelodyneStream {
                 }
             }
         }
+        let continued = |this: &Self| {
+            let (toh0, ff0) = this.anchor;
+            ff0.saturating_add(toh_delta_us(toh0, toh).saturating_mul(1_000))
+        };
+        let mut first_firing_ns = if self.sweep_open {
+            continued(self)
+        } else {
+            fresh_first_firing_ns
+        };
         let cut = self.cfg.cut_angle;
         let rel = |az: u16| -> u16 {
             ((u32::from(az) + 36_000 - u32::from(cut) % 36_000) % 36_000) as u16
@@ -472,16 +488,17 @@ impl VelodyneStream {
             // stream's first packet, or the first after a discontinuity).
             if (wrapped || too_long) && (self.sweep_open || g > seg_start) {
                 if g > seg_start {
-                    self.add_segment(host_ns, p, seg_start..g, first_firing_ns, clock);
+                    self.add_segment_at(toh, host_ns, p, seg_start..g, first_firing_ns, clock);
                 }
                 self.emit(on_sweep);
+                first_firing_ns = fresh_first_firing_ns;
                 seg_start = g;
             }
             last_rel = Some(r);
             g += bpf;
         }
         if seg_start < BLOCKS {
-            self.add_segment(host_ns, p, seg_start..BLOCKS, first_firing_ns, clock);
+            self.add_segment_at(toh, host_ns, p, seg_start..BLOCKS, first_firing_ns, clock);
         }
         self.cur.last_azimuth = p.azimuth(BLOCKS - 1);
         self.stats.data_packets += 1;
@@ -489,6 +506,23 @@ impl VelodyneStream {
             toh_us: toh,
             rel_az: last_rel.unwrap_or(0),
         });
+    }
+
+    /// [`Self::add_segment`], remembering the packet that opens a sweep as its time anchor.
+    fn add_segment_at(
+        &mut self,
+        toh: u32,
+        host_ns: i64,
+        p: &DataPacket<'_>,
+        blocks: core::ops::Range<usize>,
+        first_firing_ns: i64,
+        clock: ClockSource,
+    ) {
+        let was_open = self.sweep_open;
+        self.add_segment(host_ns, p, blocks, first_firing_ns, clock);
+        if !was_open && self.sweep_open {
+            self.anchor = (toh, first_firing_ns);
+        }
     }
 
     fn add_segment(
