@@ -122,6 +122,8 @@ pub struct SensorFacts {
     pub calibration: String,
     /// Last PPS state reported.
     pub pps: Option<PpsState>,
+    /// Last telemetry of the position packets (newer firmware only).
+    pub telemetry: Option<crate::wire::velodyne::Telemetry>,
     /// Last RMC sentence with a valid date.
     pub last_rmc: Option<Rmc>,
     /// Position packets whose NMEA field was empty.
@@ -243,6 +245,9 @@ impl VelodyneStream {
         self.stats.position_packets += 1;
         let pps = p.pps();
         self.facts.pps = Some(pps);
+        if let Some(t) = p.telemetry() {
+            self.facts.telemetry = Some(t);
+        }
         let nmea = p.nmea();
         if nmea.is_empty() {
             self.facts.empty_nmea += 1;

@@ -180,6 +180,32 @@ impl PpsState {
     }
 }
 
+/// Telemetry of a position packet (newer firmware), as the sensor sends it: temperatures in
+/// whole °C, offsets 0xBB–0xC5 and 0xCB–0xCD.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Telemetry {
+    /// Temperature of the top board, °C (0xBB).
+    pub temp_top_c: u8,
+    /// Temperature of the bottom board, °C (0xBC).
+    pub temp_bottom_c: u8,
+    /// Temperature at the last ADC calibration, °C (0xBD).
+    pub temp_at_adc_calibration_c: u8,
+    /// Temperature change since the last ADC calibration (0xBE, i16).
+    pub temp_change_since_adc_calibration: i16,
+    /// Seconds since the last ADC calibration (0xC0, u32).
+    pub seconds_since_adc_calibration: u32,
+    /// Reason of the last ADC calibration (0xC4).
+    pub adc_calibration_reason: u8,
+    /// ADC calibration flags (0xC5).
+    pub adc_calibration_flags: u8,
+    /// Thermal shutdown state (0xCB; 0 = none).
+    pub thermal_shutdown: u8,
+    /// Temperature at the last thermal shutdown, °C (0xCC).
+    pub temp_at_shutdown_c: u8,
+    /// Temperature at power-up, °C (0xCD).
+    pub temp_at_power_up_c: u8,
+}
+
 /// A checked view of one Velodyne position (telemetry) packet, 512 bytes.
 ///
 /// Offsets (velodyne_decoder `telemetry_packet.cpp`; VLP-16 manual §9.3.3): 0xC6 µs since the
@@ -216,10 +242,74 @@ impl<'a> PositionPacket<'a> {
         }
     }
 
+    /// The telemetry of newer firmware (VLP-16, VLP-32C, HDL-32E; FORMATS.md "Position /
+    /// telemetry packet"), or `None` when every telemetry byte is zero (older firmware sends
+    /// nothing there).
+    pub fn telemetry(&self) -> Option<Telemetry> {
+        let b = self.b;
+        let zero = b[0xBB..0xC6].iter().chain(&b[0xCB..0xCE]).all(|&x| x == 0);
+        (!zero).then(|| Telemetry {
+            temp_top_c: b[0xBB],
+            temp_bottom_c: b[0xBC],
+            temp_at_adc_calibration_c: b[0xBD],
+            temp_change_since_adc_calibration: i16::from_le_bytes([b[0xBE], b[0xBF]]),
+            seconds_since_adc_calibration: u32::from_le_bytes([b[0xC0], b[0xC1], b[0xC2], b[0xC3]]),
+            adc_calibration_reason: b[0xC4],
+            adc_calibration_flags: b[0xC5],
+            thermal_shutdown: b[0xCB],
+            temp_at_shutdown_c: b[0xCC],
+            temp_at_power_up_c: b[0xCD],
+        })
+    }
+
     /// The NMEA sentence bytes (up to the first NUL, at most 128 bytes); empty if none.
     pub fn nmea(&self) -> &'a [u8] {
         let field = &self.b[0xCE..0xCE + 128];
         let end = field.iter().position(|&c| c == 0).unwrap_or(field.len());
         &field[..end]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn telemetry_reads_the_documented_offsets_and_is_absent_when_zero() {
+        // Values placed by hand at FORMATS.md's offsets.
+        let mut b = [0u8; POSITION_PACKET_LEN];
+        b[0xBB] = 46;
+        b[0xBC] = 41;
+        b[0xBD] = 38;
+        b[0xBE..0xC0].copy_from_slice(&(-3i16).to_le_bytes());
+        b[0xC0..0xC4].copy_from_slice(&7_200u32.to_le_bytes());
+        b[0xC4] = 2;
+        b[0xC5] = 0x81;
+        b[0xCB] = 1;
+        b[0xCC] = 95;
+        b[0xCD] = 21;
+        b[0xCA] = 2;
+        let t = PositionPacket::new(&b).unwrap().telemetry().unwrap();
+        assert_eq!(
+            t,
+            Telemetry {
+                temp_top_c: 46,
+                temp_bottom_c: 41,
+                temp_at_adc_calibration_c: 38,
+                temp_change_since_adc_calibration: -3,
+                seconds_since_adc_calibration: 7_200,
+                adc_calibration_reason: 2,
+                adc_calibration_flags: 0x81,
+                thermal_shutdown: 1,
+                temp_at_shutdown_c: 95,
+                temp_at_power_up_c: 21,
+            }
+        );
+        // Old firmware: time, PPS and NMEA only.
+        let mut old = [0u8; POSITION_PACKET_LEN];
+        old[0xC6..0xCA].copy_from_slice(&123_456u32.to_le_bytes());
+        old[0xCA] = 2;
+        old[0xCE..0xD3].copy_from_slice(b"$GPRM");
+        assert_eq!(PositionPacket::new(&old).unwrap().telemetry(), None);
     }
 }
