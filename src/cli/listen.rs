@@ -451,6 +451,10 @@ impl DecodeThread {
             let _ = self.session.close_sink();
             return Err((err, path));
         }
+        if let Err(e) = self.session.finish_odometry() {
+            let _ = self.session.close_sink();
+            return Err((e, path));
+        }
         let last = self
             .session
             .close_sink()

@@ -229,6 +229,10 @@ struct ListenCmd {
     #[arg(long)]
     json: bool,
     #[command(flatten)]
+    pipeline: pipeline::PipelineArgs,
+    #[command(flatten)]
+    odometry: odometry::OdometryArgs,
+    #[command(flatten)]
     serve: serve::ServeArgs,
 }
 
@@ -340,11 +344,9 @@ pub fn main() -> ExitCode {
                         CrcArg::On => Some(true),
                         CrcArg::Off => Some(false),
                     },
-                    // The pipeline runs on decoded captures (`decode --pipeline`); live, the
-                    // sweeps are written as they come.
-                    pipeline: Default::default(),
+                    pipeline: c.pipeline,
                     format: c.format,
-                    odometry: Default::default(),
+                    odometry: c.odometry,
                 },
                 format: c.format,
                 multicast: c.multicast,

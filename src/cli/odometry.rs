@@ -282,6 +282,15 @@ fn median_ms(v: &[u64]) -> Option<f64> {
 }
 
 impl OdometryRunner {
+    /// The output moved to a new file (`listen --split-every`): `/tf` and the maps are added
+    /// again there before the next message.
+    pub fn new_file(&mut self) {
+        self.tf = None;
+        for so in self.sensors.iter_mut().flatten() {
+            so.topics = None;
+        }
+    }
+
     /// A runner for the resolved flags.
     pub fn new(setup: OdometrySetup) -> Self {
         Self {

@@ -230,6 +230,15 @@ impl PipelineRunner {
         }
     }
 
+    /// The output moved to a new file (`listen --split-every`): its channels, and the static
+    /// transforms, are added again there before the next message.
+    pub fn new_file(&mut self) {
+        self.tf_static = None;
+        for sp in self.sensors.iter_mut().flatten() {
+            sp.topics = None;
+        }
+    }
+
     /// Publishes the outputs to a live view too.
     pub fn set_live(&mut self, live: Option<super::serve::SharedPublisher>) {
         self.live = live;

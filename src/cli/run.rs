@@ -560,6 +560,12 @@ impl Session {
                 None => None,
             };
         }
+        if let Some(p) = self.out.pipeline.as_mut() {
+            p.new_file();
+        }
+        if let Some(o) = self.out.odometry.as_mut() {
+            o.new_file();
+        }
         Ok(closed)
     }
 
