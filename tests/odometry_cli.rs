@@ -16,12 +16,14 @@
 //!   messages byte for byte.
 
 mod common;
+mod foxglove_msgs;
 
 use std::collections::BTreeMap;
 use std::net::{Ipv4Addr, SocketAddrV4};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use foxglove_msgs::*;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use prost::Message as _;
 use ringscan::calib::builtin::builtin;
@@ -31,77 +33,13 @@ use ringscan::sim::net::{udp_frame, PcapWriter};
 use ringscan::sim::scenes;
 use ringscan::sim::velodyne::VelodyneSim;
 
-#[derive(Clone, PartialEq, prost::Message)]
-struct V3 {
-    #[prost(double, tag = "1")]
-    x: f64,
-    #[prost(double, tag = "2")]
-    y: f64,
-    #[prost(double, tag = "3")]
-    z: f64,
-}
-#[derive(Clone, PartialEq, prost::Message)]
-struct Q {
-    #[prost(double, tag = "1")]
-    x: f64,
-    #[prost(double, tag = "2")]
-    y: f64,
-    #[prost(double, tag = "3")]
-    z: f64,
-    #[prost(double, tag = "4")]
-    w: f64,
-}
-#[derive(Clone, PartialEq, prost::Message)]
-struct FrameTransform {
-    #[prost(message, optional, tag = "1")]
-    timestamp: Option<prost_types::Timestamp>,
-    #[prost(string, tag = "2")]
-    parent_frame_id: String,
-    #[prost(string, tag = "3")]
-    child_frame_id: String,
-    #[prost(message, optional, tag = "4")]
-    translation: Option<V3>,
-    #[prost(message, optional, tag = "5")]
-    rotation: Option<Q>,
-}
-#[derive(Clone, PartialEq, prost::Message)]
-struct PointCloud {
-    #[prost(message, optional, tag = "1")]
-    timestamp: Option<prost_types::Timestamp>,
-    #[prost(string, tag = "2")]
-    frame_id: String,
-    #[prost(fixed32, tag = "4")]
-    point_stride: u32,
-    #[prost(bytes = "vec", tag = "6")]
-    data: Vec<u8>,
-}
-
-fn ringscan(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_ringscan"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
 fn out_path(name: &str) -> PathBuf {
-    std::env::temp_dir().join(format!(
-        "ringscan-odometry-cli-{}-{name}",
-        std::process::id()
-    ))
+    foxglove_msgs::out_path("odometry-cli", name)
 }
 
 /// Message bodies per topic, in file order.
-fn read(path: &Path) -> BTreeMap<String, Vec<Vec<u8>>> {
-    let bytes = std::fs::read(path).unwrap();
-    let mut by_topic: BTreeMap<String, Vec<Vec<u8>>> = BTreeMap::new();
-    for m in mcap::MessageStream::new(&bytes).unwrap() {
-        let m = m.unwrap();
-        by_topic
-            .entry(m.channel.topic.clone())
-            .or_default()
-            .push(m.data.to_vec());
-    }
-    by_topic
+fn read(path: &Path) -> ByTopic {
+    read_mcap(path).0
 }
 
 /// TUM lines: (t s, pose).

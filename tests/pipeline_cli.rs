@@ -11,115 +11,13 @@
 //! configuration is refused (exit 2) naming the key; `ringscan render` draws a PNG.
 
 mod common;
+mod foxglove_msgs;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
+use foxglove_msgs::*;
 use prost::Message as _;
-
-#[derive(Clone, PartialEq, prost::Message)]
-struct Field {
-    #[prost(string, tag = "1")]
-    name: String,
-    #[prost(fixed32, tag = "2")]
-    offset: u32,
-    #[prost(int32, tag = "3")]
-    r#type: i32,
-}
-#[derive(Clone, PartialEq, prost::Message)]
-struct PointCloud {
-    #[prost(message, optional, tag = "1")]
-    timestamp: Option<prost_types::Timestamp>,
-    #[prost(string, tag = "2")]
-    frame_id: String,
-    #[prost(fixed32, tag = "4")]
-    point_stride: u32,
-    #[prost(message, repeated, tag = "5")]
-    fields: Vec<Field>,
-    #[prost(bytes = "vec", tag = "6")]
-    data: Vec<u8>,
-}
-#[derive(Clone, PartialEq, prost::Message)]
-struct V3 {
-    #[prost(double, tag = "1")]
-    x: f64,
-    #[prost(double, tag = "2")]
-    y: f64,
-    #[prost(double, tag = "3")]
-    z: f64,
-}
-#[derive(Clone, PartialEq, prost::Message)]
-struct Q {
-    #[prost(double, tag = "1")]
-    x: f64,
-    #[prost(double, tag = "2")]
-    y: f64,
-    #[prost(double, tag = "3")]
-    z: f64,
-    #[prost(double, tag = "4")]
-    w: f64,
-}
-#[derive(Clone, PartialEq, prost::Message)]
-struct Pose {
-    #[prost(message, optional, tag = "1")]
-    position: Option<V3>,
-    #[prost(message, optional, tag = "2")]
-    orientation: Option<Q>,
-}
-#[derive(Clone, PartialEq, prost::Message)]
-struct Cube {
-    #[prost(message, optional, tag = "1")]
-    pose: Option<Pose>,
-    #[prost(message, optional, tag = "2")]
-    size: Option<V3>,
-}
-#[derive(Clone, PartialEq, prost::Message)]
-struct Kv {
-    #[prost(string, tag = "1")]
-    key: String,
-    #[prost(string, tag = "2")]
-    value: String,
-}
-#[derive(Clone, PartialEq, prost::Message)]
-struct Entity {
-    #[prost(string, tag = "2")]
-    frame_id: String,
-    #[prost(string, tag = "3")]
-    id: String,
-    #[prost(message, repeated, tag = "6")]
-    metadata: Vec<Kv>,
-    #[prost(message, repeated, tag = "8")]
-    cubes: Vec<Cube>,
-}
-#[derive(Clone, PartialEq, prost::Message)]
-struct Deletion {
-    #[prost(int32, tag = "2")]
-    r#type: i32,
-}
-#[derive(Clone, PartialEq, prost::Message)]
-struct SceneUpdate {
-    #[prost(message, repeated, tag = "1")]
-    deletions: Vec<Deletion>,
-    #[prost(message, repeated, tag = "2")]
-    entities: Vec<Entity>,
-}
-#[derive(Clone, PartialEq, prost::Message)]
-struct FrameTransform {
-    #[prost(string, tag = "2")]
-    parent_frame_id: String,
-    #[prost(string, tag = "3")]
-    child_frame_id: String,
-    #[prost(message, optional, tag = "4")]
-    translation: Option<V3>,
-}
-
-fn ringscan(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_ringscan"))
-        .args(args)
-        .output()
-        .unwrap()
-}
 
 fn inputs() -> Option<(PathBuf, PathBuf)> {
     let root = common::captures()?;
@@ -130,10 +28,7 @@ fn inputs() -> Option<(PathBuf, PathBuf)> {
 }
 
 fn out_path(name: &str) -> PathBuf {
-    std::env::temp_dir().join(format!(
-        "ringscan-pipeline-cli-{}-{name}",
-        std::process::id()
-    ))
+    foxglove_msgs::out_path("pipeline-cli", name)
 }
 
 /// Points of a cloud as (x, y, z, cluster).
@@ -160,23 +55,8 @@ fn points(pc: &PointCloud) -> Vec<(f32, f32, f32, Option<u32>)> {
         .collect()
 }
 
-/// Message bodies per topic, in file order.
-type ByTopic = BTreeMap<String, Vec<Vec<u8>>>;
-
-/// Messages per topic, in file order, and each channel's schema name.
 fn read(path: &Path) -> (ByTopic, BTreeMap<String, String>) {
-    let bytes = std::fs::read(path).unwrap();
-    let mut by_topic: BTreeMap<String, Vec<Vec<u8>>> = BTreeMap::new();
-    let mut schemas = BTreeMap::new();
-    for m in mcap::MessageStream::new(&bytes).unwrap() {
-        let m = m.unwrap();
-        let topic = m.channel.topic.clone();
-        if let Some(s) = &m.channel.schema {
-            schemas.insert(topic.clone(), s.name.clone());
-        }
-        by_topic.entry(topic).or_default().push(m.data.to_vec());
-    }
-    (by_topic, schemas)
+    read_mcap(path)
 }
 
 #[test]

@@ -14,6 +14,7 @@ use std::process::ExitCode;
 use mcap::records::Record;
 use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader};
 use prost::Message as _;
+use ringscan::sink::read::{PointCloud, Quaternion, SceneUpdate};
 use ringscan::sink::scene::cluster_color;
 
 use super::run::RunError;
@@ -40,74 +41,6 @@ pub struct RenderCmd {
     size_px: u32,
 }
 
-// Mirrors of the Foxglove messages, as far as the picture needs them.
-#[derive(Clone, PartialEq, prost::Message)]
-struct PackedElementField {
-    #[prost(string, tag = "1")]
-    name: String,
-    #[prost(fixed32, tag = "2")]
-    offset: u32,
-    #[prost(int32, tag = "3")]
-    r#type: i32,
-}
-#[derive(Clone, PartialEq, prost::Message)]
-struct PointCloud {
-    #[prost(string, tag = "2")]
-    frame_id: String,
-    #[prost(fixed32, tag = "4")]
-    point_stride: u32,
-    #[prost(message, repeated, tag = "5")]
-    fields: Vec<PackedElementField>,
-    #[prost(bytes = "vec", tag = "6")]
-    data: Vec<u8>,
-}
-#[derive(Clone, PartialEq, prost::Message)]
-struct Vector3 {
-    #[prost(double, tag = "1")]
-    x: f64,
-    #[prost(double, tag = "2")]
-    y: f64,
-    #[prost(double, tag = "3")]
-    z: f64,
-}
-#[derive(Clone, PartialEq, prost::Message)]
-struct Quaternion {
-    #[prost(double, tag = "1")]
-    x: f64,
-    #[prost(double, tag = "2")]
-    y: f64,
-    #[prost(double, tag = "3")]
-    z: f64,
-    #[prost(double, tag = "4")]
-    w: f64,
-}
-#[derive(Clone, PartialEq, prost::Message)]
-struct Pose {
-    #[prost(message, optional, tag = "1")]
-    position: Option<Vector3>,
-    #[prost(message, optional, tag = "2")]
-    orientation: Option<Quaternion>,
-}
-#[derive(Clone, PartialEq, prost::Message)]
-struct Cube {
-    #[prost(message, optional, tag = "1")]
-    pose: Option<Pose>,
-    #[prost(message, optional, tag = "2")]
-    size: Option<Vector3>,
-}
-#[derive(Clone, PartialEq, prost::Message)]
-struct Entity {
-    #[prost(string, tag = "3")]
-    id: String,
-    #[prost(message, repeated, tag = "8")]
-    cubes: Vec<Cube>,
-}
-#[derive(Clone, PartialEq, prost::Message)]
-struct SceneUpdate {
-    #[prost(message, repeated, tag = "2")]
-    entities: Vec<Entity>,
-}
-
 /// One sweep's pipeline outputs, as read back.
 #[derive(Default)]
 struct Frame {
@@ -125,24 +58,21 @@ fn bad(path: &str, msg: impl std::fmt::Display) -> RunError {
 
 /// x, y (and the `cluster` field, if any) of a point cloud's points.
 fn points_of(pc: &PointCloud) -> Option<Vec<(f32, f32, u32)>> {
-    let off = |n: &str| {
-        pc.fields
-            .iter()
-            .find(|f| f.name == n)
-            .map(|f| f.offset as usize)
-    };
-    let (x, y) = (off("x")?, off("y")?);
-    let cluster = off("cluster");
+    let (x, y) = (pc.offset("x")?, pc.offset("y")?);
     let stride = pc.point_stride as usize;
-    if stride == 0 || x + 4 > stride || y + 4 > stride || cluster.is_some_and(|c| c + 4 > stride) {
+    if stride == 0 || x + 4 > stride || y + 4 > stride {
         return None;
     }
-    let f = |r: &[u8], o: usize| f32::from_le_bytes([r[o], r[o + 1], r[o + 2], r[o + 3]]);
-    let u = |r: &[u8], o: usize| u32::from_le_bytes([r[o], r[o + 1], r[o + 2], r[o + 3]]);
+    let clusters: Vec<u32> = match pc.offset("cluster") {
+        Some(c) if c + 4 <= stride => pc.u32s(c).collect(),
+        Some(_) => return None,
+        None => Vec::new(),
+    };
     Some(
-        pc.data
-            .chunks_exact(stride)
-            .map(|r| (f(r, x), f(r, y), cluster.map_or(0, |c| u(r, c))))
+        pc.f32s(x)
+            .zip(pc.f32s(y))
+            .enumerate()
+            .map(|(i, (x, y))| (x, y, clusters.get(i).copied().unwrap_or(0)))
             .collect(),
     )
 }

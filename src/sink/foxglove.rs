@@ -533,57 +533,7 @@ mod tests {
     /// The hand-written encoding decodes with prost into a mirror of the official messages.
     #[test]
     fn point_cloud_round_trips_through_prost() {
-        #[derive(Clone, PartialEq, prost::Message)]
-        struct Field {
-            #[prost(string, tag = "1")]
-            name: String,
-            #[prost(fixed32, tag = "2")]
-            offset: u32,
-            #[prost(int32, tag = "3")]
-            r#type: i32,
-        }
-        #[derive(Clone, PartialEq, prost::Message)]
-        struct Quaternion {
-            #[prost(double, tag = "1")]
-            x: f64,
-            #[prost(double, tag = "2")]
-            y: f64,
-            #[prost(double, tag = "3")]
-            z: f64,
-            #[prost(double, tag = "4")]
-            w: f64,
-        }
-        #[derive(Clone, PartialEq, prost::Message)]
-        struct Vector3 {
-            #[prost(double, tag = "1")]
-            x: f64,
-            #[prost(double, tag = "2")]
-            y: f64,
-            #[prost(double, tag = "3")]
-            z: f64,
-        }
-        #[derive(Clone, PartialEq, prost::Message)]
-        struct Pose {
-            #[prost(message, optional, tag = "1")]
-            position: Option<Vector3>,
-            #[prost(message, optional, tag = "2")]
-            orientation: Option<Quaternion>,
-        }
-        #[derive(Clone, PartialEq, prost::Message)]
-        struct PointCloud {
-            #[prost(message, optional, tag = "1")]
-            timestamp: Option<prost_types::Timestamp>,
-            #[prost(string, tag = "2")]
-            frame_id: String,
-            #[prost(message, optional, tag = "3")]
-            pose: Option<Pose>,
-            #[prost(fixed32, tag = "4")]
-            point_stride: u32,
-            #[prost(message, repeated, tag = "5")]
-            fields: Vec<Field>,
-            #[prost(bytes = "vec", tag = "6")]
-            data: Vec<u8>,
-        }
+        use crate::sink::read::{PointCloud, Quaternion, Vector3};
         let points = [
             Point {
                 x: 1.0,

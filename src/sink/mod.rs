@@ -28,6 +28,7 @@ pub mod foxglove;
 #[cfg(feature = "serve")]
 pub mod live_view;
 pub mod mcap;
+pub mod read;
 pub mod ros2;
 pub mod scene;
 

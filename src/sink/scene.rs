@@ -680,105 +680,7 @@ pub fn add_tf_static<W: Write + Seek>(sink: &mut McapSink<W>) -> Result<TopicId,
 mod tests {
     use super::*;
     use crate::pipeline::cluster::OrientedBox;
-
-    #[derive(Clone, PartialEq, prost::Message)]
-    struct Vector3 {
-        #[prost(double, tag = "1")]
-        x: f64,
-        #[prost(double, tag = "2")]
-        y: f64,
-        #[prost(double, tag = "3")]
-        z: f64,
-    }
-    #[derive(Clone, PartialEq, prost::Message)]
-    struct Quaternion {
-        #[prost(double, tag = "1")]
-        x: f64,
-        #[prost(double, tag = "2")]
-        y: f64,
-        #[prost(double, tag = "3")]
-        z: f64,
-        #[prost(double, tag = "4")]
-        w: f64,
-    }
-    #[derive(Clone, PartialEq, prost::Message)]
-    struct Pose {
-        #[prost(message, optional, tag = "1")]
-        position: Option<Vector3>,
-        #[prost(message, optional, tag = "2")]
-        orientation: Option<Quaternion>,
-    }
-    #[derive(Clone, PartialEq, prost::Message)]
-    struct Color {
-        #[prost(double, tag = "1")]
-        r: f64,
-        #[prost(double, tag = "2")]
-        g: f64,
-        #[prost(double, tag = "3")]
-        b: f64,
-        #[prost(double, tag = "4")]
-        a: f64,
-    }
-    #[derive(Clone, PartialEq, prost::Message)]
-    struct Cube {
-        #[prost(message, optional, tag = "1")]
-        pose: Option<Pose>,
-        #[prost(message, optional, tag = "2")]
-        size: Option<Vector3>,
-        #[prost(message, optional, tag = "3")]
-        color: Option<Color>,
-    }
-    #[derive(Clone, PartialEq, prost::Message)]
-    struct Kv {
-        #[prost(string, tag = "1")]
-        key: String,
-        #[prost(string, tag = "2")]
-        value: String,
-    }
-    #[derive(Clone, PartialEq, prost::Message)]
-    struct Entity {
-        #[prost(message, optional, tag = "1")]
-        timestamp: Option<prost_types::Timestamp>,
-        #[prost(string, tag = "2")]
-        frame_id: String,
-        #[prost(string, tag = "3")]
-        id: String,
-        #[prost(bool, tag = "5")]
-        frame_locked: bool,
-        #[prost(message, repeated, tag = "6")]
-        metadata: Vec<Kv>,
-        #[prost(message, repeated, tag = "8")]
-        cubes: Vec<Cube>,
-    }
-    #[derive(Clone, PartialEq, prost::Message)]
-    struct Deletion {
-        #[prost(message, optional, tag = "1")]
-        timestamp: Option<prost_types::Timestamp>,
-        #[prost(int32, tag = "2")]
-        r#type: i32,
-        #[prost(string, tag = "3")]
-        id: String,
-    }
-    #[derive(Clone, PartialEq, prost::Message)]
-    struct SceneUpdate {
-        #[prost(message, repeated, tag = "1")]
-        deletions: Vec<Deletion>,
-        #[prost(message, repeated, tag = "2")]
-        entities: Vec<Entity>,
-    }
-    #[derive(Clone, PartialEq, prost::Message)]
-    struct FrameTransform {
-        #[prost(message, optional, tag = "1")]
-        timestamp: Option<prost_types::Timestamp>,
-        #[prost(string, tag = "2")]
-        parent_frame_id: String,
-        #[prost(string, tag = "3")]
-        child_frame_id: String,
-        #[prost(message, optional, tag = "4")]
-        translation: Option<Vector3>,
-        #[prost(message, optional, tag = "5")]
-        rotation: Option<Quaternion>,
-    }
+    use crate::sink::read::{FrameTransform, KeyValuePair, SceneUpdate, Vector3};
 
     /// The hand encoding decodes with prost into mirrors of the official messages.
     #[test]
@@ -810,7 +712,7 @@ mod tests {
         );
         assert_eq!(
             e.metadata,
-            [Kv {
+            [KeyValuePair {
                 key: "points".into(),
                 value: "42".into()
             }]
