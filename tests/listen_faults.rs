@@ -84,9 +84,8 @@ fn sigint_and_sigterm_mid_run_leave_a_finalised_mcap() {
         // About 3 s of packets; the signal comes after 1.2 s, in the middle.
         let loops = (3.0 / secs).ceil() as u64;
         let pcap = pcap.clone();
-        let sender = std::thread::spawn(move || {
-            replay(&pcap, offset, "1", &["--loop", &loops.to_string()])
-        });
+        let sender =
+            std::thread::spawn(move || replay(&pcap, offset, "1", &["--loop", &loops.to_string()]));
         std::thread::sleep(Duration::from_millis(1200));
         let (code, stdout, err) = l.stop(sig);
         sender.join().unwrap();
@@ -300,7 +299,7 @@ fn ouster_metadata_from_its_http_api_and_again_after_a_new_init_id() {
     let l = start_listen(&args);
     let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
     let port_of = |p: u16| (i32::from(p) + offset) as u16;
-    // Run 1: no metadata yet; the first packets start the request.
+    // Run 1: no metadata yet; the first packets start the request and wait for it.
     send_all(&sock, &dgrams, port_of);
     // Runs 2 and 3: the sensor re-initialised (init_id u24 @4 of each lidar packet changed).
     for k in 1..=2u32 {
@@ -332,12 +331,19 @@ fn ouster_metadata_from_its_http_api_and_again_after_a_new_init_id() {
     // The metadata is attached to the file like a --calib file.
     let att = &j["output"]["attachments"];
     assert_eq!(att[0]["name"], "metadata-127.0.0.1.json", "{att}");
-    // Runs 2 and 3 decode to exactly the sweeps of `decode` with the metadata file.
+    // The datagrams that came before the metadata were held and decoded once it arrived:
+    // none is lost to the request's round trip.
+    let held = &j["receive"]["held_for_metadata"];
+    assert!(held["held"].as_u64().unwrap() > 0, "{held}");
+    assert_eq!(held["decoded"], held["held"], "{held}");
+    assert_eq!(held["evicted"], 0, "{held}");
+    assert_eq!(j["packets"]["ignored"], 0);
+    // Every run decodes to exactly the sweeps of `decode` with the metadata file.
     let live = points_by_topic(&std::fs::read(&out).unwrap())["/points"].clone();
-    let n = live.len();
-    assert!(n >= 6, "{n} sweeps");
-    assert!(live[n - 6..n - 3] == truth[..], "run 2 differs from decode");
-    assert!(live[n - 3..] == truth[..], "run 3 differs from decode");
+    assert_eq!(live.len(), 9, "sweeps");
+    assert!(live[..3] == truth[..], "run 1 differs from decode");
+    assert!(live[3..6] == truth[..], "run 2 differs from decode");
+    assert!(live[6..] == truth[..], "run 3 differs from decode");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

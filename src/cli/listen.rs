@@ -41,6 +41,9 @@ pub const QUEUE_DATAGRAMS: usize = 65_536;
 pub const QUEUE_BYTES: usize = 128 << 20;
 /// Time between two metadata requests to one sensor.
 const FETCH_RETRY: Duration = Duration::from_secs(5);
+/// Payload bytes held, over all sensors, while their metadata is fetched (the oldest go first
+/// beyond it: 16 MiB is about 2.5 s of an OS-2-128 at 2048 × 10).
+pub const HOLD_BYTES: usize = 16 << 20;
 
 /// When `--split-every` starts a new file.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -201,6 +204,61 @@ struct DecodeResult {
     summary: serde_json::Map<String, Value>,
     lost: u64,
     files: Vec<(PathBuf, SinkSummary)>,
+    held: Held,
+}
+
+/// Datagrams of Ouster sensors whose metadata is being fetched, decoded once it arrives, so a
+/// recording's first frames are not lost to the request's round trip.
+#[derive(Default)]
+struct Held {
+    by_addr: HashMap<Ipv4Addr, std::collections::VecDeque<Received>>,
+    bytes: usize,
+    /// Datagrams held, ever.
+    held: u64,
+    /// Pushed again once the metadata came (each was counted `ignored` when it arrived).
+    replayed: u64,
+    /// Of those, routed to a sensor this time.
+    decoded: u64,
+    /// Let go to stay within [`HOLD_BYTES`].
+    evicted: u64,
+}
+
+impl Held {
+    fn hold(&mut self, r: Received) {
+        let addr = *r.src.ip();
+        self.bytes += r.payload.len();
+        self.held += 1;
+        self.by_addr.entry(addr).or_default().push_back(r);
+        while self.bytes > HOLD_BYTES {
+            // The oldest datagram of the sensor holding most.
+            let Some(q) = self.by_addr.values_mut().max_by_key(|q| q.len()) else {
+                break;
+            };
+            match q.pop_front() {
+                Some(old) => {
+                    self.bytes -= old.payload.len();
+                    self.evicted += 1;
+                }
+                None => break,
+            }
+        }
+    }
+
+    fn take(&mut self, addr: Ipv4Addr) -> std::collections::VecDeque<Received> {
+        let q = self.by_addr.remove(&addr).unwrap_or_default();
+        self.bytes -= q.iter().map(|r| r.payload.len()).sum::<usize>();
+        q
+    }
+
+    fn json(&self) -> Value {
+        json!({
+            "held": self.held,
+            "decoded": self.decoded,
+            "replayed": self.replayed,
+            "evicted": self.evicted,
+            "left": self.by_addr.values().map(|q| q.len() as u64).sum::<u64>(),
+        })
+    }
 }
 
 struct DecodeThread {
@@ -219,6 +277,8 @@ struct DecodeThread {
     alerts: Vec<(u8, u8, u64)>,
     /// When the last health diagnostics were written.
     last_health: Instant,
+    /// Datagrams waiting for their sensor's metadata.
+    held: Held,
 }
 
 impl DecodeThread {
@@ -236,10 +296,10 @@ impl DecodeThread {
                         let _ = self.session.close_sink();
                         return Err(self.with_path(err));
                     }
-                    if self.session.demux().stats().ignored > ignored {
-                        self.unclaimed(*r.src.ip(), r.payload.len());
-                    }
                     self.note_alerts(*r.src.ip(), &r.payload);
+                    if self.session.demux().stats().ignored > ignored {
+                        self.unclaimed(r);
+                    }
                     let (sweeps, points) = self.session.totals();
                     self.live.sweeps.store(sweeps, Ordering::Relaxed);
                     self.live.points.store(points, Ordering::Relaxed);
@@ -273,11 +333,14 @@ impl DecodeThread {
     }
 
     /// A datagram from a sensor address that no configuration claimed: an Ouster sensor whose
-    /// metadata is not known yet; ask the sensor for it.
-    fn unclaimed(&mut self, addr: Ipv4Addr, len: usize) {
+    /// metadata is not known yet; ask the sensor for it, and hold the datagram until it comes.
+    fn unclaimed(&mut self, r: Received) {
+        let addr = *r.src.ip();
+        let len = r.payload.len();
         if matches!(len, DATA_PACKET_LEN | POSITION_PACKET_LEN) || !self.sensors.contains(&addr) {
             return;
         }
+        self.held.hold(r);
         if self
             .asked
             .get(&addr)
@@ -360,7 +423,7 @@ impl DecodeThread {
         }
         while let Ok(c) = self.ctl.try_recv() {
             match c {
-                Control::Metadata(addr, name, bytes) => self.on_metadata(addr, name, bytes),
+                Control::Metadata(addr, name, bytes) => self.on_metadata(addr, name, bytes)?,
             }
         }
         // Ouster re-initialised (new init_id): read its metadata again.
@@ -392,12 +455,17 @@ impl DecodeThread {
         Ok(())
     }
 
-    fn on_metadata(&mut self, addr: Ipv4Addr, name: String, bytes: Vec<u8>) {
+    fn on_metadata(
+        &mut self,
+        addr: Ipv4Addr,
+        name: String,
+        bytes: Vec<u8>,
+    ) -> Result<(), RunError> {
         let spec = match metadata_spec(addr, name.clone(), bytes) {
             Ok(s) => s,
             Err(e) => {
                 tracing::warn!("sensor {addr}: metadata from its HTTP API not usable: {e}");
-                return;
+                return Ok(());
             }
         };
         // A sensor already decoding: compare what changed.
@@ -425,6 +493,26 @@ impl DecodeThread {
                 self.session.add_calib(spec);
             }
         }
+        // What arrived while the metadata was on its way.
+        let held = self.held.take(addr);
+        if !held.is_empty() {
+            tracing::info!(
+                "sensor {addr}: decoding {} datagrams held for its metadata",
+                held.len()
+            );
+        }
+        for r in held {
+            let ignored = self.session.demux().stats().ignored;
+            if let Err(e) = self.session.push(r.time_ns, r.src, r.port, &r.payload) {
+                return Err(self.session.run_error(e, "listen"));
+            }
+            self.held.replayed += 1;
+            if self.session.demux().stats().ignored == ignored {
+                self.held.decoded += 1;
+            }
+            self.note_alerts(addr, &r.payload);
+        }
+        Ok(())
     }
 
     fn rotate(&mut self) -> Result<(), RunError> {
@@ -466,11 +554,20 @@ impl DecodeThread {
                 files.push((f.current, s));
             }
         }
-        let (summary, lost) = self.session.summary();
+        let (mut summary, lost) = self.session.summary();
+        // Datagrams held and pushed again were counted `ignored` on arrival.
+        if let Some(p) = summary.get_mut("packets").and_then(Value::as_object_mut) {
+            let i = p.get("ignored").and_then(Value::as_u64).unwrap_or(0);
+            p.insert(
+                "ignored".into(),
+                json!(i.saturating_sub(self.held.replayed)),
+            );
+        }
         Ok(DecodeResult {
             summary,
             lost,
             files,
+            held: std::mem::take(&mut self.held),
         })
     }
 }
@@ -655,6 +752,7 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
                     epochs: Vec::new(),
                     alerts: Vec::new(),
                     last_health: Instant::now(),
+                    held: Held::default(),
                 };
                 let r = t.run(rx);
                 if r.is_err() {
@@ -794,6 +892,7 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
             "queue_peak_bytes": stats.queued_bytes_peak.load(Ordering::Relaxed),
             "kernel_dropped": kernel,
             "errors": stats.errors.load(Ordering::Relaxed),
+            "held_for_metadata": result.held.json(),
             "sockets": socket_json,
         }),
     );
@@ -884,5 +983,40 @@ mod tests {
             Files::path_for(b, Some(Split::Seconds(1.0)), 12),
             PathBuf::from("/x/drive_0012.mcap")
         );
+    }
+
+    #[test]
+    fn held_datagrams_stay_within_their_budget_and_keep_their_order() {
+        let mut h = Held::default();
+        let (a, b) = (Ipv4Addr::new(10, 0, 0, 1), Ipv4Addr::new(10, 0, 0, 2));
+        let dgram = |addr: Ipv4Addr, k: u32| Received {
+            time_ns: i64::from(k),
+            src: SocketAddrV4::new(addr, 7502),
+            port: 7502,
+            payload: vec![0; 8192],
+        };
+        // 20 MiB from `a` (2560 datagrams), then 100 from `b`.
+        for k in 0..2560 {
+            h.hold(dgram(a, k));
+        }
+        for k in 0..100 {
+            h.hold(dgram(b, k));
+        }
+        let cap = HOLD_BYTES / 8192;
+        assert!(h.bytes <= HOLD_BYTES);
+        assert_eq!(h.held, 2660);
+        // Only the sensor holding most gave way: its oldest datagrams.
+        assert_eq!(h.evicted, 2660 - cap as u64);
+        let qb = h.take(b);
+        assert_eq!(qb.len(), 100);
+        let qa = h.take(a);
+        assert_eq!(qa.len(), cap - 100);
+        assert!(qa
+            .iter()
+            .zip(qa.iter().skip(1))
+            .all(|(x, y)| x.time_ns + 1 == y.time_ns));
+        assert_eq!(qa.back().map(|r| r.time_ns), Some(2559));
+        assert_eq!(h.bytes, 0);
+        assert_eq!(h.json()["left"], 0);
     }
 }
