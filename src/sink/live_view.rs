@@ -607,39 +607,80 @@ async fn client(stream: tokio::net::TcpStream, peer: SocketAddr, shared: Arc<Sha
 
 /// Applies a client's `subscribe` / `unsubscribe`; anything else is ignored.
 fn on_request(shared: &Shared, client: u64, text: &str) {
-    let Ok(v) = serde_json::from_str::<Value>(text) else {
+    let Some(req) = ClientRequest::parse(text) else {
         return;
     };
     let mut st = shared.state();
     let n_channels = st.channels.len() as u64;
-    let Some(c) = st.clients.iter_mut().find(|c| c.id == client) else {
-        return;
-    };
-    let u32_of = |v: &Value| v.as_u64().and_then(|x| u32::try_from(x).ok());
-    match v["op"].as_str() {
-        Some("subscribe") => {
-            for s in v["subscriptions"].as_array().into_iter().flatten() {
-                let (Some(sub), Some(ch)) = (u32_of(&s["id"]), u32_of(&s["channelId"])) else {
-                    continue;
-                };
-                let known = ch >= 1 && u64::from(ch) <= n_channels;
-                let taken = c
-                    .subscriptions
-                    .iter()
-                    .any(|&(c2, s2)| c2 == ch || s2 == sub);
-                if known && !taken {
-                    c.subscriptions.push((ch, sub));
+    if let Some(c) = st.clients.iter_mut().find(|c| c.id == client) {
+        req.apply(&mut c.subscriptions, n_channels);
+    }
+}
+
+/// A client's request of the `foxglove.websocket.v1` protocol that the server acts on.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum ClientRequest {
+    /// `{"op": "subscribe", "subscriptions": [{"id": SUB, "channelId": CH}, …]}`: (sub, ch)
+    /// pairs; entries whose ids are missing or not `u32` are left out.
+    Subscribe(Vec<(u32, u32)>),
+    /// `{"op": "unsubscribe", "subscriptionIds": [SUB, …]}`.
+    Unsubscribe(Vec<u32>),
+}
+
+impl ClientRequest {
+    /// Requests from clients are limited to this many entries (a client's text message may
+    /// be large; what it asks for stays bounded).
+    pub const MAX_ENTRIES: usize = 4096;
+
+    /// Parses a client's text message; `None` for anything that is not JSON or not one of
+    /// the two requests.
+    pub fn parse(text: &str) -> Option<Self> {
+        let v = serde_json::from_str::<Value>(text).ok()?;
+        let u32_of = |v: &Value| v.as_u64().and_then(|x| u32::try_from(x).ok());
+        match v["op"].as_str()? {
+            "subscribe" => Some(Self::Subscribe(
+                v["subscriptions"]
+                    .as_array()
+                    .into_iter()
+                    .flatten()
+                    .filter_map(|s| Some((u32_of(&s["id"])?, u32_of(&s["channelId"])?)))
+                    .take(Self::MAX_ENTRIES)
+                    .collect(),
+            )),
+            "unsubscribe" => Some(Self::Unsubscribe(
+                v["subscriptionIds"]
+                    .as_array()
+                    .into_iter()
+                    .flatten()
+                    .filter_map(u32_of)
+                    .take(Self::MAX_ENTRIES)
+                    .collect(),
+            )),
+            _ => None,
+        }
+    }
+
+    /// Applies the request to a client's subscriptions, `(channel, subscription)` pairs, with
+    /// channels `1 ..= n_channels` advertised: a subscription to an unknown channel, to a
+    /// channel already subscribed or with a subscription id already in use is ignored, so
+    /// each channel and each id appears at most once.
+    pub fn apply(&self, subscriptions: &mut Vec<(u32, u32)>, n_channels: u64) {
+        match self {
+            Self::Subscribe(list) => {
+                for &(sub, ch) in list {
+                    let known = ch >= 1 && u64::from(ch) <= n_channels;
+                    let taken = subscriptions.iter().any(|&(c2, s2)| c2 == ch || s2 == sub);
+                    if known && !taken {
+                        subscriptions.push((ch, sub));
+                    }
+                }
+            }
+            Self::Unsubscribe(ids) => {
+                for sub in ids {
+                    subscriptions.retain(|&(_, s2)| s2 != *sub);
                 }
             }
         }
-        Some("unsubscribe") => {
-            for s in v["subscriptionIds"].as_array().into_iter().flatten() {
-                if let Some(sub) = u32_of(s) {
-                    c.subscriptions.retain(|&(_, s2)| s2 != sub);
-                }
-            }
-        }
-        _ => {}
     }
 }
 
@@ -688,6 +729,40 @@ mod tests {
         let bytes = [0x00, 0x10, 0x83, 0x10, 0x51, 0x87, 0x20, 0x92, 0x8b];
         assert_eq!(base64(&bytes), "ABCDEFGHIJKL");
         assert_eq!(base64(&[0xfb, 0xff, 0xbf]), "+/+/");
+    }
+
+    #[test]
+    fn client_requests_parse_and_apply() {
+        let sub = ClientRequest::parse(
+            r#"{"op":"subscribe","subscriptions":[{"id":1,"channelId":1},{"id":2,"channelId":3},{"id":4294967296,"channelId":2},{"id":5}]}"#,
+        );
+        assert_eq!(sub, Some(ClientRequest::Subscribe(vec![(1, 1), (2, 3)])));
+        assert_eq!(ClientRequest::parse("not json"), None);
+        assert_eq!(ClientRequest::parse(r#"{"op":"advertise"}"#), None);
+        assert_eq!(
+            ClientRequest::parse(r#"{"op":"unsubscribe","subscriptionIds":[2,-1,"x"]}"#),
+            Some(ClientRequest::Unsubscribe(vec![2]))
+        );
+        // Two channels advertised: channel 3 is unknown; a channel or an id in use is refused.
+        let mut subs = Vec::new();
+        sub.unwrap().apply(&mut subs, 2);
+        assert_eq!(subs, vec![(1, 1)]);
+        ClientRequest::Subscribe(vec![(1, 2), (7, 1), (8, 2)]).apply(&mut subs, 2);
+        assert_eq!(subs, vec![(1, 1), (2, 8)]);
+        ClientRequest::Unsubscribe(vec![1, 99]).apply(&mut subs, 2);
+        assert_eq!(subs, vec![(2, 8)]);
+        // A request's entries are bounded.
+        let many: Vec<String> = (0..10_000)
+            .map(|i| format!(r#"{{"id":{i},"channelId":1}}"#))
+            .collect();
+        let text = format!(
+            r#"{{"op":"subscribe","subscriptions":[{}]}}"#,
+            many.join(",")
+        );
+        match ClientRequest::parse(&text) {
+            Some(ClientRequest::Subscribe(v)) => assert_eq!(v.len(), ClientRequest::MAX_ENTRIES),
+            other => panic!("{other:?}"),
+        }
     }
 
     #[test]

@@ -2009,3 +2009,90 @@ pub fn tum_poses(data: &[u8]) {
         }
     }
 }
+
+// ----- network parsers of the live path ----------------------------------------------------------
+
+/// `http_response`: any bytes as the reply to the Ouster metadata request
+/// (`source::udp::parse_http_response`, plain, sized or chunked bodies). No panic; a body is
+/// never longer than what came after the headers (chunk framing only removes bytes); a
+/// plain 200 response built around the input gives the input back.
+pub fn http_response(data: &[u8]) {
+    use ringscan::source::udp::parse_http_response;
+    if let Ok(body) = parse_http_response(data) {
+        let head_end = data
+            .windows(4)
+            .position(|w| w == b"\r\n\r\n")
+            .expect("a parsed response has an end of headers");
+        assert!(
+            body.len() <= data.len() - head_end - 4,
+            "body longer than the input"
+        );
+    }
+    let mut framed =
+        format!("HTTP/1.1 200 OK\r\nContent-Length: {}\r\n\r\n", data.len()).into_bytes();
+    framed.extend_from_slice(data);
+    assert_eq!(
+        parse_http_response(&framed).as_deref(),
+        Ok(data),
+        "sized body"
+    );
+    // The same body in chunks of up to 7 bytes.
+    let mut chunked = b"HTTP/1.1 200 OK\r\nTransfer-Encoding: chunked\r\n\r\n".to_vec();
+    for part in data.chunks(7) {
+        chunked.extend_from_slice(format!("{:x}\r\n", part.len()).as_bytes());
+        chunked.extend_from_slice(part);
+        chunked.extend_from_slice(b"\r\n");
+    }
+    chunked.extend_from_slice(b"0\r\n\r\n");
+    assert_eq!(
+        parse_http_response(&chunked).as_deref(),
+        Ok(data),
+        "chunked body"
+    );
+}
+
+/// `live_view_requests`: the input split at newlines as a live-view client's text messages
+/// (`sink::live_view::ClientRequest`), applied in turn to its subscriptions with a channel
+/// count taken from the first byte. No panic; requests stay within `MAX_ENTRIES`; after each
+/// one every subscription names an advertised channel, and no channel and no subscription id
+/// appears twice.
+pub fn live_view_requests(data: &[u8]) {
+    use ringscan::sink::live_view::ClientRequest;
+    let Some((&n, rest)) = data.split_first() else {
+        return;
+    };
+    let n_channels = u64::from(n % 16);
+    let mut subs: Vec<(u32, u32)> = Vec::new();
+    for line in rest.split(|&b| b == b'\n') {
+        let Ok(text) = std::str::from_utf8(line) else {
+            continue;
+        };
+        let Some(req) = ClientRequest::parse(text) else {
+            continue;
+        };
+        match &req {
+            ClientRequest::Subscribe(v) => assert!(v.len() <= ClientRequest::MAX_ENTRIES),
+            ClientRequest::Unsubscribe(v) => assert!(v.len() <= ClientRequest::MAX_ENTRIES),
+        }
+        req.apply(&mut subs, n_channels);
+        assert!(
+            subs.len() as u64 <= n_channels,
+            "more subscriptions than channels"
+        );
+        for (i, &(ch, sub)) in subs.iter().enumerate() {
+            assert!(
+                ch >= 1 && u64::from(ch) <= n_channels,
+                "unknown channel {ch}"
+            );
+            for &(ch2, sub2) in &subs[i + 1..] {
+                assert!(ch != ch2 && sub != sub2, "duplicate channel or id");
+            }
+        }
+        if let ClientRequest::Unsubscribe(ids) = &req {
+            assert!(
+                subs.iter().all(|(_, s)| !ids.contains(s)),
+                "unsubscribed id kept"
+            );
+        }
+    }
+}

@@ -310,6 +310,22 @@ def main():
     put("tum_poses", ("# t x y z qx qy qz qw\n" + tum).encode(), "tum")
     put("tum_poses", b"1.0 0 0 0 0 0 0 1\n2.0 1 0 0 0 0 0.7071068 0.7071068\n", "two")
 
+    # http_response: the replies an Ouster sensor's HTTP API gives (plain, sized, chunked, 404).
+    body = b'{"sensor_info": {"prod_sn": "992109000123"}, "lidar_mode": "1024x10"}'
+    put("http_response", b"HTTP/1.1 200 OK\r\nContent-Type: application/json\r\n\r\n" + body, "plain")
+    put("http_response", b"HTTP/1.1 200 OK\r\nContent-Length: %d\r\n\r\n" % len(body) + body, "sized")
+    put("http_response", b"HTTP/1.1 200 OK\r\nTransfer-Encoding: chunked\r\n\r\n"
+        + b"".join(b"%x\r\n" % len(body[i:i + 20]) + body[i:i + 20] + b"\r\n" for i in range(0, len(body), 20))
+        + b"0\r\n\r\n", "chunked")
+    put("http_response", b"HTTP/1.1 404 Not Found\r\nContent-Length: 0\r\n\r\n", "404")
+    # live_view_requests: channel count, then a client's messages, one per line.
+    put("live_view_requests", b"\x05" + b"\n".join([
+        b'{"op":"subscribe","subscriptions":[{"id":1,"channelId":1},{"id":2,"channelId":3}]}',
+        b'{"op":"subscribe","subscriptions":[{"id":1,"channelId":2},{"id":3,"channelId":3},{"id":4,"channelId":9}]}',
+        b'{"op":"unsubscribe","subscriptionIds":[1,7]}',
+        b'{"op":"advertise","channels":[]}',
+    ]), "session")
+
     # calib_velodyne: the calibration files as they are.
     for c in calibs:
         put("calib_velodyne", c.read_bytes(), c.suffix[1:])
