@@ -26,6 +26,12 @@
 //! residual smear is centred and the loop converges (`tools/odometry.rs`, BENCHMARKS.md
 //! "Odometry").
 //!
+//! A sensor with an IMU stream (Ouster) gives each registration a rotation prior: the gyro,
+//! rotated into the sensor frame by the metadata's `imu_to_sensor_transform`, integrated from
+//! the previous registered stamp to this one (on the sensor clock of both), with a covariance
+//! of a gyro bias up to [`GYRO_BIAS_RADPS`]. It holds the rotation where the scene cannot (yaw
+//! on an empty floor); elsewhere the lidar, far more precise than that bias, decides.
+//!
 //! The algorithms live in `ringscan::pipeline::odometry`; this file owns the clock, the files and
 //! the MCAP channels.
 
@@ -36,17 +42,48 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use nalgebra::{Isometry3, Point3};
-use ringscan::deskew::Twist;
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+use ringscan::deskew::{ImuTrack, Twist};
 use ringscan::pipeline::odometry::{
-    Odometry, OdometryConfig, OdometryMethod, OdometryStep, SweepMotion, TrackStatus,
+    ImuRotation, Odometry, OdometryConfig, OdometryMethod, OdometryStep, SweepMotion, TrackStatus,
 };
 use ringscan::point::Point;
 use ringscan::sink::foxglove::{self, PointCloudPrefix};
 use ringscan::sink::mcap::TopicSchema;
 use ringscan::sink::scene::{self, FRAME_TRANSFORM_SCHEMA};
 use ringscan::sink::{McapSink, SensorId, SinkError, TopicId};
-use ringscan::sweep::Sweep;
+use ringscan::sweep::{ImuSample, Sweep};
 use serde_json::{json, Value};
+
+/// The gyro bias the IMU rotation prior allows for, rad/s (0.57 °/s: a MEMS gyro without
+/// calibration); its standard deviation over an interval `dt` is this × `dt` per axis.
+pub const GYRO_BIAS_RADPS: f64 = 0.01;
+
+/// Integration step of the gyro between two sweeps, ns.
+const IMU_STEP_NS: i64 = 1_000_000;
+
+/// The rotation of the sensor at `t1_ns` in its frame at `t0_ns` (sensor clock), integrated
+/// from the gyro by the midpoint rule, or `None` when the track does not cover the interval
+/// (or it is empty or longer than a second).
+fn imu_rotation(track: &ImuTrack, t0_ns: i64, t1_ns: i64) -> Option<ImuRotation> {
+    let span = t1_ns.checked_sub(t0_ns)?;
+    if span <= 0 || span > 1_000_000_000 {
+        return None;
+    }
+    let steps = (span + IMU_STEP_NS - 1) / IMU_STEP_NS;
+    let dt_ns = span as f64 / steps as f64;
+    let mut q = UnitQuaternion::identity();
+    for k in 0..steps {
+        let t_mid = t0_ns + ((k as f64 + 0.5) * dt_ns) as i64;
+        let w: Vector3<f64> = track.angular_velocity_at(t_mid)?;
+        q *= UnitQuaternion::from_scaled_axis(w * (dt_ns * 1e-9));
+    }
+    let sigma = GYRO_BIAS_RADPS * span as f64 * 1e-9;
+    Some(ImuRotation {
+        previous_from_current: q,
+        covariance_rad2: Matrix3::identity() * (sigma * sigma),
+    })
+}
 
 /// Topic of the odometry poses.
 pub const TF_TOPIC: &str = "/tf";
@@ -193,6 +230,10 @@ struct SensorOdometry {
     last_position: Option<nalgebra::Vector3<f64>>,
     /// The last registered sweep's pose and stamp.
     last_registered: Option<(Isometry3<f64>, i64)>,
+    /// The last registration's stamp on the sensor clock (that of its IMU samples).
+    last_device_ns: Option<i64>,
+    /// Registrations given an IMU rotation prior.
+    imu_priors: u64,
 }
 
 /// Registration times kept per sensor for the median (512 KB; later sweeps count in the max).
@@ -202,6 +243,8 @@ const TIMES_KEPT: usize = 65_536;
 pub struct OdometryRunner {
     setup: OdometrySetup,
     sensors: Vec<Option<SensorOdometry>>,
+    /// Gyro samples per sensor index (sensors with an IMU stream).
+    imu: Vec<Option<ImuTrack>>,
     tf: Option<TopicId>,
     buf: Vec<u8>,
     /// The first error writing a trajectory file (reported at the end).
@@ -296,10 +339,24 @@ impl OdometryRunner {
         Self {
             setup,
             sensors: Vec::new(),
+            imu: Vec::new(),
             tf: None,
             buf: Vec::new(),
             io_error: None,
         }
+    }
+
+    /// Adds a gyro sample of sensor `idx` (its metadata's `imu_to_sensor_transform`).
+    pub fn push_imu(&mut self, idx: usize, imu_to_sensor: &[f64; 16], s: &ImuSample) {
+        if idx >= ringscan::sweep::demux::MAX_SENSORS {
+            return;
+        }
+        while self.imu.len() <= idx {
+            self.imu.push(None);
+        }
+        let track =
+            self.imu[idx].get_or_insert_with(|| ImuTrack::from_imu_to_sensor(imu_to_sensor));
+        track.push(i64::try_from(s.sensor_ns).unwrap_or(i64::MAX), s.gyro);
     }
 
     /// The motion between sensor `idx`'s last two sweeps (for the next sweep's deskew).
@@ -358,6 +415,8 @@ impl OdometryRunner {
                 distance_m: 0.0,
                 last_position: None,
                 last_registered: None,
+                last_device_ns: None,
+                imu_priors: 0,
             });
         }
         self.sensors[idx].as_mut()
@@ -381,16 +440,35 @@ impl OdometryRunner {
         sink: Option<(&mut McapSink<W>, SensorId)>,
     ) -> Result<Option<Value>, SinkError> {
         let map_every = self.setup.map_every;
+        // The registration's stamp: mid-sweep when deskewed here, else the sweep's.
+        let stamp_ns = match deskew {
+            Some((_, start_ns)) => {
+                let span = sweep.points.iter().map(|p| p.t).max().unwrap_or(0);
+                start_ns.saturating_add(i64::from(span / 2))
+            }
+            None => sweep.timestamp_ns,
+        };
+        // The same instant on the sensor clock, and the gyro's rotation since the last one.
+        let device_ns = sweep
+            .device_time_ns
+            .saturating_add(stamp_ns.saturating_sub(sweep.timestamp_ns));
+        let previous = self
+            .sensors
+            .get(idx)
+            .and_then(Option::as_ref)
+            .and_then(|s| s.last_device_ns);
+        let prior = match (self.imu.get(idx).and_then(Option::as_ref), previous) {
+            (Some(track), Some(t0)) => imu_rotation(track, t0, device_ns),
+            _ => None,
+        };
         let Some(so) = self.sensor(idx, name, several) else {
             return Ok(None);
         };
         let t0 = Instant::now();
-        let step: OdometryStep = match deskew {
-            Some((twist, start_ns)) => {
+        let source: &[Point] = match deskew {
+            Some((twist, _)) => {
                 // The points are at the pose of `sweep.timestamp_ns`; move them on to mid-sweep.
-                let span = sweep.points.iter().map(|p| p.t).max().unwrap_or(0);
-                let mid_ns = start_ns.saturating_add(i64::from(span / 2));
-                let dt_s = mid_ns.saturating_sub(sweep.timestamp_ns) as f64 * 1e-9;
+                let dt_s = stamp_ns.saturating_sub(sweep.timestamp_ns) as f64 * 1e-9;
                 let mid_from_ref = twist.integrate(dt_s).inverse();
                 so.work.clear();
                 so.work.extend(sweep.points.iter().map(|p| {
@@ -403,12 +481,21 @@ impl OdometryRunner {
                         ..*p
                     }
                 }));
-                so.odometry.register_points(&so.work, mid_ns)
+                &so.work
             }
-            None => so
-                .odometry
-                .register_points(&sweep.points, sweep.timestamp_ns),
+            None => &sweep.points,
         };
+        let step: OdometryStep = so.odometry.register(
+            source
+                .iter()
+                .map(|p| Vector3::new(f64::from(p.x), f64::from(p.y), f64::from(p.z))),
+            stamp_ns,
+            prior.as_ref(),
+        );
+        if !matches!(step.status, TrackStatus::Lost(_)) {
+            so.last_device_ns = Some(device_ns);
+            so.imu_priors += u64::from(prior.is_some());
+        }
         let ns = t0.elapsed().as_nanos() as u64;
         so.sweeps += 1;
         if so.times.len() < TIMES_KEPT {
@@ -599,6 +686,7 @@ impl OdometryRunner {
                     "failed": s.failed,
                     "not_converged": s.not_converged,
                     "degenerate": s.degenerate,
+                    "imu_priors": s.imu_priors,
                     "median_ms": median_ms(&s.times),
                     "max_ms": (s.sweeps > 0).then_some(s.max_ns as f64 * 1e-6),
                     "distance_m": s.distance_m,
@@ -622,6 +710,7 @@ impl OdometryRunner {
             "failed": all.iter().map(|s| s.failed).sum::<u64>(),
             "not_converged": all.iter().map(|s| s.not_converged).sum::<u64>(),
             "degenerate": all.iter().map(|s| s.degenerate).sum::<u64>(),
+            "imu_priors": all.iter().map(|s| s.imu_priors).sum::<u64>(),
             "median_ms": median_ms(&times),
             "max_ms": all.iter().map(|s| s.max_ns).max().filter(|_| !times.is_empty()).map(|n| n as f64 * 1e-6),
             "final_pose": all.first().map(|s| final_pose(s)),

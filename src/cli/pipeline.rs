@@ -416,10 +416,11 @@ impl PipelineRunner {
         copy_sweep(&mut sp.work, sweep);
         let mut clock = || origin.elapsed().as_nanos() as u64;
         let stats = sp.pipeline.run(&mut sp.work, &mut clock);
-        // Points deskewed to the sweep's end pose are stamped with the end's time.
-        sp.work.timestamp_ns = sweep
-            .timestamp_ns
-            .saturating_add(i64::from(stats.reference_ns));
+        // Points deskewed to the sweep's end pose are stamped with the end's time (on both
+        // clocks, so the sensor-clock instant of the stamp stays known: the odometry's IMU).
+        let reference_ns = i64::from(stats.reference_ns);
+        sp.work.timestamp_ns = sweep.timestamp_ns.saturating_add(reference_ns);
+        sp.work.device_time_ns = sweep.device_time_ns.saturating_add(reference_ns);
         sp.sweeps += 1;
         if sp.times.len() < TIMES_KEPT {
             sp.times.push(stats.times);

@@ -684,6 +684,9 @@ impl Session {
                 if let Some(p) = out.pipeline.as_mut() {
                     p.push_imu(idx, &imu_to_sensor, &smp);
                 }
+                if let Some(o) = out.odometry.as_mut() {
+                    o.push_imu(idx, &imu_to_sensor, &smp);
+                }
                 if let (Some(sink), Some(id)) = (out.sink.as_mut(), id) {
                     let msg = json!({
                         "timestamp_ns": smp.sensor_ns,
