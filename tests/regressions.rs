@@ -23,6 +23,7 @@ const REGRESSIONS: &[(&str, Option<&str>)] = &[
     ("velodyne_packet-nmea-time-char-boundary.bin", None),
     ("decode_to_mcap-nmea-char-boundary.bin", None),
     ("ouster_packet-duplicate-measurement-id.bin", None),
+    ("http_response-chunk-size-overflow.bin", None),
 ];
 
 fn dir() -> PathBuf {
@@ -46,6 +47,8 @@ fn replay(file: &str) {
         "ouster_stream" => harness::ouster_stream(&data),
         "pipeline_config" => harness::pipeline_config(&data),
         "tum_poses" => harness::tum_poses(&data),
+        "http_response" => harness::http_response(&data),
+        "live_view_requests" => harness::live_view_requests(&data),
         other => panic!("{file}: no fuzz target named {other:?}"),
     }
 }
@@ -136,4 +139,12 @@ fn velodyne_packet_nmea_time_char_boundary() {
 #[test]
 fn decode_to_mcap_nmea_char_boundary() {
     replay("decode_to_mcap-nmea-char-boundary.bin");
+}
+
+/// A chunk size near `usize::MAX` in an HTTP reply (the Ouster metadata fetch of `listen`)
+/// overflowed `size + 2`; in release builds the check wrapped and the slice panicked
+/// (src/source/udp.rs `dechunk`; found by the `http_response` target, fixed in session 3).
+#[test]
+fn http_response_chunk_size_overflow() {
+    replay("http_response-chunk-size-overflow.bin");
 }

@@ -430,7 +430,9 @@ fn dechunk(mut body: &[u8]) -> Result<Vec<u8>, String> {
         if size == 0 {
             return Ok(out);
         }
-        if body.len() < size + 2 {
+        // `size` comes from the peer: compare without adding to it (a size near usize::MAX
+        // must not wrap around).
+        if body.len() < 2 || body.len() - 2 < size {
             return Err(format!("chunk of {size} bytes cut short"));
         }
         out.extend_from_slice(&body[..size]);
@@ -489,6 +491,10 @@ mod tests {
         assert!(parse_http_response(b"garbage").is_err());
         let bad_chunk = b"HTTP/1.1 200 OK\r\nTransfer-Encoding: chunked\r\n\r\nzz\r\n";
         assert!(parse_http_response(bad_chunk).is_err());
+        // A peer's chunk size near usize::MAX is an error, not an overflow.
+        let huge =
+            b"HTTP/1.1 200 OK\r\nTransfer-Encoding: chunked\r\n\r\nffffffffffffffff\r\nab\r\n";
+        assert!(parse_http_response(huge).unwrap_err().contains("cut short"));
     }
 
     #[test]
