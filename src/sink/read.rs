@@ -128,14 +128,7 @@ impl PointCloud {
     /// The `f32` field at `offset` of every complete record (none if the offset or the stride
     /// does not fit).
     pub fn f32s(&self, offset: usize) -> impl Iterator<Item = f32> + '_ {
-        let stride = self.point_stride as usize;
-        let ok = stride > 0 && offset + 4 <= stride;
-        self.data
-            .chunks_exact(stride.max(1))
-            .filter(move |_| ok)
-            .map(move |r| {
-                f32::from_le_bytes([r[offset], r[offset + 1], r[offset + 2], r[offset + 3]])
-            })
+        self.u32s(offset).map(f32::from_bits)
     }
 
     /// The `u32` field at `offset` of every complete record (none if it does not fit).
