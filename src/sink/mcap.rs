@@ -527,11 +527,7 @@ impl<W: Write + Seek> McapSink<W> {
     /// the message's own timestamp = the sweep's first firing.
     pub fn write_sweep(&mut self, s: SensorId, sweep: &SweepMsg) -> Result<(), SinkError> {
         self.before_message(sweep.log_time_ns)?;
-        let registered = self.sensors.len();
-        let sensor = self.sensors.get_mut(s.0).ok_or(SinkError::UnknownSensor {
-            id: s.0,
-            registered,
-        })?;
+        let sensor = sensor_at(&mut self.sensors, s)?;
         let buf = &mut self.buf;
         match self.format {
             Format::Foxglove => foxglove::encode_point_cloud(
@@ -565,12 +561,9 @@ impl<W: Write + Seek> McapSink<W> {
         }
         let header = sensor.points.next_header(sweep.log_time_ns);
         let writer = self.writer.as_mut().ok_or_else(finished_error)?;
-        writer
-            .write_to_known_channel(&header, &self.buf)
-            .map_err(mcap_err(format!(
-                "writing a sweep to {}",
-                sensor.points_topic()
-            )))
+        write_known(writer, &header, &self.buf, || {
+            format!("writing a sweep to {}", sensor.points_topic())
+        })
     }
 
     /// Writes one sweep with its extra fields (`--fields all`): records of
@@ -583,11 +576,7 @@ impl<W: Write + Seek> McapSink<W> {
     ) -> Result<(), SinkError> {
         use crate::point::{interleave_extended, EXTENDED_FIELDS, EXTENDED_STRIDE};
         self.before_message(sweep.log_time_ns)?;
-        let registered = self.sensors.len();
-        let sensor = self.sensors.get_mut(s.0).ok_or(SinkError::UnknownSensor {
-            id: s.0,
-            registered,
-        })?;
+        let sensor = sensor_at(&mut self.sensors, s)?;
         let mut records = std::mem::take(&mut self.records);
         interleave_extended(sweep.points, extras, &mut records);
         let topic = sensor.points_topic();
@@ -639,12 +628,9 @@ impl<W: Write + Seek> McapSink<W> {
         encoded?;
         let header = sensor.points.next_header(sweep.log_time_ns);
         let writer = self.writer.as_mut().ok_or_else(finished_error)?;
-        writer
-            .write_to_known_channel(&header, &self.buf)
-            .map_err(mcap_err(format!(
-                "writing a sweep to {}",
-                sensor.points_topic()
-            )))
+        write_known(writer, &header, &self.buf, || {
+            format!("writing a sweep to {}", sensor.points_topic())
+        })
     }
 
     /// Writes one UDP payload to `<prefix>/raw` as a `ringscan.RawPacket` (protobuf; see
@@ -658,11 +644,7 @@ impl<W: Write + Seek> McapSink<W> {
         payload: &[u8],
     ) -> Result<(), SinkError> {
         self.before_message(log_time_ns)?;
-        let registered = self.sensors.len();
-        let sensor = self.sensors.get_mut(s.0).ok_or(SinkError::UnknownSensor {
-            id: s.0,
-            registered,
-        })?;
+        let sensor = sensor_at(&mut self.sensors, s)?;
         let writer = self.writer.as_mut().ok_or_else(finished_error)?;
         if sensor.raw.is_none() {
             let topic = sensor.raw_topic();
@@ -691,12 +673,9 @@ impl<W: Write + Seek> McapSink<W> {
             return Err(finished_error());
         };
         let header = channel.next_header(log_time_ns);
-        writer
-            .write_to_known_channel(&header, &self.buf)
-            .map_err(mcap_err(format!(
-                "writing a packet to {}",
-                sensor.raw_topic()
-            )))
+        write_known(writer, &header, &self.buf, || {
+            format!("writing a packet to {}", sensor.raw_topic())
+        })
     }
 
     /// Writes one IMU sample to `<prefix>/imu` (JSON, schema `ringscan.Imu`: `timestamp_ns`
@@ -709,11 +688,7 @@ impl<W: Write + Seek> McapSink<W> {
         json: &serde_json::Value,
     ) -> Result<(), SinkError> {
         self.before_message(log_time_ns)?;
-        let registered = self.sensors.len();
-        let sensor = self.sensors.get_mut(s.0).ok_or(SinkError::UnknownSensor {
-            id: s.0,
-            registered,
-        })?;
+        let sensor = sensor_at(&mut self.sensors, s)?;
         let writer = self.writer.as_mut().ok_or_else(finished_error)?;
         if sensor.imu.is_none() {
             let topic = sensor.imu_topic();
@@ -738,12 +713,9 @@ impl<W: Write + Seek> McapSink<W> {
             return Err(finished_error());
         };
         let header = channel.next_header(log_time_ns);
-        writer
-            .write_to_known_channel(&header, &self.buf)
-            .map_err(mcap_err(format!(
-                "writing an IMU sample to {}",
-                sensor.imu_topic()
-            )))
+        write_known(writer, &header, &self.buf, || {
+            format!("writing an IMU sample to {}", sensor.imu_topic())
+        })
     }
 
     /// Writes one diagnostics object to `<prefix>/diagnostics` (JSON).
@@ -754,11 +726,7 @@ impl<W: Write + Seek> McapSink<W> {
         json: &serde_json::Value,
     ) -> Result<(), SinkError> {
         self.before_message(log_time_ns)?;
-        let registered = self.sensors.len();
-        let sensor = self.sensors.get_mut(s.0).ok_or(SinkError::UnknownSensor {
-            id: s.0,
-            registered,
-        })?;
+        let sensor = sensor_at(&mut self.sensors, s)?;
         self.buf.clear();
         serde_json::to_writer(&mut self.buf, json).map_err(|source| SinkError::Json {
             topic: sensor.diagnostics_topic(),
@@ -766,12 +734,9 @@ impl<W: Write + Seek> McapSink<W> {
         })?;
         let header = sensor.diagnostics.next_header(log_time_ns);
         let writer = self.writer.as_mut().ok_or_else(finished_error)?;
-        writer
-            .write_to_known_channel(&header, &self.buf)
-            .map_err(mcap_err(format!(
-                "writing diagnostics to {}",
-                sensor.diagnostics_topic()
-            )))
+        write_known(writer, &header, &self.buf, || {
+            format!("writing diagnostics to {}", sensor.diagnostics_topic())
+        })
     }
 
     /// Adds a channel on `topic` with `schema` (the schema is written once per name) and
@@ -819,9 +784,9 @@ impl<W: Write + Seek> McapSink<W> {
                 })?;
         let header = channel.next_header(log_time_ns);
         let writer = self.writer.as_mut().ok_or_else(finished_error)?;
-        writer
-            .write_to_known_channel(&header, data)
-            .map_err(mcap_err(format!("writing a message to {name}")))
+        write_known(writer, &header, data, || {
+            format!("writing a message to {name}")
+        })
     }
 
     /// Writes the summary section and footer. For a sink made by [`create_file`], then flushes,
@@ -982,6 +947,34 @@ fn lazy_channel<W: Write + Seek>(
         .map_err(mcap_err(format!("adding channel {topic}")))?;
     *channel = Some(Channel { id, sequence: 0 });
     Ok(())
+}
+
+/// The sensor registered as `s`.
+fn sensor_at(
+    sensors: &mut [SensorChannels],
+    s: SensorId,
+) -> Result<&mut SensorChannels, SinkError> {
+    let registered = sensors.len();
+    sensors.get_mut(s.0).ok_or(SinkError::UnknownSensor {
+        id: s.0,
+        registered,
+    })
+}
+
+/// Writes `data` to a channel already added; `context` (which names the topic) is built only
+/// when the write fails, so a message costs no formatting.
+fn write_known<W: Write + Seek>(
+    writer: &mut Writer<W>,
+    header: &MessageHeader,
+    data: &[u8],
+    context: impl FnOnce() -> String,
+) -> Result<(), SinkError> {
+    writer
+        .write_to_known_channel(header, data)
+        .map_err(|source| SinkError::Mcap {
+            context: context(),
+            source,
+        })
 }
 
 fn finished_error() -> SinkError {
