@@ -188,13 +188,9 @@ fn main() -> Res<()> {
     // 2024-05-01 12:00:00 UTC, sensor top-of-hour counter at 0; with --poses, the table's
     // first time (the run follows the table's clock).
     let poses = match arg(&args, "--poses") {
-        Some(p) => {
-            let t = PoseTable::parse_tum(&std::fs::read_to_string(&p)?)?;
-            if t.poses.is_empty() {
-                return Err(format!("{p}: no poses").into());
-            }
-            Some(t)
-        }
+        Some(p) => Some(
+            PoseTable::parse_tum(&std::fs::read_to_string(&p)?).map_err(|e| format!("{p}: {e}"))?,
+        ),
         None => None,
     };
     let t0_ns: i64 = poses

@@ -194,6 +194,14 @@ impl PoseTable {
         Self::new(entries)
     }
 
+    /// The poses in time order: `(time ns, world_from_sensor)`.
+    pub fn entries(&self) -> impl Iterator<Item = (i64, Isometry3<f64>)> + '_ {
+        self.times_ns
+            .iter()
+            .copied()
+            .zip(self.poses.iter().copied())
+    }
+
     /// Number of poses.
     pub fn len(&self) -> usize {
         self.poses.len()

@@ -107,16 +107,6 @@ pub struct Trajectory {
     pub motion: Motion,
 }
 
-/// Malformed TUM text.
-#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-#[error("TUM line {line}: {reason}")]
-pub struct TumError {
-    /// 1-based line number.
-    pub line: usize,
-    /// What is wrong.
-    pub reason: String,
-}
-
 impl Trajectory {
     /// A sensor that never moves (identity: sensor frame = world frame).
     pub fn identity() -> Self {
@@ -288,45 +278,13 @@ impl PoseTable {
         Isometry3::from_parts(Translation3::from(tr), rot)
     }
 
-    /// Parses TUM text: one pose per line, `t x y z qx qy qz qw` (t in seconds, decimal, read
-    /// exactly to the ns), `#` comments and blank lines skipped.
-    pub fn parse_tum(text: &str) -> Result<Self, TumError> {
-        let mut poses = Vec::new();
-        for (n, line) in text.lines().enumerate() {
-            let line = line.trim();
-            if line.is_empty() || line.starts_with('#') {
-                continue;
-            }
-            let err = |reason: &str| TumError {
-                line: n + 1,
-                reason: reason.to_owned(),
-            };
-            let f: Vec<&str> = line.split_whitespace().collect();
-            if f.len() != 8 {
-                return Err(err("expected 8 fields: t x y z qx qy qz qw"));
-            }
-            let t = parse_seconds_ns(f[0]).ok_or_else(|| err("bad time"))?;
-            let mut v = [0f64; 7];
-            for (k, s) in f[1..].iter().enumerate() {
-                v[k] = s
-                    .parse()
-                    .ok()
-                    .filter(|x: &f64| x.is_finite())
-                    .ok_or_else(|| err("bad number"))?;
-            }
-            let q = nalgebra::Quaternion::new(v[6], v[3], v[4], v[5]);
-            if q.norm() < 1e-9 {
-                return Err(err("zero quaternion"));
-            }
-            poses.push((
-                t,
-                Isometry3::from_parts(
-                    Translation3::new(v[0], v[1], v[2]),
-                    UnitQuaternion::from_quaternion(q),
-                ),
-            ));
-        }
-        Ok(Self::new(poses))
+    /// Parses TUM text with the parser `--deskew poses:FILE` uses
+    /// ([`crate::deskew::PoseTable::from_tum`]: 8 values a line, times read exactly to the ns,
+    /// at least two poses strictly increasing in time, unit quaternions); one format, one set
+    /// of rules for every TUM file ringscan reads.
+    pub fn parse_tum(text: &str) -> Result<Self, crate::deskew::PosesError> {
+        let table = crate::deskew::PoseTable::from_tum(text)?;
+        Ok(Self::new(table.entries().collect()))
     }
 
     /// Writes TUM text (times with 9 decimals, qw ≥ 0).
@@ -351,29 +309,6 @@ impl PoseTable {
         }
         s
     }
-}
-
-/// "1714564800.123456789" → ns, exactly (digits beyond the ns truncated).
-fn parse_seconds_ns(s: &str) -> Option<i64> {
-    let (neg, s) = match s.strip_prefix('-') {
-        Some(r) => (true, r),
-        None => (false, s),
-    };
-    let (int, frac) = s.split_once('.').unwrap_or((s, ""));
-    if int.is_empty() && frac.is_empty() {
-        return None;
-    }
-    let whole: i64 = if int.is_empty() { 0 } else { int.parse().ok()? };
-    if !frac.bytes().all(|b| b.is_ascii_digit()) {
-        return None;
-    }
-    let mut ns = 0i64;
-    for k in 0..9 {
-        let d = frac.as_bytes().get(k).map_or(0, |b| i64::from(b - b'0'));
-        ns = ns * 10 + d;
-    }
-    let v = whole.checked_mul(1_000_000_000)?.checked_add(ns)?;
-    Some(if neg { -v } else { v })
 }
 
 /// A piece of a [`Route`].
