@@ -10,16 +10,22 @@
 //! exceeds the tolerance `√3·s` once an offset reaches 3, so only cells within ±2 on every
 //! axis can be joined. Cells are grouped by column (their x, y cell) and sorted by z within a
 //! column; each column is compared with itself and its 12 forward neighbours of the 5×5
-//! column block (each unordered pair once), sliding a ±2 window in z. This costs 12 hash
-//! look-ups per column instead of 62 per cell, which mattered: a first version probing the
-//! 62 forward cells of the 5×5×5 block spent most of its time on look-ups of empty cells.
+//! column block (each unordered pair once), sliding a ±2 window in z.
+//!
+//! Cells and columns come from one sort, with no hashing: each candidate's cell coordinates,
+//! relative to the smallest, are packed x above y above z in as many bits as each axis's
+//! extent needs, and the (key, candidate) pairs are sorted by a stable LSD radix sort (11-bit
+//! digits, a pass skipped when its digit never varies). A cell is then a run of equal keys,
+//! a column a run of equal x, y bits, its cells already in z order, and each cell's points in
+//! ascending index order. Walking the columns in (x, y) order, the target column of each of
+//! the 12 offsets only moves forward, so one cursor per offset finds every neighbour column
+//! without a look-up. (Before: hash tables for cells and columns and 12 hash look-ups per
+//! column, most of them misses; `perf` put the table probes at a quarter of the stage.)
 //! A pair of cells already in one component is skipped without looking at its points;
-//! otherwise point pairs are scanned until one is within the tolerance. The result is exact:
-//! the same partition as a brute-force search (tests check this on real sweeps). Cells and
-//! columns are found through a hash of their packed integer coordinates, cells are renumbered
-//! in column order (z ascending within a column) so the union–find and the points of
-//! neighbouring cells are close in memory, points are grouped by cell with a counting sort,
-//! and all buffers are kept between calls.
+//! otherwise point pairs are scanned until one is within the tolerance. A join makes the
+//! smaller cell id the root, so after the joins one forward pass points every cell straight
+//! at its root. The result is exact: the same partition as a brute-force search (tests check
+//! this on real sweeps and on random clouds). All buffers are kept between calls.
 //!
 //! Distances are computed in `f64` from the `f32` coordinates, so ties at exactly the
 //! tolerance are decided as a double-precision reference decides them.
@@ -34,7 +40,7 @@
 //! (about 300 km at a 0.5 m tolerance), belong to no cluster and are counted in
 //! [`ClusterStats`].
 
-use super::{grid_index, pack_key, positive, KeyTable, PipelineError};
+use super::{grid_index, positive, PipelineError};
 use crate::point::Point;
 
 /// Parameters of a [`Clusterer`].
@@ -168,27 +174,23 @@ const COLUMN_NEIGHBOURS: [[i64; 2]; 12] = [
 #[derive(Clone, Debug)]
 pub struct Clusterer {
     params: ClusterParams,
-    table: KeyTable,
-    /// Column (x, y cell coordinates) → column id.
-    columns: KeyTable,
-    /// Per column: start of its cells in `col_cells` (len = columns + 1).
-    col_start: Vec<u32>,
-    /// Cells grouped by column, each column's cells by ascending z.
-    col_cells: Vec<u32>,
-    /// z index of each entry of `col_cells` (read sequentially by the z windows).
-    col_z: Vec<i32>,
-    /// Column-order position of each cell (its id from step 3 on).
-    rank: Vec<u32>,
-    /// Column of each cell.
-    col_of: Vec<u32>,
     /// Candidate point indices, ascending.
     cand: Vec<u32>,
+    /// Cell coordinates of each candidate.
+    cell_ijk: Vec<[i32; 3]>,
+    /// (relative cell key, candidate position), sorted by key; and the radix sort's scratch.
+    pairs: Vec<(u64, u32)>,
+    scratch: Vec<(u64, u32)>,
+    counts: Vec<u32>,
     /// Cell of each candidate.
     cell_of: Vec<u32>,
-    /// Per cell: grid coordinates.
-    cell_ijk: Vec<[i32; 3]>,
     /// Per cell: start of its points in the cell-ordered arrays (len = cells + 1).
     cell_start: Vec<u32>,
+    /// Per column: start of its cells (len = columns + 1) and its relative (x, y) key.
+    col_start: Vec<u32>,
+    col_key: Vec<u64>,
+    /// Relative z index of each cell (read sequentially by the z windows).
+    col_z: Vec<i32>,
     /// Cell-ordered coordinates and point indices.
     xyz: Vec<[f32; 3]>,
     order: Vec<u32>,
@@ -225,17 +227,16 @@ impl Clusterer {
         }
         Ok(Self {
             params,
-            table: KeyTable::default(),
-            columns: KeyTable::default(),
-            col_start: Vec::new(),
-            col_cells: Vec::new(),
-            col_z: Vec::new(),
-            rank: Vec::new(),
-            col_of: Vec::new(),
             cand: Vec::new(),
-            cell_of: Vec::new(),
             cell_ijk: Vec::new(),
+            pairs: Vec::new(),
+            scratch: Vec::new(),
+            counts: Vec::new(),
+            cell_of: Vec::new(),
             cell_start: Vec::new(),
+            col_start: Vec::new(),
+            col_key: Vec::new(),
+            col_z: Vec::new(),
             xyz: Vec::new(),
             order: Vec::new(),
             parent: Vec::new(),
@@ -283,11 +284,9 @@ impl Clusterer {
         let n = points.len().min(u32::MAX as usize - 1);
         stats.skipped += points.len() - n;
 
-        // 1. Candidates and their cells.
+        // 1. Candidates and their cell coordinates.
         self.cand.clear();
-        self.cell_of.clear();
         self.cell_ijk.clear();
-        self.table.reset(n);
         for (i, p) in points.iter().enumerate().take(n) {
             if excluded(i) {
                 continue;
@@ -300,143 +299,133 @@ impl Clusterer {
                 stats.skipped += 1;
                 continue;
             };
-            let (cell, new) = self.table.insert(pack_key(a, b, c));
-            if new {
-                self.cell_ijk.push([a as i32, b as i32, c as i32]);
-            }
             self.cand.push(i as u32);
-            self.cell_of.push(cell);
+            self.cell_ijk.push([a as i32, b as i32, c as i32]);
         }
         stats.candidates = self.cand.len();
-        let cells = self.cell_ijk.len();
 
-        // 3. Cells grouped by column (x, y), each column sorted by z.
-        self.columns.reset(cells);
-        self.col_of.clear();
-        for &[a, b, _] in &self.cell_ijk {
-            let (col, _) = self.columns.insert(pack_key(i64::from(a), i64::from(b), 0));
-            self.col_of.push(col);
+        // 2. Keys relative to the smallest coordinates, each axis in as many bits as its
+        //    extent needs (at most 21: indices lie in [−2^20, 2^20)), x above y above z, so
+        //    that key order is (x, y, z) order: a cell is a run of equal keys, a column (x, y)
+        //    a run of equal `key >> zbits`, already sorted by z. A stable LSD radix sort of
+        //    (key, candidate position) keeps each cell's candidates ascending.
+        let mut lo = [i32::MAX; 3];
+        let mut hi = [i32::MIN; 3];
+        for ijk in &self.cell_ijk {
+            for k in 0..3 {
+                lo[k] = lo[k].min(ijk[k]);
+                hi[k] = hi[k].max(ijk[k]);
+            }
         }
-        let ncols = self
-            .col_of
-            .iter()
-            .map(|&c| c as usize + 1)
-            .max()
-            .unwrap_or(0);
-        self.col_start.clear();
-        self.col_start.resize(ncols + 1, 0);
-        for &c in &self.col_of {
-            self.col_start[c as usize + 1] += 1;
-        }
-        for k in 0..ncols {
-            self.col_start[k + 1] += self.col_start[k];
-        }
-        self.col_cells.clear();
-        self.col_cells.resize(cells, 0);
-        self.parent.clear();
-        self.parent.extend_from_slice(&self.col_start[..ncols]);
-        for (cell, &c) in self.col_of.iter().enumerate() {
-            let at = self.parent[c as usize] as usize;
-            self.parent[c as usize] += 1;
-            self.col_cells[at] = cell as u32;
-        }
-        for k in 0..ncols {
-            let (s, e) = (self.col_start[k] as usize, self.col_start[k + 1] as usize);
-            let ijk = &self.cell_ijk;
-            self.col_cells[s..e].sort_unstable_by_key(|&c| ijk[c as usize][2]);
-        }
-        self.col_z.clear();
-        self.col_z
-            .extend(self.col_cells.iter().map(|&c| self.cell_ijk[c as usize][2]));
+        // Bits of the largest relative index (< 2^21), 0 for one value or none.
+        let bits = |k: usize| 64 - (i64::from(hi[k]) - i64::from(lo[k])).max(0).leading_zeros();
+        let (ybits, zbits) = (bits(1), bits(2));
+        let total = bits(0) + ybits + zbits;
+        self.pairs.clear();
+        self.pairs
+            .extend(self.cell_ijk.iter().enumerate().map(|(pos, ijk)| {
+                let rel = |k: usize| (i64::from(ijk[k]) - i64::from(lo[k])) as u64;
+                ((rel(0) << ybits | rel(1)) << zbits | rel(2), pos as u32)
+            }));
+        radix_sort(&mut self.pairs, &mut self.scratch, total, &mut self.counts);
 
-        // Cells renumbered in column order, so that the union–find and the point spans of
-        // neighbouring cells are close in memory.
-        self.rank.clear();
-        self.rank.resize(cells, 0);
-        for (pos, &c) in self.col_cells.iter().enumerate() {
-            self.rank[c as usize] = pos as u32;
-        }
-        for c in &mut self.cell_of {
-            *c = self.rank[*c as usize];
-        }
-
-        // 3b. Counting sort of the candidates by cell.
-        self.cell_start.clear();
-        self.cell_start.resize(cells + 1, 0);
-        for &c in &self.cell_of {
-            self.cell_start[c as usize + 1] += 1;
-        }
-        for k in 0..cells {
-            self.cell_start[k + 1] += self.cell_start[k];
-        }
+        // 3. Cells (in key order: columns in (x, y) order, z ascending within a column), the
+        //    candidates grouped by cell, the columns.
+        let nc = self.cand.len();
+        self.cell_of.clear();
+        self.cell_of.resize(nc, 0);
         self.xyz.clear();
-        self.xyz.resize(self.cand.len(), [0.0; 3]);
         self.order.clear();
-        self.order.resize(self.cand.len(), 0);
-        // `parent` doubles as the fill cursor here.
-        self.parent.clear();
-        self.parent.extend_from_slice(&self.cell_start[..cells]);
-        for (&i, &c) in self.cand.iter().zip(&self.cell_of) {
-            let at = self.parent[c as usize] as usize;
-            self.parent[c as usize] += 1;
+        self.cell_start.clear();
+        self.col_start.clear();
+        self.col_key.clear();
+        self.col_z.clear();
+        let zmask = (1u64 << zbits) - 1;
+        let mut last: Option<u64> = None;
+        for (at, &(key, pos)) in self.pairs.iter().enumerate() {
+            if last != Some(key) {
+                let column = key >> zbits;
+                if last.map(|k| k >> zbits) != Some(column) {
+                    self.col_start.push(self.cell_start.len() as u32);
+                    self.col_key.push(column);
+                }
+                self.cell_start.push(at as u32);
+                self.col_z.push((key & zmask) as i32);
+                last = Some(key);
+            }
+            let i = self.cand[pos as usize];
+            self.cell_of[pos as usize] = (self.cell_start.len() - 1) as u32;
             let p = &points[i as usize];
-            self.xyz[at] = [p.x, p.y, p.z];
-            self.order[at] = i;
+            self.xyz.push([p.x, p.y, p.z]);
+            self.order.push(i);
         }
+        let cells = self.cell_start.len();
+        let ncols = self.col_key.len();
+        self.cell_start.push(nc as u32);
+        self.col_start.push(cells as u32);
 
         // 4. Union–find over cells: within a column, cells up to two apart in z; between a
-        //    column and its 12 forward neighbours, cells up to two apart in z. A pair already
-        //    in one component is skipped without looking at its points; the root of the
-        //    first cell of a pair is kept across its partners and updated on a join.
+        //    column and its 12 forward neighbours, cells up to two apart in z. Neighbour
+        //    columns are found by one cursor per offset: walking the columns in (x, y) order,
+        //    each offset's target (x + di, y + dj) only grows. A pair already in one
+        //    component is skipped without looking at its points; the root of the first cell
+        //    of a pair is kept across its partners and updated on a join.
         self.parent.clear();
         self.parent.extend(0..cells as u32);
+        let ylim = 1u64 << ybits;
+        let mut cursors = [0usize; 12];
         for col in 0..ncols {
             let own = self.col_start[col] as usize..self.col_start[col + 1] as usize;
-            let Some(&first) = self.col_cells.get(own.start) else {
-                continue;
-            };
-            let [ci, cj, _] = self.cell_ijk[first as usize];
-            for x in own.clone() {
-                let a = x as u32;
-                let za = self.col_z[x];
-                let mut ra = find(&mut self.parent, a);
-                for y in x + 1..own.end {
-                    if self.col_z[y] - za > 2 {
+            for a in own.clone() {
+                let za = self.col_z[a];
+                let mut ra = find(&mut self.parent, a as u32);
+                for b in a + 1..own.end {
+                    if self.col_z[b] - za > 2 {
                         break;
                     }
-                    ra = self.link(a, ra, y as u32, tol2);
+                    ra = self.link(a as u32, ra, b as u32, tol2);
                 }
             }
-            for [di, dj] in COLUMN_NEIGHBOURS {
-                let (ni, nj) = (i64::from(ci) + di, i64::from(cj) + dj);
-                if grid_index(ni as f64).is_none() || grid_index(nj as f64).is_none() {
+            let (cx, cy) = (self.col_key[col] >> ybits, self.col_key[col] & (ylim - 1));
+            for (cursor, [di, dj]) in cursors.iter_mut().zip(COLUMN_NEIGHBOURS) {
+                let ty = cy as i64 + dj;
+                if ty < 0 || ty >= ylim as i64 {
                     continue;
                 }
-                let Some(other) = self.columns.get(pack_key(ni, nj, 0)) else {
+                let target = (cx + di as u64) << ybits | ty as u64;
+                while *cursor < ncols && self.col_key[*cursor] < target {
+                    *cursor += 1;
+                }
+                if *cursor == ncols || self.col_key[*cursor] != target {
                     continue;
-                };
-                let theirs = self.col_start[other as usize] as usize
-                    ..self.col_start[other as usize + 1] as usize;
+                }
+                let other = *cursor;
+                let theirs = self.col_start[other] as usize..self.col_start[other + 1] as usize;
                 // Both columns are sorted by z: slide a window of cells within ±2 in z.
                 let mut lo = theirs.start;
-                for x in own.clone() {
-                    let a = x as u32;
-                    let za = self.col_z[x];
+                for a in own.clone() {
+                    let za = self.col_z[a];
                     while lo < theirs.end && self.col_z[lo] < za - 2 {
                         lo += 1;
                     }
                     if lo == theirs.end {
                         break;
                     }
-                    let mut ra = find(&mut self.parent, a);
-                    for y in lo..theirs.end {
-                        if self.col_z[y] > za + 2 {
+                    let mut ra = find(&mut self.parent, a as u32);
+                    for b in lo..theirs.end {
+                        if self.col_z[b] > za + 2 {
                             break;
                         }
-                        ra = self.link(a, ra, y as u32, tol2);
+                        ra = self.link(a as u32, ra, b as u32, tol2);
                     }
                 }
             }
+        }
+        // A join makes the smaller id the root and path halving only shortens paths, so
+        // parent[c] ≤ c: one forward pass points every cell at its root.
+        for c in 0..cells {
+            let p = self.parent[c] as usize;
+            self.parent[c] = self.parent[p];
         }
 
         // 5. Component sizes, accepted components ordered by their smallest point index.
@@ -446,7 +435,7 @@ impl Clusterer {
         self.comp_cluster.resize(cells, u32::MAX);
         self.roots.clear();
         for c in 0..cells {
-            let r = find(&mut self.parent, c as u32) as usize;
+            let r = self.parent[c] as usize;
             self.comp_size[r] += self.cell_start[c + 1] - self.cell_start[c];
         }
         for c in 0..cells {
@@ -466,7 +455,7 @@ impl Clusterer {
         // Smallest point index per accepted root: candidates are ascending, so the first
         // candidate met in each component is its smallest.
         for (&i, &c) in self.cand.iter().zip(&self.cell_of) {
-            let r = find(&mut self.parent, c);
+            let r = self.parent[c as usize];
             if self.comp_cluster[r as usize] == u32::MAX {
                 self.comp_cluster[r as usize] = i;
             }
@@ -495,7 +484,7 @@ impl Clusterer {
             self.comp_size[k] = c.start as u32;
         }
         for (&i, &c) in self.cand.iter().zip(&self.cell_of) {
-            let r = find(&mut self.parent, c);
+            let r = self.parent[c as usize];
             let k = self.comp_cluster[r as usize];
             if k != u32::MAX {
                 let at = self.comp_size[k as usize] as usize;
@@ -530,6 +519,46 @@ impl Clusterer {
         } else {
             ra
         }
+    }
+}
+
+/// Stable LSD radix sort of `pairs` by their key's low `bits` bits (11 bits a pass; a pass
+/// whose digit is the same for every key is skipped). `scratch` and `counts` are reused.
+fn radix_sort(
+    pairs: &mut Vec<(u64, u32)>,
+    scratch: &mut Vec<(u64, u32)>,
+    bits: u32,
+    counts: &mut Vec<u32>,
+) {
+    const DIGIT: u32 = 11;
+    let n = pairs.len();
+    scratch.clear();
+    scratch.resize(n, (0, 0));
+    let mut shift = 0;
+    while shift < bits {
+        let mask = (1u64 << DIGIT) - 1;
+        counts.clear();
+        counts.resize(1 << DIGIT, 0);
+        for &(k, _) in pairs.iter() {
+            counts[((k >> shift) & mask) as usize] += 1;
+        }
+        if counts.iter().any(|&c| c as usize == n) {
+            shift += DIGIT;
+            continue;
+        }
+        let mut sum = 0;
+        for c in counts.iter_mut() {
+            let here = *c;
+            *c = sum;
+            sum += here;
+        }
+        for &e in pairs.iter() {
+            let d = ((e.0 >> shift) & mask) as usize;
+            scratch[counts[d] as usize] = e;
+            counts[d] += 1;
+        }
+        std::mem::swap(pairs, scratch);
+        shift += DIGIT;
     }
 }
 
@@ -801,6 +830,57 @@ mod tests {
             assert_eq!(stats.candidates, keep.iter().filter(|&&k| k).count());
             for (k, cl) in out.as_slice().iter().enumerate() {
                 assert_eq!(cl.point_count, expected[k].len());
+            }
+        }
+    }
+
+    /// A point of a random cloud: on a lattice of step `tol / 2` (so pairs exactly at the
+    /// tolerance and duplicates are common), around one of a few centres that may lie far
+    /// apart (up to ~1e5 tolerances: every bit width of the radix keys), or non-finite.
+    fn lattice_point() -> impl proptest::strategy::Strategy<Value = (u8, [i16; 3])> {
+        use proptest::prelude::*;
+        (0u8..6, prop::array::uniform3(-8i16..8))
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(200))]
+        #[test]
+        fn random_clouds_partition_as_the_o_n2_reference(
+            raw in proptest::collection::vec(lattice_point(), 0..300),
+            tol in proptest::sample::select(vec![0.05, 0.3, 0.5, 1.7]),
+            min in 1usize..4,
+            spread in proptest::sample::select(vec![1.0f64, 50.0, 3.0e4]),
+        ) {
+            let centres = [
+                [0.0, 0.0, 0.0],
+                [spread, -spread, 0.5],
+                [-spread, spread * 0.5, -spread],
+                [1.0, 2.0, spread],
+                [f64::NAN, 0.0, 0.0],
+            ];
+            let points: Vec<Point> = raw
+                .iter()
+                .map(|&(c, [a, b, d])| {
+                    let centre = centres[usize::from(c) % centres.len()];
+                    let step = tol / 2.0 * if c == 5 { 0.93 } else { 1.0 };
+                    pt(
+                        (centre[0] * tol + f64::from(a) * step) as f32,
+                        (centre[1] * tol + f64::from(b) * step) as f32,
+                        (centre[2] * tol + f64::from(d) * step) as f32,
+                    )
+                })
+                .collect();
+            let keep: Vec<bool> = points
+                .iter()
+                .map(|p| p.x.is_finite() && p.y.is_finite() && p.z.is_finite())
+                .collect();
+            let mut out = Clusters::new();
+            let mut c = Clusterer::new(ClusterParams::new(tol, min, 120)).unwrap();
+            // Twice with one clusterer: reused buffers give the same answer.
+            for _ in 0..2 {
+                let stats = c.cluster(&points, &mut out);
+                proptest::prop_assert_eq!(partition(&out), reference(&points, &keep, tol, min, 120));
+                proptest::prop_assert_eq!(stats.skipped, keep.iter().filter(|k| !**k).count());
             }
         }
     }

@@ -122,23 +122,6 @@ impl KeyTable {
             h = (h + 1) & mask;
         }
     }
-
-    /// The id of `key`, if present.
-    #[inline]
-    pub(crate) fn get(&self, key: u64) -> Option<u32> {
-        let mask = self.slots.len().checked_sub(1)?;
-        let mut h = self.home(key);
-        loop {
-            let e = self.slots.get(h)?;
-            if e.0 == key {
-                return Some(e.1);
-            }
-            if e.0 == NO_KEY {
-                return None;
-            }
-            h = (h + 1) & mask;
-        }
-    }
 }
 
 /// Half the index range of a packed key per axis: indices in `[-KEY_BIAS, KEY_BIAS)` fit.
