@@ -343,7 +343,7 @@ impl GroundSegmenter {
                     .ring_lut
                     .get((r / step) as usize)
                     .map_or(rings - 1, |&v| usize::from(v));
-                let a = y.atan2(x) + core::f64::consts::PI;
+                let a = fast_atan2(y, x) + core::f64::consts::PI;
                 let sector = ((a * sector_scale) as usize).min(sectors - 1);
                 (sector * rings + ring) as u32
             } else {
@@ -576,9 +576,65 @@ impl SplitMix64 {
     }
 }
 
+/// `atan2(y, x)` within 1.2e-5 rad (Abramowitz & Stegun 4.4.49: a degree-9 odd polynomial on
+/// [−1, 1], |error| ≤ 1e-5 there, 1.15e-5 measured over every octant): a sector index needs far
+/// less (a sector spans ≥ 1.5e-3 rad at the 4096-sector limit), and libm's `atan2` was a
+/// third of the stage's binning (`perf`: 3.6 % of the whole pipeline on a 128 × 1024 sweep).
+/// NaN in, NaN out; (0, 0) gives 0.
+#[inline]
+fn fast_atan2(y: f64, x: f64) -> f64 {
+    use core::f64::consts::{FRAC_PI_2, PI};
+    let (ax, ay) = (x.abs(), y.abs());
+    let (num, den) = if ay > ax { (ax, ay) } else { (ay, ax) };
+    if den == 0.0 {
+        return if x.is_sign_negative() {
+            PI.copysign(y)
+        } else {
+            0.0f64.copysign(y)
+        };
+    }
+    let z = num / den;
+    let z2 = z * z;
+    let mut a = z
+        * (0.999_866_0
+            + z2 * (-0.330_299_5 + z2 * (0.180_141_0 + z2 * (-0.085_133_0 + z2 * 0.020_835_1))));
+    if ay > ax {
+        a = FRAC_PI_2 - a;
+    }
+    if x < 0.0 {
+        a = PI - a;
+    }
+    a.copysign(y)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn fast_atan2_is_within_1_2e_5_rad_of_atan2() {
+        let mut worst = 0f64;
+        for k in 0..200_000 {
+            let t = k as f64 / 200_000.0 * core::f64::consts::TAU - core::f64::consts::PI;
+            for r in [1e-3, 1.0, 137.5] {
+                let (y, x) = (r * t.sin(), r * t.cos());
+                worst = worst.max((fast_atan2(y, x) - y.atan2(x)).abs());
+            }
+        }
+        for (y, x) in [
+            (0.0, 1.0),
+            (0.0, -1.0),
+            (1.0, 0.0),
+            (-1.0, 0.0),
+            (2.0, 2.0),
+            (-3.0, -3.0),
+        ] {
+            worst = worst.max((fast_atan2(y, x) - f64::atan2(y, x)).abs());
+        }
+        assert!(worst <= 1.2e-5, "worst error {worst} rad");
+        assert_eq!(fast_atan2(0.0, 0.0), 0.0);
+        assert!(fast_atan2(f64::NAN, 1.0).is_nan());
+    }
 
     fn pt(x: f64, y: f64, z: f64) -> Point {
         Point {
