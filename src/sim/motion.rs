@@ -399,9 +399,10 @@ impl Route {
         r
     }
 
-    /// The urban loop of [`super::scenes::urban`]: counter-clockwise around the block from
-    /// (20, 0) heading +x, corners of radius 10 m at 9 m/s, straights at 12–18 m/s, sensor
-    /// 1.8 m above the road; ≈ 483 m in ≈ 41.3 s, ending at the start.
+    /// The urban drive of [`super::scenes::urban`]: counter-clockwise once around the block
+    /// from (20, 0) heading +x, corners of radius 10 m at 9 m/s, straights at 12–20 m/s, then
+    /// on along the first street to (80, 0) at up to 20 m/s; sensor 1.8 m above the road;
+    /// ≈ 543 m in ≈ 43 s.
     pub fn urban() -> Self {
         let q = std::f64::consts::FRAC_PI_2;
         let arc = Segment::Arc {
@@ -413,15 +414,15 @@ impl Route {
         Self::new(
             [20.0, 0.0, 0.0, 0.0],
             vec![
-                st(120.0, 15.0),
+                st(120.0, 20.0),
                 arc,
-                st(80.0, 12.0),
+                st(80.0, 14.0),
                 arc,
-                st(130.0, 18.0),
+                st(130.0, 20.0),
                 arc,
-                st(80.0, 12.0),
+                st(80.0, 14.0),
                 arc,
-                st(10.0, 9.0),
+                st(70.0, 20.0),
             ],
             Isometry3::translation(0.0, 0.0, super::scenes::SENSOR_HEIGHT_M),
         )
@@ -655,14 +656,15 @@ mod tests {
     }
 
     #[test]
-    fn urban_route_closes_and_respects_its_speeds() {
+    fn urban_route_loops_once_and_respects_its_speeds() {
         let r = Route::urban();
-        assert!((r.length() - (420.0 + 20.0 * std::f64::consts::PI)).abs() < 1e-9);
+        assert!((r.length() - (480.0 + 20.0 * std::f64::consts::PI)).abs() < 1e-9);
         let tr = Trajectory::route(0, r.clone());
         let end = tr.pose_s(r.duration_s());
         let start = tr.pose_s(0.0);
-        // Symmetric corners: the loop closes (to the integration error).
-        assert!((end.translation.vector - start.translation.vector).norm() < 1e-3);
+        // Symmetric corners: once around the block (to the integration error), then 60 m on.
+        let d = end.translation.vector - start.translation.vector;
+        assert!((d - Vector3::new(60.0, 0.0, 0.0)).norm() < 1e-3, "{d:?}");
         assert!(end.rotation.angle_to(&start.rotation) < 1e-6);
         let mut max_v: f64 = 0.0;
         let mut max_yaw_rate: f64 = 0.0;
@@ -682,7 +684,7 @@ mod tests {
             }
             prev = Some(kin);
         }
-        assert!((max_v - 18.0).abs() < 1e-3);
+        assert!((max_v - 20.0).abs() < 1e-3);
         assert!((max_yaw_rate - 0.9).abs() < 0.02, "{max_yaw_rate}");
     }
 

@@ -8,7 +8,7 @@
 //!
 //! | name | content |
 //! |------|---------|
-//! | `urban` | a ≈ 480 m closed loop of streets (the [`super::motion::Route::urban`] path) with kerbs, sidewalks, building walls at irregular setbacks on both sides, parked cars (boxes) and poles |
+//! | `urban` | a 150 × 100 m block of streets (a ≈ 483 m loop; [`super::motion::Route::urban`] drives it once and 60 m on) with kerbs, sidewalks, building walls at irregular setbacks on both sides, parked cars (boxes) and poles |
 //! | `corridor` | two parallel infinite walls (y = ±2.5 m), floor (z = 0) and ceiling (z = 3 m): no feature along x |
 //! | `flat_floor` | the infinite plane z = 0 only |
 //! | `flat`, `slope10`, `ramp`, `kerbs` | ground test scenes, see [`ground_scene`] |
@@ -131,7 +131,7 @@ impl Lcg {
 
 /// The urban loop: the centreline of its streets is the rectangle [0, 150] × [0, 100] m with
 /// corners rounded to 10 m ([`super::motion::Route::urban`] drives it counter-clockwise from
-/// (20, 0)). Roads are 10 m wide (kerbs 5 m from the centreline, 15 cm high); sidewalks 7 m
+/// (20, 0), once around and on to (80, 0)). Roads are 10 m wide (kerbs 5 m from the centreline, 15 cm high); sidewalks 7 m
 /// wide on the outside, the whole inner block raised as sidewalk; building walls (boxes 6–20 m
 /// high, irregular lengths, setbacks and gaps) on both sides; parked cars on straight stretches
 /// 3.9 m from the centreline (clear of the corners); poles 1 m behind the kerbs at irregular
