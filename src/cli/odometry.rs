@@ -91,8 +91,8 @@ pub const TF_TOPIC: &str = "/tf";
 /// The odometry's ICP residual on the command line.
 #[derive(Clone, Copy, Debug, clap::ValueEnum, PartialEq, Eq, Default)]
 pub enum MethodArg {
-    /// Point-to-point, then refined point-to-plane (0.39 % drift on the simulated urban loop
-    /// against 3.3 % for point-to-point: BENCHMARKS.md "Odometry").
+    /// Point-to-point, then refined point-to-plane (0.41 % drift on the simulated urban drive
+    /// against 3.2 % for point-to-point: BENCHMARKS.md "Odometry").
     #[default]
     PointToPlane,
     /// Point-to-point only, as KISS-ICP.
