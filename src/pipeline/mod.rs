@@ -88,12 +88,10 @@ pub(crate) struct KeyTable {
 pub(crate) const NO_KEY: u64 = u64::MAX;
 
 impl KeyTable {
-    /// Empties the table and sizes it for up to `expected` distinct keys.
-    pub(crate) fn reset(&mut self, expected: usize) {
-        let cap = (expected.max(8) * 2).next_power_of_two();
-        self.slots.clear();
-        self.slots.resize(cap, (NO_KEY, 0));
-        self.shift = 64 - cap.trailing_zeros();
+    /// Empties the table, keeping its size (the largest a call has needed: a sweep has far
+    /// fewer voxels than points, and a table sized for those stays in cache).
+    pub(crate) fn reset(&mut self) {
+        self.slots.fill((NO_KEY, 0));
         self.len = 0;
     }
 
@@ -102,9 +100,13 @@ impl KeyTable {
     }
 
     /// The id of `key`, inserting it with the next id if absent; `true` if it was inserted.
-    /// The caller never inserts more keys than it reset the table for.
+    /// The table doubles (and rehashes) when it becomes three-quarters full, so `expected`
+    /// in [`KeyTable::reset`] is a hint.
     #[inline]
     pub(crate) fn insert(&mut self, key: u64) -> (u32, bool) {
+        if (self.len as usize + 1) * 4 > self.slots.len() * 3 {
+            self.grow();
+        }
         let mask = self.slots.len() - 1;
         let mut h = self.home(key);
         loop {
@@ -120,6 +122,22 @@ impl KeyTable {
                 return (self.len - 1, true);
             }
             h = (h + 1) & mask;
+        }
+    }
+
+    #[cold]
+    fn grow(&mut self) {
+        let old = std::mem::take(&mut self.slots);
+        let cap = (old.len() * 2).max(16);
+        self.slots.resize(cap, (NO_KEY, 0));
+        self.shift = 64 - cap.trailing_zeros();
+        let mask = cap - 1;
+        for (key, id) in old.into_iter().filter(|e| e.0 != NO_KEY) {
+            let mut h = self.home(key);
+            while self.slots[h].0 != NO_KEY {
+                h = (h + 1) & mask;
+            }
+            self.slots[h] = (key, id);
         }
     }
 }
@@ -144,5 +162,27 @@ pub(crate) fn grid_index(scaled: f64) -> Option<i64> {
         Some(if (t as f64) > scaled { t - 1 } else { t })
     } else {
         None // also NaN
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn key_table_grows_and_keeps_every_id() {
+        let mut t = KeyTable::default();
+        let key = |i: u64| pack_key(i as i64 % 1000 - 500, i as i64 / 1000, -(i as i64 % 7));
+        for round in 0..2 {
+            t.reset();
+            for i in 0..50_000u64 {
+                assert_eq!(t.insert(key(i)), (i as u32, true), "round {round}, key {i}");
+            }
+            // After the doublings every key is still found with its id.
+            for i in (0..50_000u64).rev() {
+                assert_eq!(t.insert(key(i)), (i as u32, false));
+            }
+            assert!(t.slots.len() * 3 >= 50_000 * 4, "{}", t.slots.len());
+        }
     }
 }

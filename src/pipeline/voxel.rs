@@ -260,7 +260,8 @@ impl VoxelGrid {
         };
         match self.config.grouping {
             KeyGrouping::Hash => {
-                self.table.reset(points.len());
+                self.table.reset();
+                let mut last = (NO_KEY, 0u32);
                 for (i, p) in points.iter().enumerate() {
                     let key = match key_of(p) {
                         Ok(k) => k,
@@ -274,13 +275,20 @@ impl VoxelGrid {
                             continue;
                         }
                     };
-                    let (slot, new) = self.table.insert(key);
-                    if new {
-                        self.acc.push(Acc {
-                            first: i as u32,
-                            ..Acc::default()
-                        });
-                    }
+                    // Points come in scan order: often the same voxel as the last one.
+                    let slot = if key == last.0 {
+                        last.1
+                    } else {
+                        let (slot, new) = self.table.insert(key);
+                        if new {
+                            self.acc.push(Acc {
+                                first: i as u32,
+                                ..Acc::default()
+                            });
+                        }
+                        last = (key, slot);
+                        slot
+                    };
                     self.slot_of.push(slot);
                     if let Some(a) = self.acc.get_mut(slot as usize) {
                         a.sum[0] += f64::from(p.x);
