@@ -76,10 +76,13 @@ pub(crate) fn within(
 
 /// A reusable open-addressing map from a packed 63-bit integer key (a voxel or cell) to a
 /// dense id `0, 1, 2, …` in order of first insertion. Multiplicative (Fibonacci) hashing,
-/// linear probing, at most half full, so a lookup touches one or two slots on average.
+/// linear probing, at most three-quarters full (doubling then), so a lookup touches a few
+/// neighbouring slots on average.
 #[derive(Debug, Clone, Default)]
 pub(crate) struct KeyTable {
     slots: Vec<(u64, u32)>,
+    /// The entries while the table grows.
+    moved: Vec<(u64, u32)>,
     shift: u32,
     len: u32,
 }
@@ -88,15 +91,23 @@ pub(crate) struct KeyTable {
 pub(crate) const NO_KEY: u64 = u64::MAX;
 
 impl KeyTable {
-    /// Empties the table, keeping its size (the largest a call has needed: a sweep has far
-    /// fewer voxels than points, and a table sized for those stays in cache).
-    pub(crate) fn reset(&mut self) {
+    /// Empties the table for at most `max_keys` keys, keeping its size (the largest a call
+    /// has needed: a sweep has far fewer voxels than points, and a table sized for those
+    /// stays in cache) unless that is more than `max_keys` can ever fill: then it is cut to
+    /// the size `max_keys` would grow it to (the memory stays reserved, so growing back does
+    /// not allocate), and one huge call does not make every later reset clear a huge table.
+    pub(crate) fn reset(&mut self, max_keys: usize) {
+        let fits = (max_keys.max(12) * 4 / 3 + 1).next_power_of_two();
+        if self.slots.len() > fits {
+            self.slots.truncate(fits);
+            self.shift = 64 - fits.trailing_zeros();
+        }
         self.slots.fill((NO_KEY, 0));
         self.len = 0;
     }
 
     fn home(&self, key: u64) -> usize {
-        (key.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> self.shift) as usize
+        home(key, self.shift)
     }
 
     /// The id of `key`, inserting it with the next id if absent; `true` if it was inserted.
@@ -127,19 +138,30 @@ impl KeyTable {
 
     #[cold]
     fn grow(&mut self) {
-        let old = std::mem::take(&mut self.slots);
-        let cap = (old.len() * 2).max(16);
+        // The entries go through `moved` (kept), and `slots` grows within its capacity when a
+        // reset cut it: once warm, growing allocates nothing.
+        self.moved.clear();
+        self.moved
+            .extend(self.slots.iter().copied().filter(|e| e.0 != NO_KEY));
+        let cap = (self.slots.len() * 2).max(16);
+        self.slots.clear();
         self.slots.resize(cap, (NO_KEY, 0));
         self.shift = 64 - cap.trailing_zeros();
         let mask = cap - 1;
-        for (key, id) in old.into_iter().filter(|e| e.0 != NO_KEY) {
-            let mut h = self.home(key);
+        for &(key, id) in &self.moved {
+            let mut h = home(key, self.shift);
             while self.slots[h].0 != NO_KEY {
                 h = (h + 1) & mask;
             }
             self.slots[h] = (key, id);
         }
     }
+}
+
+/// The home slot of `key` in a table of `2^(64 − shift)` slots (Fibonacci hashing).
+#[inline]
+fn home(key: u64, shift: u32) -> usize {
+    (key.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> shift) as usize
 }
 
 /// Half the index range of a packed key per axis: indices in `[-KEY_BIAS, KEY_BIAS)` fit.
@@ -174,7 +196,7 @@ mod tests {
         let mut t = KeyTable::default();
         let key = |i: u64| pack_key(i as i64 % 1000 - 500, i as i64 / 1000, -(i as i64 % 7));
         for round in 0..2 {
-            t.reset();
+            t.reset(50_000);
             for i in 0..50_000u64 {
                 assert_eq!(t.insert(key(i)), (i as u32, true), "round {round}, key {i}");
             }
@@ -183,6 +205,15 @@ mod tests {
                 assert_eq!(t.insert(key(i)), (i as u32, false));
             }
             assert!(t.slots.len() * 3 >= 50_000 * 4, "{}", t.slots.len());
+        }
+        // A small call after a large one clears a small table, and it still works.
+        t.reset(100);
+        assert!(t.slots.len() <= 256, "{}", t.slots.len());
+        for i in 0..100u64 {
+            assert_eq!(t.insert(key(i)), (i as u32, true));
+        }
+        for i in 0..100u64 {
+            assert_eq!(t.insert(key(i)), (i as u32, false));
         }
     }
 }

@@ -260,7 +260,7 @@ impl VoxelGrid {
         };
         match self.config.grouping {
             KeyGrouping::Hash => {
-                self.table.reset();
+                self.table.reset(points.len());
                 let mut last = (NO_KEY, 0u32);
                 for (i, p) in points.iter().enumerate() {
                     let key = match key_of(p) {
