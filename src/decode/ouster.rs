@@ -17,7 +17,7 @@
 //! ```
 //!
 //! Per packet: per valid column one timestamp subtraction; per pixel the profile's fields are
-//! read by their [`Field`](crate::model::ouster::Field) descriptions and the point is one
+//! read by their [`Field`] descriptions and the point is one
 //! multiply-add per axis. No trigonometry, no allocation per packet.
 //!
 //! Conventions (DESIGN.md "Points"; ouster-sdk 1.0.1):
