@@ -111,8 +111,8 @@ impl KeyTable {
     }
 
     /// The id of `key`, inserting it with the next id if absent; `true` if it was inserted.
-    /// The table doubles (and rehashes) when it becomes three-quarters full, so `expected`
-    /// in [`KeyTable::reset`] is a hint.
+    /// The table doubles (and rehashes) when it becomes three-quarters full, so any number of
+    /// keys fits; `max_keys` in [`KeyTable::reset`] only bounds how large a table is kept.
     #[inline]
     pub(crate) fn insert(&mut self, key: u64) -> (u32, bool) {
         if (self.len as usize + 1) * 4 > self.slots.len() * 3 {
