@@ -6,7 +6,7 @@
 //! cargo run --release --example odometry -- --model vlp16 --calib VLP16db.yaml \
 //!     [--max-range 100] [--dump sweeps.bin] [--repeat 5] [--no-degeneracy] [--deskew] \
 //!     [--timed [--deskew-passes 1-4]] [--point-to-plane] [--voxel M] \
-//!     [--keyframe-m 0] [--trajectory out.tum] [--report out.json] capture.pcap
+//!     [--keyframe-m 0] [--skip N] [--trajectory out.tum] [--report out.json] capture.pcap
 //! cargo run --release --example odometry -- --sweeps sweeps.bin [...]   # read a dump instead
 //! ```
 //! - Sweeps come from [`ringscan::sweep::VelodyneStream`] (the CLI's cut: azimuth wrap at
@@ -27,6 +27,7 @@
 //!   `--deskew-passes N` (default 1) deskewed again with the motion just estimated and
 //!   registered again, up to N registrations in all; poses are those of the sensor at the
 //!   sweep's last point. Time includes the deskews.
+//! - `--skip N` leaves out the first N sweeps (a sequence that starts elsewhere).
 //! - `--repeat R` runs the whole sequence R times on fresh odometries; the trajectory is the
 //!   first run's (every run gives the same poses), each sweep's time the median over the runs.
 //!   Time = `Odometry::register` from the decoded points to the pose (range filter,
@@ -159,6 +160,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .ok_or("the last argument is the pcap (or give --sweeps FILE)")?;
         decode(&args, input)?
     };
+    let mut sweeps = sweeps;
+    if let Some(k) = arg(&args, "--skip") {
+        let k: usize = k.parse()?;
+        sweeps.drain(..k.min(sweeps.len()));
+    }
     if let Some(path) = arg(&args, "--dump") {
         write_dump(&path, &sweeps)?;
     }
@@ -181,6 +187,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         if let Some(d) = cfg.degeneracy.as_mut() {
             d.min_eigenvalue = k.parse()?;
         }
+    }
+    cfg.continuous_time = args.iter().any(|a| a == "--continuous");
+    if let Some(k) = arg(&args, "--ct-start") {
+        cfg.continuous_start_weight = k.parse()?;
+    }
+    if let Some(k) = arg(&args, "--ct-motion") {
+        cfg.continuous_motion_weight = k.parse()?;
     }
     if let Some(k) = arg(&args, "--deskew-passes") {
         cfg.deskew_passes = k.parse()?;

@@ -176,6 +176,18 @@ impl VoxelSampler {
         voxel_size_m: f64,
         out: &mut Vec<Vector3<f64>>,
     ) {
+        self.sample_by(input, |p| *p, voxel_size_m, out);
+    }
+
+    /// As [`VoxelSampler::sample`] for items that carry more than a position (a point with
+    /// its time, say): `position` gives the position an item is binned by.
+    pub fn sample_by<T: Copy>(
+        &mut self,
+        input: &[T],
+        position: impl Fn(&T) -> Vector3<f64>,
+        voxel_size_m: f64,
+        out: &mut Vec<T>,
+    ) {
         out.clear();
         if input.is_empty() || !(voxel_size_m.is_finite() && voxel_size_m > 0.0) {
             return;
@@ -188,7 +200,7 @@ impl VoxelSampler {
         self.table.resize(buckets, EMPTY_BUCKET);
         let table = &mut self.table[..];
         'points: for (i, p) in input.iter().enumerate() {
-            let Some(key) = voxel_coords_i32(p, voxel_size_m) else {
+            let Some(key) = voxel_coords_i32(&position(p), voxel_size_m) else {
                 continue;
             };
             let mut ib = kiss_hash(&key) & mask;

@@ -39,18 +39,23 @@
 //! the next sweep's firing times ([`SweepMotion::sweep_start_from_offset`]). Without deskew
 //! the points of a sweep are a blend over its duration and the pose registers that blend.
 //! [`Odometry::register_timed`] takes the raw points with their times instead, deskews them
-//! itself and stamps the pose at the sweep's last point.
+//! itself and stamps the pose at the sweep's last point; with
+//! [`OdometryConfig::continuous_time`] it estimates the poses at the sweep's first and last
+//! points together ([`Icp::align_continuous`], after CT-ICP) instead of deskewing first.
 //!
 //! No I/O, no clock: callers time it.
 
-use nalgebra::{Isometry3, Matrix3, UnitQuaternion, Vector3, Vector6};
+use nalgebra::{Isometry3, Matrix3, Matrix6, UnitQuaternion, Vector3, Vector6};
 
 use super::degeneracy::{analyse, Degeneracy, DegeneracyConfig};
 use super::icp::{
-    se3_exp, se3_log, Icp, IcpConfig, IcpError, IcpMethod, IcpResult, RegistrationConfigError,
-    RobustKernel, RotationPrior,
+    se3_exp, se3_log, ContinuousResult, Icp, IcpConfig, IcpError, IcpMethod, IcpResult,
+    RegistrationConfigError, RobustKernel, RotationPrior, SweepPriors,
 };
 use super::map::{VoxelMap, VoxelMapConfig, VoxelSampler};
+
+/// The arm at which a rotation weighs like a translation in the continuous-time priors, m.
+const CT_ROTATION_ARM_M: f64 = 10.0;
 use crate::point::Point;
 
 /// The residual the odometry's ICP minimises.
@@ -104,6 +109,22 @@ pub struct OdometryConfig {
     /// and 0.16°/100 m, but 8 passes diverged (4.7°/100 m): a sweep determines its own
     /// forward speed poorly and the passes can drift with it, so more is not safer.
     pub deskew_passes: usize,
+    /// [`Odometry::register_timed`] estimates the sweep's poses at its first and last point
+    /// together (continuous-time ICP, [`Icp::align_continuous`]: every point placed by its
+    /// own time along the motion between them) instead of deskewing the sweep and registering
+    /// it rigidly; `deskew_passes` is then unused. Off by default (see BENCHMARKS.md
+    /// "Odometry": better than the deskew passes on the VLP-16 urban drive, as good on the
+    /// HDL-32E one, and sensitive to the two weights below).
+    pub continuous_time: bool,
+    /// Continuous time: the information holding the sweep's start pose at the previous
+    /// sweep's end, per source point (in units of one point's squared residual, m², so 1 weighs
+    /// like every point of the sweep once more; rotation at a 10 m arm). Default 0.3.
+    pub continuous_start_weight: f64,
+    /// Continuous time: the information holding the motion over the sweep at the predicted
+    /// one (constant velocity), per source point, as `continuous_start_weight`; none before
+    /// a motion was seen. Default 0.003. Both defaults were chosen on the simulated urban
+    /// drives (BENCHMARKS.md "Odometry" has the grid); 0 leaves that part free.
+    pub continuous_motion_weight: f64,
 }
 
 impl Default for OdometryConfig {
@@ -132,6 +153,9 @@ impl OdometryConfig {
             keyframe_rotation_rad: 0.0,
             degeneracy: Some(DegeneracyConfig::default()),
             deskew_passes: 4,
+            continuous_time: false,
+            continuous_start_weight: 0.3,
+            continuous_motion_weight: 0.003,
         }
     }
 }
@@ -275,6 +299,10 @@ pub struct Odometry {
     source: Vec<Vector3<f64>>,
     timed: Vec<Point>,
     skewed: Vec<Point>,
+    /// Continuous time: the sweep's raw points with their fraction of the sweep's motion,
+    /// subsampled as `frame_ds` and as `source`.
+    timed_ds: Vec<(Vector3<f64>, f64)>,
+    timed_source: Vec<(Vector3<f64>, f64)>,
     deskewer: crate::deskew::Deskewer,
     last_pose: Isometry3<f64>,
     last_delta: Isometry3<f64>,
@@ -296,6 +324,14 @@ impl Odometry {
             cfg.keyframe_translation_m,
         )?;
         RegistrationConfigError::non_negative("keyframe_rotation_rad", cfg.keyframe_rotation_rad)?;
+        RegistrationConfigError::non_negative(
+            "continuous_start_weight",
+            cfg.continuous_start_weight,
+        )?;
+        RegistrationConfigError::non_negative(
+            "continuous_motion_weight",
+            cfg.continuous_motion_weight,
+        )?;
         if !(1..=4).contains(&cfg.deskew_passes) {
             return Err(RegistrationConfigError::Invalid {
                 name: "deskew_passes",
@@ -352,6 +388,8 @@ impl Odometry {
             source: Vec::new(),
             timed: Vec::new(),
             skewed: Vec::new(),
+            timed_ds: Vec::new(),
+            timed_source: Vec::new(),
             deskewer: crate::deskew::Deskewer::new(crate::deskew::Reference::End),
             last_pose: Isometry3::identity(),
             last_delta: Isometry3::identity(),
@@ -457,6 +495,11 @@ impl Odometry {
     /// the start instead would deskew each sweep with the previous sweep's motion, and every
     /// change of yaw rate would show as a transient yaw error of its size × one sweep.
     ///
+    /// With [`OdometryConfig::continuous_time`], no deskew passes: the sweep's start and end
+    /// poses are estimated together from its raw points (see [`Icp::align_continuous`]),
+    /// the start held near the previous sweep's end and the motion near the predicted one,
+    /// and the map gets the sweep deskewed to its end with the motion found.
+    ///
     /// Feed a sequence either to this method or to [`Odometry::register`], not both; an IMU
     /// increment is between the ends of consecutive sweeps.
     pub fn register_timed(
@@ -478,6 +521,9 @@ impl Odometry {
         let dt_ns = self
             .last_stamp_ns
             .map_or(0, |prev| end_ns.saturating_sub(prev));
+        if self.cfg.continuous_time {
+            return self.register_continuous(stamp_ns, end_ns, prediction, prior, sigma);
+        }
         let passes = self.cfg.deskew_passes;
         let mut guess = prediction;
         // The motion the sweep is deskewed with: the predicted one, then half-way from the
@@ -526,6 +572,161 @@ impl Odometry {
         }
         let est = est.unwrap_or((prediction, TrackStatus::Initialized, None, None));
         self.finish(prediction, est, sigma, end_ns)
+    }
+
+    /// [`Odometry::register_timed`] with continuous-time ICP: the filtered points are in
+    /// `timed`, the sweep ends at `end_ns`.
+    fn register_continuous(
+        &mut self,
+        stamp_ns: i64,
+        end_ns: i64,
+        prediction: Isometry3<f64>,
+        prior: Option<RotationPrior>,
+        sigma: f64,
+    ) -> OdometryStep {
+        // A point's fraction of the motion from the previous sweep's end to this one's.
+        let (start_ns, span_ns) = match self.last_stamp_ns {
+            Some(prev) if end_ns > prev => (prev, (end_ns - prev) as f64),
+            _ => (end_ns, 1.0),
+        };
+        self.frame.clear();
+        self.frame.extend(
+            self.timed
+                .iter()
+                .map(|p| Vector3::new(f64::from(p.x), f64::from(p.y), f64::from(p.z))),
+        );
+        let vs = self.cfg.voxel_size_m;
+        let timed = &self.timed;
+        let fraction = |i: usize| {
+            let at = stamp_ns.saturating_add(i64::from(timed[i].t));
+            (at.saturating_sub(start_ns) as f64 / span_ns).clamp(0.0, 1.0)
+        };
+        self.timed_source.clear();
+        self.timed_source.extend(
+            self.frame
+                .iter()
+                .enumerate()
+                .map(|(i, p)| (*p, fraction(i))),
+        );
+        self.sampler
+            .sample_by(&self.timed_source, |p| p.0, 0.5 * vs, &mut self.timed_ds);
+        self.sampler
+            .sample_by(&self.timed_ds, |p| p.0, 1.5 * vs, &mut self.timed_source);
+        // Until estimated, the registration source is the raw sweep (for an empty map).
+        self.source.clear();
+        self.source.extend(self.timed_source.iter().map(|p| p.0));
+        let start = self.last_pose;
+        let (est, xi) = if self.last_stamp_ns.is_some() {
+            self.estimate_continuous(&start, &prediction, prior.as_ref(), sigma)
+        } else {
+            (
+                (prediction, TrackStatus::Initialized, None, None),
+                Vector6::zeros(),
+            )
+        };
+        // The map and the source get the sweep deskewed to its end with the motion found.
+        if self.last_stamp_ns.is_some() {
+            self.refine
+                .deskew_to_end(&self.timed_ds, &xi, &mut self.frame_ds);
+            self.refine
+                .deskew_to_end(&self.timed_source, &xi, &mut self.source);
+        } else {
+            self.frame_ds.clear();
+            self.frame_ds.extend(self.timed_ds.iter().map(|p| p.0));
+        }
+        self.finish(prediction, est, sigma, end_ns)
+    }
+
+    /// As [`Odometry::estimate`] for the timed source, by continuous-time ICP from `start`;
+    /// also the motion over the sweep (`log(B⁻¹·E)`) found, or predicted.
+    fn estimate_continuous(
+        &mut self,
+        start: &Isometry3<f64>,
+        initial: &Isometry3<f64>,
+        prior: Option<&RotationPrior>,
+        sigma: f64,
+    ) -> (Estimate, Vector6<f64>) {
+        let prediction = *initial;
+        let predicted_motion = se3_log(&(start.inverse() * prediction));
+        if self.map.is_empty() {
+            return (
+                (prediction, TrackStatus::Initialized, None, None),
+                predicted_motion,
+            );
+        }
+        let _ = self.icp.set_gate(
+            3.0 * sigma,
+            RobustKernel::GemanMcClure {
+                scale_m: sigma.sqrt(),
+            },
+        );
+        let n = self.timed_source.len() as f64;
+        let l2 = CT_ROTATION_ARM_M * CT_ROTATION_ARM_M;
+        let diag = |w: f64| Matrix6::from_diagonal(&Vector6::new(w, w, w, w * l2, w * l2, w * l2));
+        let priors = SweepPriors {
+            start: *start,
+            start_information: diag(self.cfg.continuous_start_weight * n),
+            motion: predicted_motion,
+            // No motion seen yet: nothing to hold it to.
+            motion_information: if self.last_motion.is_some() {
+                diag(self.cfg.continuous_motion_weight * n)
+            } else {
+                Matrix6::zeros()
+            },
+        };
+        let mut aligned = self.icp.align_continuous(
+            &self.timed_source,
+            &self.map,
+            start,
+            &prediction,
+            &priors,
+            prior,
+        );
+        let mut coarse_degeneracy: Option<(Option<Degeneracy>, bool)> = None;
+        if let (Some(dc), Ok(coarse)) = (&self.cfg.degeneracy, &aligned) {
+            self.icp
+                .deskew_to_end(&self.timed_source, &coarse.motion, &mut self.source);
+            let d = analyse(dc, &self.map, &self.source, &coarse.end.target_from_source);
+            coarse_degeneracy = Some((d, d.as_ref().is_some_and(|d| d.is_degenerate(dc))));
+        }
+        let free = coarse_degeneracy.as_ref().is_some_and(|(_, flag)| *flag);
+        if let (OdometryMethod::PointToPlane, Ok(coarse), false) = (self.cfg.method, &aligned, free)
+        {
+            if let Ok(fine) = self.refine.align_continuous(
+                &self.timed_source,
+                &self.map.with_normals(),
+                &coarse.start,
+                &coarse.end.target_from_source,
+                &priors,
+                prior,
+            ) {
+                aligned = Ok(ContinuousResult {
+                    end: IcpResult {
+                        iterations: coarse.end.iterations + fine.end.iterations,
+                        converged: coarse.end.converged && fine.end.converged,
+                        ..fine.end
+                    },
+                    ..fine
+                });
+            }
+        }
+        match aligned {
+            Ok(r) => {
+                let st = if r.end.converged {
+                    TrackStatus::Converged
+                } else {
+                    TrackStatus::NotConverged
+                };
+                (
+                    (r.end.target_from_source, st, Some(r.end), coarse_degeneracy),
+                    r.motion,
+                )
+            }
+            Err(e) => (
+                (prediction, TrackStatus::Lost(e), None, coarse_degeneracy),
+                predicted_motion,
+            ),
+        }
     }
 
     fn range_sq(&self) -> (f64, f64) {
@@ -1077,6 +1278,20 @@ mod tests {
                 ..d
             })
             .is_err());
+        }
+        for w in [-1.0, f64::NAN, f64::INFINITY] {
+            for cfg in [
+                OdometryConfig {
+                    continuous_start_weight: w,
+                    ..d
+                },
+                OdometryConfig {
+                    continuous_motion_weight: w,
+                    ..d
+                },
+            ] {
+                assert!(Odometry::new(cfg).is_err(), "{cfg:?}");
+            }
         }
     }
 }
