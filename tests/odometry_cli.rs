@@ -271,28 +271,25 @@ fn simulated_capture(seconds: f64) -> Vec<u8> {
     w.into_inner().unwrap()
 }
 
-#[test]
-fn simulated_drive_ends_within_one_percent_of_the_truth() {
-    let pcap = out_path("sim.pcap");
+/// Decodes the simulated 3 s drive with `args` after the input, writing a trajectory; the
+/// end pose's error (m, °) against the truth, the distance travelled and the JSON summary.
+fn simulated_drive_end_error(name: &str, args: &[&str]) -> (f64, f64, f64, serde_json::Value) {
+    let pcap = out_path(&format!("{name}.pcap"));
     std::fs::write(&pcap, simulated_capture(3.0)).unwrap();
-    let tum = out_path("sim.tum");
-    let o = ringscan(&[
-        "decode",
-        pcap.to_str().unwrap(),
-        "--model",
-        "vlp16",
-        "--deskew",
-        "odometry",
-        "--trajectory",
-        tum.to_str().unwrap(),
-        "--json",
-    ]);
+    let tum = out_path(&format!("{name}.tum"));
+    let mut all = vec!["decode", pcap.to_str().unwrap(), "--model", "vlp16"];
+    all.extend_from_slice(args);
+    all.extend_from_slice(&["--trajectory", tum.to_str().unwrap(), "--json"]);
+    let o = ringscan(&all);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    let odo = &summary["odometry"];
-    assert_eq!(odo["deskew"], true, "{odo}");
     let traj = read_tum(&tum);
-    assert!(traj.len() >= 25, "{} poses: {odo}", traj.len());
+    assert!(
+        traj.len() >= 25,
+        "{} poses: {}",
+        traj.len(),
+        summary["odometry"]
+    );
 
     let truth = drive();
     let pose_at = |t: f64| truth.pose((t * 1e9).round() as i64);
@@ -307,18 +304,64 @@ fn simulated_drive_ends_within_one_percent_of_the_truth() {
     let err = (est_last.translation.vector - true_last.translation.vector).norm();
     let rot_err = est_last.rotation.angle_to(&true_last.rotation).to_degrees();
     println!(
-        "simulated drive: {} poses over {travelled:.2} m; end error {err:.3} m ({:.3} %), {rot_err:.3}°",
+        "simulated drive, {args:?}: {} poses over {travelled:.2} m; end error {err:.3} m ({:.3} %), {rot_err:.3}°",
         traj.len(),
         100.0 * err / travelled
     );
+    for p in [&pcap, &tum] {
+        let _ = std::fs::remove_file(p);
+    }
+    (err, rot_err, travelled, summary)
+}
+
+#[test]
+fn simulated_drive_ends_within_one_percent_of_the_truth() {
+    let (err, _, travelled, summary) = simulated_drive_end_error("sim", &["--deskew", "odometry"]);
+    assert_eq!(summary["odometry"]["deskew"], true, "{summary}");
     assert!(travelled > 20.0, "travelled {travelled} m");
     assert!(
         err <= 0.01 * travelled,
         "end error {err:.3} m over {travelled:.2} m"
     );
-    for p in [&pcap, &tum] {
-        let _ = std::fs::remove_file(p);
+}
+
+/// `--odometry-method continuous-time`: the raw sweeps with their point times, poses at each
+/// sweep's last point; the same drive, the same bound. With a pipeline deskew it is refused.
+#[test]
+fn continuous_time_odometry_from_the_cli() {
+    let (err, _, travelled, summary) = simulated_drive_end_error(
+        "sim-ct",
+        &["--odometry", "--odometry-method", "continuous-time"],
+    );
+    assert_eq!(summary["odometry"]["deskew"], false, "{summary}");
+    assert!(travelled > 20.0, "travelled {travelled} m");
+    assert!(
+        err <= 0.01 * travelled,
+        "end error {err:.3} m over {travelled:.2} m"
+    );
+    let pcap = out_path("sim-ct-refused.pcap");
+    std::fs::write(&pcap, simulated_capture(0.3)).unwrap();
+    for deskew in ["odometry", "constant-velocity"] {
+        let o = ringscan(&[
+            "decode",
+            pcap.to_str().unwrap(),
+            "--model",
+            "vlp16",
+            "--odometry",
+            "--odometry-method",
+            "continuous-time",
+            "--deskew",
+            deskew,
+            "--json",
+        ]);
+        assert!(!o.status.success(), "--deskew {deskew} accepted");
+        assert!(
+            String::from_utf8_lossy(&o.stderr).contains("continuous-time"),
+            "{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
     }
+    let _ = std::fs::remove_file(&pcap);
 }
 
 /// `decode --odometry --serve`: the live view advertises `/tf` and a subscriber receives the

@@ -97,6 +97,11 @@ pub enum MethodArg {
     PointToPlane,
     /// Point-to-point only, as KISS-ICP.
     PointToPoint,
+    /// Continuous-time ICP on the raw sweep with its point times: the poses at the sweep's
+    /// first and last points estimated together, the pose stamped at the last point (0.10 %,
+    /// 0.09°/100 m on the simulated urban drive; weights tuned, and a drive that starts at
+    /// 20 m/s can trap it at a standstill: BENCHMARKS.md "Odometry"). Not with `--deskew`.
+    ContinuousTime,
 }
 
 /// The odometry flags of `decode`.
@@ -155,8 +160,13 @@ impl OdometryArgs {
     }
 
     /// Resolves the flags: `Ok(None)` without odometry. `deskew` is whether the pipeline
-    /// deskews with the odometry's motion (which turns the odometry on).
-    pub fn setup(&self, deskew: bool) -> Result<Option<OdometrySetup>, String> {
+    /// deskews with the odometry's motion (which turns the odometry on), `pipeline_deskews`
+    /// whether it deskews at all.
+    pub fn setup(
+        &self,
+        deskew: bool,
+        pipeline_deskews: bool,
+    ) -> Result<Option<OdometrySetup>, String> {
         if !self.odometry && !deskew {
             return match self.stray() {
                 Some(flag) => Err(format!("{flag} needs --odometry")),
@@ -174,9 +184,19 @@ impl OdometryArgs {
             config.voxel_size_m = v;
         }
         config.method = match self.odometry_method {
-            MethodArg::PointToPlane => OdometryMethod::PointToPlane,
+            MethodArg::PointToPlane | MethodArg::ContinuousTime => OdometryMethod::PointToPlane,
             MethodArg::PointToPoint => OdometryMethod::PointToPoint,
         };
+        if self.odometry_method == MethodArg::ContinuousTime {
+            if pipeline_deskews {
+                return Err(
+                    "--odometry-method continuous-time registers the raw sweep with its \
+                     point times: it cannot follow --deskew (give --deskew none)"
+                        .into(),
+                );
+            }
+            config.continuous_time = true;
+        }
         // Checked here so that a bad value is a usage error, not a per-sensor failure.
         Odometry::new(config).map_err(|e| format!("--odometry: {e}"))?;
         if self.map_every == 0 {
@@ -440,12 +460,13 @@ impl OdometryRunner {
         sink: Option<(&mut McapSink<W>, SensorId)>,
     ) -> Result<Option<Value>, SinkError> {
         let map_every = self.setup.map_every;
-        // The registration's stamp: mid-sweep when deskewed here, else the sweep's.
+        let continuous = self.setup.config.continuous_time;
+        // The registration's stamp: mid-sweep when deskewed here, the last point's with
+        // continuous time, else the sweep's.
+        let span = sweep.points.iter().map(|p| p.t).max().unwrap_or(0);
         let stamp_ns = match deskew {
-            Some((_, start_ns)) => {
-                let span = sweep.points.iter().map(|p| p.t).max().unwrap_or(0);
-                start_ns.saturating_add(i64::from(span / 2))
-            }
+            Some((_, start_ns)) => start_ns.saturating_add(i64::from(span / 2)),
+            None if continuous => sweep.timestamp_ns.saturating_add(i64::from(span)),
             None => sweep.timestamp_ns,
         };
         // The same instant on the sensor clock, and the gyro's rotation since the last one.
@@ -485,13 +506,18 @@ impl OdometryRunner {
             }
             None => &sweep.points,
         };
-        let step: OdometryStep = so.odometry.register(
-            source
-                .iter()
-                .map(|p| Vector3::new(f64::from(p.x), f64::from(p.y), f64::from(p.z))),
-            stamp_ns,
-            prior.as_ref(),
-        );
+        let step: OdometryStep = if continuous {
+            so.odometry
+                .register_timed(source, sweep.timestamp_ns, prior.as_ref())
+        } else {
+            so.odometry.register(
+                source
+                    .iter()
+                    .map(|p| Vector3::new(f64::from(p.x), f64::from(p.y), f64::from(p.z))),
+                stamp_ns,
+                prior.as_ref(),
+            )
+        };
         if !matches!(step.status, TrackStatus::Lost(_)) {
             so.last_device_ns = Some(device_ns);
             so.imu_priors += u64::from(prior.is_some());

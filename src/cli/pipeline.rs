@@ -262,7 +262,12 @@ impl PipelineRunner {
             .map(|e| e.base_from_sensor)
     }
 
-    /// Whether sweeps are deskewed with the odometry's motion (`--deskew odometry`).
+    /// Whether sweeps are deskewed (any `--deskew` mode but `none`).
+    pub fn deskews(&self) -> bool {
+        self.setup.config.deskew.mode != DeskewMode::None
+    }
+
+    /// Whether the deskew takes its motion from the odometry (`--deskew odometry`).
     pub fn deskews_with_odometry(&self) -> bool {
         self.setup.config.deskew.mode == DeskewMode::Odometry
     }

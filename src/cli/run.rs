@@ -466,9 +466,10 @@ impl Session {
         let odometry_deskew = pipeline
             .as_ref()
             .is_some_and(PipelineRunner::deskews_with_odometry);
+        let pipeline_deskews = pipeline.as_ref().is_some_and(PipelineRunner::deskews);
         let odometry = opts
             .odometry
-            .setup(odometry_deskew)
+            .setup(odometry_deskew, pipeline_deskews)
             .map_err(RunError::Usage)?
             .map(OdometryRunner::new);
         if odometry.is_some() && opts.format == FormatArg::Ros2 {
