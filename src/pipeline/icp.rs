@@ -10,6 +10,10 @@
 //! - **Point-to-plane, Gauss–Newton**: the residual `nᵀ(T·p − q)` with the target's normal `n`
 //!   (Chen & Medioni 1992).
 //!
+//! [`Icp::align_continuous`] registers a sweep measured while moving (continuous-time ICP,
+//! after CT-ICP, Dellenbach et al. 2022): poses at the sweep's first and last points, each
+//! point placed by its time along the motion between them, both estimated together.
+//!
 //! Gauss–Newton updates perturb the current estimate on the left, `T ← exp(δ)·T`, with the
 //! twist `δ = (ρ, φ)` (translation first, m; then rotation, rad) and the exact SE(3)
 //! exponential ([`se3_exp`]). Robust kernels ([`RobustKernel`]) weight each residual by
