@@ -1377,6 +1377,64 @@ mod tests {
     }
 
     #[test]
+    fn continuous_time_reports_failures_and_survives_hostile_input() {
+        let target = IndexedCloud::new(room(), 0.5).unwrap();
+        let mut icp = Icp::new(exact_cfg(IcpMethod::PointToPointGaussNewton)).unwrap();
+        let id = Isometry3::identity();
+        let priors = SweepPriors {
+            start: id,
+            start_information: Matrix6::identity(),
+            motion: Vector6::zeros(),
+            motion_information: Matrix6::identity(),
+        };
+        assert_eq!(
+            icp.align_continuous(&[], &target, &id, &id, &priors, None),
+            Err(IcpError::EmptySource)
+        );
+        // Far from the target: no pair, an error, not a pose.
+        let far: Vec<_> = room()
+            .iter()
+            .map(|p| (p + Vector3::new(100.0, 0.0, 0.0), 0.5))
+            .collect();
+        assert!(matches!(
+            icp.align_continuous(&far, &target, &id, &id, &priors, None),
+            Err(IcpError::TooFewCorrespondences { found: 0, .. })
+        ));
+        // Non-finite points and fractions (NaN, ±inf, outside [0, 1]) among good ones: the
+        // fractions are clamped (NaN as 0), the bad points find no pair; a pose or an error,
+        // never a panic, and a pose is finite.
+        let mut mixed: Vec<(Vector3<f64>, f64)> = room().iter().map(|p| (*p, 0.5)).collect();
+        for (i, a) in [f64::NAN, f64::INFINITY, -3.0, 7.0, f64::NEG_INFINITY]
+            .into_iter()
+            .enumerate()
+        {
+            mixed[i * 7].1 = a;
+            mixed.push((Vector3::new(f64::NAN, 1.0, 1.0), a));
+            mixed.push((Vector3::new(f64::INFINITY, 0.0, 0.0), 0.5));
+        }
+        match icp.align_continuous(&mixed, &target, &id, &id, &priors, None) {
+            Ok(r) => {
+                assert!(r
+                    .end
+                    .target_from_source
+                    .translation
+                    .vector
+                    .iter()
+                    .all(|v| v.is_finite()));
+                assert!(r.motion.iter().all(|v| v.is_finite()));
+            }
+            Err(e) => assert!(!matches!(e, IcpError::EmptySource), "{e}"),
+        }
+        let mut out = Vec::new();
+        icp.deskew_to_end(
+            &mixed,
+            &Vector6::new(1.0, 0.0, 0.0, 0.0, 0.0, 0.1),
+            &mut out,
+        );
+        assert_eq!(out.len(), mixed.len());
+    }
+
+    #[test]
     fn too_few_correspondences_is_an_error_not_a_pose() {
         let target = IndexedCloud::new(room(), 0.5).unwrap();
         let far: Vec<_> = room()
