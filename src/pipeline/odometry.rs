@@ -173,6 +173,17 @@ pub enum TrackStatus {
     Lost(IcpError),
 }
 
+impl TrackStatus {
+    /// A registration's status by whether ICP converged.
+    fn of(converged: bool) -> Self {
+        if converged {
+            Self::Converged
+        } else {
+            Self::NotConverged
+        }
+    }
+}
+
 /// The motion between two consecutive sweeps, for deskewing.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SweepMotion {
@@ -477,7 +488,7 @@ impl Odometry {
         let sigma = self.threshold.value();
         let (prediction, prior) = self.predict(stamp_ns, false, imu);
         let est = self.estimate(&prediction, prior.as_ref(), sigma);
-        self.finish(prediction, est, sigma, stamp_ns)
+        self.finish(prediction, est, sigma, stamp_ns, self.frame.len())
     }
 
     /// Registers one sweep of a decoder's points (sensor frame) WITH their time offsets
@@ -571,7 +582,7 @@ impl Odometry {
             motion = (motion + estimated) * 0.5;
         }
         let est = est.unwrap_or((prediction, TrackStatus::Initialized, None, None));
-        self.finish(prediction, est, sigma, end_ns)
+        self.finish(prediction, est, sigma, end_ns, self.frame.len())
     }
 
     /// [`Odometry::register_timed`] with continuous-time ICP: the filtered points are in
@@ -589,25 +600,16 @@ impl Odometry {
             Some(prev) if end_ns > prev => (prev, (end_ns - prev) as f64),
             _ => (end_ns, 1.0),
         };
-        self.frame.clear();
-        self.frame.extend(
-            self.timed
-                .iter()
-                .map(|p| Vector3::new(f64::from(p.x), f64::from(p.y), f64::from(p.z))),
-        );
         let vs = self.cfg.voxel_size_m;
-        let timed = &self.timed;
-        let fraction = |i: usize| {
-            let at = stamp_ns.saturating_add(i64::from(timed[i].t));
-            (at.saturating_sub(start_ns) as f64 / span_ns).clamp(0.0, 1.0)
-        };
         self.timed_source.clear();
-        self.timed_source.extend(
-            self.frame
-                .iter()
-                .enumerate()
-                .map(|(i, p)| (*p, fraction(i))),
-        );
+        self.timed_source.extend(self.timed.iter().map(|p| {
+            let at = stamp_ns.saturating_add(i64::from(p.t));
+            let fraction = (at.saturating_sub(start_ns) as f64 / span_ns).clamp(0.0, 1.0);
+            (
+                Vector3::new(f64::from(p.x), f64::from(p.y), f64::from(p.z)),
+                fraction,
+            )
+        }));
         self.sampler
             .sample_by(&self.timed_source, |p| p.0, 0.5 * vs, &mut self.timed_ds);
         self.sampler
@@ -634,7 +636,7 @@ impl Odometry {
             self.frame_ds.clear();
             self.frame_ds.extend(self.timed_ds.iter().map(|p| p.0));
         }
-        self.finish(prediction, est, sigma, end_ns)
+        self.finish(prediction, est, sigma, end_ns, self.timed.len())
     }
 
     /// As [`Odometry::estimate`] for the timed source, by continuous-time ICP from `start`;
@@ -711,17 +713,15 @@ impl Odometry {
             }
         }
         match aligned {
-            Ok(r) => {
-                let st = if r.end.converged {
-                    TrackStatus::Converged
-                } else {
-                    TrackStatus::NotConverged
-                };
+            Ok(r) => (
                 (
-                    (r.end.target_from_source, st, Some(r.end), coarse_degeneracy),
-                    r.motion,
-                )
-            }
+                    r.end.target_from_source,
+                    TrackStatus::of(r.end.converged),
+                    Some(r.end),
+                    coarse_degeneracy,
+                ),
+                r.motion,
+            ),
             Err(e) => (
                 (prediction, TrackStatus::Lost(e), None, coarse_degeneracy),
                 predicted_motion,
@@ -832,14 +832,7 @@ impl Odometry {
                 }
             }
             match aligned {
-                Ok(r) => {
-                    let st = if r.converged {
-                        TrackStatus::Converged
-                    } else {
-                        TrackStatus::NotConverged
-                    };
-                    (r.target_from_source, st, Some(r))
-                }
+                Ok(r) => (r.target_from_source, TrackStatus::of(r.converged), Some(r)),
                 Err(e) => (prediction, TrackStatus::Lost(e), None),
             }
         };
@@ -847,13 +840,14 @@ impl Odometry {
     }
 
     /// Updates the threshold, the map and the motion with the estimate of the sweep now in
-    /// `frame_ds`.
+    /// `frame_ds` (`points` in range before subsampling).
     fn finish(
         &mut self,
         prediction: Isometry3<f64>,
         est: Estimate,
         sigma: f64,
         stamp_ns: i64,
+        points: usize,
     ) -> OdometryStep {
         let (pose, status, icp, coarse_degeneracy) = est;
         let mut pose = pose;
@@ -905,7 +899,7 @@ impl Odometry {
             status,
             icp,
             threshold_m: sigma,
-            points: self.frame.len(),
+            points,
             source_points: self.source.len(),
             keyframe,
             map_points: self.map.len(),
