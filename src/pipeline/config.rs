@@ -34,6 +34,8 @@
 //! max_slope_deg = 15.0
 //! max_step_m = 0.25
 //! sensor_height_m = 1.8           # optional
+//! riser_column_deg = 0.25         # riser (kerb face) test: profile width, 0 = off
+//! riser_margin_m = 0.01
 //! iterations = 100                # ransac
 //! seed = 1
 //!
@@ -189,6 +191,10 @@ pub struct GroundConfig {
     pub max_step_m: f64,
     /// `ground.sensor_height_m` (grid): height of the points' origin above the ground.
     pub sensor_height_m: Option<f64>,
+    /// `ground.riser_column_deg` (grid): azimuth width of the riser test's profiles; 0 = off.
+    pub riser_column_deg: f64,
+    /// `ground.riser_margin_m` (grid): height margin of the riser test.
+    pub riser_margin_m: f64,
     /// `ground.iterations` (ransac).
     pub iterations: u32,
     /// `ground.seed` (ransac).
@@ -206,6 +212,8 @@ impl Default for GroundConfig {
             max_slope_deg: 15.0,
             max_step_m: 0.25,
             sensor_height_m: None,
+            riser_column_deg: 0.25,
+            riser_margin_m: 0.01,
             iterations: 100,
             seed: 1,
         }
@@ -343,6 +351,20 @@ impl PipelineConfig {
             if !h.is_finite() || h.abs() > 100.0 {
                 return Err(invalid("ground.sensor_height_m", h, "finite, |h| <= 100"));
             }
+        }
+        if g.riser_column_deg != 0.0 && !(0.01..=10.0).contains(&g.riser_column_deg) {
+            return Err(invalid(
+                "ground.riser_column_deg",
+                g.riser_column_deg,
+                "0 (off) or in [0.01, 10]",
+            ));
+        }
+        if !(g.riser_margin_m.is_finite() && (0.0..=1.0).contains(&g.riser_margin_m)) {
+            return Err(invalid(
+                "ground.riser_margin_m",
+                g.riser_margin_m,
+                "in [0, 1]",
+            ));
         }
         if g.iterations == 0 || g.iterations > 1_000_000 {
             return Err(invalid("ground.iterations", g.iterations, "1 ..= 1000000"));
@@ -566,6 +588,8 @@ mod toml_load {
                         "max_slope_deg" => g.max_slope_deg = float(&key, v)?,
                         "max_step_m" => g.max_step_m = float(&key, v)?,
                         "sensor_height_m" => g.sensor_height_m = Some(float(&key, v)?),
+                        "riser_column_deg" => g.riser_column_deg = float(&key, v)?,
+                        "riser_margin_m" => g.riser_margin_m = float(&key, v)?,
                         "iterations" => g.iterations = uint(&key, v, u64::from(u32::MAX))? as u32,
                         "seed" => g.seed = uint(&key, v, i64::MAX as u64)?,
                         _ => return Err(ConfigError::UnknownKey { key }),
@@ -629,6 +653,8 @@ max_range_m = 50
 max_slope_deg = 10
 max_step_m = 0.3
 sensor_height_m = 1.9
+riser_column_deg = 0.5
+riser_margin_m = 0.02
 iterations = 200
 seed = 7
 [cluster]
@@ -673,6 +699,7 @@ max_points = 5000
             ),
             (10.0, 0.3, Some(1.9), 200, 7)
         );
+        assert_eq!((g.riser_column_deg, g.riser_margin_m), (0.5, 0.02));
         assert_eq!(
             (
                 c.cluster.tolerance_m,
@@ -760,6 +787,12 @@ max_points = 5000
             ("[ground]\nmax_slope_deg = 90", "ground.max_slope_deg"),
             ("[ground]\nmax_step_m = -0.1", "ground.max_step_m"),
             ("[ground]\nsensor_height_m = inf", "ground.sensor_height_m"),
+            (
+                "[ground]\nriser_column_deg = 0.001",
+                "ground.riser_column_deg",
+            ),
+            ("[ground]\nriser_column_deg = -1", "ground.riser_column_deg"),
+            ("[ground]\nriser_margin_m = nan", "ground.riser_margin_m"),
             ("[ground]\niterations = 0", "ground.iterations"),
             ("[ground]\nseed = -1", "ground.seed"),
             ("[ground]\nplane = 1", "ground.plane"),

@@ -152,6 +152,8 @@ impl Pipeline {
                 max_slope_deg: g.max_slope_deg,
                 max_step_m: g.max_step_m,
                 sensor_height_m: g.sensor_height_m,
+                riser_column_deg: g.riser_column_deg,
+                riser_margin_m: g.riser_margin_m,
             }),
             GroundMethodName::Ransac => GroundMethod::Ransac {
                 distance_threshold_m: g.distance_threshold_m,
