@@ -617,6 +617,7 @@ fn describe(
     ];
     c.min = min;
     c.max = max;
+    drop_interior(xy);
     convex_hull(xy, hull);
     let (center, length, width, yaw) = min_area_rectangle(hull);
     c.oriented = OrientedBox {
@@ -632,6 +633,55 @@ fn describe(
 
 fn cross(o: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
     (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+}
+
+/// Removes points that cannot be hull vertices, in one pass (Akl–Toussaint): those strictly
+/// inside the polygon of the extreme points in eight directions (x, y and the diagonals),
+/// which are on the hull and in counter-clockwise order along it. On a cluster's points most
+/// are inside, so the hull's sort handles a few instead of all (`describe` took a quarter of
+/// the clustering stage before). The hull of what is left is the hull of all.
+fn drop_interior(pts: &mut Vec<[f64; 2]>) {
+    if pts.len() < 16 {
+        return;
+    }
+    // Support points in the directions −90°, −45°, 0°, 45°, 90°, 135°, 180°, 225°.
+    let key = |p: [f64; 2]| {
+        [
+            -p[1],
+            p[0] - p[1],
+            p[0],
+            p[0] + p[1],
+            p[1],
+            p[1] - p[0],
+            -p[0],
+            -p[0] - p[1],
+        ]
+    };
+    let mut best = [pts[0]; 8];
+    let mut top = key(pts[0]);
+    for &p in pts.iter() {
+        let k = key(p);
+        for d in 0..8 {
+            if k[d] > top[d] {
+                top[d] = k[d];
+                best[d] = p;
+            }
+        }
+    }
+    let mut edges = [([0.0; 2], [0.0; 2]); 8];
+    let mut n = 0;
+    for d in 0..8 {
+        let (a, b) = (best[d], best[(d + 1) % 8]);
+        if a != b {
+            edges[n] = (a, b);
+            n += 1;
+        }
+    }
+    if n < 3 {
+        return;
+    }
+    let edges = &edges[..n];
+    pts.retain(|&q| !edges.iter().all(|&(a, b)| cross(a, b, q) > 0.0));
 }
 
 /// Convex hull of `pts` (sorted in place), counter-clockwise, no collinear points: Andrew's
@@ -947,6 +997,73 @@ mod tests {
         let hy = 2.0 * s + c;
         assert!(close(b.min[0], 10.0 - hx, 1e-4) && close(b.max[0], 10.0 + hx, 1e-4));
         assert!(close(b.min[1], -3.0 - hy, 1e-4) && close(b.max[1], -3.0 + hy, 1e-4));
+    }
+
+    /// The hull after `drop_interior` is the hull of all the points: random clouds, points
+    /// on a lattice (ties for every extreme, collinear runs), a segment, one repeated point.
+    #[test]
+    fn dropping_interior_points_keeps_the_hull() {
+        let mut s = 99u64;
+        let mut next = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 33) as f64 / (1u64 << 31) as f64
+        };
+        let mut clouds: Vec<Vec<[f64; 2]>> = Vec::new();
+        for n in [16, 17, 40, 200, 3000] {
+            clouds.push(
+                (0..n)
+                    .map(|_| [next() * 10.0 - 5.0, next() * 3.0])
+                    .collect(),
+            );
+            clouds.push(
+                (0..n)
+                    .map(|_| [(next() * 6.0).floor() * 0.2, (next() * 4.0).floor() * 0.2])
+                    .collect(),
+            );
+            clouds.push(
+                (0..n)
+                    .map(|_| {
+                        let t = next();
+                        [t, 2.0 * t]
+                    })
+                    .collect(),
+            );
+            clouds.push(vec![[1.5, -2.0]; n]);
+            // A rotated thin rectangle, like a wall.
+            clouds.push(
+                (0..n)
+                    .map(|_| {
+                        let (u, v) = (next() * 8.0, next() * 0.3);
+                        [0.8 * u - 0.6 * v + 3.0, 0.6 * u + 0.8 * v - 1.0]
+                    })
+                    .collect(),
+            );
+        }
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        for (k, cloud) in clouds.iter().enumerate() {
+            let mut all = cloud.clone();
+            convex_hull(&mut all, &mut a);
+            let mut kept = cloud.clone();
+            drop_interior(&mut kept);
+            convex_hull(&mut kept, &mut b);
+            assert_eq!(
+                a,
+                b,
+                "cloud {k} ({} points, {} kept)",
+                cloud.len(),
+                kept.len()
+            );
+            if cloud.len() >= 200 && k % 5 == 0 {
+                assert!(
+                    kept.len() < cloud.len() / 2,
+                    "cloud {k}: {} of {} kept",
+                    kept.len(),
+                    cloud.len()
+                );
+            }
+        }
     }
 
     #[test]
