@@ -563,10 +563,16 @@ impl GroundSegmenter {
                 while hi < col.len() && col[hi].0 <= r + RISER_SPAN_M {
                     hi += 1;
                 }
+                // At most RISER_NEIGHBOURS on each side: a sensor's column holds one point per
+                // ring within the span, and a hostile cloud stays linear.
+                let (from, to) = (
+                    lo.max(k.saturating_sub(RISER_NEIGHBOURS)),
+                    hi.min(k + 1 + RISER_NEIGHBOURS),
+                );
                 let (mut lower, mut higher, mut steep_below, mut steep_above) =
                     (false, false, false, false);
-                for (j, &(rq, zq, _)) in col[lo..hi].iter().enumerate() {
-                    if lo + j == k {
+                for (j, &(rq, zq, _)) in col[from..to].iter().enumerate() {
+                    if from + j == k {
                         continue;
                     }
                     if rq <= r && zq < z - m {
@@ -590,6 +596,9 @@ impl GroundSegmenter {
 
 /// How far along its radial profile the riser test looks from a point, metres.
 const RISER_SPAN_M: f32 = 1.0;
+
+/// The most neighbours on each side the riser test looks at (the nearest in range).
+const RISER_NEIGHBOURS: usize = 64;
 
 /// Height `z` of the plane `a x + b y + c z + d = 0` (`c > 0`) above `(x, y)`.
 fn height_at(pl: &[f64; 4], x: f64, y: f64) -> f64 {
@@ -1013,6 +1022,13 @@ mod tests {
         }))
         .unwrap();
         assert_eq!(off.segment(&kerb, &mut labels).ground, kerb.len());
+        // 200 000 points along one ray within a metre (no sensor makes that): each looks at
+        // 64 neighbours a side, not at all the others; flat, so all ground.
+        let dense: Vec<Point> = (0..200_000)
+            .map(|k| at(5.0 + 1e-5 * k as f32, 0.0))
+            .collect();
+        let stats = g.segment(&dense, &mut labels);
+        assert_eq!((stats.ground, stats.risers), (dense.len(), 0));
     }
 
     #[test]
