@@ -380,16 +380,13 @@ impl GroundSegmenter {
         let max_r2 = p.max_range_m * p.max_range_m;
 
         // 1. Bin of every finite point within range; counting sort into bin order.
-        self.bin_of.clear();
-        self.bin_start.clear();
-        self.bin_start.resize(bins + 1, 0);
-        for pt in points.iter().take(u32::MAX as usize) {
+        let ring_lut = &self.ring_lut;
+        let bin = |pt: &Point| {
             let (x, y) = (f64::from(pt.x), f64::from(pt.y));
             let r2 = x * x + y * y;
-            let bin = if pt.z.is_finite() && r2 <= max_r2 {
+            if pt.z.is_finite() && r2 <= max_r2 {
                 let r = r2.sqrt();
-                let ring = self
-                    .ring_lut
+                let ring = ring_lut
                     .get((r / step) as usize)
                     .map_or(rings - 1, |&v| usize::from(v));
                 let a = fast_atan2(y, x) + core::f64::consts::PI;
@@ -397,15 +394,14 @@ impl GroundSegmenter {
                 (sector * rings + ring) as u32
             } else {
                 u32::MAX
-            };
-            self.bin_of.push(bin);
-            if bin != u32::MAX {
-                self.bin_start[bin as usize + 1] += 1;
             }
-        }
-        for b in 0..bins {
-            self.bin_start[b + 1] += self.bin_start[b];
-        }
+        };
+        count_bins(
+            bins,
+            points.iter().take(u32::MAX as usize).map(bin),
+            &mut self.bin_of,
+            &mut self.bin_start,
+        );
         let total = self.bin_start[bins] as usize;
         for v in [&mut self.xs, &mut self.ys, &mut self.zs] {
             v.clear();
@@ -508,24 +504,20 @@ impl GroundSegmenter {
         let columns = (360.0 / p.riser_column_deg).ceil() as usize;
         let scale = columns as f64 / core::f64::consts::TAU;
         // Counting sort of the ground points into azimuth columns.
-        self.column_of.clear();
-        self.column_start.clear();
-        self.column_start.resize(columns + 1, 0);
-        for (pt, &g) in points.iter().zip(labels.iter()) {
-            let c = if g {
+        let column = |(pt, &g): (&Point, &bool)| {
+            if g {
                 let a = fast_atan2(f64::from(pt.y), f64::from(pt.x)) + core::f64::consts::PI;
                 ((a * scale) as usize).min(columns - 1) as u32
             } else {
                 u32::MAX
-            };
-            self.column_of.push(c);
-            if c != u32::MAX {
-                self.column_start[c as usize + 1] += 1;
             }
-        }
-        for c in 0..columns {
-            self.column_start[c + 1] += self.column_start[c];
-        }
+        };
+        count_bins(
+            columns,
+            points.iter().zip(labels.iter()).map(column),
+            &mut self.column_of,
+            &mut self.column_start,
+        );
         let total = self.column_start[columns] as usize;
         self.profile.clear();
         self.profile.resize(total, (0.0, 0.0, 0));
@@ -591,6 +583,28 @@ impl GroundSegmenter {
             }
         }
         relabelled
+    }
+}
+
+/// The first half of a counting sort: `of[i]` is item `i`'s bin (`u32::MAX`: none) and
+/// `start[b]` where bin `b` begins in bin order (`start[bins]`: the items binned).
+fn count_bins(
+    bins: usize,
+    items: impl Iterator<Item = u32>,
+    of: &mut Vec<u32>,
+    start: &mut Vec<u32>,
+) {
+    of.clear();
+    start.clear();
+    start.resize(bins + 1, 0);
+    for b in items {
+        of.push(b);
+        if b != u32::MAX {
+            start[b as usize + 1] += 1;
+        }
+    }
+    for b in 0..bins {
+        start[b + 1] += start[b];
     }
 }
 
