@@ -110,6 +110,17 @@ impl KeyTable {
         home(key, self.shift)
     }
 
+    /// Reads the home slot of `key` and discards it: called with a key that will be inserted a
+    /// little later, it brings that slot into cache while other work goes on (the read is
+    /// kept by `black_box`; nothing depends on it, so it does not stall). Safe code has no
+    /// prefetch instruction; this is its stand-in.
+    #[inline]
+    pub(crate) fn warm(&self, key: u64) {
+        if let Some(e) = self.slots.get(self.home(key)) {
+            std::hint::black_box(e.0);
+        }
+    }
+
     /// The id of `key`, inserting it with the next id if absent; `true` if it was inserted.
     /// The table doubles (and rehashes) when it becomes three-quarters full, so any number of
     /// keys fits; `max_keys` in [`KeyTable::reset`] only bounds how large a table is kept.
