@@ -3,29 +3,42 @@
 //! Open3D's `cluster_dbscan` with `min_points = 1`), keeping the components whose size lies in
 //! `[min_points, max_points]`.
 //!
-//! How: the points are binned into cubic cells of side `s = tolerance / √3`, so that any two
-//! points of one cell are within the tolerance (the cell's diagonal is `√3·s`): every cell is
-//! connected on its own, and the union–find runs over cells, not points. Cells whose
-//! coordinates differ by `(a, b, c)` are at least `s·√(Σ max(|·| − 1, 0)²)` apart, which
-//! exceeds the tolerance `√3·s` once an offset reaches 3, so only cells within ±2 on every
-//! axis can be joined. Cells are grouped by column (their x, y cell) and sorted by z within a
-//! column; each column is compared with itself and its 12 forward neighbours of the 5×5
-//! column block (each unordered pair once), sliding a ±2 window in z.
+//! How: the points are binned into cubic cells, on one of two grids, and a union–find over
+//! the points joins, for each cell, its own points and those of the cells within reach:
+//! - **coarse** (first choice): cells a hair wider than the tolerance (`s = tol·(1 + 1e-8)`).
+//!   Points two cells apart on an axis are farther apart than the tolerance, so only cells
+//!   within ±1 on every axis can be joined: each column (x, y cell) is compared with itself
+//!   and its 4 forward neighbours of the 3×3 column block (each unordered pair once), sliding
+//!   a ±1 window in z. Within a cell every pair of points is tested; a cell whose points end
+//!   up in one component is marked so (it stays so), and two such cells are joined by their
+//!   roots when any pair of their points is within the tolerance, skipped at once when they
+//!   are already one component. Other cells test every pair against their neighbours.
+//! - **fine**, when some coarse cell holds more than 64 points (a raw sweep near the sensor):
+//!   cells of side `s = tol·(1 − 1e-8) / √3`, so that any two points of one cell are within
+//!   the tolerance (the diagonal is `√3·s`) and every cell is one component without a test.
+//!   Cells whose coordinates differ by `(a, b, c)` are at least `s·√(Σ max(|·| − 1, 0)²)`
+//!   apart, more than the tolerance (≈ √3·s) once an offset reaches 3: cells within ±2 can
+//!   be joined, 12 forward neighbour columns of the 5×5 block, a ±2 window in z. Every cell
+//!   is one component, so every join goes by roots as above, and pairs within a cell cost
+//!   nothing.
+//!
+//! The coarse grid does the work of the pipeline's input (voxel centroids, a few per coarse
+//! cell) in about half the time of the fine grid, whose 5×5×5 neighbourhood holds many
+//! near-empty cells at that density (BENCHMARKS.md "Pipeline end to end"); with at most 64
+//! points a cell, its pair tests stay bounded per point on any input. The fine grid stays
+//! linear on dense clouds, where one coarse cell can hold thousands of points.
 //!
 //! Cells and columns come from one sort, with no hashing: each candidate's cell coordinates,
 //! relative to the smallest, are packed x above y above z in as many bits as each axis's
 //! extent needs, and the (key, candidate) pairs are sorted by a stable LSD radix sort (11-bit
 //! digits, a pass skipped when its digit never varies). A cell is then a run of equal keys,
 //! a column a run of equal x, y bits, its cells already in z order, and each cell's points in
-//! ascending index order. Walking the columns in (x, y) order, the target column of each of
-//! the 12 offsets only moves forward, so one cursor per offset finds every neighbour column
-//! without a look-up. (Before: hash tables for cells and columns and 12 hash look-ups per
-//! column, most of them misses; `perf` put the table probes at a quarter of the stage.)
-//! A pair of cells already in one component is skipped without looking at its points;
-//! otherwise point pairs are scanned until one is within the tolerance. A join makes the
-//! smaller cell id the root, so after the joins one forward pass points every cell straight
-//! at its root. The result is exact: the same partition as a brute-force search (tests check
-//! this on real sweeps and on random clouds). All buffers are kept between calls.
+//! ascending index order. Walking the columns in (x, y) order, the target column of each
+//! offset only moves forward, so one cursor per offset finds every neighbour column without a
+//! look-up. A join makes the smaller point position the root, so after the joins one forward
+//! pass points every point straight at its root. The result is exact on either grid: the
+//! same partition as a brute-force search (tests check this on real sweeps and on random
+//! clouds, sparse and dense). All buffers are kept between calls.
 //!
 //! Distances are computed in `f64` from the `f32` coordinates, so ties at exactly the
 //! tolerance are decided as a double-precision reference decides them.
@@ -36,8 +49,8 @@
 //! side on a hull edge), extruded over the cluster's z range. Clusters are ordered by their
 //! smallest point index, so the output is deterministic.
 //!
-//! Points with a NaN or infinite coordinate, and points more than 2^20 cells from the origin
-//! (about 300 km at a 0.5 m tolerance), belong to no cluster and are counted in
+//! Points with a NaN or infinite coordinate, and points more than 2^20 fine cells from the
+//! origin (about 300 km at a 0.5 m tolerance), belong to no cluster and are counted in
 //! [`ClusterStats`].
 
 use super::{grid_index, positive, PipelineError};
@@ -151,17 +164,23 @@ pub struct ClusterStats {
     pub too_large: usize,
     /// Points skipped for a NaN or infinite coordinate or lying too far from the origin.
     pub skipped: usize,
+    /// The call used the fine grid (some coarse cell held more than 64 points; see the
+    /// module docs).
+    pub fine_grid: bool,
 }
 
+/// A coarse cell holding more points than this makes the clusterer use the fine grid.
+const COARSE_MAX_POINTS: usize = 64;
+
 /// Forward half of the 5×5 column neighbourhood (12 offsets): each unordered pair of
-/// columns is visited once.
+/// columns is visited once. Its first four are the forward half of the 3×3 neighbourhood.
 const COLUMN_NEIGHBOURS: [[i64; 2]; 12] = [
     [0, 1],
-    [0, 2],
-    [1, -2],
     [1, -1],
     [1, 0],
     [1, 1],
+    [0, 2],
+    [1, -2],
     [1, 2],
     [2, -2],
     [2, -1],
@@ -169,6 +188,53 @@ const COLUMN_NEIGHBOURS: [[i64; 2]; 12] = [
     [2, 1],
     [2, 2],
 ];
+
+/// The two cell grids (see the module docs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Grid {
+    /// Cells a little wider than the tolerance: neighbours within ±1 on every axis.
+    Coarse,
+    /// Cells of tolerance / √3, each within the tolerance across: neighbours within ±2.
+    Fine,
+}
+
+impl Grid {
+    /// Cell side for a tolerance.
+    fn side(self, tol: f64) -> f64 {
+        match self {
+            // Wider by 1e-8: the cell of a coordinate is computed with a rounding error of
+            // at most 2^-32 cells (indices stay below 2^20), so points two cells apart on an
+            // axis are always farther apart than the tolerance.
+            Grid::Coarse => tol * (1.0 + 1e-8),
+            // The diagonal, √3 · side, is a hair under the tolerance (the same rounding):
+            // any two points of a cell are within it.
+            Grid::Fine => tol / 3f64.sqrt() * (1.0 - 1e-8),
+        }
+    }
+
+    /// How many cells apart on an axis two points can be joined.
+    fn reach(self) -> i32 {
+        match self {
+            Grid::Coarse => 1,
+            Grid::Fine => 2,
+        }
+    }
+
+    /// Forward column offsets within the reach.
+    fn column_offsets(self) -> &'static [[i64; 2]] {
+        match self {
+            Grid::Coarse => &COLUMN_NEIGHBOURS[..4],
+            Grid::Fine => &COLUMN_NEIGHBOURS,
+        }
+    }
+}
+
+/// What [`Clusterer::bin`] made.
+struct Layout {
+    cells: usize,
+    columns: usize,
+    ybits: u32,
+}
 
 /// A reusable Euclidean clusterer. See the module docs.
 #[derive(Clone, Debug)]
@@ -182,8 +248,8 @@ pub struct Clusterer {
     pairs: Vec<(u64, u32)>,
     scratch: Vec<(u64, u32)>,
     counts: Vec<u32>,
-    /// Cell of each candidate.
-    cell_of: Vec<u32>,
+    /// Position of each candidate in the cell-ordered arrays.
+    at_of: Vec<u32>,
     /// Per cell: start of its points in the cell-ordered arrays (len = cells + 1).
     cell_start: Vec<u32>,
     /// Per column: start of its cells (len = columns + 1) and its relative (x, y) key.
@@ -191,12 +257,13 @@ pub struct Clusterer {
     col_key: Vec<u64>,
     /// Relative z index of each cell (read sequentially by the z windows).
     col_z: Vec<i32>,
-    /// Cell-ordered coordinates and point indices.
+    /// Cell-ordered coordinates.
     xyz: Vec<[f32; 3]>,
-    order: Vec<u32>,
-    /// Union–find parent per cell.
+    /// Union–find parent per point (cell order).
     parent: Vec<u32>,
-    /// Per root cell: points in the component, then cluster id.
+    /// Per cell: all its points are in one component (they then stay so).
+    single: Vec<bool>,
+    /// Per root: points in the component, then cluster id.
     comp_size: Vec<u32>,
     comp_cluster: Vec<u32>,
     /// Accepted roots with their smallest point index.
@@ -232,14 +299,14 @@ impl Clusterer {
             pairs: Vec::new(),
             scratch: Vec::new(),
             counts: Vec::new(),
-            cell_of: Vec::new(),
+            at_of: Vec::new(),
             cell_start: Vec::new(),
             col_start: Vec::new(),
             col_key: Vec::new(),
             col_z: Vec::new(),
             xyz: Vec::new(),
-            order: Vec::new(),
             parent: Vec::new(),
+            single: Vec::new(),
             comp_size: Vec::new(),
             comp_cluster: Vec::new(),
             roots: Vec::new(),
@@ -280,166 +347,52 @@ impl Clusterer {
         let mut stats = ClusterStats::default();
         let tol = self.params.tolerance_m;
         let tol2 = tol * tol;
-        let side = tol / 3f64.sqrt();
         let n = points.len().min(u32::MAX as usize - 1);
         stats.skipped += points.len() - n;
 
-        // 1. Candidates and their cell coordinates.
+        // 1. Candidates: not excluded, finite and within 2^20 fine cells of the origin on
+        //    every axis (then within range of the coarse grid too).
+        let fine = Grid::Fine.side(tol);
         self.cand.clear();
-        self.cell_ijk.clear();
         for (i, p) in points.iter().enumerate().take(n) {
             if excluded(i) {
                 continue;
             }
-            let (Some(a), Some(b), Some(c)) = (
-                grid_index(f64::from(p.x) / side),
-                grid_index(f64::from(p.y) / side),
-                grid_index(f64::from(p.z) / side),
-            ) else {
+            if [p.x, p.y, p.z]
+                .iter()
+                .all(|&v| grid_index(f64::from(v) / fine).is_some())
+            {
+                self.cand.push(i as u32);
+            } else {
                 stats.skipped += 1;
-                continue;
-            };
-            self.cand.push(i as u32);
-            self.cell_ijk.push([a as i32, b as i32, c as i32]);
+            }
         }
         stats.candidates = self.cand.len();
 
-        // 2. Keys relative to the smallest coordinates, each axis in as many bits as its
-        //    extent needs (at most 21: indices lie in [−2^20, 2^20)), x above y above z, so
-        //    that key order is (x, y, z) order: a cell is a run of equal keys, a column (x, y)
-        //    a run of equal `key >> zbits`, already sorted by z. A stable LSD radix sort of
-        //    (key, candidate position) keeps each cell's candidates ascending.
-        let mut lo = [i32::MAX; 3];
-        let mut hi = [i32::MIN; 3];
-        for ijk in &self.cell_ijk {
-            for k in 0..3 {
-                lo[k] = lo[k].min(ijk[k]);
-                hi[k] = hi[k].max(ijk[k]);
-            }
+        // 2–4. Cells, then the joins: on the coarse grid unless one of its cells holds more
+        //      than `COARSE_MAX_POINTS` points, on the fine grid then.
+        let mut grid = Grid::Coarse;
+        let mut bits = self.sort_cells(points, grid.side(tol));
+        if self.a_cell_holds_more_than(COARSE_MAX_POINTS) {
+            grid = Grid::Fine;
+            bits = self.sort_cells(points, grid.side(tol));
         }
-        // Bits of the largest relative index (< 2^21), 0 for one value or none.
-        let bits = |k: usize| 64 - (i64::from(hi[k]) - i64::from(lo[k])).max(0).leading_zeros();
-        let (ybits, zbits) = (bits(1), bits(2));
-        let total = bits(0) + ybits + zbits;
-        self.pairs.clear();
-        self.pairs
-            .extend(self.cell_ijk.iter().enumerate().map(|(pos, ijk)| {
-                let rel = |k: usize| (i64::from(ijk[k]) - i64::from(lo[k])) as u64;
-                ((rel(0) << ybits | rel(1)) << zbits | rel(2), pos as u32)
-            }));
-        radix_sort(&mut self.pairs, &mut self.scratch, total, &mut self.counts);
-
-        // 3. Cells (in key order: columns in (x, y) order, z ascending within a column), the
-        //    candidates grouped by cell, the columns.
+        let layout = self.build_cells(points, bits);
+        self.join(grid, &layout, tol2);
+        stats.fine_grid = grid == Grid::Fine;
         let nc = self.cand.len();
-        self.cell_of.clear();
-        self.cell_of.resize(nc, 0);
-        self.xyz.clear();
-        self.order.clear();
-        self.cell_start.clear();
-        self.col_start.clear();
-        self.col_key.clear();
-        self.col_z.clear();
-        let zmask = (1u64 << zbits) - 1;
-        let mut last: Option<u64> = None;
-        for (at, &(key, pos)) in self.pairs.iter().enumerate() {
-            if last != Some(key) {
-                let column = key >> zbits;
-                if last.map(|k| k >> zbits) != Some(column) {
-                    self.col_start.push(self.cell_start.len() as u32);
-                    self.col_key.push(column);
-                }
-                self.cell_start.push(at as u32);
-                self.col_z.push((key & zmask) as i32);
-                last = Some(key);
-            }
-            let i = self.cand[pos as usize];
-            self.cell_of[pos as usize] = (self.cell_start.len() - 1) as u32;
-            let p = &points[i as usize];
-            self.xyz.push([p.x, p.y, p.z]);
-            self.order.push(i);
-        }
-        let cells = self.cell_start.len();
-        let ncols = self.col_key.len();
-        self.cell_start.push(nc as u32);
-        self.col_start.push(cells as u32);
-
-        // 4. Union–find over cells: within a column, cells up to two apart in z; between a
-        //    column and its 12 forward neighbours, cells up to two apart in z. Neighbour
-        //    columns are found by one cursor per offset: walking the columns in (x, y) order,
-        //    each offset's target (x + di, y + dj) only grows. A pair already in one
-        //    component is skipped without looking at its points; the root of the first cell
-        //    of a pair is kept across its partners and updated on a join.
-        self.parent.clear();
-        self.parent.extend(0..cells as u32);
-        let ylim = 1u64 << ybits;
-        let mut cursors = [0usize; 12];
-        for col in 0..ncols {
-            let own = self.col_start[col] as usize..self.col_start[col + 1] as usize;
-            for a in own.clone() {
-                let za = self.col_z[a];
-                let mut ra = find(&mut self.parent, a as u32);
-                for b in a + 1..own.end {
-                    if self.col_z[b] - za > 2 {
-                        break;
-                    }
-                    ra = self.link(a as u32, ra, b as u32, tol2);
-                }
-            }
-            let (cx, cy) = (self.col_key[col] >> ybits, self.col_key[col] & (ylim - 1));
-            for (cursor, [di, dj]) in cursors.iter_mut().zip(COLUMN_NEIGHBOURS) {
-                let ty = cy as i64 + dj;
-                if ty < 0 || ty >= ylim as i64 {
-                    continue;
-                }
-                let target = (cx + di as u64) << ybits | ty as u64;
-                while *cursor < ncols && self.col_key[*cursor] < target {
-                    *cursor += 1;
-                }
-                if *cursor == ncols || self.col_key[*cursor] != target {
-                    continue;
-                }
-                let other = *cursor;
-                let theirs = self.col_start[other] as usize..self.col_start[other + 1] as usize;
-                // Both columns are sorted by z: slide a window of cells within ±2 in z.
-                let mut lo = theirs.start;
-                for a in own.clone() {
-                    let za = self.col_z[a];
-                    while lo < theirs.end && self.col_z[lo] < za - 2 {
-                        lo += 1;
-                    }
-                    if lo == theirs.end {
-                        break;
-                    }
-                    let mut ra = find(&mut self.parent, a as u32);
-                    for b in lo..theirs.end {
-                        if self.col_z[b] > za + 2 {
-                            break;
-                        }
-                        ra = self.link(a as u32, ra, b as u32, tol2);
-                    }
-                }
-            }
-        }
-        // A join makes the smaller id the root and path halving only shortens paths, so
-        // parent[c] ≤ c: one forward pass points every cell at its root.
-        for c in 0..cells {
-            let p = self.parent[c] as usize;
-            self.parent[c] = self.parent[p];
-        }
 
         // 5. Component sizes, accepted components ordered by their smallest point index.
         self.comp_size.clear();
-        self.comp_size.resize(cells, 0);
+        self.comp_size.resize(nc, 0);
         self.comp_cluster.clear();
-        self.comp_cluster.resize(cells, u32::MAX);
+        self.comp_cluster.resize(nc, u32::MAX);
         self.roots.clear();
-        for c in 0..cells {
-            let r = self.parent[c] as usize;
-            self.comp_size[r] += self.cell_start[c + 1] - self.cell_start[c];
+        for &r in &self.parent {
+            self.comp_size[r as usize] += 1;
         }
-        for c in 0..cells {
-            if self.parent[c] as usize != c {
+        for (c, &r) in self.parent.iter().enumerate() {
+            if r as usize != c {
                 continue;
             }
             stats.components += 1;
@@ -454,8 +407,8 @@ impl Clusterer {
         }
         // Smallest point index per accepted root: candidates are ascending, so the first
         // candidate met in each component is its smallest.
-        for (&i, &c) in self.cand.iter().zip(&self.cell_of) {
-            let r = self.parent[c as usize];
+        for (&i, &at) in self.cand.iter().zip(&self.at_of) {
+            let r = self.parent[at as usize];
             if self.comp_cluster[r as usize] == u32::MAX {
                 self.comp_cluster[r as usize] = i;
             }
@@ -483,13 +436,13 @@ impl Clusterer {
         for (k, c) in out.clusters.iter().enumerate() {
             self.comp_size[k] = c.start as u32;
         }
-        for (&i, &c) in self.cand.iter().zip(&self.cell_of) {
-            let r = self.parent[c as usize];
+        for (&i, &at) in self.cand.iter().zip(&self.at_of) {
+            let r = self.parent[at as usize];
             let k = self.comp_cluster[r as usize];
             if k != u32::MAX {
-                let at = self.comp_size[k as usize] as usize;
+                let slot = self.comp_size[k as usize] as usize;
                 self.comp_size[k as usize] += 1;
-                out.indices[at] = i;
+                out.indices[slot] = i;
             }
         }
         for c in &mut out.clusters {
@@ -498,26 +451,206 @@ impl Clusterer {
         }
         stats
     }
-}
 
-impl Clusterer {
-    /// Joins cells `a` (whose root is `ra`) and `b` if they are in different components and
-    /// some pair of their points is within the tolerance; returns `a`'s root afterwards.
-    #[inline]
-    fn link(&mut self, a: u32, ra: u32, b: u32, tol2: f64) -> u32 {
-        let rb = find(&mut self.parent, b);
-        if ra == rb {
-            return ra;
+    /// Sorts the candidates by their cell of `side` metres into `pairs`; returns the bits
+    /// of the y and z fields of the keys.
+    fn sort_cells(&mut self, points: &[Point], side: f64) -> (u32, u32) {
+        // Keys relative to the smallest cell coordinates, each axis in as many bits as its
+        // extent needs (at most 21: indices lie in [−2^20, 2^20)), x above y above z, so that
+        // key order is (x, y, z) order: a cell is a run of equal keys, a column (x, y) a run
+        // of equal `key >> zbits`, already sorted by z. A stable LSD radix sort of (key,
+        // candidate position) keeps each cell's candidates ascending.
+        self.cell_ijk.clear();
+        self.cell_ijk.extend(self.cand.iter().map(|&i| {
+            let p = &points[i as usize];
+            // In range: checked on the fine grid, whose cells are the smallest.
+            let g = |v: f32| grid_index(f64::from(v) / side).unwrap_or(0) as i32;
+            [g(p.x), g(p.y), g(p.z)]
+        }));
+        let mut lo = [i32::MAX; 3];
+        let mut hi = [i32::MIN; 3];
+        for ijk in &self.cell_ijk {
+            for k in 0..3 {
+                lo[k] = lo[k].min(ijk[k]);
+                hi[k] = hi[k].max(ijk[k]);
+            }
         }
-        let span =
-            |c: u32| self.cell_start[c as usize] as usize..self.cell_start[c as usize + 1] as usize;
-        if any_within(&self.xyz[span(a)], &self.xyz[span(b)], tol2) {
-            // The smaller id becomes the root (any rule would do).
-            let (lo, hi) = if ra < rb { (ra, rb) } else { (rb, ra) };
-            self.parent[hi as usize] = lo;
-            lo
-        } else {
-            ra
+        // Bits of the largest relative index (< 2^21), 0 for one value or none.
+        let bits = |k: usize| 64 - (i64::from(hi[k]) - i64::from(lo[k])).max(0).leading_zeros();
+        let (ybits, zbits) = (bits(1), bits(2));
+        let total = bits(0) + ybits + zbits;
+        self.pairs.clear();
+        self.pairs
+            .extend(self.cell_ijk.iter().enumerate().map(|(pos, ijk)| {
+                let rel = |k: usize| (i64::from(ijk[k]) - i64::from(lo[k])) as u64;
+                ((rel(0) << ybits | rel(1)) << zbits | rel(2), pos as u32)
+            }));
+        radix_sort(&mut self.pairs, &mut self.scratch, total, &mut self.counts);
+        (ybits, zbits)
+    }
+
+    /// True when more than `k` sorted candidates share a cell.
+    fn a_cell_holds_more_than(&self, k: usize) -> bool {
+        self.pairs
+            .windows(k + 1)
+            .any(|w| w.first().map(|e| e.0) == w.last().map(|e| e.0))
+    }
+
+    /// From the sorted candidates: `xyz` (cell order), `at_of`, `cell_start`, the columns
+    /// and `col_z`.
+    fn build_cells(&mut self, points: &[Point], (ybits, zbits): (u32, u32)) -> Layout {
+        // Cells in key order (columns in (x, y) order, z ascending within a column), the
+        // candidates grouped by cell, the columns.
+        let nc = self.cand.len();
+        self.at_of.clear();
+        self.at_of.resize(nc, 0);
+        self.xyz.clear();
+        self.cell_start.clear();
+        self.col_start.clear();
+        self.col_key.clear();
+        self.col_z.clear();
+        let zmask = (1u64 << zbits) - 1;
+        let mut last: Option<u64> = None;
+        for (at, &(key, pos)) in self.pairs.iter().enumerate() {
+            if last != Some(key) {
+                let column = key >> zbits;
+                if last.map(|k| k >> zbits) != Some(column) {
+                    self.col_start.push(self.cell_start.len() as u32);
+                    self.col_key.push(column);
+                }
+                self.cell_start.push(at as u32);
+                self.col_z.push((key & zmask) as i32);
+                last = Some(key);
+            }
+            self.at_of[pos as usize] = at as u32;
+            let p = &points[self.cand[pos as usize] as usize];
+            self.xyz.push([p.x, p.y, p.z]);
+        }
+        let cells = self.cell_start.len();
+        self.cell_start.push(nc as u32);
+        self.col_start.push(cells as u32);
+        Layout {
+            cells,
+            columns: self.col_key.len(),
+            ybits,
+        }
+    }
+
+    /// Union–find over the points (in cell order): within each cell, then between each cell
+    /// and the cells within `grid.reach()` of it on every axis, found by column: a column is
+    /// compared with itself and its forward neighbours (each unordered pair once), sliding a
+    /// window in z. Neighbour columns are found by one cursor per offset: walking the
+    /// columns in (x, y) order, each offset's target only grows.
+    fn join(&mut self, grid: Grid, layout: &Layout, tol2: f64) {
+        let nc = self.cand.len();
+        self.parent.clear();
+        self.parent.extend(0..nc as u32);
+        self.single.clear();
+        for c in 0..layout.cells {
+            let (s, e) = (self.cell_start[c] as usize, self.cell_start[c + 1] as usize);
+            match grid {
+                // Within the tolerance of each other: all one component.
+                Grid::Fine => {
+                    for a in s + 1..e {
+                        self.parent[a] = s as u32;
+                    }
+                    self.single.push(true);
+                }
+                // A few points: every pair.
+                Grid::Coarse => {
+                    for a in s..e {
+                        for b in a + 1..e {
+                            if dist2(&self.xyz[a], &self.xyz[b]) <= tol2 {
+                                union(&mut self.parent, a as u32, b as u32);
+                            }
+                        }
+                    }
+                    let r = find(&mut self.parent, s as u32);
+                    let single = (s + 1..e).all(|a| find(&mut self.parent, a as u32) == r);
+                    self.single.push(single);
+                }
+            }
+        }
+        let reach = grid.reach();
+        let offsets = grid.column_offsets();
+        let ylim = 1u64 << layout.ybits;
+        let mut cursors = [0usize; 12];
+        for col in 0..layout.columns {
+            let own = self.col_start[col] as usize..self.col_start[col + 1] as usize;
+            for a in own.clone() {
+                let za = self.col_z[a];
+                for b in a + 1..own.end {
+                    if self.col_z[b] - za > reach {
+                        break;
+                    }
+                    self.link(a, b, tol2);
+                }
+            }
+            let key = self.col_key[col];
+            let (cx, cy) = (key >> layout.ybits, key & (ylim - 1));
+            for (cursor, &[di, dj]) in cursors.iter_mut().zip(offsets) {
+                let ty = cy as i64 + dj;
+                if ty < 0 || ty >= ylim as i64 {
+                    continue;
+                }
+                let target = (cx + di as u64) << layout.ybits | ty as u64;
+                while *cursor < layout.columns && self.col_key[*cursor] < target {
+                    *cursor += 1;
+                }
+                if *cursor == layout.columns || self.col_key[*cursor] != target {
+                    continue;
+                }
+                let other = *cursor;
+                let theirs = self.col_start[other] as usize..self.col_start[other + 1] as usize;
+                // Both columns are sorted by z: slide a window of cells within the reach.
+                let mut lo = theirs.start;
+                for a in own.clone() {
+                    let za = self.col_z[a];
+                    while lo < theirs.end && self.col_z[lo] < za - reach {
+                        lo += 1;
+                    }
+                    for b in lo..theirs.end {
+                        if self.col_z[b] > za + reach {
+                            break;
+                        }
+                        self.link(a, b, tol2);
+                    }
+                }
+            }
+        }
+        // A join makes the smaller id the root and path halving only shortens paths, so
+        // parent[p] ≤ p: one forward pass points every point at its root.
+        for p in 0..nc {
+            let q = self.parent[p] as usize;
+            self.parent[p] = self.parent[q];
+        }
+    }
+
+    /// Joins the components of cells `a` and `b` where a point of one is within the
+    /// tolerance of a point of the other.
+    #[inline]
+    fn link(&mut self, a: usize, b: usize, tol2: f64) {
+        let (sa, ea) = (self.cell_start[a] as usize, self.cell_start[a + 1] as usize);
+        let (sb, eb) = (self.cell_start[b] as usize, self.cell_start[b + 1] as usize);
+        if self.single[a] && self.single[b] {
+            // One component each: skipped when it is the same one, else one pair within
+            // the tolerance joins them.
+            let ra = find(&mut self.parent, sa as u32);
+            let rb = find(&mut self.parent, sb as u32);
+            if ra != rb && any_within(&self.xyz[sa..ea], &self.xyz[sb..eb], tol2) {
+                let (lo, hi) = if ra < rb { (ra, rb) } else { (rb, ra) };
+                self.parent[hi as usize] = lo;
+            }
+            return;
+        }
+        // A coarse cell of several components (at most `COARSE_MAX_POINTS` points): every
+        // pair.
+        for p in sa..ea {
+            for q in sb..eb {
+                if dist2(&self.xyz[p], &self.xyz[q]) <= tol2 {
+                    union(&mut self.parent, p as u32, q as u32);
+                }
+            }
         }
     }
 }
@@ -574,16 +707,28 @@ fn find(parent: &mut [u32], mut x: u32) -> u32 {
 }
 
 /// True when some point of `a` is within `sqrt(tol2)` of some point of `b`.
+#[inline]
 fn any_within(a: &[[f32; 3]], b: &[[f32; 3]], tol2: f64) -> bool {
-    a.iter().any(|p| {
-        let (x, y, z) = (f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
-        b.iter().any(|q| {
-            let dx = f64::from(q[0]) - x;
-            let dy = f64::from(q[1]) - y;
-            let dz = f64::from(q[2]) - z;
-            dx * dx + dy * dy + dz * dz <= tol2
-        })
-    })
+    a.iter().any(|p| b.iter().any(|q| dist2(p, q) <= tol2))
+}
+
+/// Squared distance, computed in `f64` from the `f32` coordinates.
+#[inline]
+fn dist2(p: &[f32; 3], q: &[f32; 3]) -> f64 {
+    let dx = f64::from(q[0]) - f64::from(p[0]);
+    let dy = f64::from(q[1]) - f64::from(p[1]);
+    let dz = f64::from(q[2]) - f64::from(p[2]);
+    dx * dx + dy * dy + dz * dz
+}
+
+/// Joins the components of `a` and `b`; the smaller root becomes the root.
+#[inline]
+fn union(parent: &mut [u32], a: u32, b: u32) {
+    let (ra, rb) = (find(parent, a), find(parent, b));
+    if ra != rb {
+        let (lo, hi) = if ra < rb { (ra, rb) } else { (rb, ra) };
+        parent[hi as usize] = lo;
+    }
 }
 
 /// Fills a cluster's centroid, axis-aligned and oriented boxes from its points.
@@ -900,6 +1045,7 @@ mod tests {
             tol in proptest::sample::select(vec![0.05, 0.3, 0.5, 1.7]),
             min in 1usize..4,
             spread in proptest::sample::select(vec![1.0f64, 50.0, 3.0e4]),
+            copies in proptest::sample::select(vec![1usize, 1, 70]),
         ) {
             let centres = [
                 [0.0, 0.0, 0.0],
@@ -908,8 +1054,13 @@ mod tests {
                 [1.0, 2.0, spread],
                 [f64::NAN, 0.0, 0.0],
             ];
+            // Each point `copies` times: 70 copies fill coarse cells past 64 points, so both
+            // grids are checked.
+            let take = if copies > 1 { 20 } else { raw.len() };
             let points: Vec<Point> = raw
                 .iter()
+                .take(take)
+                .flat_map(|r| std::iter::repeat_n(r, copies))
                 .map(|&(c, [a, b, d])| {
                     let centre = centres[usize::from(c) % centres.len()];
                     let step = tol / 2.0 * if c == 5 { 0.93 } else { 1.0 };
@@ -933,6 +1084,38 @@ mod tests {
                 proptest::prop_assert_eq!(stats.skipped, keep.iter().filter(|k| !**k).count());
             }
         }
+    }
+
+    #[test]
+    fn a_coarse_cell_of_two_components_and_a_dense_cloud_on_the_fine_grid() {
+        // Tolerance 0.5: p0 and p1 share the coarse cell (0, 0, 0) but lie 0.69 m apart;
+        // p2 (cell (0, 0, 1)) is 0.40 m from p1 and 0.98 m from p0; p3 (cell (0, 0, −1)) is
+        // 0.35 m from p0 and 0.92 m from p1. Components {p0, p3} and {p1, p2}.
+        let split = [
+            pt(0.05, 0.05, 0.05),
+            pt(0.45, 0.45, 0.45),
+            pt(0.45, 0.45, 0.85),
+            pt(0.05, 0.05, -0.3),
+        ];
+        let mut c = Clusterer::new(ClusterParams::new(0.5, 1, 100)).unwrap();
+        let mut out = Clusters::new();
+        let stats = c.cluster(&split, &mut out);
+        assert!(!stats.fine_grid);
+        assert_eq!(partition(&out), vec![vec![0, 3], vec![1, 2]]);
+        // The same with 80 points packed in a 4 cm box beside p0 (one coarse cell over 64
+        // points): the fine grid, the same components, the box joined to p0's.
+        let mut dense = split.to_vec();
+        for k in 0..80 {
+            let f = |v: u32| (v % 4) as f32 * 0.01;
+            dense.push(pt(0.1 + f(k), 0.1 + f(k / 4), 0.1 + f(k / 16)));
+        }
+        let stats = c.cluster(&dense, &mut out);
+        assert!(stats.fine_grid);
+        let keep = vec![true; dense.len()];
+        let expected = reference(&dense, &keep, 0.5, 1, 100);
+        assert_eq!(partition(&out), expected);
+        assert_eq!(expected.len(), 2);
+        assert_eq!(expected[1], vec![1, 2]);
     }
 
     #[test]
