@@ -112,8 +112,11 @@ impl KeyTable {
 
     /// Reads the home slot of `key` and discards it: called with a key that will be inserted a
     /// little later, it brings that slot into cache while other work goes on (the read is
-    /// kept by `black_box`; nothing depends on it, so it does not stall). Safe code has no
-    /// prefetch instruction; this is its stand-in.
+    /// kept by `black_box`; nothing waits for its value, so several such misses overlap).
+    /// Safe code has no prefetch instruction; this is its stand-in, and an imperfect one: a
+    /// load that misses holds its place in the reorder buffer until it completes, so once
+    /// the buffer fills the core waits on it (`perf` puts ~8 % of the OS-2-128 pipeline on
+    /// this read; reading 6 keys ahead instead of 16 was no faster, BENCHMARKS.md).
     #[inline]
     pub(crate) fn warm(&self, key: u64) {
         if let Some(e) = self.slots.get(self.home(key)) {
