@@ -53,7 +53,7 @@
 //! origin (about 300 km at a 0.5 m tolerance), belong to no cluster and are counted in
 //! [`ClusterStats`].
 
-use super::{grid_index, positive, PipelineError};
+use super::{positive, GridScale, PipelineError};
 use crate::point::Point;
 
 /// Parameters of a [`Clusterer`].
@@ -352,7 +352,7 @@ impl Clusterer {
 
         // 1. Candidates: not excluded, finite and within 2^20 fine cells of the origin on
         //    every axis (then within range of the coarse grid too).
-        let fine = Grid::Fine.side(tol);
+        let fine = GridScale::new(Grid::Fine.side(tol));
         self.cand.clear();
         for (i, p) in points.iter().enumerate().take(n) {
             if excluded(i) {
@@ -360,7 +360,7 @@ impl Clusterer {
             }
             if [p.x, p.y, p.z]
                 .iter()
-                .all(|&v| grid_index(f64::from(v) / fine).is_some())
+                .all(|&v| fine.index(f64::from(v)).is_some())
             {
                 self.cand.push(i as u32);
             } else {
@@ -460,11 +460,12 @@ impl Clusterer {
         // key order is (x, y, z) order: a cell is a run of equal keys, a column (x, y) a run
         // of equal `key >> zbits`, already sorted by z. A stable LSD radix sort of (key,
         // candidate position) keeps each cell's candidates ascending.
+        let scale = GridScale::new(side);
         self.cell_ijk.clear();
         self.cell_ijk.extend(self.cand.iter().map(|&i| {
             let p = &points[i as usize];
             // In range: checked on the fine grid, whose cells are the smallest.
-            let g = |v: f32| grid_index(f64::from(v) / side).unwrap_or(0) as i32;
+            let g = |v: f32| scale.index(f64::from(v)).unwrap_or(0) as i32;
             [g(p.x), g(p.y), g(p.z)]
         }));
         let mut lo = [i32::MAX; 3];

@@ -1,9 +1,10 @@
 //! Voxel-grid downsampling: one output point per occupied voxel.
 //!
 //! A point `p` falls in voxel `(i, j, k) = floor((p − origin) / leaf)` per axis, computed in
-//! `f64` from the `f32` coordinates, with the division done as written (not a multiplication
-//! by `1/leaf`), so that a reference computing the same formula, such as Open3D's
-//! `voxel_down_sample`, puts every point in the same voxel. The origin is either a fixed point
+//! `f64` from the `f32` coordinates with the result of the division as written (a
+//! multiplication by `1/leaf`, cheaper, whose floor is taken only away from cell boundaries:
+//! within 2^-20 of one the division is done), so that a reference computing the same formula,
+//! such as Open3D's `voxel_down_sample`, puts every point in the same voxel. The origin is either a fixed point
 //! ([`GridOrigin::At`], default the sensor origin: the grid then does not move from sweep to
 //! sweep) or, as Open3D does, the cloud's minimum corner less half a leaf
 //! ([`GridOrigin::MinBoundMinusHalfLeaf`]).
@@ -39,7 +40,7 @@
 //! The grid keeps its buffers; once they have grown to a sweep's size, later sweeps of that
 //! size allocate nothing (the caller's `out` is cleared and reused too).
 
-use super::{grid_index, pack_key, positive, KeyTable, PipelineError, NO_KEY};
+use super::{pack_key, positive, GridScale, KeyTable, PipelineError, NO_KEY};
 use crate::point::Point;
 
 /// Where voxel `(0, 0, 0)` starts.
@@ -258,13 +259,15 @@ impl VoxelGrid {
         let kept = points.len().min(SKIPPED as usize);
         stats.out_of_range += points.len() - kept;
         let points = &points[..kept];
+        // `floor((p − origin) / leaf)`, the division's result at a multiplication's cost.
+        let (gx, gy, gz) = (GridScale::new(lx), GridScale::new(ly), GridScale::new(lz));
         let key_of = |p: &Point| -> Result<u64, bool> {
             if !(p.x.is_finite() && p.y.is_finite() && p.z.is_finite()) {
                 return Err(false);
             }
-            let ix = grid_index((f64::from(p.x) - origin[0]) / lx);
-            let iy = grid_index((f64::from(p.y) - origin[1]) / ly);
-            let iz = grid_index((f64::from(p.z) - origin[2]) / lz);
+            let ix = gx.index(f64::from(p.x) - origin[0]);
+            let iy = gy.index(f64::from(p.y) - origin[1]);
+            let iz = gz.index(f64::from(p.z) - origin[2]);
             match (ix, iy, iz) {
                 (Some(i), Some(j), Some(k)) => Ok(pack_key(i, j, k)),
                 _ => Err(true),
