@@ -486,9 +486,9 @@ impl GroundSegmenter {
                         f64::from(self.ys[t]),
                         f64::from(self.zs[t]),
                     );
-                    if dist(&pl, x, y, z) <= thr {
-                        labels[self.idx[t] as usize] = true;
-                    }
+                    // Each point is in one bin and every label starts false: a plain store,
+                    // no branch on the data.
+                    labels[self.idx[t] as usize] = dist(&pl, x, y, z) <= thr;
                 }
             }
         }
@@ -678,20 +678,21 @@ fn fit(xs: &[f32], ys: &[f32], zs: &[f32], keep: impl Fn(f64, f64, f64) -> bool)
         (Some(&x), Some(&y), Some(&z)) => (f64::from(x), f64::from(y), f64::from(z)),
         _ => return None,
     };
+    // Without a branch: a point left out adds zeros (the sums are the same to the bit), and
+    // whether a point is kept is data, which a branch would mispredict on mixed bins.
     for ((&x, &y), &z) in xs.iter().zip(ys).zip(zs) {
         let (x, y, z) = (f64::from(x), f64::from(y), f64::from(z));
-        if keep(x, y, z) {
-            let (x, y, z) = (x - ox, y - oy, z - oz);
-            n += 1.0;
-            sx += x;
-            sy += y;
-            sz += z;
-            sxx += x * x;
-            sxy += x * y;
-            syy += y * y;
-            sxz += x * z;
-            syz += y * z;
-        }
+        let w = if keep(x, y, z) { 1.0 } else { 0.0 };
+        let (x, y, z) = ((x - ox) * w, (y - oy) * w, (z - oz) * w);
+        n += w;
+        sx += x;
+        sy += y;
+        sz += z;
+        sxx += x * x;
+        sxy += x * y;
+        syy += y * y;
+        sxz += x * z;
+        syz += y * z;
     }
     if n < 3.0 {
         return None;
