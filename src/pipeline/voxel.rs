@@ -290,7 +290,7 @@ impl VoxelGrid {
                 }));
                 self.table.reset(points.len());
                 let mut last = (NO_KEY, 0u32);
-                for (i, (p, &key)) in points.iter().zip(&self.keys).enumerate() {
+                for (i, &key) in self.keys.iter().enumerate() {
                     if let Some(&ahead) = self.keys.get(i + LOOK_AHEAD) {
                         self.table.warm(ahead);
                     }
@@ -318,6 +318,12 @@ impl VoxelGrid {
                         slot
                     };
                     self.slot_of.push(slot);
+                }
+                // The sums in a pass of their own: a voxel met again after other voxels has
+                // its sums out of cache, and here their addresses are known ahead (`slot_of`
+                // is read in order), so those misses overlap instead of each waiting for the
+                // table look-up that found its slot.
+                for (p, &slot) in points.iter().zip(&self.slot_of) {
                     if let Some(a) = self.acc.get_mut(slot as usize) {
                         a.sum[0] += f64::from(p.x);
                         a.sum[1] += f64::from(p.y);
