@@ -19,8 +19,8 @@
 //! - `Hash` (default): an open-addressing table of `u64` keys (multiplicative hash, linear
 //!   probing, at most three-quarters full), mapping a key to its voxel slot in order of first
 //!   appearance. One pass computes every point's key, a second looks them up (reading each
-//!   key's slot a few points ahead, so that cache misses overlap) and accumulates the sums;
-//!   the output follows the input order of each voxel's first point.
+//!   key's slot a few points ahead, so that cache misses overlap), a third accumulates the
+//!   sums; the output follows the input order of each voxel's first point.
 //! - `Sort`: `(key, index)` pairs sorted with `sort_unstable`, then one pass over the runs
 //!   (small_gicp's approach); the output is in ascending key order.
 //!
