@@ -873,34 +873,36 @@ fn min_area_rectangle(hull: &[[f64; 2]]) -> ([f64; 2], f64, f64, f64) {
     }
     let h = hull.len();
     let dot = |a: [f64; 2], b: [f64; 2]| a[0] * b[0] + a[1] * b[1];
+    let after = |k: usize| if k + 1 == h { 0 } else { k + 1 };
     // Moves caliper `k` forward while `f` does not decrease (at most once round).
-    let advance = |k: &mut usize, f: &dyn Fn([f64; 2]) -> f64| {
-        for _ in 0..h {
-            let next = (*k + 1) % h;
+    fn advance(hull: &[[f64; 2]], k: &mut usize, f: impl Fn([f64; 2]) -> f64) {
+        for _ in 0..hull.len() {
+            let next = if *k + 1 == hull.len() { 0 } else { *k + 1 };
             if f(hull[next]) >= f(hull[*k]) {
                 *k = next;
             } else {
                 break;
             }
         }
-    };
-    let mut best = (f64::INFINITY, [0.0; 2], 0.0, 0.0, 0.0);
+    }
+    // Area, centre, length, width, direction of the length side.
+    let mut best = (f64::INFINITY, [0.0; 2], 0.0, 0.0, [1.0, 0.0]);
     let (mut far_u, mut far_v, mut near_u) = (1usize, 1usize, 0usize);
     for i in 0..h {
         let a = hull[i];
-        let b = hull[(i + 1) % h];
+        let b = hull[after(i)];
         let len = ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)).sqrt();
         if len == 0.0 {
             continue;
         }
         let u = [(b[0] - a[0]) / len, (b[1] - a[1]) / len];
         let v = [-u[1], u[0]]; // inward normal of a counter-clockwise polygon
-        advance(&mut far_u, &|p| dot(p, u));
-        advance(&mut far_v, &|p| dot(p, v));
+        advance(hull, &mut far_u, |p| dot(p, u));
+        advance(hull, &mut far_v, |p| dot(p, v));
         if i == 0 {
             near_u = far_u; // from the far end, -u·p rises to the near end
         }
-        advance(&mut near_u, &|p| -dot(p, u));
+        advance(hull, &mut near_u, |p| -dot(p, u));
         let (umax, umin) = (dot(hull[far_u], u), dot(hull[near_u], u));
         let (vmin, vmax) = (dot(a, v), dot(hull[far_v], v));
         let (du, dv) = (umax - umin, vmax - vmin);
@@ -910,10 +912,11 @@ fn min_area_rectangle(hull: &[[f64; 2]]) -> ([f64; 2], f64, f64, f64) {
             let cv = (vmax + vmin) * 0.5;
             let center = [cu * u[0] + cv * v[0], cu * u[1] + cv * v[1]];
             let (length, width, dir) = if du >= dv { (du, dv, u) } else { (dv, du, v) };
-            best = (area, center, length, width, dir[1].atan2(dir[0]));
+            best = (area, center, length, width, dir);
         }
     }
-    let (_, center, length, width, mut yaw) = best;
+    let (_, center, length, width, dir) = best;
+    let mut yaw = dir[1].atan2(dir[0]);
     if yaw <= -core::f64::consts::FRAC_PI_2 {
         yaw += core::f64::consts::PI;
     } else if yaw > core::f64::consts::FRAC_PI_2 {
