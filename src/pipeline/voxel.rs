@@ -112,6 +112,22 @@ const OUT_OF_RANGE: u64 = u64::MAX - 1;
 /// How many points ahead the hash grouping reads a key's home slot.
 const LOOK_AHEAD: usize = 16;
 
+/// The packed voxel key of `p`, or [`NO_KEY`] for a point with a NaN or infinite coordinate,
+/// or [`OUT_OF_RANGE`]. Inlined into both key loops (as a closure called from two places it
+/// was not). A non-finite coordinate has no index either, so the finiteness test is only
+/// made for a point without a key.
+#[inline(always)]
+fn voxel_key(p: &Point, origin: &[f64; 3], scales: &[GridScale; 3]) -> u64 {
+    let ix = scales[0].index(f64::from(p.x) - origin[0]);
+    let iy = scales[1].index(f64::from(p.y) - origin[1]);
+    let iz = scales[2].index(f64::from(p.z) - origin[2]);
+    match (ix, iy, iz) {
+        (Some(i), Some(j), Some(k)) => pack_key(i, j, k),
+        _ if p.x.is_finite() && p.y.is_finite() && p.z.is_finite() => OUT_OF_RANGE,
+        _ => NO_KEY,
+    }
+}
+
 /// Running sums of one voxel.
 #[derive(Clone, Copy, Debug, Default)]
 struct Acc {
@@ -260,19 +276,8 @@ impl VoxelGrid {
         stats.out_of_range += points.len() - kept;
         let points = &points[..kept];
         // `floor((p − origin) / leaf)`, the division's result at a multiplication's cost.
-        let (gx, gy, gz) = (GridScale::new(lx), GridScale::new(ly), GridScale::new(lz));
-        let key_of = |p: &Point| -> Result<u64, bool> {
-            if !(p.x.is_finite() && p.y.is_finite() && p.z.is_finite()) {
-                return Err(false);
-            }
-            let ix = gx.index(f64::from(p.x) - origin[0]);
-            let iy = gy.index(f64::from(p.y) - origin[1]);
-            let iz = gz.index(f64::from(p.z) - origin[2]);
-            match (ix, iy, iz) {
-                (Some(i), Some(j), Some(k)) => Ok(pack_key(i, j, k)),
-                _ => Err(true),
-            }
-        };
+        let scales = [GridScale::new(lx), GridScale::new(ly), GridScale::new(lz)];
+        let key_of = |p: &Point| voxel_key(p, &origin, &scales);
         match self.config.grouping {
             KeyGrouping::Hash => {
                 // Two passes. The keys first: a tight loop of divisions and conversions with
@@ -283,11 +288,7 @@ impl VoxelGrid {
                 // (Measured on the OS-2-128 sweep, BENCHMARKS.md "Pipeline end to end":
                 // one pass with the look-ups in it took ~20 % longer.)
                 self.keys.clear();
-                self.keys.extend(points.iter().map(|p| match key_of(p) {
-                    Ok(k) => k,
-                    Err(true) => OUT_OF_RANGE,
-                    Err(false) => NO_KEY,
-                }));
+                self.keys.extend(points.iter().map(key_of));
                 self.table.reset(points.len());
                 let mut last = (NO_KEY, 0u32);
                 for (i, &key) in self.keys.iter().enumerate() {
@@ -338,9 +339,9 @@ impl VoxelGrid {
                 self.slot_of.resize(points.len(), SKIPPED);
                 for (i, p) in points.iter().enumerate() {
                     match key_of(p) {
-                        Ok(k) => self.pairs.push((k, i as u32)),
-                        Err(true) => stats.out_of_range += 1,
-                        Err(false) => stats.non_finite += 1,
+                        OUT_OF_RANGE => stats.out_of_range += 1,
+                        NO_KEY => stats.non_finite += 1,
+                        k => self.pairs.push((k, i as u32)),
                     }
                 }
                 self.pairs.sort_unstable();
