@@ -280,7 +280,7 @@ impl VoxelGrid {
         let key_of = |p: &Point| voxel_key(p, &origin, &scales);
         match self.config.grouping {
             KeyGrouping::Hash => {
-                // Two passes. The keys first: a tight loop of divisions and conversions with
+                // Three passes. The keys first: a tight loop of arithmetic and conversions with
                 // no table access in it. Then the table: a new voxel's slot is a cache miss
                 // (the table is larger than L2 on a 128 × 1024 sweep, and the slots are
                 // spread by the hash), so the home slot of the key `LOOK_AHEAD` points on is
