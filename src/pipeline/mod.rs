@@ -253,6 +253,25 @@ impl GridScale {
         }
         grid_index(v / self.side)
     }
+
+    /// [`GridScale::index`]'s fast path without a branch: the index biased by `KEY_BIAS` in
+    /// the low 21 bits, as [`pack_key`] packs it, and whether that is the division's result.
+    /// When the flag is false (near a cell boundary, out of range, NaN), the bits mean
+    /// nothing and [`GridScale::index`] must be asked.
+    #[inline(always)]
+    pub(crate) fn biased_fast(self, v: f64) -> (u64, bool) {
+        const M: f64 = 6_755_399_441_055_744.0; // 1.5 · 2^52
+        const NEAR: f64 = 1.0 / (1u64 << 20) as f64;
+        // 2^52 + KEY_BIAS: adding it to an integer in [−2^20, 2^20) gives a double in
+        // [2^52, 2^53) whose low mantissa bits are that integer + KEY_BIAS.
+        const TO_BITS: f64 = 4_503_599_627_370_496.0 + KEY_BIAS as f64;
+        let q = v * self.inv;
+        let r = (q + M) - M;
+        let d = q - r;
+        let floor = r - if d < 0.0 { 1.0 } else { 0.0 };
+        let ok = d.abs() > NEAR && q.abs() < KEY_BIAS as f64;
+        ((floor + TO_BITS).to_bits() & 0x1F_FFFF, ok)
+    }
 }
 
 #[cfg(test)]
@@ -300,7 +319,13 @@ mod tests {
                 values.push(f64::from(v as f32));
             }
             for v in values {
-                assert_eq!(g.index(v), grid_index(v / side), "v {v:e}, side {side:e}");
+                let exact = grid_index(v / side);
+                assert_eq!(g.index(v), exact, "v {v:e}, side {side:e}");
+                let (bits, ok) = g.biased_fast(v);
+                if ok {
+                    let k = exact.map(|k| pack_key(0, 0, k) & 0x1F_FFFF);
+                    assert_eq!(Some(bits), k, "fast path: v {v:e}, side {side:e}");
+                }
                 checked += 1;
             }
         }

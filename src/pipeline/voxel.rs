@@ -128,6 +128,26 @@ fn voxel_key(p: &Point, origin: &[f64; 3], scales: &[GridScale; 3]) -> u64 {
     }
 }
 
+/// Marks, in the hash grouping's key pass, a point whose key the branch-free pass could not
+/// give (see [`fast_voxel_key`]); never left in the keys.
+const NEEDS_EXACT: u64 = u64::MAX - 2;
+
+/// The packed voxel key of `p` when every axis is clear of cell boundaries and in range,
+/// else [`NEEDS_EXACT`]: without a branch, so the key pass runs without mispredictions and
+/// stalls; [`voxel_key`] does the few others.
+#[inline(always)]
+fn fast_voxel_key(p: &Point, origin: &[f64; 3], scales: &[GridScale; 3]) -> u64 {
+    let (i, a) = scales[0].biased_fast(f64::from(p.x) - origin[0]);
+    let (j, b) = scales[1].biased_fast(f64::from(p.y) - origin[1]);
+    let (k, c) = scales[2].biased_fast(f64::from(p.z) - origin[2]);
+    let key = i << 42 | j << 21 | k;
+    if a & b & c {
+        key
+    } else {
+        NEEDS_EXACT
+    }
+}
+
 /// Running sums of one voxel.
 #[derive(Clone, Copy, Debug, Default)]
 struct Acc {
@@ -288,7 +308,13 @@ impl VoxelGrid {
                 // (Measured on the OS-2-128 sweep, BENCHMARKS.md "Pipeline end to end":
                 // one pass with the look-ups in it took ~20 % longer.)
                 self.keys.clear();
-                self.keys.extend(points.iter().map(key_of));
+                self.keys
+                    .extend(points.iter().map(|p| fast_voxel_key(p, &origin, &scales)));
+                for (k, p) in self.keys.iter_mut().zip(points) {
+                    if *k == NEEDS_EXACT {
+                        *k = key_of(p);
+                    }
+                }
                 self.table.reset(points.len());
                 let mut last = (NO_KEY, 0u32);
                 for (i, &key) in self.keys.iter().enumerate() {
