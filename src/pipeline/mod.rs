@@ -202,9 +202,9 @@ pub(crate) fn grid_index(scaled: f64) -> Option<i64> {
 }
 
 /// `floor(v / side)` for many `v` and one cell side, as [`grid_index`] of the quotient, at the
-/// cost of a multiplication. A division takes several times longer than a multiplication,
-/// and the key passes of the voxel grid and the clusterer did three per point (a tenth of the
-/// pipeline's time on a 128 × 1024 sweep, BENCHMARKS.md "Pipeline end to end").
+/// cost of a multiplication: the key passes of the voxel grid and the clusterer, three per
+/// point, are a tenth of the pipeline's time on a 128 × 1024 sweep (BENCHMARKS.md "Pipeline
+/// end to end").
 ///
 /// The result is the division's, bit for bit, so a reference that divides (Open3D) puts every
 /// point in the same cell: `q = v · (1/side)` differs from the rounded quotient `v / side` by
@@ -234,19 +234,21 @@ impl GridScale {
         }
     }
 
+    /// 1.5 · 2^52: `(q + ROUND) − ROUND` is `q` rounded to the nearest integer (|q| < 2^51),
+    /// in two additions instead of a round trip through an integer register.
+    const ROUND: f64 = 6_755_399_441_055_744.0;
+    /// Closer than this to an integer, `q`'s floor may not be the division's.
+    const NEAR: f64 = 1.0 / (1u64 << 20) as f64;
+
     /// `grid_index(v / side)`.
     #[inline(always)]
     pub(crate) fn index(self, v: f64) -> Option<i64> {
-        // 1.5 · 2^52: `(q + M) − M` is `q` rounded to the nearest integer (|q| < 2^51), in
-        // two additions instead of a round trip through an integer register.
-        const M: f64 = 6_755_399_441_055_744.0;
-        const NEAR: f64 = 1.0 / (1u64 << 20) as f64;
         let q = v * self.inv;
         let lim = KEY_BIAS as f64;
         if q > -lim && q < lim {
-            let r = (q + M) - M;
+            let r = (q + Self::ROUND) - Self::ROUND;
             let d = q - r; // exact, in [−0.5, 0.5]
-            if d.abs() > NEAR {
+            if d.abs() > Self::NEAR {
                 let floor = if d < 0.0 { r - 1.0 } else { r };
                 return Some(floor as i64); // an integer: exact
             }
@@ -260,16 +262,14 @@ impl GridScale {
     /// nothing and [`GridScale::index`] must be asked.
     #[inline(always)]
     pub(crate) fn biased_fast(self, v: f64) -> (u64, bool) {
-        const M: f64 = 6_755_399_441_055_744.0; // 1.5 · 2^52
-        const NEAR: f64 = 1.0 / (1u64 << 20) as f64;
         // 2^52 + KEY_BIAS: adding it to an integer in [−2^20, 2^20) gives a double in
         // [2^52, 2^53) whose low mantissa bits are that integer + KEY_BIAS.
         const TO_BITS: f64 = 4_503_599_627_370_496.0 + KEY_BIAS as f64;
         let q = v * self.inv;
-        let r = (q + M) - M;
+        let r = (q + Self::ROUND) - Self::ROUND;
         let d = q - r;
         let floor = r - if d < 0.0 { 1.0 } else { 0.0 };
-        let ok = d.abs() > NEAR && q.abs() < KEY_BIAS as f64;
+        let ok = d.abs() > Self::NEAR && q.abs() < KEY_BIAS as f64;
         ((floor + TO_BITS).to_bits() & 0x1F_FFFF, ok)
     }
 }

@@ -3,11 +3,11 @@
 //! A point `p` falls in voxel `(i, j, k) = floor((p − origin) / leaf)` per axis, computed in
 //! `f64` from the `f32` coordinates with the result of the division as written (a
 //! multiplication by `1/leaf`, cheaper, whose floor is taken only away from cell boundaries:
-//! within 2^-20 of one the division is done), so that a reference computing the same formula,
-//! such as Open3D's `voxel_down_sample`, puts every point in the same voxel. The origin is either a fixed point
-//! ([`GridOrigin::At`], default the sensor origin: the grid then does not move from sweep to
-//! sweep) or, as Open3D does, the cloud's minimum corner less half a leaf
-//! ([`GridOrigin::MinBoundMinusHalfLeaf`]).
+//! within 2^-20 of one the division is done), so that a reference computing the same
+//! formula, such as Open3D's `voxel_down_sample`, puts every point in the same voxel. The
+//! origin is either a fixed point ([`GridOrigin::At`], default the sensor origin: the grid
+//! then does not move from sweep to sweep) or, as Open3D does, the cloud's minimum corner
+//! less half a leaf ([`GridOrigin::MinBoundMinusHalfLeaf`]).
 //!
 //! Each voxel index is biased by 2^20 and packed into 21 bits per axis of a `u64` key, so a
 //! voxel is a single integer: ±2^20 leaves per axis around the origin (±105 km at a 0.1 m
