@@ -53,7 +53,7 @@
 //! origin (about 300 km at a 0.5 m tolerance), belong to no cluster and are counted in
 //! [`ClusterStats`].
 
-use super::{positive, GridScale, PipelineError};
+use super::{positive, GridScale, PipelineError, KEY_BIAS};
 use crate::point::Point;
 
 /// Parameters of a [`Clusterer`].
@@ -242,8 +242,8 @@ pub struct Clusterer {
     params: ClusterParams,
     /// Candidate point indices, ascending.
     cand: Vec<u32>,
-    /// Cell coordinates of each candidate.
-    cell_ijk: Vec<[i32; 3]>,
+    /// Cell coordinates of each candidate, biased by `KEY_BIAS`.
+    cell_ijk: Vec<[u32; 3]>,
     /// (relative cell key, candidate position), sorted by key; and the radix sort's scratch.
     pairs: Vec<(u64, u32)>,
     scratch: Vec<(u64, u32)>,
@@ -351,31 +351,22 @@ impl Clusterer {
         stats.skipped += points.len() - n;
 
         // 1. Candidates: not excluded, finite and within 2^20 fine cells of the origin on
-        //    every axis (then within range of the coarse grid too).
+        //    every axis (then within range of the coarse grid too), with their coarse cells.
         let fine = GridScale::new(Grid::Fine.side(tol));
-        self.cand.clear();
-        for (i, p) in points.iter().enumerate().take(n) {
-            if excluded(i) {
-                continue;
-            }
-            if [p.x, p.y, p.z]
-                .iter()
-                .all(|&v| fine.index(f64::from(v)).is_some())
-            {
-                self.cand.push(i as u32);
-            } else {
-                stats.skipped += 1;
-            }
-        }
+        let coarse = GridScale::new(Grid::Coarse.side(tol));
+        let (skipped, mut range) =
+            self.select(points, n, excluded, (Grid::Fine.side(tol), fine), coarse);
+        stats.skipped += skipped;
         stats.candidates = self.cand.len();
 
         // 2–4. Cells, then the joins: on the coarse grid unless one of its cells holds more
         //      than `COARSE_MAX_POINTS` points, on the fine grid then.
         let mut grid = Grid::Coarse;
-        let mut bits = self.sort_cells(points, grid.side(tol));
+        let mut bits = self.sort_cells(range);
         if self.a_cell_holds_more_than(COARSE_MAX_POINTS) {
             grid = Grid::Fine;
-            bits = self.sort_cells(points, grid.side(tol));
+            range = self.cells_on(points, fine);
+            bits = self.sort_cells(range);
         }
         let layout = self.build_cells(points, bits);
         self.join(grid, &layout, tol2);
@@ -452,38 +443,86 @@ impl Clusterer {
         stats
     }
 
-    /// Sorts the candidates by their cell of `side` metres into `pairs`; returns the bits
-    /// of the y and z fields of the keys.
-    fn sort_cells(&mut self, points: &[Point], side: f64) -> (u32, u32) {
-        // Keys relative to the smallest cell coordinates, each axis in as many bits as its
-        // extent needs (at most 21: indices lie in [−2^20, 2^20)), x above y above z, so that
-        // key order is (x, y, z) order: a cell is a run of equal keys, a column (x, y) a run
-        // of equal `key >> zbits`, already sorted by z. A stable LSD radix sort of (key,
-        // candidate position) keeps each cell's candidates ascending.
-        let scale = GridScale::new(side);
+    /// Fills `cand` with the points to cluster (not `excluded`, within range of the fine
+    /// grid of side `fine.0`) and `cell_ijk` with their cells on the `coarse` grid, biased by
+    /// `KEY_BIAS`; returns the points skipped and the smallest and largest biased cells.
+    fn select(
+        &mut self,
+        points: &[Point],
+        n: usize,
+        excluded: impl Fn(usize) -> bool,
+        (fine_side, fine): (f64, GridScale),
+        coarse: GridScale,
+    ) -> (usize, ([u32; 3], [u32; 3])) {
+        // Coordinates below this in magnitude are within 2^20 − 1 fine cells of the origin:
+        // their range check needs no division.
+        let near = (KEY_BIAS - 1) as f64 * fine_side * (1.0 - 1e-9);
+        let mut skipped = 0;
+        let (mut lo, mut hi) = ([u32::MAX; 3], [0u32; 3]);
+        self.cand.clear();
         self.cell_ijk.clear();
-        self.cell_ijk.extend(self.cand.iter().map(|&i| {
-            let p = &points[i as usize];
-            // In range: checked on the fine grid, whose cells are the smallest.
-            let g = |v: f32| scale.index(f64::from(v)).unwrap_or(0) as i32;
-            [g(p.x), g(p.y), g(p.z)]
-        }));
-        let mut lo = [i32::MAX; 3];
-        let mut hi = [i32::MIN; 3];
-        for ijk in &self.cell_ijk {
+        for (i, p) in points.iter().enumerate().take(n) {
+            if excluded(i) {
+                continue;
+            }
+            let v = [f64::from(p.x), f64::from(p.y), f64::from(p.z)];
+            let (a, fa) = coarse.biased_fast(v[0]);
+            let (b, fb) = coarse.biased_fast(v[1]);
+            let (c, fc) = coarse.biased_fast(v[2]);
+            let ijk = if fa & fb & fc && v[0].abs().max(v[1].abs()).max(v[2].abs()) < near {
+                [a as u32, b as u32, c as u32]
+            } else if v.iter().all(|&v| fine.index(v).is_some()) {
+                // In range of the coarse grid too: its cells are larger.
+                v.map(|v| (coarse.index(v).unwrap_or(0) + KEY_BIAS) as u32)
+            } else {
+                skipped += 1;
+                continue;
+            };
             for k in 0..3 {
                 lo[k] = lo[k].min(ijk[k]);
                 hi[k] = hi[k].max(ijk[k]);
             }
+            self.cand.push(i as u32);
+            self.cell_ijk.push(ijk);
         }
-        // Bits of the largest relative index (< 2^21), 0 for one value or none.
-        let bits = |k: usize| 64 - (i64::from(hi[k]) - i64::from(lo[k])).max(0).leading_zeros();
+        (skipped, (lo, hi))
+    }
+
+    /// `cell_ijk` of the candidates on the grid of `scale` (biased by `KEY_BIAS`); returns
+    /// the smallest and largest.
+    fn cells_on(&mut self, points: &[Point], scale: GridScale) -> ([u32; 3], [u32; 3]) {
+        let (mut lo, mut hi) = ([u32::MAX; 3], [0u32; 3]);
+        self.cell_ijk.clear();
+        for &i in &self.cand {
+            let p = &points[i as usize];
+            // In range: checked on this (the fine) grid by `select`.
+            let ijk =
+                [p.x, p.y, p.z].map(|v| (scale.index(f64::from(v)).unwrap_or(0) + KEY_BIAS) as u32);
+            for k in 0..3 {
+                lo[k] = lo[k].min(ijk[k]);
+                hi[k] = hi[k].max(ijk[k]);
+            }
+            self.cell_ijk.push(ijk);
+        }
+        (lo, hi)
+    }
+
+    /// Sorts the candidates by their cell (`cell_ijk`, within `lo..=hi`) into `pairs`;
+    /// returns the bits of the y and z fields of the keys.
+    fn sort_cells(&mut self, (lo, hi): ([u32; 3], [u32; 3])) -> (u32, u32) {
+        // Keys relative to the smallest cell coordinates, each axis in as many bits as its
+        // extent needs (at most 21: biased indices lie in [0, 2^21)), x above y above z, so
+        // that key order is (x, y, z) order: a cell is a run of equal keys, a column (x, y) a
+        // run of equal `key >> zbits`, already sorted by z. A stable LSD radix sort of (key,
+        // candidate position) keeps each cell's candidates ascending.
+        // Bits of the largest relative index, 0 for one value or none.
+        let bits = |k: usize| 32 - hi[k].saturating_sub(lo[k]).leading_zeros();
         let (ybits, zbits) = (bits(1), bits(2));
         let total = bits(0) + ybits + zbits;
         self.pairs.clear();
         self.pairs
             .extend(self.cell_ijk.iter().enumerate().map(|(pos, ijk)| {
-                let rel = |k: usize| (i64::from(ijk[k]) - i64::from(lo[k])) as u64;
+                let rel = |k: usize| u64::from(ijk[k] - lo[k]);
                 ((rel(0) << ybits | rel(1)) << zbits | rel(2), pos as u32)
             }));
         radix_sort(&mut self.pairs, &mut self.scratch, total, &mut self.counts);
@@ -1293,6 +1332,36 @@ mod tests {
         convex_hull(&mut pts, &mut hull);
         assert_eq!(min_area_rectangle(&hull), ([2.0, 1.0], 0.0, 0.0, 0.0));
         assert_eq!(min_area_rectangle(&[]), ([0.0, 0.0], 0.0, 0.0, 0.0));
+    }
+
+    /// Points near the edge of the range, 2^20 fine cells from the origin, are candidates
+    /// exactly when the division puts them inside it (the other coordinates off cell
+    /// boundaries, so that the fast path decides).
+    #[test]
+    fn the_range_edge_is_the_divisions() {
+        let tol = 0.5;
+        let side = Grid::Fine.side(tol);
+        let mut c = Clusterer::new(ClusterParams::new(tol, 1, 5)).unwrap();
+        let mut out = Clusters::new();
+        let (mut inside, mut outside) = (0, 0);
+        for edge in [KEY_BIAS as f64 * side, -(KEY_BIAS as f64) * side] {
+            let e = edge as f32;
+            for step in -40i32..=40 {
+                let v = f32::from_bits((e.to_bits() as i32 + step) as u32);
+                let expected_in = crate::pipeline::grid_index(f64::from(v) / side).is_some();
+                for p in [pt(v, 0.3, 0.7), pt(1.1, v, 2.2), pt(0.6, -3.3, v)] {
+                    let stats = c.cluster(&[p], &mut out);
+                    assert_eq!(stats.skipped == 0, expected_in, "{v} on an axis");
+                    assert_eq!(out.len(), usize::from(expected_in));
+                }
+                if expected_in {
+                    inside += 1;
+                } else {
+                    outside += 1;
+                }
+            }
+        }
+        assert!(inside > 20 && outside > 20, "{inside} {outside}");
     }
 
     #[test]
