@@ -9,10 +9,13 @@
 //!   Points two cells apart on an axis are farther apart than the tolerance, so only cells
 //!   within ±1 on every axis can be joined: each column (x, y cell) is compared with itself
 //!   and its 4 forward neighbours of the 3×3 column block (each unordered pair once), sliding
-//!   a ±1 window in z. Within a cell every pair of points is tested; a cell whose points end
-//!   up in one component is marked so (it stays so), and two such cells are joined by their
-//!   roots when any pair of their points is within the tolerance, skipped at once when they
-//!   are already one component. Other cells test every pair against their neighbours.
+//!   a ±1 window in z. Within a cell (at most 64 points) the components come from a
+//!   breadth-first search over bit sets of its points that tests each point it reaches only
+//!   against those not reached yet (about one test per point in a cell of close points,
+//!   where testing every pair cost a union per pair); a cell whose points are one component
+//!   is marked so (it stays so), and two such cells are joined by their roots when any pair
+//!   of their points is within the tolerance, skipped at once when they are already one
+//!   component. Other cells test every pair against their neighbours.
 //! - **fine**, when some coarse cell holds more than 64 points (a raw sweep near the sensor):
 //!   cells of side `s = tol·(1 − 1e-8) / √3`, so that any two points of one cell are within
 //!   the tolerance (the diagonal is `√3·s`) and every cell is one component without a test.
@@ -596,17 +599,15 @@ impl Clusterer {
                     }
                     self.single.push(true);
                 }
-                // A few points: every pair.
+                // At most `COARSE_MAX_POINTS` (64) points: components by a search over
+                // bit sets of the cell's points.
                 Grid::Coarse => {
-                    for a in s..e {
-                        for b in a + 1..e {
-                            if dist2(&self.xyz[a], &self.xyz[b]) <= tol2 {
-                                union(&mut self.parent, a as u32, b as u32);
-                            }
+                    let single = match self.xyz.get(s..e) {
+                        Some(xyz) if xyz.len() <= 64 => {
+                            components_in_cell(xyz, tol2, &mut self.parent[s..e], s as u32)
                         }
-                    }
-                    let r = find(&mut self.parent, s as u32);
-                    let single = (s + 1..e).all(|a| find(&mut self.parent, a as u32) == r);
+                        _ => self.components_by_pairs(s, e, tol2),
+                    };
                     self.single.push(single);
                 }
             }
@@ -664,6 +665,21 @@ impl Clusterer {
             let q = self.parent[p] as usize;
             self.parent[p] = self.parent[q];
         }
+    }
+
+    /// The components among points `s..e` (one cell), by testing every pair; true when
+    /// they are one. What [`components_in_cell`] does for more than 64 points, which a
+    /// coarse cell never holds.
+    fn components_by_pairs(&mut self, s: usize, e: usize, tol2: f64) -> bool {
+        for a in s..e {
+            for b in a + 1..e {
+                if dist2(&self.xyz[a], &self.xyz[b]) <= tol2 {
+                    union(&mut self.parent, a as u32, b as u32);
+                }
+            }
+        }
+        let r = find(&mut self.parent, s as u32);
+        (s + 1..e).all(|a| find(&mut self.parent, a as u32) == r)
     }
 
     /// Joins the components of cells `a` and `b` where a point of one is within the
@@ -738,6 +754,44 @@ fn radix_sort(
         std::mem::swap(pairs, scratch);
         shift += digit;
     }
+}
+
+/// The connected components of the tolerance graph on one cell's points (at most 64, as
+/// bits of a `u64`): from the lowest point not yet reached, a breadth-first search that
+/// tests each point it takes from the frontier against the points not reached yet only, so
+/// a cell whose points are mostly within the tolerance of each other costs about one test
+/// per point rather than one per pair. Every point's parent becomes its component's lowest
+/// point (`base` + its position), the root a union–find expects; true when there is one
+/// component.
+fn components_in_cell(xyz: &[[f32; 3]], tol2: f64, parent: &mut [u32], base: u32) -> bool {
+    let n = xyz.len().min(64).min(parent.len());
+    let mut unreached = if n == 64 { u64::MAX } else { (1u64 << n) - 1 };
+    let mut components = 0;
+    while unreached != 0 {
+        let first = unreached.trailing_zeros();
+        unreached &= unreached - 1;
+        let mut frontier = 1u64 << first;
+        let mut members = frontier;
+        while frontier != 0 {
+            let i = frontier.trailing_zeros() as usize;
+            frontier &= frontier - 1;
+            let (mut rest, mut found) = (unreached, 0u64);
+            while rest != 0 {
+                let j = rest.trailing_zeros() as usize;
+                rest &= rest - 1;
+                found |= u64::from(dist2(&xyz[i], &xyz[j]) <= tol2) << j;
+            }
+            unreached &= !found;
+            frontier |= found;
+            members |= found;
+        }
+        while members != 0 {
+            parent[members.trailing_zeros() as usize] = base + first;
+            members &= members - 1;
+        }
+        components += 1;
+    }
+    components <= 1
 }
 
 /// Root of `x` with path halving.
