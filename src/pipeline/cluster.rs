@@ -912,20 +912,34 @@ fn drop_interior(pts: &mut Vec<[f64; 2]>) {
             }
         }
     }
+    // Each edge as its start and direction, `cross(a, b, q)` without recomputing `b − a`;
+    // fewer than eight distinct edges are padded by repeating one, which tests it twice.
     let mut edges = [([0.0; 2], [0.0; 2]); 8];
     let mut n = 0;
     for d in 0..8 {
         let (a, b) = (best[d], best[(d + 1) % 8]);
         if a != b {
-            edges[n] = (a, b);
+            edges[n] = (a, [b[0] - a[0], b[1] - a[1]]);
             n += 1;
         }
     }
     if n < 3 {
         return;
     }
-    let edges = &edges[..n];
-    pts.retain(|&q| !edges.iter().all(|&(a, b)| cross(a, b, q) > 0.0));
+    for k in n..8 {
+        edges[k] = edges[0];
+    }
+    // All eight tests, and the compaction, without a branch.
+    let mut kept = 0;
+    for r in 0..pts.len() {
+        let q = pts[r];
+        let inside = edges.iter().fold(true, |inside, &(a, u)| {
+            inside & (u[0] * (q[1] - a[1]) - u[1] * (q[0] - a[0]) > 0.0)
+        });
+        pts[kept] = q;
+        kept += usize::from(!inside);
+    }
+    pts.truncate(kept);
 }
 
 /// Convex hull of `pts` (sorted in place), counter-clockwise, no collinear points: Andrew's
