@@ -561,20 +561,17 @@ impl GroundSegmenter {
                     lo.max(k.saturating_sub(RISER_NEIGHBOURS)),
                     hi.min(k + 1 + RISER_NEIGHBOURS),
                 );
+                // Without a branch per neighbour (on flat ground, whether a neighbour lies
+                // a margin above or below is noise, which branches mispredict). The point
+                // itself needs no skipping: it is neither `m ≥ 0` above nor below itself.
                 let (mut lower, mut higher, mut steep_below, mut steep_above) =
                     (false, false, false, false);
-                for (j, &(rq, zq, _)) in col[from..to].iter().enumerate() {
-                    if from + j == k {
-                        continue;
-                    }
-                    if rq <= r && zq < z - m {
-                        lower = true;
-                        steep_below |= z - zq > tan_max * (r - rq) + m;
-                    }
-                    if rq >= r && zq > z + m {
-                        higher = true;
-                        steep_above |= zq - z > tan_max * (rq - r) + m;
-                    }
+                for &(rq, zq, _) in &col[from..to] {
+                    let (before, beyond) = (rq <= r, rq >= r);
+                    lower |= before & (zq < z - m);
+                    steep_below |= before & (z - zq > tan_max * (r - rq) + m);
+                    higher |= beyond & (zq > z + m);
+                    steep_above |= beyond & (zq - z > tan_max * (rq - r) + m);
                 }
                 if (steep_below && higher) || (steep_above && lower) {
                     labels[i as usize] = false;
