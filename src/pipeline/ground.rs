@@ -173,6 +173,8 @@ pub struct GroundSegmenter {
     /// Riser test: ground points as (range in xy, z, index), grouped by azimuth column.
     profile: Vec<(f32, f32, u32)>,
     column_of: Vec<u32>,
+    /// Positions (bin order) of the points labelled ground; the first `ground_len` hold.
+    ground_at: Vec<u32>,
     column_start: Vec<u32>,
 }
 
@@ -244,6 +246,7 @@ impl GroundSegmenter {
             scratch: Vec::new(),
             profile: Vec::new(),
             column_of: Vec::new(),
+            ground_at: Vec::new(),
             column_start: Vec::new(),
         };
         if let GroundMethod::PolarGrid(p) = method {
@@ -448,6 +451,9 @@ impl GroundSegmenter {
         //    ground; label the points above their plane by at most the threshold.
         let cos_max = p.max_slope_deg.to_radians().cos();
         let mut stats = GroundStats::default();
+        self.ground_at.clear();
+        self.ground_at.resize(total, 0);
+        let mut grounds = 0;
         for sec in 0..sectors {
             let mid = (sec as f64 + 0.5) / sector_scale - core::f64::consts::PI;
             let (cs, sn) = (mid.cos(), mid.sin());
@@ -487,34 +493,38 @@ impl GroundSegmenter {
                         f64::from(self.zs[t]),
                     );
                     // Each point is in one bin and every label starts false: a plain store,
-                    // no branch on the data.
-                    labels[self.idx[t] as usize] = dist(&pl, x, y, z) <= thr;
+                    // no branch on the data; the ground ones listed for the riser test the
+                    // same way.
+                    let ground = dist(&pl, x, y, z) <= thr;
+                    labels[self.idx[t] as usize] = ground;
+                    self.ground_at[grounds] = t as u32;
+                    grounds += usize::from(ground);
                 }
             }
         }
+        self.ground_at.truncate(grounds);
         if p.riser_column_deg > 0.0 {
-            stats.risers = self.risers(points, p, labels);
+            stats.risers = self.risers(p, labels);
         }
         stats
     }
 
     /// The riser test (see the module docs): relabels as not ground the ground points that
     /// lie on a step's face in their radial profile. Returns how many.
-    fn risers(&mut self, points: &[Point], p: &PolarGridParams, labels: &mut [bool]) -> usize {
+    fn risers(&mut self, p: &PolarGridParams, labels: &mut [bool]) -> usize {
         let columns = (360.0 / p.riser_column_deg).ceil() as usize;
         let scale = columns as f64 / core::f64::consts::TAU;
-        // Counting sort of the ground points into azimuth columns.
-        let column = |(pt, &g): (&Point, &bool)| {
-            if g {
-                let a = fast_atan2(f64::from(pt.y), f64::from(pt.x)) + core::f64::consts::PI;
-                ((a * scale) as usize).min(columns - 1) as u32
-            } else {
-                u32::MAX
-            }
+        // Counting sort of the ground points (listed by the labelling, in bin order) into
+        // azimuth columns.
+        let (xs, ys, zs, idx) = (&self.xs, &self.ys, &self.zs, &self.idx);
+        let column = |&t: &u32| {
+            let (x, y) = (f64::from(xs[t as usize]), f64::from(ys[t as usize]));
+            let a = fast_atan2(y, x) + core::f64::consts::PI;
+            ((a * scale) as usize).min(columns - 1) as u32
         };
         count_bins(
             columns,
-            points.iter().zip(labels.iter()).map(column),
+            self.ground_at.iter().map(column),
             &mut self.column_of,
             &mut self.column_start,
         );
@@ -523,14 +533,12 @@ impl GroundSegmenter {
         self.profile.resize(total, (0.0, 0.0, 0));
         self.cursor.clear();
         self.cursor.extend_from_slice(&self.column_start[..columns]);
-        for (i, (&c, pt)) in self.column_of.iter().zip(points).enumerate() {
-            if c == u32::MAX {
-                continue;
-            }
+        for (&c, &t) in self.column_of.iter().zip(&self.ground_at) {
             let at = self.cursor[c as usize] as usize;
             self.cursor[c as usize] += 1;
-            let r = (f64::from(pt.x).powi(2) + f64::from(pt.y).powi(2)).sqrt();
-            self.profile[at] = (r as f32, pt.z, i as u32);
+            let (x, y) = (f64::from(xs[t as usize]), f64::from(ys[t as usize]));
+            let r = (x.powi(2) + y.powi(2)).sqrt();
+            self.profile[at] = (r as f32, zs[t as usize], idx[t as usize]);
         }
         // Each column's profile by range; a point on a rise steeper than the steepest ground
         // (by the margin) from a point below it, with a point higher still beyond it (or the
