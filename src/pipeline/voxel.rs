@@ -316,7 +316,6 @@ impl VoxelGrid {
                     }
                 }
                 self.table.reset(points.len());
-                let mut last = (NO_KEY, 0u32);
                 for (i, &key) in self.keys.iter().enumerate() {
                     if let Some(&ahead) = self.keys.get(i + LOOK_AHEAD) {
                         self.table.warm(ahead);
@@ -330,20 +329,16 @@ impl VoxelGrid {
                         self.slot_of.push(SKIPPED);
                         continue;
                     }
-                    // Points come in scan order: sometimes the same voxel as the last one.
-                    let slot = if key == last.0 {
-                        last.1
-                    } else {
-                        let (slot, new) = self.table.insert(key);
-                        if new {
-                            self.acc.push(Acc {
-                                first: i as u32,
-                                ..Acc::default()
-                            });
-                        }
-                        last = (key, slot);
-                        slot
-                    };
+                    // Every point looks its key up, also when it repeats the last one's: a
+                    // repeat finds its slot in cache, and a test for it mispredicted (it was
+                    // 5-11 % of this stage on the real sweeps, BENCHMARKS.md).
+                    let (slot, new) = self.table.insert(key);
+                    if new {
+                        self.acc.push(Acc {
+                            first: i as u32,
+                            ..Acc::default()
+                        });
+                    }
                     self.slot_of.push(slot);
                 }
                 // The sums in a pass of their own: a voxel met again after other voxels has
