@@ -357,8 +357,7 @@ impl Clusterer {
         //    every axis (then within range of the coarse grid too), with their coarse cells.
         let fine = GridScale::new(Grid::Fine.side(tol));
         let coarse = GridScale::new(Grid::Coarse.side(tol));
-        let (skipped, mut range) =
-            self.select(points, n, excluded, (Grid::Fine.side(tol), fine), coarse);
+        let (skipped, mut range) = self.select(points, n, excluded, fine, coarse);
         stats.skipped += skipped;
         stats.candidates = self.cand.len();
 
@@ -446,20 +445,20 @@ impl Clusterer {
         stats
     }
 
-    /// Fills `cand` with the points to cluster (not `excluded`, within range of the fine
-    /// grid of side `fine.0`) and `cell_ijk` with their cells on the `coarse` grid, biased by
+    /// Fills `cand` with the points to cluster (not `excluded`, within range of the `fine`
+    /// grid) and `cell_ijk` with their cells on the `coarse` grid, biased by
     /// `KEY_BIAS`; returns the points skipped and the smallest and largest biased cells.
     fn select(
         &mut self,
         points: &[Point],
         n: usize,
         excluded: impl Fn(usize) -> bool,
-        (fine_side, fine): (f64, GridScale),
+        fine: GridScale,
         coarse: GridScale,
     ) -> (usize, ([u32; 3], [u32; 3])) {
         // Coordinates below this in magnitude are within 2^20 − 1 fine cells of the origin:
         // their range check needs no division.
-        let near = (KEY_BIAS - 1) as f64 * fine_side * (1.0 - 1e-9);
+        let near = (KEY_BIAS - 1) as f64 * fine.side * (1.0 - 1e-9);
         let mut skipped = 0;
         let (mut lo, mut hi) = ([u32::MAX; 3], [0u32; 3]);
         self.cand.clear();
