@@ -173,7 +173,7 @@ pub struct GroundSegmenter {
     /// Riser test: ground points as (range in xy, z, index), grouped by azimuth column.
     profile: Vec<(f32, f32, u32)>,
     column_of: Vec<u32>,
-    /// Positions (bin order) of the points labelled ground; the first `ground_len` hold.
+    /// Riser test: positions (bin order) of the points the planes labelled ground.
     ground_at: Vec<u32>,
     column_start: Vec<u32>,
 }
@@ -576,10 +576,11 @@ impl GroundSegmenter {
                     (false, false, false, false);
                 for &(rq, zq, _) in &col[from..to] {
                     let (before, beyond) = (rq <= r, rq >= r);
-                    lower |= before & (zq < z - m);
-                    steep_below |= before & (z - zq > tan_max * (r - rq) + m);
-                    higher |= beyond & (zq > z + m);
-                    steep_above |= beyond & (zq - z > tan_max * (rq - r) + m);
+                    let (below, above) = (before & (zq < z - m), beyond & (zq > z + m));
+                    lower |= below;
+                    steep_below |= below & (z - zq > tan_max * (r - rq) + m);
+                    higher |= above;
+                    steep_above |= above & (zq - z > tan_max * (rq - r) + m);
                 }
                 if (steep_below && higher) || (steep_above && lower) {
                     labels[i as usize] = false;
