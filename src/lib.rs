@@ -14,10 +14,10 @@
 //! model (stream-level detection lives in [`sweep::VelodyneStream`]).
 //!
 //! ```
-//! use ringscan::calib::builtin::builtin;
-//! use ringscan::decode::{DecodeOptions, VelodyneDecoder};
+//! use ringscan::sensor::velodyne::calib::builtin::builtin;
+//! use ringscan::sensor::decode::{DecodeOptions, VelodyneDecoder};
 //! use ringscan::model::{ReturnMode, VelodyneModel};
-//! use ringscan::wire::velodyne::DataPacket;
+//! use ringscan::sensor::velodyne::wire::DataPacket;
 //!
 //! // A VLP-16 data packet: 12 blocks `FF EE`, azimuths 0.00°, 0.20°, …, one return.
 //! let mut bytes = [0u8; 1206];
@@ -50,12 +50,11 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
-pub mod calib;
-pub mod decode;
 pub mod deskew;
-pub mod model;
 pub mod pipeline;
 pub mod point;
+pub mod registration;
+pub mod sensor;
 #[cfg(feature = "sim")]
 pub mod sim;
 #[cfg(feature = "mcap")]
@@ -63,6 +62,5 @@ pub mod sink;
 pub mod source;
 pub mod sweep;
 pub mod time;
-pub mod wire;
 
 pub use point::Point;

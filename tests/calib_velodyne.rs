@@ -3,12 +3,16 @@
 
 use std::path::{Path, PathBuf};
 
-use ringscan::calib::builtin::builtin;
-use ringscan::calib::{
-    parse_velodyne, parse_velodyne_bytes, ros_yaml, veloview_xml, CalibError, LaserCalibration,
-    VelodyneCalibration, MAX_CALIB_BYTES,
-};
-use ringscan::model::velodyne::VelodyneModel;
+use ringscan::sensor::calib::CalibError;
+use ringscan::sensor::calib::MAX_CALIB_BYTES;
+use ringscan::sensor::velodyne::calib::builtin::builtin;
+use ringscan::sensor::velodyne::calib::parse_velodyne;
+use ringscan::sensor::velodyne::calib::parse_velodyne_bytes;
+use ringscan::sensor::velodyne::calib::ros_yaml;
+use ringscan::sensor::velodyne::calib::veloview_xml;
+use ringscan::sensor::velodyne::calib::LaserCalibration;
+use ringscan::sensor::velodyne::calib::VelodyneCalibration;
+use ringscan::sensor::velodyne::model::VelodyneModel;
 
 fn captures() -> Option<PathBuf> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/captures");

@@ -5,11 +5,13 @@ use std::net::{Ipv4Addr, SocketAddrV4};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use ringscan::calib::builtin::builtin;
-use ringscan::model::{ReturnMode, VelodyneModel};
-use ringscan::sim::net::{udp_frame, PcapWriter};
+use ringscan::sensor::velodyne::calib::builtin::builtin;
+use ringscan::sensor::velodyne::sim::VelodyneSim;
+use ringscan::sensor::velodyne::ReturnMode;
+use ringscan::sensor::velodyne::VelodyneModel;
+use ringscan::sim::net::udp_frame;
+use ringscan::sim::net::PcapWriter;
 use ringscan::sim::scene::Shapes;
-use ringscan::sim::velodyne::VelodyneSim;
 
 fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_ringscan")

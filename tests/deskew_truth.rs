@@ -14,17 +14,22 @@
 use std::collections::HashMap;
 
 use nalgebra::{Isometry3, Point3, Vector3};
-use ringscan::calib::builtin::builtin;
-use ringscan::decode::{DecodeOptions, OusterDecoder, VelodyneDecoder};
 use ringscan::deskew::{Deskewer, ImuTrack, PoseTable, Reference, Twist};
-use ringscan::model::{ReturnMode, VelodyneModel};
 use ringscan::point::Point;
+use ringscan::sensor::ouster::sim::OusterSim;
+use ringscan::sensor::ouster::sim::OusterTruth;
+use ringscan::sensor::ouster::wire::ImuPacketLegacy;
+use ringscan::sensor::ouster::OusterDecoder;
+use ringscan::sensor::velodyne::calib::builtin::builtin;
+use ringscan::sensor::velodyne::sim::Truth;
+use ringscan::sensor::velodyne::sim::VelodyneSim;
+use ringscan::sensor::velodyne::wire::DataPacket;
+use ringscan::sensor::velodyne::ReturnMode;
+use ringscan::sensor::velodyne::VelodyneDecoder;
+use ringscan::sensor::velodyne::VelodyneModel;
+use ringscan::sensor::DecodeOptions;
 use ringscan::sim::motion::Trajectory;
-use ringscan::sim::ouster::{OusterSim, OusterTruth};
 use ringscan::sim::scenes;
-use ringscan::sim::velodyne::{Truth, VelodyneSim};
-use ringscan::wire::ouster::ImuPacketLegacy;
-use ringscan::wire::velodyne::DataPacket;
 
 const T0: i64 = 1_714_564_800_000_000_000;
 const V_MPS: f64 = 15.0;
@@ -123,7 +128,7 @@ fn velodyne_sweep() -> (SimSweep, Trajectory) {
 
 /// Ouster metadata with the defaults the SDK fills in (LEGACY lidar and IMU packets, IMU at
 /// the default `imu_to_sensor_transform`): 128 beams evenly from +22.5° to −22.5°, 1024×10.
-fn os1_128() -> ringscan::calib::ouster::OusterInfo {
+fn os1_128() -> ringscan::sensor::ouster::calib::OusterInfo {
     let alt: Vec<String> = (0..128)
         .map(|i| format!("{:.4}", 22.5 - 45.0 * f64::from(i) / 127.0))
         .collect();
@@ -135,7 +140,7 @@ fn os1_128() -> ringscan::calib::ouster::OusterInfo {
         alt.join(", "),
         az.join(", ")
     );
-    ringscan::calib::ouster::parse(&text, "os1-128-sim.json").unwrap()
+    ringscan::sensor::ouster::calib::parse(&text, "os1-128-sim.json").unwrap()
 }
 
 /// The second frame of a simulated OS-1-128, and the IMU samples (sensor clock ns, rad/s in

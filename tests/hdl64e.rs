@@ -12,14 +12,23 @@ mod common;
 
 use std::collections::HashMap;
 
-use ringscan::calib::{parse_velodyne, LaserCalibration, VelodyneCalibration};
-use ringscan::decode::velodyne::corrected_intensity;
-use ringscan::decode::{DecodeOptions, VelodyneDecoder};
-use ringscan::model::{ReturnMode, VelodyneModel};
 use ringscan::point::Point;
+use ringscan::sensor::velodyne::calib::parse_velodyne;
+use ringscan::sensor::velodyne::calib::LaserCalibration;
+use ringscan::sensor::velodyne::calib::VelodyneCalibration;
+use ringscan::sensor::velodyne::decode::corrected_intensity;
+use ringscan::sensor::velodyne::sim::encode_data_packet;
+use ringscan::sensor::velodyne::sim::Block;
+use ringscan::sensor::velodyne::sim::Truth;
+use ringscan::sensor::velodyne::sim::VelodyneSim;
+use ringscan::sensor::velodyne::wire::DataPacket;
+use ringscan::sensor::velodyne::wire::FLAG_LOWER;
+use ringscan::sensor::velodyne::wire::FLAG_UPPER;
+use ringscan::sensor::velodyne::ReturnMode;
+use ringscan::sensor::velodyne::VelodyneDecoder;
+use ringscan::sensor::velodyne::VelodyneModel;
+use ringscan::sensor::DecodeOptions;
 use ringscan::sim::scene::Shapes;
-use ringscan::sim::velodyne::{encode_data_packet, Block, Truth, VelodyneSim};
-use ringscan::wire::velodyne::{DataPacket, FLAG_LOWER, FLAG_UPPER};
 
 /// sin(0.005°): half the 0.01° azimuth step of the wire format.
 const SIN_0005_DEG: f64 = 8.726_646e-5;

@@ -29,12 +29,14 @@ use std::process::Command;
 use foxglove_msgs::*;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use prost::Message as _;
-use ringscan::calib::builtin::builtin;
-use ringscan::model::{ReturnMode, VelodyneModel};
+use ringscan::sensor::velodyne::calib::builtin::builtin;
+use ringscan::sensor::velodyne::sim::VelodyneSim;
+use ringscan::sensor::velodyne::ReturnMode;
+use ringscan::sensor::velodyne::VelodyneModel;
 use ringscan::sim::motion::Trajectory;
-use ringscan::sim::net::{udp_frame, PcapWriter};
+use ringscan::sim::net::udp_frame;
+use ringscan::sim::net::PcapWriter;
 use ringscan::sim::scenes;
-use ringscan::sim::velodyne::VelodyneSim;
 
 fn out_path(name: &str) -> PathBuf {
     foxglove_msgs::out_path("odometry-cli", name)
@@ -471,11 +473,11 @@ fn live_view_publishes_the_tf_of_the_mcap() {
 /// at 5 m/s and turning 10 °/s over an empty flat floor: lidar (and IMU) datagrams in time
 /// order.
 fn simulated_ouster_on_a_floor(
-    info: &ringscan::calib::ouster::OusterInfo,
+    info: &ringscan::sensor::ouster::calib::OusterInfo,
     seconds: f64,
     with_imu: bool,
 ) -> Vec<u8> {
-    let mut sim = ringscan::sim::ouster::OusterSim::new(info.clone(), T0_NS);
+    let mut sim = ringscan::sensor::ouster::sim::OusterSim::new(info.clone(), T0_NS);
     sim.trajectory = floor_drive();
     let scene = scenes::flat_floor();
     let mut w = PcapWriter::new(Vec::new()).unwrap();
@@ -526,7 +528,8 @@ fn an_imu_rotation_prior_holds_the_heading_the_floor_cannot() {
     let rel = "ouster-lidar__ouster-sdk/tests/pcaps/OS-1-32-G_v2.1.1_1024x10.json";
     let meta = root.join(rel);
     let info =
-        ringscan::calib::ouster::parse(&std::fs::read_to_string(&meta).unwrap(), rel).unwrap();
+        ringscan::sensor::ouster::calib::parse(&std::fs::read_to_string(&meta).unwrap(), rel)
+            .unwrap();
     let truth = floor_drive();
     let mut worst: Vec<(f64, f64)> = Vec::new();
     for imu in [false, true] {

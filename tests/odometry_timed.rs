@@ -16,14 +16,19 @@
 //! steps of both are the first ones: the odometry starts at 20 m/s knowing no velocity.)
 
 use nalgebra::Isometry3;
-use ringscan::calib::builtin::builtin;
-use ringscan::model::{ReturnMode, VelodyneModel};
-use ringscan::pipeline::odometry::{Odometry, OdometryConfig, OdometryMethod};
 use ringscan::point::Point;
-use ringscan::sim::motion::{Route, Trajectory};
+use ringscan::registration::odometry::Odometry;
+use ringscan::registration::odometry::OdometryConfig;
+use ringscan::registration::odometry::OdometryMethod;
+use ringscan::sensor::velodyne::calib::builtin::builtin;
+use ringscan::sensor::velodyne::sim::VelodyneSim;
+use ringscan::sensor::velodyne::ReturnMode;
+use ringscan::sensor::velodyne::StreamConfig;
+use ringscan::sensor::velodyne::VelodyneModel;
+use ringscan::sensor::velodyne::VelodyneStream;
+use ringscan::sim::motion::Route;
+use ringscan::sim::motion::Trajectory;
 use ringscan::sim::scenes;
-use ringscan::sim::velodyne::VelodyneSim;
-use ringscan::sweep::{StreamConfig, VelodyneStream};
 
 const T0: i64 = 1_714_564_800_000_000_000;
 
@@ -38,7 +43,7 @@ fn sweeps(seconds: f64) -> (Vec<(i64, Vec<Point>)>, Trajectory) {
         ..StreamConfig::default()
     });
     let mut out = Vec::new();
-    let mut on_sweep = |s: &ringscan::sweep::Sweep, _: &ringscan::sweep::SensorFacts| {
+    let mut on_sweep = |s: &ringscan::sweep::Sweep, _: &ringscan::sensor::velodyne::SensorFacts| {
         out.push((s.timestamp_ns, s.points.clone()));
     };
     let mut truth = Vec::new();

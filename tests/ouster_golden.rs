@@ -31,14 +31,21 @@ mod common;
 use std::net::SocketAddrV4;
 use std::path::{Path, PathBuf};
 
-use ringscan::calib::ouster::{parse, ImuProfile, OusterInfo};
-use ringscan::decode::{DecodeError, OusterDecoder, OusterFrame};
-use ringscan::model::ouster::Profile;
+use ringscan::sensor::ouster::calib::parse;
+use ringscan::sensor::ouster::calib::ImuProfile;
+use ringscan::sensor::ouster::calib::OusterInfo;
+use ringscan::sensor::ouster::model::Profile;
+use ringscan::sensor::ouster::wire::imu_nmea_packet_bytes;
+use ringscan::sensor::ouster::wire::shot_limiting_name;
+use ringscan::sensor::ouster::wire::thermal_shutdown_name;
+use ringscan::sensor::ouster::wire::ImuPacketLegacy;
+use ringscan::sensor::ouster::wire::ImuPacketNmea;
+use ringscan::sensor::ouster::wire::LidarPacket;
+use ringscan::sensor::ouster::wire::IMU_LEGACY_BYTES;
+use ringscan::sensor::ouster::OusterDecoder;
+use ringscan::sensor::ouster::OusterFrame;
+use ringscan::sensor::DecodeError;
 use ringscan::source::pcap::PcapSource;
-use ringscan::wire::ouster::{
-    imu_nmea_packet_bytes, shot_limiting_name, thermal_shutdown_name, ImuPacketLegacy,
-    ImuPacketNmea, LidarPacket, IMU_LEGACY_BYTES,
-};
 use serde_json::Value;
 
 /// One datagram of a capture.
@@ -536,8 +543,8 @@ fn check_sensor(
         }
         // No datagram of the capture is a lidar packet of any profile at this H.
         for d in datagrams {
-            for p in ringscan::model::ouster::ALL_PROFILES {
-                let fmt = ringscan::model::ouster::PacketFormat {
+            for p in ringscan::sensor::ouster::model::ALL_PROFILES {
+                let fmt = ringscan::sensor::ouster::model::PacketFormat {
                     profile: p,
                     ..info.format
                 };
@@ -598,7 +605,7 @@ fn check_sensor(
     );
     // The CRC rule against INVENTORY's per-capture findings.
     let has_crc_field = info.format.profile.header()
-        == ringscan::model::ouster::HeaderKind::Standard
+        == ringscan::sensor::ouster::model::HeaderKind::Standard
         && info.format.profile != Profile::FusaRng15Rfl8Nir8Dual;
     if dec.crc_check() {
         assert!(fw.is_some_and(|v| v >= (2, 5, 0)), "{what}");

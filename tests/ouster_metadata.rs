@@ -5,13 +5,24 @@
 
 use std::path::{Path, PathBuf};
 
-use ringscan::calib::ouster::{
-    self, default_pixel_shift_by_row, parse, parse_firmware_version, prod_line_beam_count,
-    ImuProfile, OusterInfo, TimestampMode, DEFAULT_IMU_TO_SENSOR, DEFAULT_LIDAR_TO_SENSOR,
-    DEFAULT_UDP_PORT_IMU, DEFAULT_UDP_PORT_LIDAR, LAYOUT_LEGACY, LAYOUT_NESTED, LAYOUT_NESTED_1_12,
-};
-use ringscan::calib::{CalibError, MAX_CALIB_BYTES};
-use ringscan::model::ouster::Profile;
+use ringscan::sensor::calib::CalibError;
+use ringscan::sensor::calib::MAX_CALIB_BYTES;
+use ringscan::sensor::ouster::calib as ouster;
+use ringscan::sensor::ouster::calib::default_pixel_shift_by_row;
+use ringscan::sensor::ouster::calib::parse;
+use ringscan::sensor::ouster::calib::parse_firmware_version;
+use ringscan::sensor::ouster::calib::prod_line_beam_count;
+use ringscan::sensor::ouster::calib::ImuProfile;
+use ringscan::sensor::ouster::calib::OusterInfo;
+use ringscan::sensor::ouster::calib::TimestampMode;
+use ringscan::sensor::ouster::calib::DEFAULT_IMU_TO_SENSOR;
+use ringscan::sensor::ouster::calib::DEFAULT_LIDAR_TO_SENSOR;
+use ringscan::sensor::ouster::calib::DEFAULT_UDP_PORT_IMU;
+use ringscan::sensor::ouster::calib::DEFAULT_UDP_PORT_LIDAR;
+use ringscan::sensor::ouster::calib::LAYOUT_LEGACY;
+use ringscan::sensor::ouster::calib::LAYOUT_NESTED;
+use ringscan::sensor::ouster::calib::LAYOUT_NESTED_1_12;
+use ringscan::sensor::ouster::model::Profile;
 use serde_json::{json, Value};
 
 const SDK_TESTS: &str = "ouster-lidar__ouster-sdk/tests";

@@ -6,12 +6,21 @@
 //! the header and column values, a valid CRC-64/XZ for standard headers, and points whose
 //! xyz is the lookup table's, whose `t` is the column time and whose ring is the altitude rank.
 
-use ringscan::calib::ouster::{parse, OusterInfo};
-use ringscan::decode::{DecodeError, Extra, OusterDecoder};
-use ringscan::model::ouster::{HeaderKind, PacketFormat, Profile, ALL_PROFILES};
-use ringscan::sim::ouster::{OusterEncoder, SimColumn, SimHeader, SimPixel};
-use ringscan::wire::ouster::LidarPacket;
-use ringscan::wire::WireError;
+use ringscan::sensor::ouster::calib::parse;
+use ringscan::sensor::ouster::calib::OusterInfo;
+use ringscan::sensor::ouster::model::HeaderKind;
+use ringscan::sensor::ouster::model::PacketFormat;
+use ringscan::sensor::ouster::model::Profile;
+use ringscan::sensor::ouster::model::ALL_PROFILES;
+use ringscan::sensor::ouster::sim::OusterEncoder;
+use ringscan::sensor::ouster::sim::SimColumn;
+use ringscan::sensor::ouster::sim::SimHeader;
+use ringscan::sensor::ouster::sim::SimPixel;
+use ringscan::sensor::ouster::wire::LidarPacket;
+use ringscan::sensor::ouster::Extra;
+use ringscan::sensor::ouster::OusterDecoder;
+use ringscan::sensor::DecodeError;
+use ringscan::sensor::WireError;
 
 const W: usize = 512;
 const CPP: usize = 16;
@@ -74,7 +83,7 @@ fn synthetic_info(profile: Profile, h: usize) -> OusterInfo {
 /// A pixel value at random within the field widths of the profile, with the limits mixed in.
 fn pixel(rng: &mut Rng, profile: Profile, row: usize, col: usize) -> SimPixel {
     let l = profile.layout();
-    let mut draw = |f: Option<ringscan::model::ouster::Field>, limit: bool| -> u32 {
+    let mut draw = |f: Option<ringscan::sensor::ouster::model::Field>, limit: bool| -> u32 {
         let Some(f) = f else { return 0 };
         let max = (1u64 << f.width) - 1;
         let raw = match (limit, rng.below(8)) {

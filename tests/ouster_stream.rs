@@ -4,11 +4,19 @@
 //! counted as missing, an `init_id` change starts an epoch, IMU packets come out in SI units.
 //! Expected numbers come from the packets the test builds, not from the decoder.
 
-use ringscan::calib::ouster::{parse, OusterInfo};
-use ringscan::decode::DecodeOptions;
-use ringscan::model::ouster::{PacketFormat, Profile};
-use ringscan::sim::ouster::{encode_imu_legacy, OusterEncoder, SimColumn, SimHeader, SimPixel};
-use ringscan::sweep::{OusterStream, OusterStreamConfig, Sweep};
+use ringscan::sensor::ouster::calib::parse;
+use ringscan::sensor::ouster::calib::OusterInfo;
+use ringscan::sensor::ouster::model::PacketFormat;
+use ringscan::sensor::ouster::model::Profile;
+use ringscan::sensor::ouster::sim::encode_imu_legacy;
+use ringscan::sensor::ouster::sim::OusterEncoder;
+use ringscan::sensor::ouster::sim::SimColumn;
+use ringscan::sensor::ouster::sim::SimHeader;
+use ringscan::sensor::ouster::sim::SimPixel;
+use ringscan::sensor::ouster::OusterStream;
+use ringscan::sensor::ouster::OusterStreamConfig;
+use ringscan::sensor::DecodeOptions;
+use ringscan::sweep::Sweep;
 
 const W: usize = 512;
 const H: usize = 16;

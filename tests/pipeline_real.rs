@@ -16,9 +16,16 @@ fn sweeps_decode() {
 
 use std::collections::BTreeMap;
 
-use ringscan::pipeline::cluster::{ClusterParams, Clusterer, Clusters};
-use ringscan::pipeline::ground::{GroundMethod, GroundSegmenter, PolarGridParams};
-use ringscan::pipeline::voxel::{GridOrigin, KeyGrouping, VoxelConfig, VoxelGrid};
+use ringscan::pipeline::cluster::ClusterParams;
+use ringscan::pipeline::cluster::Clusterer;
+use ringscan::pipeline::cluster::Clusters;
+use ringscan::pipeline::ground::GroundMethod;
+use ringscan::pipeline::ground::GroundSegmenter;
+use ringscan::pipeline::ground::PolarGridParams;
+use ringscan::pipeline::voxel::GridOrigin;
+use ringscan::pipeline::voxel::KeyGrouping;
+use ringscan::pipeline::voxel::VoxelConfig;
+use ringscan::pipeline::voxel::VoxelGrid;
 use ringscan::Point;
 
 /// Naive voxel reference: a BTreeMap from floor((p − origin) / leaf) (f64) to point indices.

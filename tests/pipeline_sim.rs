@@ -16,16 +16,25 @@
 //!   tolerance, is exactly one cluster holding exactly its points.
 
 use nalgebra::Isometry3;
-use ringscan::calib::builtin::builtin;
-use ringscan::calib::ouster::OusterInfo;
-use ringscan::model::{ReturnMode, VelodyneModel};
-use ringscan::pipeline::cluster::{ClusterParams, Clusterer, Clusters};
-use ringscan::pipeline::ground::{GroundMethod, GroundSegmenter, PolarGridParams};
+use ringscan::pipeline::cluster::ClusterParams;
+use ringscan::pipeline::cluster::Clusterer;
+use ringscan::pipeline::cluster::Clusters;
+use ringscan::pipeline::ground::GroundMethod;
+use ringscan::pipeline::ground::GroundSegmenter;
+use ringscan::pipeline::ground::PolarGridParams;
+use ringscan::sensor::ouster::calib::OusterInfo;
+use ringscan::sensor::ouster::sim::OusterSim;
+use ringscan::sensor::ouster::sim::OusterTruth;
+use ringscan::sensor::velodyne::calib::builtin::builtin;
+use ringscan::sensor::velodyne::sim::Truth;
+use ringscan::sensor::velodyne::sim::VelodyneSim;
+use ringscan::sensor::velodyne::ReturnMode;
+use ringscan::sensor::velodyne::VelodyneModel;
 use ringscan::sim::motion::Trajectory;
-use ringscan::sim::ouster::{OusterSim, OusterTruth};
-use ringscan::sim::scene::{World, GROUND};
-use ringscan::sim::scenes::{self, SENSOR_HEIGHT_M};
-use ringscan::sim::velodyne::{Truth, VelodyneSim};
+use ringscan::sim::scene::World;
+use ringscan::sim::scene::GROUND;
+use ringscan::sim::scenes;
+use ringscan::sim::scenes::SENSOR_HEIGHT_M;
 use ringscan::Point;
 
 const SCENES: [&str; 4] = ["flat", "slope10", "ramp", "kerbs"];
@@ -64,9 +73,9 @@ fn os1_128_info() -> Option<OusterInfo> {
         "../shared/captures/ouster-lidar__ouster-sdk/tests/pcaps/OS-1-128_v2.3.0_1024x10.json",
     );
     match std::fs::read_to_string(&path) {
-        Ok(text) => {
-            Some(ringscan::calib::ouster::parse(&text, "OS-1-128_v2.3.0_1024x10.json").unwrap())
-        }
+        Ok(text) => Some(
+            ringscan::sensor::ouster::calib::parse(&text, "OS-1-128_v2.3.0_1024x10.json").unwrap(),
+        ),
         Err(_) => {
             eprintln!(
                 "SKIP: {} is absent: OS-1-128 scenes not run",

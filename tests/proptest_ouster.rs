@@ -17,13 +17,20 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use proptest::prelude::*;
 use proptest::test_runner::{Config, TestCaseError, TestRunner};
 
-use ringscan::calib::ouster::{parse, OusterInfo};
-use ringscan::decode::{DecodeOptions, OusterDecoder};
-use ringscan::model::ouster::{PacketFormat, Profile, ALL_PROFILES};
+use ringscan::sensor::ouster::calib::parse;
+use ringscan::sensor::ouster::calib::OusterInfo;
+use ringscan::sensor::ouster::model::PacketFormat;
+use ringscan::sensor::ouster::model::Profile;
+use ringscan::sensor::ouster::model::ALL_PROFILES;
+use ringscan::sensor::ouster::sim::OusterSim;
+use ringscan::sensor::ouster::sim::OusterTruth;
+use ringscan::sensor::ouster::OusterDecoder;
+use ringscan::sensor::ouster::OusterStream;
+use ringscan::sensor::ouster::OusterStreamConfig;
+use ringscan::sensor::DecodeOptions;
 use ringscan::sim::motion::Trajectory;
-use ringscan::sim::ouster::{OusterSim, OusterTruth};
 use ringscan::sim::scene::Shapes;
-use ringscan::sweep::{OusterStream, OusterStreamConfig, Sweep};
+use ringscan::sweep::Sweep;
 
 const SIN_0005_DEG: f64 = 8.726_646e-5;
 const T0: i64 = 1_714_564_800_000_000_000;
@@ -220,7 +227,7 @@ fn wrap_case(profile: Profile, first_frame: u64, frames: u64) -> Result<(), Test
     };
     let mut expected_points: HashMap<u32, usize> = HashMap::new();
     let mut sweeps: Vec<(u64, u32, usize)> = Vec::new();
-    let mut on_sweep = |s: &Sweep, _: &ringscan::sweep::OusterFacts| {
+    let mut on_sweep = |s: &Sweep, _: &ringscan::sensor::ouster::OusterFacts| {
         sweeps.push((s.index, s.frame_id, s.points.len()));
     };
     for _ in 0..frames * per_frame {

@@ -5,14 +5,18 @@
 //! sin(0.005°) (block azimuths are rounded to 0.01° on the wire, so the decoder's interpolated
 //! azimuth can be off by half a step), with the right ring, return, time and intensity.
 
-use ringscan::calib::builtin::builtin;
-use ringscan::calib::{LaserCalibration, VelodyneCalibration};
-use ringscan::decode::{DecodeOptions, VelodyneDecoder};
-use ringscan::model::velodyne::ALL_MODELS;
-use ringscan::model::{ReturnMode, VelodyneModel};
+use ringscan::sensor::velodyne::calib::builtin::builtin;
+use ringscan::sensor::velodyne::calib::LaserCalibration;
+use ringscan::sensor::velodyne::calib::VelodyneCalibration;
+use ringscan::sensor::velodyne::model::ALL_MODELS;
+use ringscan::sensor::velodyne::sim::Truth;
+use ringscan::sensor::velodyne::sim::VelodyneSim;
+use ringscan::sensor::velodyne::wire::DataPacket;
+use ringscan::sensor::velodyne::ReturnMode;
+use ringscan::sensor::velodyne::VelodyneDecoder;
+use ringscan::sensor::velodyne::VelodyneModel;
+use ringscan::sensor::DecodeOptions;
 use ringscan::sim::scene::Shapes;
-use ringscan::sim::velodyne::{Truth, VelodyneSim};
-use ringscan::wire::velodyne::DataPacket;
 use std::collections::HashMap;
 
 const SIN_0005_DEG: f64 = 8.726_646e-5;

@@ -14,18 +14,26 @@ mod common;
 use std::collections::HashMap;
 
 use nalgebra::{Isometry3, Point3, Vector3};
-use ringscan::calib::builtin::builtin;
-use ringscan::calib::ouster::OusterInfo;
-use ringscan::calib::{parse_velodyne, VelodyneCalibration};
-use ringscan::decode::{DecodeOptions, OusterDecoder, VelodyneDecoder};
-use ringscan::model::ouster::{Profile, ALL_PROFILES};
-use ringscan::model::{ReturnMode, VelodyneModel};
+use ringscan::sensor::ouster::calib::OusterInfo;
+use ringscan::sensor::ouster::model::Profile;
+use ringscan::sensor::ouster::model::ALL_PROFILES;
+use ringscan::sensor::ouster::sim::OusterSim;
+use ringscan::sensor::ouster::sim::OusterTruth;
+use ringscan::sensor::ouster::OusterDecoder;
+use ringscan::sensor::velodyne::calib::builtin::builtin;
+use ringscan::sensor::velodyne::calib::parse_velodyne;
+use ringscan::sensor::velodyne::calib::VelodyneCalibration;
+use ringscan::sensor::velodyne::sim::Truth;
+use ringscan::sensor::velodyne::sim::VelodyneSim;
+use ringscan::sensor::velodyne::wire::DataPacket;
+use ringscan::sensor::velodyne::ReturnMode;
+use ringscan::sensor::velodyne::VelodyneDecoder;
+use ringscan::sensor::velodyne::VelodyneModel;
+use ringscan::sensor::DecodeOptions;
 use ringscan::sim::motion::Trajectory;
-use ringscan::sim::ouster::{OusterSim, OusterTruth};
-use ringscan::sim::scene::{World, GROUND};
+use ringscan::sim::scene::World;
+use ringscan::sim::scene::GROUND;
 use ringscan::sim::scenes;
-use ringscan::sim::velodyne::{Truth, VelodyneSim};
-use ringscan::wire::velodyne::DataPacket;
 
 const SIN_0005_DEG: f64 = 8.726_646e-5;
 const T0: i64 = 1_714_564_800_000_000_000;
@@ -231,7 +239,7 @@ fn ouster(info: &OusterInfo, name: &str, scene: &World, seconds: f64) -> Figures
 fn metadata(root: &std::path::Path, rel: &str) -> OusterInfo {
     let path = root.join("ouster-lidar__ouster-sdk/tests").join(rel);
     let text = std::fs::read_to_string(&path).unwrap();
-    ringscan::calib::ouster::parse(&text, rel).unwrap_or_else(|e| panic!("{rel}: {e}"))
+    ringscan::sensor::ouster::calib::parse(&text, rel).unwrap_or_else(|e| panic!("{rel}: {e}"))
 }
 
 #[test]
@@ -281,7 +289,8 @@ fn ouster_metadata_and_profiles_recover_the_scene_while_moving() {
 /// (`OusterStream`, SI units), which must give back those values at the sample times.
 #[test]
 fn ouster_imu_packets_follow_the_motion() {
-    use ringscan::sweep::{OusterStream, OusterStreamConfig};
+    use ringscan::sensor::ouster::OusterStream;
+    use ringscan::sensor::ouster::OusterStreamConfig;
     let Some(root) = common::captures() else {
         return;
     };

@@ -12,11 +12,13 @@
 
 mod common;
 
-use ringscan::calib::parse_velodyne;
-use ringscan::decode::{DecodeOptions, VelodyneDecoder};
-use ringscan::model::{ReturnMode, VelodyneModel};
+use ringscan::sensor::velodyne::calib::parse_velodyne;
+use ringscan::sensor::velodyne::wire::DataPacket;
+use ringscan::sensor::velodyne::ReturnMode;
+use ringscan::sensor::velodyne::VelodyneDecoder;
+use ringscan::sensor::velodyne::VelodyneModel;
+use ringscan::sensor::DecodeOptions;
 use ringscan::time::toh_delta_us;
-use ringscan::wire::velodyne::DataPacket;
 use serde_json::Value;
 
 const SIN_001_DEG: f64 = 1.745_329_1e-4; // sin(0.01°)

@@ -2,11 +2,17 @@
 //! hour roll-over and the GPS clock — each against numbers derived from the simulation's
 //! set-up, not from the decoder.
 
-use ringscan::calib::builtin::builtin;
-use ringscan::model::{ReturnMode, VelodyneModel};
+use ringscan::sensor::velodyne::calib::builtin::builtin;
+use ringscan::sensor::velodyne::sim::encode_position_packet;
+use ringscan::sensor::velodyne::sim::VelodyneSim;
+use ringscan::sensor::velodyne::ReturnMode;
+use ringscan::sensor::velodyne::SensorFacts;
+use ringscan::sensor::velodyne::StreamConfig;
+use ringscan::sensor::velodyne::VelodyneModel;
+use ringscan::sensor::velodyne::VelodyneStream;
 use ringscan::sim::scene::Shapes;
-use ringscan::sim::velodyne::{encode_position_packet, VelodyneSim};
-use ringscan::sweep::{Organized, SensorFacts, StreamConfig, Sweep, VelodyneStream};
+use ringscan::sweep::Organized;
+use ringscan::sweep::Sweep;
 use ringscan::time::ClockSource;
 
 struct Out {

@@ -22,13 +22,17 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::Path;
 
-use ringscan::calib::parse_velodyne;
-use ringscan::decode::velodyne::corrected_intensity;
-use ringscan::decode::{DecodeOptions, VelodyneDecoder};
-use ringscan::model::velodyne::{BLOCKS, DATA_PACKET_LEN, SLOTS};
-use ringscan::model::{ReturnMode, VelodyneModel};
+use ringscan::sensor::velodyne::calib::parse_velodyne;
+use ringscan::sensor::velodyne::decode::corrected_intensity;
+use ringscan::sensor::velodyne::model::BLOCKS;
+use ringscan::sensor::velodyne::model::DATA_PACKET_LEN;
+use ringscan::sensor::velodyne::model::SLOTS;
+use ringscan::sensor::velodyne::wire::DataPacket;
+use ringscan::sensor::velodyne::ReturnMode;
+use ringscan::sensor::velodyne::VelodyneDecoder;
+use ringscan::sensor::velodyne::VelodyneModel;
+use ringscan::sensor::DecodeOptions;
 use ringscan::source::pcap::PcapSource;
-use ringscan::wire::velodyne::DataPacket;
 
 fn arg(args: &[String], name: &str) -> Option<String> {
     args.iter()
@@ -119,8 +123,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 }
 
 fn ouster(args: &[String], meta: &str) -> Result<(), Box<dyn std::error::Error>> {
-    let info = ringscan::calib::ouster::parse(&std::fs::read_to_string(meta)?, meta)?;
-    let dec = ringscan::decode::OusterDecoder::new(&info)?;
+    let info = ringscan::sensor::ouster::calib::parse(&std::fs::read_to_string(meta)?, meta)?;
+    let dec = ringscan::sensor::ouster::OusterDecoder::new(&info)?;
     let out_path = arg(args, "--out").ok_or("--out FILE is required")?;
     let input = args
         .last()

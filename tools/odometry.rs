@@ -9,7 +9,7 @@
 //!     [--keyframe-m 0] [--skip N] [--trajectory out.tum] [--report out.json] capture.pcap
 //! cargo run --release --example odometry -- --sweeps sweeps.bin [...]   # read a dump instead
 //! ```
-//! - Sweeps come from [`ringscan::sweep::VelodyneStream`] (the CLI's cut: azimuth wrap at
+//! - Sweeps come from [`ringscan::sensor::velodyne::VelodyneStream`] (the CLI's cut: azimuth wrap at
 //!   0°), in order; fragments cut by the capture's end (fewer than 10 % of the points of the
 //!   largest sweep) are left out and counted.
 //! - `--dump FILE` writes the sweeps as decoded: per sweep `i64 stamp_ns`, `u64 n`, then `n`
@@ -40,15 +40,18 @@ use std::io::{BufWriter, Read, Write};
 use std::path::Path;
 use std::time::Instant;
 
-use ringscan::calib::parse_velodyne;
 use ringscan::deskew::{Deskewer, Reference, Twist};
-use ringscan::model::VelodyneModel;
-use ringscan::pipeline::odometry::{
-    Odometry, OdometryConfig, OdometryMethod, OdometryStep, TrackStatus,
-};
 use ringscan::point::Point;
+use ringscan::registration::odometry::Odometry;
+use ringscan::registration::odometry::OdometryConfig;
+use ringscan::registration::odometry::OdometryMethod;
+use ringscan::registration::odometry::OdometryStep;
+use ringscan::registration::odometry::TrackStatus;
+use ringscan::sensor::velodyne::calib::parse_velodyne;
+use ringscan::sensor::velodyne::StreamConfig;
+use ringscan::sensor::velodyne::VelodyneModel;
+use ringscan::sensor::velodyne::VelodyneStream;
 use ringscan::source::pcap::PcapSource;
-use ringscan::sweep::{StreamConfig, VelodyneStream};
 
 fn arg(args: &[String], name: &str) -> Option<String> {
     args.iter()
@@ -73,7 +76,7 @@ fn decode(args: &[String], input: &str) -> Result<Sweeps, Box<dyn std::error::Er
         ..StreamConfig::default()
     });
     let mut sweeps: Sweeps = Vec::new();
-    let mut on_sweep = |s: &ringscan::sweep::Sweep, _: &ringscan::sweep::SensorFacts| {
+    let mut on_sweep = |s: &ringscan::sweep::Sweep, _: &ringscan::sensor::velodyne::SensorFacts| {
         if !s.points.is_empty() {
             sweeps.push((s.timestamp_ns, s.points.clone()));
         }

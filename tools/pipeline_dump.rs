@@ -27,9 +27,15 @@ use std::path::Path;
 
 use std::time::Instant;
 
-use ringscan::pipeline::cluster::{ClusterParams, Clusterer, Clusters};
-use ringscan::pipeline::ground::{GroundMethod, GroundSegmenter, PolarGridParams};
-use ringscan::pipeline::voxel::{GridOrigin, VoxelConfig, VoxelGrid};
+use ringscan::pipeline::cluster::ClusterParams;
+use ringscan::pipeline::cluster::Clusterer;
+use ringscan::pipeline::cluster::Clusters;
+use ringscan::pipeline::ground::GroundMethod;
+use ringscan::pipeline::ground::GroundSegmenter;
+use ringscan::pipeline::ground::PolarGridParams;
+use ringscan::pipeline::voxel::GridOrigin;
+use ringscan::pipeline::voxel::VoxelConfig;
+use ringscan::pipeline::voxel::VoxelGrid;
 use ringscan::Point;
 
 fn median_ms(v: &mut [f64]) -> f64 {

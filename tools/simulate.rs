@@ -58,17 +58,27 @@ use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4, UdpSocket};
 use std::time::{Duration, Instant};
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
-use ringscan::calib::ouster::OusterInfo;
-use ringscan::calib::{builtin::builtin, parse_velodyne, LaserCalibration, VelodyneCalibration};
-use ringscan::model::ouster::Profile;
-use ringscan::model::{ReturnMode, VelodyneModel};
-use ringscan::sim::motion::{PoseTable, Route, Trajectory};
-use ringscan::sim::net::{udp_frame, PcapWriter};
-use ringscan::sim::ouster::OusterSim;
-use ringscan::sim::scene::{Scene, Shapes};
+use ringscan::sensor::ouster::calib::OusterInfo;
+use ringscan::sensor::ouster::model::Profile;
+use ringscan::sensor::ouster::sim::OusterSim;
+use ringscan::sensor::velodyne::calib::builtin::builtin;
+use ringscan::sensor::velodyne::calib::parse_velodyne;
+use ringscan::sensor::velodyne::calib::LaserCalibration;
+use ringscan::sensor::velodyne::calib::VelodyneCalibration;
+use ringscan::sensor::velodyne::sim::encode_position_packet;
+use ringscan::sensor::velodyne::sim::VelodyneSim;
+use ringscan::sensor::velodyne::ReturnMode;
+use ringscan::sensor::velodyne::VelodyneModel;
+use ringscan::sim::motion::PoseTable;
+use ringscan::sim::motion::Route;
+use ringscan::sim::motion::Trajectory;
+use ringscan::sim::net::udp_frame;
+use ringscan::sim::net::PcapWriter;
+use ringscan::sim::scene::Scene;
+use ringscan::sim::scene::Shapes;
 use ringscan::sim::scenes;
-use ringscan::sim::truth::{TruthRecord, TruthWriter};
-use ringscan::sim::velodyne::{encode_position_packet, VelodyneSim};
+use ringscan::sim::truth::TruthRecord;
+use ringscan::sim::truth::TruthWriter;
 
 type Res<T> = Result<T, Box<dyn std::error::Error>>;
 
@@ -267,7 +277,7 @@ fn main() -> Res<()> {
     if model_name == "ouster" {
         let meta = arg(&args, "--metadata").ok_or("--model ouster needs --metadata FILE.json")?;
         let mut info: OusterInfo =
-            ringscan::calib::ouster::parse(&std::fs::read_to_string(&meta)?, &meta)?;
+            ringscan::sensor::ouster::calib::parse(&std::fs::read_to_string(&meta)?, &meta)?;
         if let Some(p) = arg(&args, "--profile") {
             let profile = Profile::from_name(&p).ok_or_else(|| format!("unknown --profile {p}"))?;
             info.format.profile = profile;
@@ -280,7 +290,7 @@ fn main() -> Res<()> {
         if let Some(f) = num::<u32>(&args, "--fps")? {
             info.fps = f;
         }
-        let rings = ringscan::decode::OusterDecoder::new(&info)?
+        let rings = ringscan::sensor::ouster::OusterDecoder::new(&info)?
             .rings()
             .to_vec();
         let mut sim = OusterSim::new(info.clone(), t0_ns);

@@ -16,14 +16,15 @@ use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use ringscan::calib::ouster::parse as parse_ouster;
-use ringscan::decode::ouster::OusterDecoder;
-use ringscan::model::velodyne::{DATA_PACKET_LEN, POSITION_PACKET_LEN};
+use ringscan::sensor::ouster::calib::parse as parse_ouster;
+use ringscan::sensor::ouster::decode::OusterDecoder;
+use ringscan::sensor::ouster::wire::LidarPacket;
+use ringscan::sensor::velodyne::model::DATA_PACKET_LEN;
+use ringscan::sensor::velodyne::model::POSITION_PACKET_LEN;
 use ringscan::sink::mcap::SinkSummary;
 use ringscan::sink::{McapSink, SinkError};
 use ringscan::source::udp::{self, BoundSocket, Queue, ReceiveStats, Received, SocketOptions};
 use ringscan::sweep::SensorStream;
-use ringscan::wire::ouster::LidarPacket;
 use serde_json::{json, Value};
 
 use super::run::{output_json, sink_options, RunError, Session, SessionOptions, Sink};

@@ -1,4 +1,4 @@
-//! `--odometry`: LiDAR odometry (`ringscan::pipeline::odometry`) run per sensor on every sweep
+//! `--odometry`: LiDAR odometry (`ringscan::registration::odometry`) run per sensor on every sweep
 //! of `decode`, and its outputs:
 //! - `/tf`: one `foxglove.FrameTransform` per sweep, parent `odom`, child the sensor's frame
 //!   (the pose `odom_from_sensor`, stamped with the pose's time);
@@ -32,7 +32,7 @@
 //! of a gyro bias up to [`GYRO_BIAS_RADPS`]. It holds the rotation where the scene cannot (yaw
 //! on an empty floor); elsewhere the lidar, far more precise than that bias, decides.
 //!
-//! The algorithms live in `ringscan::pipeline::odometry`; this file owns the clock, the files and
+//! The algorithms live in `ringscan::registration::odometry`; this file owns the clock, the files and
 //! the MCAP channels.
 
 use std::collections::BTreeMap;
@@ -44,15 +44,20 @@ use std::time::Instant;
 use nalgebra::{Isometry3, Point3};
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use ringscan::deskew::{ImuTrack, Twist};
-use ringscan::pipeline::odometry::{
-    ImuRotation, Odometry, OdometryConfig, OdometryMethod, OdometryStep, SweepMotion, TrackStatus,
-};
 use ringscan::point::Point;
+use ringscan::registration::odometry::ImuRotation;
+use ringscan::registration::odometry::Odometry;
+use ringscan::registration::odometry::OdometryConfig;
+use ringscan::registration::odometry::OdometryMethod;
+use ringscan::registration::odometry::OdometryStep;
+use ringscan::registration::odometry::SweepMotion;
+use ringscan::registration::odometry::TrackStatus;
+use ringscan::sensor::ImuSample;
 use ringscan::sink::foxglove::{self, PointCloudPrefix};
 use ringscan::sink::mcap::TopicSchema;
 use ringscan::sink::scene::{self, FRAME_TRANSFORM_SCHEMA};
 use ringscan::sink::{McapSink, SensorId, SinkError, TopicId};
-use ringscan::sweep::{ImuSample, Sweep};
+use ringscan::sweep::Sweep;
 use serde_json::{json, Value};
 
 /// The gyro bias the IMU rotation prior allows for, rad/s (0.57 °/s: a MEMS gyro without

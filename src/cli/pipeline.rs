@@ -7,12 +7,16 @@ use std::time::Instant;
 
 use nalgebra::Isometry3;
 use ringscan::deskew::PoseTable;
-use ringscan::pipeline::config::{DeskewMode, PipelineConfig};
+use ringscan::pipeline::config::DeskewMode;
+use ringscan::pipeline::config::PipelineConfig;
 use ringscan::pipeline::filter::Extrinsics;
-use ringscan::pipeline::run::{Pipeline, StageTimes, SweepStats};
+use ringscan::pipeline::run::Pipeline;
+use ringscan::pipeline::run::StageTimes;
+use ringscan::pipeline::run::SweepStats;
+use ringscan::sensor::ImuSample;
 use ringscan::sink::scene::{self, PipelineTopics};
 use ringscan::sink::{McapSink, SensorId, SinkError, TopicId};
-use ringscan::sweep::{ImuSample, Sweep};
+use ringscan::sweep::Sweep;
 use serde_json::{json, Value};
 
 /// The pipeline flags of `decode`.

@@ -6,14 +6,18 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
-use ringscan::decode::DecodeOptions;
-use ringscan::model::VelodyneModel;
+use ringscan::sensor::velodyne::VelodyneModel;
+use ringscan::sensor::DecodeOptions;
+use ringscan::sensor::StreamError;
 use ringscan::sink::mcap::{
     create_file, Compression, Format, SensorId, SensorInfo, SinkOptions, SinkSummary, SweepMsg,
 };
 use ringscan::sink::{McapSink, SinkError};
 use ringscan::source::pcap::{PcapSource, SourceError, SourceStats};
-use ringscan::sweep::{Demux, Facts, SensorStream, StreamError, Sweep};
+use ringscan::sweep::Demux;
+use ringscan::sweep::Facts;
+use ringscan::sweep::SensorStream;
+use ringscan::sweep::Sweep;
 use serde_json::{json, Value};
 
 use super::odometry::{OdometryArgs, OdometryRunner};

@@ -5,14 +5,22 @@ use std::collections::BTreeMap;
 use std::net::Ipv4Addr;
 use std::path::Path;
 
-use ringscan::calib::ouster::{parse as parse_ouster, OusterInfo};
-use ringscan::calib::{parse_velodyne, VelodyneCalibration, MAX_CALIB_BYTES};
-use ringscan::decode::ouster::OusterDecoder;
-use ringscan::decode::DecodeOptions;
-use ringscan::model::velodyne::{DATA_PACKET_LEN, POSITION_PACKET_LEN};
-use ringscan::model::VelodyneModel;
-use ringscan::sweep::{Facts, OusterStreamConfig, SensorConfig, SensorStream, StreamConfig};
-use ringscan::wire::ouster::LidarPacket;
+use ringscan::sensor::calib::MAX_CALIB_BYTES;
+use ringscan::sensor::ouster::calib::parse as parse_ouster;
+use ringscan::sensor::ouster::calib::OusterInfo;
+use ringscan::sensor::ouster::decode::OusterDecoder;
+use ringscan::sensor::ouster::wire::LidarPacket;
+use ringscan::sensor::ouster::OusterStreamConfig;
+use ringscan::sensor::velodyne::calib::parse_velodyne;
+use ringscan::sensor::velodyne::calib::VelodyneCalibration;
+use ringscan::sensor::velodyne::model::DATA_PACKET_LEN;
+use ringscan::sensor::velodyne::model::POSITION_PACKET_LEN;
+use ringscan::sensor::velodyne::StreamConfig;
+use ringscan::sensor::velodyne::VelodyneModel;
+use ringscan::sensor::DecodeOptions;
+use ringscan::sweep::Facts;
+use ringscan::sweep::SensorConfig;
+use ringscan::sweep::SensorStream;
 use serde_json::{json, Value};
 
 use super::run::RunError;
@@ -173,7 +181,7 @@ impl Chooser {
                 match LidarPacket::with_header(payload, &info.format, dec.header_kind()) {
                     Ok(p) => {
                         if info.format.profile.header()
-                            == ringscan::model::ouster::HeaderKind::Legacy
+                            == ringscan::sensor::ouster::model::HeaderKind::Legacy
                         {
                             port == info.udp_port_lidar
                         } else {
@@ -310,8 +318,8 @@ pub fn diagnostics_extra(facts: Facts<'_>) -> Value {
     match facts {
         Facts::Velodyne(f) => json!({ "pps": f.pps.map(|p| p.name()) }),
         Facts::Ouster(f) => json!({
-            "shot_limiting": ringscan::wire::ouster::shot_limiting_name(f.shot_limiting),
-            "thermal_shutdown": ringscan::wire::ouster::thermal_shutdown_name(f.thermal_shutdown),
+            "shot_limiting": ringscan::sensor::ouster::wire::shot_limiting_name(f.shot_limiting),
+            "thermal_shutdown": ringscan::sensor::ouster::wire::thermal_shutdown_name(f.thermal_shutdown),
             "init_id": f.init_id,
         }),
     }
@@ -401,8 +409,8 @@ pub fn sensor_summary(stream: &SensorStream) -> (Value, Counts) {
                 "calibration": f.metadata,
                 "clock": f.clock.name(),
                 "crc_checked": f.crc_checked,
-                "shot_limiting": ringscan::wire::ouster::shot_limiting_name(f.shot_limiting),
-                "thermal_shutdown": ringscan::wire::ouster::thermal_shutdown_name(f.thermal_shutdown),
+                "shot_limiting": ringscan::sensor::ouster::wire::shot_limiting_name(f.shot_limiting),
+                "thermal_shutdown": ringscan::sensor::ouster::wire::thermal_shutdown_name(f.thermal_shutdown),
                 "lidar_packets": st.lidar_packets,
                 "imu_packets": st.imu_packets,
                 "malformed": st.malformed,

@@ -1,9 +1,9 @@
 //! Gyro samples kept for deskewing: angular velocity in the sensor frame, by time.
 //!
-//! Ouster IMU samples ([`crate::sweep::ImuSample`]) give the angular velocity in rad/s in the
+//! Ouster IMU samples ([`crate::sensor::ImuSample`]) give the angular velocity in rad/s in the
 //! IMU's frame, stamped in the sensor clock (the clock of the lidar columns, so of
 //! [`crate::sweep::Sweep::device_time_ns`]). The metadata's `imu_to_sensor_transform`
-//! ([`crate::calib::ouster::OusterInfo::imu_to_sensor`]) maps IMU-frame vectors into the
+//! ([`crate::sensor::ouster::calib::OusterInfo::imu_to_sensor`]) maps IMU-frame vectors into the
 //! sensor frame; a rigid body has one angular velocity, so only its rotation matters (the
 //! lever arm does not change ω).
 

@@ -11,18 +11,13 @@
 //! A typical sweep: `VoxelGrid::downsample` → `GroundSegmenter::segment` (one label per
 //! point) → `Clusterer::cluster_excluding` (the non-ground points) → boxes per cluster.
 //!
-//! Registration and odometry: [`icp`] (point-to-point and point-to-plane ICP), [`map`] (the
-//! odometry's bounded voxel-hash local map and KISS-ICP's subsampling), [`odometry`]
-//! (scan-to-map LiDAR odometry) and [`degeneracy`] (which motions a sweep leaves free).
+//! Registration and odometry, which keep state from sweep to sweep, are the layer beside this
+//! one: [`crate::registration`].
 
 pub mod cluster;
 pub mod config;
-pub mod degeneracy;
 pub mod filter;
 pub mod ground;
-pub mod icp;
-pub mod map;
-pub mod odometry;
 pub mod run;
 pub mod voxel;
 

@@ -20,7 +20,7 @@
 //!
 //! ```
 //! use nalgebra::{Isometry3, Vector3};
-//! use ringscan::calib::builtin::builtin;
+//! use ringscan::sensor::velodyne::calib::builtin::builtin;
 //! use ringscan::model::{ReturnMode, VelodyneModel};
 //! use ringscan::sim::{motion::Trajectory, scenes, velodyne::VelodyneSim};
 //!
@@ -39,13 +39,10 @@
 //! assert!((w.coords - Vector3::from(t.world)).norm() < 1e-9);
 //! ```
 
-pub mod hdl64;
 pub mod motion;
 pub mod net;
-pub mod ouster;
 pub mod scene;
 pub mod scenes;
 pub mod truth;
-pub mod velodyne;
 
 pub use scene::{Hit, Scene};

@@ -342,7 +342,8 @@ pub fn ground_scene(name: &str) -> Option<World> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::scene::{Scene, GROUND};
+    use crate::sim::scene::Scene;
+    use crate::sim::scene::GROUND;
 
     #[test]
     fn kerb_tops_and_road_are_ground_kerb_faces_are_not() {
@@ -374,7 +375,8 @@ mod tests {
 
     #[test]
     fn the_urban_route_is_clear_of_every_object() {
-        use crate::sim::motion::{Route, Trajectory};
+        use crate::sim::motion::Route;
+        use crate::sim::motion::Trajectory;
         let w = urban();
         let route = Route::urban();
         let dur = route.duration_s();

@@ -62,7 +62,7 @@ fn f32s(v: [f64; 3]) -> [f32; 3] {
 
 impl TruthRecord {
     /// The record of a Velodyne measurement (`ring` from `calib.rings()[laser]`).
-    pub fn from_velodyne(t: &super::velodyne::Truth, ring: u16) -> Self {
+    pub fn from_velodyne(t: &crate::sensor::velodyne::sim::Truth, ring: u16) -> Self {
         Self {
             sensor: f32s(t.xyz),
             world: f32s(t.world),
@@ -75,7 +75,7 @@ impl TruthRecord {
     }
 
     /// The record of an Ouster return (`ring` from the decoder's `rings()[row]`).
-    pub fn from_ouster(t: &super::ouster::OusterTruth, ring: u16) -> Self {
+    pub fn from_ouster(t: &crate::sensor::ouster::sim::OusterTruth, ring: u16) -> Self {
         Self {
             sensor: f32s(t.xyz),
             world: f32s(t.world),

@@ -10,10 +10,11 @@
 
 use std::net::Ipv4Addr;
 
-use super::ouster::{OusterFacts, OusterStream, OusterStreamConfig};
-use super::velodyne::{SensorFacts, StreamConfig, StreamError, VelodyneStream};
 use super::Sweep;
-use crate::model::velodyne::DATA_PACKET_LEN;
+use crate::sensor::ouster::{OusterFacts, OusterStream, OusterStreamConfig};
+use crate::sensor::velodyne::model::DATA_PACKET_LEN;
+use crate::sensor::velodyne::{SensorFacts, StreamConfig, VelodyneStream};
+use crate::sensor::StreamError;
 
 /// Most sensors tracked at once.
 pub const MAX_SENSORS: usize = 64;

@@ -5,15 +5,11 @@
 //! two consecutive packets = round(Δ device time / packet period) − 1.
 
 pub mod demux;
-pub mod ouster;
-pub mod velodyne;
 
 use crate::point::Point;
 use crate::time::ClockSource;
 
 pub use demux::{velodyne_only, Demux, DemuxStats, Facts, SensorConfig, SensorKey, SensorStream};
-pub use ouster::{ImuSample, OusterFacts, OusterStats, OusterStream, OusterStreamConfig};
-pub use velodyne::{SensorFacts, StreamConfig, StreamError, StreamStats, VelodyneStream};
 
 /// One sweep: the points of one revolution (or of the sensor's frame), with its times and
 /// its packet accounting. Buffers are reused from sweep to sweep.

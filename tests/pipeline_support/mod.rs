@@ -4,11 +4,15 @@
 
 use std::path::{Path, PathBuf};
 
-use ringscan::calib::{ouster, parse_velodyne};
-use ringscan::decode::DecodeOptions;
-use ringscan::model::VelodyneModel;
+use ringscan::sensor::ouster::calib as ouster;
+use ringscan::sensor::ouster::OusterStream;
+use ringscan::sensor::ouster::OusterStreamConfig;
+use ringscan::sensor::velodyne::calib::parse_velodyne;
+use ringscan::sensor::velodyne::StreamConfig;
+use ringscan::sensor::velodyne::VelodyneModel;
+use ringscan::sensor::velodyne::VelodyneStream;
+use ringscan::sensor::DecodeOptions;
 use ringscan::source::pcap::PcapSource;
-use ringscan::sweep::{OusterStream, OusterStreamConfig, StreamConfig, VelodyneStream};
 use ringscan::Point;
 
 /// HDL-32E, 10 Hz, about 50 k points per sweep (VeloView's Monterey capture).

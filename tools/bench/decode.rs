@@ -16,12 +16,19 @@
 use std::path::{Path, PathBuf};
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
-use ringscan::calib::{builtin::builtin, parse_velodyne, VelodyneCalibration};
-use ringscan::decode::{DecodeOptions, VelodyneDecoder};
-use ringscan::model::{ReturnMode, VelodyneModel};
+use ringscan::sensor::velodyne::calib::builtin::builtin;
+use ringscan::sensor::velodyne::calib::parse_velodyne;
+use ringscan::sensor::velodyne::calib::VelodyneCalibration;
+use ringscan::sensor::velodyne::wire::DataPacket;
+use ringscan::sensor::velodyne::ReturnMode;
+use ringscan::sensor::velodyne::SensorFacts;
+use ringscan::sensor::velodyne::StreamConfig;
+use ringscan::sensor::velodyne::VelodyneDecoder;
+use ringscan::sensor::velodyne::VelodyneModel;
+use ringscan::sensor::velodyne::VelodyneStream;
+use ringscan::sensor::DecodeOptions;
 use ringscan::source::pcap::PcapSource;
-use ringscan::sweep::{SensorFacts, StreamConfig, Sweep, VelodyneStream};
-use ringscan::wire::velodyne::DataPacket;
+use ringscan::sweep::Sweep;
 use ringscan::Point;
 
 struct Input {

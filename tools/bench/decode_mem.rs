@@ -19,12 +19,17 @@
 use std::path::Path;
 use std::time::Instant;
 
-use ringscan::calib::{builtin::builtin, parse_velodyne, VelodyneCalibration};
-use ringscan::decode::{DecodeOptions, VelodyneDecoder};
-use ringscan::model::{ReturnMode, VelodyneModel};
+use ringscan::sensor::velodyne::calib::builtin::builtin;
+use ringscan::sensor::velodyne::calib::parse_velodyne;
+use ringscan::sensor::velodyne::calib::VelodyneCalibration;
+use ringscan::sensor::velodyne::wire::DataPacket;
+use ringscan::sensor::velodyne::ReturnMode;
+use ringscan::sensor::velodyne::StreamConfig;
+use ringscan::sensor::velodyne::VelodyneDecoder;
+use ringscan::sensor::velodyne::VelodyneModel;
+use ringscan::sensor::velodyne::VelodyneStream;
+use ringscan::sensor::DecodeOptions;
 use ringscan::source::pcap::PcapSource;
-use ringscan::sweep::{StreamConfig, VelodyneStream};
-use ringscan::wire::velodyne::DataPacket;
 use ringscan::Point;
 
 const DATA_LEN: usize = 1206;
@@ -152,10 +157,11 @@ fn main() {
         points = 0;
         sweeps = 0;
         let t = Instant::now();
-        let mut on_sweep = |s: &ringscan::sweep::Sweep, _: &ringscan::sweep::SensorFacts| {
-            points += s.points.len() as u64;
-            sweeps += 1;
-        };
+        let mut on_sweep =
+            |s: &ringscan::sweep::Sweep, _: &ringscan::sensor::velodyne::SensorFacts| {
+                points += s.points.len() as u64;
+                sweeps += 1;
+            };
         for &(time, off, len) in &all {
             stream
                 .push(time, &bytes[off..off + len], &mut on_sweep)

@@ -16,10 +16,14 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Instant;
 
-use ringscan::calib::{builtin::builtin, parse_velodyne};
-use ringscan::model::VelodyneModel;
+use ringscan::sensor::velodyne::calib::builtin::builtin;
+use ringscan::sensor::velodyne::calib::parse_velodyne;
+use ringscan::sensor::velodyne::SensorFacts;
+use ringscan::sensor::velodyne::StreamConfig;
+use ringscan::sensor::velodyne::VelodyneModel;
+use ringscan::sensor::velodyne::VelodyneStream;
 use ringscan::source::pcap::PcapSource;
-use ringscan::sweep::{SensorFacts, StreamConfig, Sweep, VelodyneStream};
+use ringscan::sweep::Sweep;
 
 fn arg(args: &[String], name: &str) -> Option<String> {
     args.iter()

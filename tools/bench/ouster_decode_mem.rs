@@ -22,10 +22,12 @@
 use std::path::Path;
 use std::time::Instant;
 
-use ringscan::calib::ouster::parse;
-use ringscan::decode::{DecodeOptions, OusterDecoder};
+use ringscan::sensor::ouster::calib::parse;
+use ringscan::sensor::ouster::OusterDecoder;
+use ringscan::sensor::ouster::OusterStream;
+use ringscan::sensor::ouster::OusterStreamConfig;
+use ringscan::sensor::DecodeOptions;
 use ringscan::source::pcap::PcapSource;
-use ringscan::sweep::{OusterStream, OusterStreamConfig};
 use ringscan::Point;
 
 fn arg(args: &[String], name: &str) -> Option<String> {
@@ -161,7 +163,7 @@ fn main() {
             };
             let mut stream = OusterStream::new(cfg).unwrap_or_else(|e| die(format!("{e}")));
             let (mut frames, mut points) = (0u64, 0u64);
-            let mut on = |s: &ringscan::sweep::Sweep, _: &ringscan::sweep::OusterFacts| {
+            let mut on = |s: &ringscan::sweep::Sweep, _: &ringscan::sensor::ouster::OusterFacts| {
                 frames += 1;
                 points += s.points.len() as u64;
             };

@@ -22,9 +22,15 @@
 mod pipeline_support;
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
-use ringscan::pipeline::cluster::{ClusterParams, Clusterer, Clusters};
-use ringscan::pipeline::ground::{GroundMethod, GroundSegmenter, PolarGridParams};
-use ringscan::pipeline::voxel::{KeyGrouping, VoxelConfig, VoxelGrid};
+use ringscan::pipeline::cluster::ClusterParams;
+use ringscan::pipeline::cluster::Clusterer;
+use ringscan::pipeline::cluster::Clusters;
+use ringscan::pipeline::ground::GroundMethod;
+use ringscan::pipeline::ground::GroundSegmenter;
+use ringscan::pipeline::ground::PolarGridParams;
+use ringscan::pipeline::voxel::KeyGrouping;
+use ringscan::pipeline::voxel::VoxelConfig;
+use ringscan::pipeline::voxel::VoxelGrid;
 use ringscan::Point;
 
 const LEAF_M: f64 = 0.1;

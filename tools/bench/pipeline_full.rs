@@ -24,14 +24,19 @@ use std::time::Instant;
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
 use nalgebra::{Isometry3, Vector3};
-use ringscan::calib::parse_velodyne;
-use ringscan::decode::DecodeOptions;
 use ringscan::deskew::Twist;
-use ringscan::model::VelodyneModel;
 use ringscan::pipeline::config::PipelineConfig;
-use ringscan::pipeline::run::{Pipeline, StageTimes};
+use ringscan::pipeline::run::Pipeline;
+use ringscan::pipeline::run::StageTimes;
+use ringscan::sensor::ouster::OusterStream;
+use ringscan::sensor::ouster::OusterStreamConfig;
+use ringscan::sensor::velodyne::calib::parse_velodyne;
+use ringscan::sensor::velodyne::StreamConfig;
+use ringscan::sensor::velodyne::VelodyneModel;
+use ringscan::sensor::velodyne::VelodyneStream;
+use ringscan::sensor::DecodeOptions;
 use ringscan::source::pcap::PcapSource;
-use ringscan::sweep::{OusterStream, OusterStreamConfig, StreamConfig, Sweep, VelodyneStream};
+use ringscan::sweep::Sweep;
 
 fn captures() -> Option<PathBuf> {
     let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/captures");
@@ -41,7 +46,8 @@ fn captures() -> Option<PathBuf> {
 fn os2_sweep(root: &Path) -> Option<Sweep> {
     let dir = root.join("ouster-lidar__ouster-sdk/tests/pcaps");
     let text = std::fs::read_to_string(dir.join("OS-2-128-U1_v2.3.0_1024x10.json")).ok()?;
-    let info = ringscan::calib::ouster::parse(&text, "OS-2-128-U1_v2.3.0_1024x10.json").ok()?;
+    let info =
+        ringscan::sensor::ouster::calib::parse(&text, "OS-2-128-U1_v2.3.0_1024x10.json").ok()?;
     let mut stream = OusterStream::new(OusterStreamConfig {
         info,
         metadata_name: "OS-2-128-U1_v2.3.0_1024x10.json".into(),

@@ -19,12 +19,14 @@
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
 use nalgebra::{Point3, Vector3};
-use ringscan::calib::builtin::builtin;
-use ringscan::model::{ReturnMode, VelodyneModel};
-use ringscan::sim::motion::{Route, Trajectory};
+use ringscan::sensor::velodyne::calib::builtin::builtin;
+use ringscan::sensor::velodyne::sim::VelodyneSim;
+use ringscan::sensor::velodyne::ReturnMode;
+use ringscan::sensor::velodyne::VelodyneModel;
+use ringscan::sim::motion::Route;
+use ringscan::sim::motion::Trajectory;
 use ringscan::sim::scene::Scene;
 use ringscan::sim::scenes;
-use ringscan::sim::velodyne::VelodyneSim;
 
 fn rays() -> Vec<([f64; 3], [f64; 3])> {
     let calib = builtin(VelodyneModel::Hdl32e).expect("built-in HDL-32E table");

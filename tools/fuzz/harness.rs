@@ -14,14 +14,30 @@ use std::net::{Ipv4Addr, SocketAddrV4};
 use std::rc::Rc;
 use std::sync::OnceLock;
 
-use ringscan::calib::builtin::builtin;
-use ringscan::calib::{
-    parse_velodyne, parse_velodyne_bytes, LaserCalibration, VelodyneCalibration,
-};
-use ringscan::decode::{DecodeOptions, VelodyneDecoder};
-use ringscan::model::velodyne::{ALL_MODELS, BLOCKS, DATA_PACKET_LEN, POSITION_PACKET_LEN, SLOTS};
-use ringscan::model::{ReturnMode, VelodyneModel};
 use ringscan::point::Point;
+use ringscan::sensor::nmea::parse_rmc;
+use ringscan::sensor::velodyne::calib::builtin::builtin;
+use ringscan::sensor::velodyne::calib::parse_velodyne;
+use ringscan::sensor::velodyne::calib::parse_velodyne_bytes;
+use ringscan::sensor::velodyne::calib::LaserCalibration;
+use ringscan::sensor::velodyne::calib::VelodyneCalibration;
+use ringscan::sensor::velodyne::model::ALL_MODELS;
+use ringscan::sensor::velodyne::model::BLOCKS;
+use ringscan::sensor::velodyne::model::DATA_PACKET_LEN;
+use ringscan::sensor::velodyne::model::POSITION_PACKET_LEN;
+use ringscan::sensor::velodyne::model::SLOTS;
+use ringscan::sensor::velodyne::wire::DataPacket;
+use ringscan::sensor::velodyne::wire::PositionPacket;
+use ringscan::sensor::velodyne::wire::FLAG_BANK2;
+use ringscan::sensor::velodyne::wire::FLAG_BANK3;
+use ringscan::sensor::velodyne::wire::FLAG_LOWER;
+use ringscan::sensor::velodyne::wire::FLAG_UPPER;
+use ringscan::sensor::velodyne::ReturnMode;
+use ringscan::sensor::velodyne::SensorFacts;
+use ringscan::sensor::velodyne::StreamConfig;
+use ringscan::sensor::velodyne::VelodyneDecoder;
+use ringscan::sensor::velodyne::VelodyneModel;
+use ringscan::sensor::DecodeOptions;
 use ringscan::sink::mcap::{
     Compression, Format, McapSink, SensorId, SensorInfo, SinkError, SinkOptions, SweepMsg,
 };
@@ -29,11 +45,11 @@ use ringscan::source::pcap::PcapSource;
 use ringscan::source::reassembly::{
     FragmentKey, Push, Reassembler, ReassemblyConfig, MAX_IPV4_PAYLOAD,
 };
-use ringscan::sweep::{Demux, Facts, Organized, SensorConfig, SensorFacts, StreamConfig, Sweep};
-use ringscan::wire::nmea::parse_rmc;
-use ringscan::wire::velodyne::{
-    DataPacket, PositionPacket, FLAG_BANK2, FLAG_BANK3, FLAG_LOWER, FLAG_UPPER,
-};
+use ringscan::sweep::Demux;
+use ringscan::sweep::Facts;
+use ringscan::sweep::Organized;
+use ringscan::sweep::SensorConfig;
+use ringscan::sweep::Sweep;
 
 // ----- issues found and not fixed yet ----------------------------------------------------------
 
@@ -823,7 +839,7 @@ impl StreamCheck {
 /// `velodyne_stream`: a stream configuration, then a sequence of datagrams (raw or synthesised
 /// data packets, position packets with or without valid NMEA, other sizes) from a few source
 /// addresses with host times moving by signed steps or jumping to extremes, through
-/// [`Demux`] into [`ringscan::sweep::VelodyneStream`]s. Sweeps and points are bounded per
+/// [`Demux`] into [`ringscan::sensor::velodyne::VelodyneStream`]s. Sweeps and points are bounded per
 /// packet (and so per input byte), indices are consecutive, and the counters add up.
 pub fn velodyne_stream(data: &[u8]) {
     let mut b = Bytes::new(data);
@@ -1477,11 +1493,16 @@ pub fn decode_to_mcap(data: &[u8]) {
 
 // ----- Ouster ----------------------------------------------------------------------------------
 
-use ringscan::calib::ouster::{parse as parse_ouster, OusterInfo};
-use ringscan::decode::OusterDecoder;
-use ringscan::model::ouster::{Profile, ALL_PROFILES};
-use ringscan::sweep::ouster::{OusterStream, OusterStreamConfig};
-use ringscan::wire::ouster::{ImuPacketLegacy, ImuPacketNmea, LidarPacket};
+use ringscan::sensor::ouster::calib::parse as parse_ouster;
+use ringscan::sensor::ouster::calib::OusterInfo;
+use ringscan::sensor::ouster::model::Profile;
+use ringscan::sensor::ouster::model::ALL_PROFILES;
+use ringscan::sensor::ouster::sweep::OusterStream;
+use ringscan::sensor::ouster::sweep::OusterStreamConfig;
+use ringscan::sensor::ouster::wire::ImuPacketLegacy;
+use ringscan::sensor::ouster::wire::ImuPacketNmea;
+use ringscan::sensor::ouster::wire::LidarPacket;
+use ringscan::sensor::ouster::OusterDecoder;
 
 /// Largest range, metres, the range field of a profile can carry (its width and shift).
 fn ouster_max_range_m(profile: Profile) -> f64 {
@@ -1815,7 +1836,7 @@ pub fn ouster_stream(data: &[u8]) {
     let mut sweeps = 0u64;
     let mut points = 0u64;
     let mut template: Vec<u8> = Vec::new();
-    let mut on_sweep = |s: &Sweep, _: &ringscan::sweep::ouster::OusterFacts| {
+    let mut on_sweep = |s: &Sweep, _: &ringscan::sensor::ouster::sweep::OusterFacts| {
         sweeps += 1;
         points += s.points.len() as u64;
         assert!(
@@ -1858,7 +1879,7 @@ pub fn ouster_stream(data: &[u8]) {
         stream.push(host, &payload, &mut on_sweep);
         pushed += 1;
         let imu: Vec<_> = stream.drain_imu().collect();
-        assert!(imu.len() <= ringscan::sweep::ouster::MAX_IMU_QUEUE);
+        assert!(imu.len() <= ringscan::sensor::ouster::sweep::MAX_IMU_QUEUE);
     }
     stream.finish(&mut on_sweep);
     let st = stream.stats().clone();

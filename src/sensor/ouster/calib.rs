@@ -66,8 +66,11 @@
 
 use serde_json::{Map, Value};
 
-use super::{check_size, CalibError};
-use crate::model::ouster::{HeaderKind, PacketFormat, Profile};
+use crate::sensor::calib::check_size;
+use crate::sensor::calib::CalibError;
+use crate::sensor::ouster::model::HeaderKind;
+use crate::sensor::ouster::model::PacketFormat;
+use crate::sensor::ouster::model::Profile;
 
 const FORMAT: &str = "JSON";
 
@@ -943,7 +946,7 @@ impl<'a> Doc<'a> {
                 let path = self.path(Sec::DataFormat, "udp_profile_lidar");
                 let expected = format!(
                     "a lidar profile ringscan decodes ({}){}",
-                    crate::model::ouster::ALL_PROFILES
+                    crate::sensor::ouster::model::ALL_PROFILES
                         .iter()
                         .map(|p| p.name())
                         .collect::<Vec<_>>()

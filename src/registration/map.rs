@@ -26,7 +26,9 @@ use std::hash::{BuildHasher, Hasher};
 
 use nalgebra::{Isometry3, Matrix3, Vector3};
 
-use super::icp::{NearestNeighbors, Neighbor, RegistrationConfigError};
+use crate::registration::icp::NearestNeighbors;
+use crate::registration::icp::Neighbor;
+use crate::registration::icp::RegistrationConfigError;
 
 /// Half the range of one packed voxel coordinate.
 const KEY_HALF: i64 = 1 << 20;

@@ -5,8 +5,11 @@
 //! then the timestamp u32 LE (µs since the top of the hour) at 1200 and two factory bytes
 //! (return mode, product id) at 1204 / 1205 (HDL-64E: status type / value instead).
 
-use super::WireError;
-use crate::model::velodyne::{BLOCKS, DATA_PACKET_LEN, POSITION_PACKET_LEN, SLOTS};
+use crate::sensor::velodyne::model::BLOCKS;
+use crate::sensor::velodyne::model::DATA_PACKET_LEN;
+use crate::sensor::velodyne::model::POSITION_PACKET_LEN;
+use crate::sensor::velodyne::model::SLOTS;
+use crate::sensor::WireError;
 
 /// Block flag of lasers 0–31 (wire bytes `FF EE`).
 pub const FLAG_UPPER: u16 = 0xEEFF;

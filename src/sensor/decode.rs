@@ -1,13 +1,27 @@
-//! Packet view + lookup table ➜ points appended to a caller's buffer.
+//! The error every family's decoder shares, and the options every decoder takes.
 //!
-//! Knows nothing of sockets or files. Decoders are built once per calibration (all trigonometry
-//! of the calibration is done then) and allocate nothing per packet.
+//! A family's `decode` module turns a packet view + its calibration's lookup table into points
+//! appended to a caller's buffer. Decoders know nothing of sockets or files; they are built
+//! once per calibration (all trigonometry of the calibration is done then) and allocate nothing
+//! per packet.
 
-pub mod ouster;
-pub mod velodyne;
+/// Options applied while decoding, by every family.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DecodeOptions {
+    /// Points closer than this (metres) are dropped. Default 0: every non-zero distance.
+    pub min_range: f32,
+    /// Points farther than this (metres) are dropped. Default: no limit.
+    pub max_range: f32,
+}
 
-pub use ouster::{Decoded as OusterDecoded, Extra, OusterDecoder, OusterFrame};
-pub use velodyne::{DecodeOptions, VelodyneDecoder};
+impl Default for DecodeOptions {
+    fn default() -> Self {
+        Self {
+            min_range: 0.0,
+            max_range: f32::INFINITY,
+        }
+    }
+}
 
 /// Errors building a decoder or decoding a packet.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -32,7 +46,7 @@ pub enum DecodeError {
     },
     /// The packet does not have the shape required.
     #[error(transparent)]
-    Wire(#[from] crate::wire::WireError),
+    Wire(#[from] crate::sensor::WireError),
     /// The packet's blocks do not match the model's layout.
     #[error("block {block}: flag {found:#06x} does not fit the {model} layout (expected {expected:#06x})")]
     Layout {

@@ -28,10 +28,10 @@
 //! HDL-64E — the value `gen_calibration.py` means to default to). Two-point correction is taken
 //! as available for a laser when both `distCorrectionX_` and `distCorrectionY_` are non-zero
 //! (`gen_calibration.py`, fix for ros-drivers #473); otherwise both are set to
-//! `distCorrection_` (see [`crate::calib`]). Ids may be written as `0.0` (VeloView's
+//! `distCorrection_` (see [`crate::sensor::calib`]). Ids may be written as `0.0` (VeloView's
 //! `HDL-64.xml`) and must be whole numbers.
 //!
-//! Hostile input: the text is capped at [`MAX_CALIB_BYTES`](super::MAX_CALIB_BYTES) and
+//! Hostile input: the text is capped at [`MAX_CALIB_BYTES`](crate::sensor::calib::MAX_CALIB_BYTES) and
 //! [`MAX_NODES`] nodes; roxmltree resolves no external entities and stops entity-expansion
 //! loops; the tree is walked along fixed paths without recursion, so nesting depth is harmless.
 
@@ -39,8 +39,12 @@ use std::collections::BTreeMap;
 
 use roxmltree::{Document, Node, ParsingOptions};
 
-use super::velodyne::{LaserCalibration, VelodyneCalibration};
-use super::{check_size, has_advanced_corrections, parse_decimal, CalibError};
+use crate::sensor::calib::check_size;
+use crate::sensor::calib::parse_decimal;
+use crate::sensor::calib::CalibError;
+use crate::sensor::velodyne::calib::has_advanced_corrections;
+use crate::sensor::velodyne::calib::LaserCalibration;
+use crate::sensor::velodyne::calib::VelodyneCalibration;
 
 const FORMAT: &str = "XML";
 

@@ -24,7 +24,7 @@
 //!    voxel, and voxels dropped beyond `max_range_m` of the sensor) when the sensor has moved at
 //!    least `keyframe_translation_m` or turned `keyframe_rotation_rad` since the last keyframe
 //!    (both 0: every sweep, as KISS-ICP);
-//! 7. optionally, the **degeneracy** of the registration ([`super::degeneracy`]), analysed at
+//! 7. optionally, the **degeneracy** of the registration ([`crate::registration::degeneracy`]), analysed at
 //!    the point-to-point pose; with [`OdometryMethod::PointToPlane`] a degenerate sweep is
 //!    not refined on planes (nothing holds a plane fit along a free direction).
 //!
@@ -47,12 +47,24 @@
 
 use nalgebra::{Isometry3, Matrix3, Matrix6, UnitQuaternion, Vector3, Vector6};
 
-use super::degeneracy::{analyse, Degeneracy, DegeneracyConfig};
-use super::icp::{
-    se3_exp, se3_log, ContinuousResult, Icp, IcpConfig, IcpError, IcpMethod, IcpResult,
-    RegistrationConfigError, RobustKernel, RotationPrior, SweepPriors,
-};
-use super::map::{VoxelMap, VoxelMapConfig, VoxelSampler};
+use crate::registration::degeneracy::analyse;
+use crate::registration::degeneracy::Degeneracy;
+use crate::registration::degeneracy::DegeneracyConfig;
+use crate::registration::icp::se3_exp;
+use crate::registration::icp::se3_log;
+use crate::registration::icp::ContinuousResult;
+use crate::registration::icp::Icp;
+use crate::registration::icp::IcpConfig;
+use crate::registration::icp::IcpError;
+use crate::registration::icp::IcpMethod;
+use crate::registration::icp::IcpResult;
+use crate::registration::icp::RegistrationConfigError;
+use crate::registration::icp::RobustKernel;
+use crate::registration::icp::RotationPrior;
+use crate::registration::icp::SweepPriors;
+use crate::registration::map::VoxelMap;
+use crate::registration::map::VoxelMapConfig;
+use crate::registration::map::VoxelSampler;
 
 /// The arm at which a rotation weighs like a translation in the continuous-time priors, m.
 const CT_ROTATION_ARM_M: f64 = 10.0;

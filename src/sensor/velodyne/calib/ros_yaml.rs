@@ -30,15 +30,19 @@
 //!
 //! Lasers whose `two_pt_correction_available` is false (or absent) get
 //! `dist_correction_x = dist_correction_y = dist_correction` — see the module docs of
-//! [`crate::calib`] for why that is exactly the references' behaviour.
+//! [`crate::sensor::calib`] for why that is exactly the references' behaviour.
 
 use std::collections::BTreeMap;
 
 use yaml_rust2::parser::{Event, Parser};
 use yaml_rust2::scanner::{Marker, ScanError, TScalarStyle};
 
-use super::velodyne::{LaserCalibration, VelodyneCalibration};
-use super::{check_size, has_advanced_corrections, parse_decimal, CalibError};
+use crate::sensor::calib::check_size;
+use crate::sensor::calib::parse_decimal;
+use crate::sensor::calib::CalibError;
+use crate::sensor::velodyne::calib::has_advanced_corrections;
+use crate::sensor::velodyne::calib::LaserCalibration;
+use crate::sensor::velodyne::calib::VelodyneCalibration;
 
 const FORMAT: &str = "YAML";
 

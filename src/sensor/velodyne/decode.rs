@@ -16,29 +16,14 @@
 
 use core::ops::Range;
 
-use super::DecodeError;
-use crate::calib::VelodyneCalibration;
-use crate::model::velodyne::{ReturnMode, VelodyneModel, BLOCKS, SLOTS};
 use crate::point::Point;
-use crate::wire::velodyne::DataPacket;
-
-/// Options applied while decoding.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct DecodeOptions {
-    /// Points closer than this (metres) are dropped. Default 0: every non-zero distance.
-    pub min_range: f32,
-    /// Points farther than this (metres) are dropped. Default: no limit.
-    pub max_range: f32,
-}
-
-impl Default for DecodeOptions {
-    fn default() -> Self {
-        Self {
-            min_range: 0.0,
-            max_range: f32::INFINITY,
-        }
-    }
-}
+use crate::sensor::velodyne::calib::VelodyneCalibration;
+use crate::sensor::velodyne::model::ReturnMode;
+use crate::sensor::velodyne::model::VelodyneModel;
+use crate::sensor::velodyne::model::BLOCKS;
+use crate::sensor::velodyne::model::SLOTS;
+use crate::sensor::velodyne::wire::DataPacket;
+use crate::sensor::{DecodeError, DecodeOptions};
 
 /// Per-laser constants.
 #[derive(Clone, Copy, Debug, Default)]
@@ -622,7 +607,7 @@ fn advanced_xyz(measured_m: f32, l: &Laser, a: &Advanced, ca: f32, sa: f32) -> (
 /// as the point intensity for HDL-64E calibrations; ringscan keeps the raw reflectivity in
 /// [`Point::intensity`] and offers this as an extra (f32, like the reference).
 pub fn corrected_intensity(
-    laser: &crate::calib::LaserCalibration,
+    laser: &crate::sensor::velodyne::calib::LaserCalibration,
     raw_intensity: u8,
     raw_distance: u16,
 ) -> f32 {

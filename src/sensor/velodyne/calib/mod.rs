@@ -3,8 +3,33 @@
 //! Units inside ringscan are always radians and metres. The parsers (`ros_yaml`,
 //! `veloview_xml`) convert on load; [`VelodyneCalibration::validate`] rejects anything a
 //! decoder could not use safely (non-finite values, impossible angles, duplicate laser ids).
+//!
+//! # Velodyne conventions shared by every source
+//!
+//! - **Units**: radians and metres inside ringscan. ROS yaml is already in radians and metres
+//!   (including `focal_distance`, see [`ros_yaml`]); VeloView xml / db.xml is in degrees and
+//!   centimetres and is converted on load ([`veloview_xml`]).
+//! - **Two-point distance correction** (HDL-64E): the ROS and velodyne_decoder decoders apply
+//!   the near/far interpolation only to lasers whose `two_pt_correction_available` is true. The
+//!   parsers fold that flag into the values: a laser without two-point correction gets
+//!   `dist_correction_x = dist_correction_y = dist_correction`, for which the interpolation
+//!   `(dc - dcx)·(xx - 2.40)/(25.04 - 2.40) + dcx` is exactly `dc`. A decoder can therefore apply
+//!   the two-point formula to every laser of an [`VelodyneCalibration::advanced`] table and get
+//!   what the references get, with no extra flag.
+//! - **`advanced`** is true when any laser has a non-zero distance correction (`dist_correction`,
+//!   `dist_correction_x`, `dist_correction_y`) or offset (`vert_offset_correction`,
+//!   `horiz_offset_correction`) — the HDL-64E model. Built-in tables are not advanced: their only
+//!   extra is a pure vertical beam-origin offset, applied as `z += vert_offset_correction`
+//!   ([`builtin`]).
+//! - **Intensity limits** default to `min_intensity = 0`, `max_intensity = 255` when a file does
+//!   not state them (ROS `calibration.cc`, and db.xml files without `minIntensity_` /
+//!   `maxIntensity_`).
 
-use super::CalibError;
+pub mod builtin;
+pub mod ros_yaml;
+pub mod veloview_xml;
+
+use crate::sensor::calib::{check_size, CalibError};
 
 /// Corrections for one laser, in radians and metres.
 ///
@@ -154,5 +179,58 @@ impl VelodyneCalibration {
             rings[laser] = rank as u16;
         }
         rings
+    }
+}
+
+/// Whether any laser carries a distance or offset correction (the HDL-64E model).
+pub(crate) fn has_advanced_corrections(lasers: &[LaserCalibration]) -> bool {
+    lasers.iter().any(|l| {
+        [
+            l.dist_correction,
+            l.dist_correction_x,
+            l.dist_correction_y,
+            l.vert_offset_correction,
+            l.horiz_offset_correction,
+        ]
+        .iter()
+        .any(|&v| v != 0.0)
+    })
+}
+
+/// Parses a Velodyne calibration text of either format: VeloView xml / db.xml when the first
+/// non-blank character is `<`, ROS yaml otherwise. `source_name` (usually the file name) is kept
+/// in [`VelodyneCalibration::source`].
+pub fn parse_velodyne(text: &str, source_name: &str) -> Result<VelodyneCalibration, CalibError> {
+    check_size(text.len())?;
+    let body = text.strip_prefix('\u{feff}').unwrap_or(text);
+    if body.trim_start().starts_with('<') {
+        veloview_xml::parse(text, source_name)
+    } else {
+        ros_yaml::parse(text, source_name)
+    }
+}
+
+/// Like [`parse_velodyne`], for the raw bytes of a file: refuses oversized input before looking
+/// at it and reports text that is not UTF-8 with the line and column of the first bad byte.
+pub fn parse_velodyne_bytes(
+    bytes: &[u8],
+    source_name: &str,
+) -> Result<VelodyneCalibration, CalibError> {
+    check_size(bytes.len())?;
+    match core::str::from_utf8(bytes) {
+        Ok(text) => parse_velodyne(text, source_name),
+        Err(e) => {
+            let good = &bytes[..e.valid_up_to()];
+            let line = 1 + good.iter().filter(|&&b| b == b'\n').count();
+            let line_start = good.iter().rposition(|&b| b == b'\n').map_or(0, |p| p + 1);
+            // Column in characters of the valid prefix of this line, 1-based.
+            let column = 1 + String::from_utf8_lossy(&good[line_start..]).chars().count();
+            Err(CalibError::Syntax {
+                format: "text",
+                line,
+                column,
+                message: format!("not UTF-8 text (bad byte at offset {})", e.valid_up_to()),
+            })
+        }
     }
 }

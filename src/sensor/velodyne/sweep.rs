@@ -16,15 +16,23 @@
 //! than half a turn. A device-time gap of more than `max_gap_ns`, a step backwards, or a sweep
 //! longer than `max_sweep_ns` also ends the sweep (counted as a discontinuity).
 
-use super::Sweep;
-use crate::calib::{builtin, VelodyneCalibration};
-use crate::decode::{DecodeError, DecodeOptions, VelodyneDecoder};
-use crate::model::velodyne::{
-    ReturnMode, VelodyneModel, BLOCKS, DATA_PACKET_LEN, POSITION_PACKET_LEN,
-};
+use crate::sensor::nmea::parse_rmc;
+use crate::sensor::nmea::Rmc;
+use crate::sensor::velodyne::calib::builtin;
+use crate::sensor::velodyne::calib::VelodyneCalibration;
+use crate::sensor::velodyne::model::ReturnMode;
+use crate::sensor::velodyne::model::VelodyneModel;
+use crate::sensor::velodyne::model::BLOCKS;
+use crate::sensor::velodyne::model::DATA_PACKET_LEN;
+use crate::sensor::velodyne::model::POSITION_PACKET_LEN;
+use crate::sensor::velodyne::wire::DataPacket;
+use crate::sensor::velodyne::wire::PositionPacket;
+use crate::sensor::velodyne::wire::PpsState;
+use crate::sensor::velodyne::VelodyneDecoder;
+use crate::sensor::DecodeError;
+use crate::sensor::DecodeOptions;
+use crate::sweep::Sweep;
 use crate::time::{complete_toh, toh_delta_us, ClockSource};
-use crate::wire::nmea::{parse_rmc, Rmc};
-use crate::wire::velodyne::{DataPacket, PositionPacket, PpsState};
 
 /// Packets looked at before the model is decided.
 pub const DETECT_PACKETS: usize = 4;
@@ -45,7 +53,7 @@ pub struct StreamConfig {
     pub max_gap_ns: i64,
     /// A sweep longer than this is ended, ns.
     pub max_sweep_ns: i64,
-    /// Keep each point's firing column (for [`super::Organized`]).
+    /// Keep each point's firing column (for [`crate::sweep::Organized`]).
     pub keep_columns: bool,
 }
 
@@ -123,7 +131,7 @@ pub struct SensorFacts {
     /// Last PPS state reported.
     pub pps: Option<PpsState>,
     /// Last telemetry of the position packets (newer firmware only).
-    pub telemetry: Option<crate::wire::velodyne::Telemetry>,
+    pub telemetry: Option<crate::sensor::velodyne::wire::Telemetry>,
     /// Last RMC sentence with a valid date.
     pub last_rmc: Option<Rmc>,
     /// Position packets whose NMEA field was empty.

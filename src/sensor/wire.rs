@@ -1,11 +1,8 @@
-//! Typed, read-only, zero-copy views over one datagram's bytes, with length and flag checks.
+//! The error every family's packet views share.
 //!
-//! Knows nothing of calibration, time zones or I/O. Once a view is constructed its accessors
-//! cannot fail or panic: every length is checked up front.
-
-pub mod nmea;
-pub mod ouster;
-pub mod velodyne;
+//! A family's `wire` module holds typed, read-only, zero-copy views over one datagram's bytes.
+//! They know nothing of calibration, time zones or I/O; once a view is constructed its
+//! accessors cannot fail or panic: every length is checked up front.
 
 /// A datagram that does not have the shape its format requires.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]

@@ -36,8 +36,9 @@
 //!   manual tabulates no vertical offsets; they are `42.4 mm · tan(−ω)` with velodyne_decoder's
 //!   VLP-32C focal distance.
 
-use super::velodyne::{LaserCalibration, VelodyneCalibration};
-use crate::model::velodyne::VelodyneModel;
+use crate::sensor::velodyne::calib::LaserCalibration;
+use crate::sensor::velodyne::calib::VelodyneCalibration;
+use crate::sensor::velodyne::model::VelodyneModel;
 
 /// VLP-16 / Puck LITE: (elevation °, vertical correction mm), by laser id.
 const VLP16: [(f64, f64); 16] = [
@@ -209,7 +210,7 @@ fn tabulated(rows: &[(f64, f64)]) -> Vec<LaserCalibration> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::velodyne::ALL_MODELS;
+    use crate::sensor::velodyne::model::ALL_MODELS;
 
     #[test]
     fn every_fixed_design_model_has_a_valid_table() {

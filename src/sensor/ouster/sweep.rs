@@ -11,15 +11,19 @@
 //! arrived with status bit 0 set. A packet whose `init_id` differs from the metadata's (the
 //! sensor re-initialised) starts a new epoch: counted, warned in the summary, the stream goes on.
 
-use super::Sweep;
-use crate::calib::ouster::{ImuProfile, OusterInfo, TimestampMode};
-use crate::decode::ouster::OusterDecoder;
-use crate::decode::{DecodeError, DecodeOptions};
-use crate::model::ouster::HeaderKind;
 use crate::point::PointExtra;
+use crate::sensor::ouster::calib::ImuProfile;
+use crate::sensor::ouster::calib::OusterInfo;
+use crate::sensor::ouster::calib::TimestampMode;
+use crate::sensor::ouster::decode::OusterDecoder;
+use crate::sensor::ouster::model::HeaderKind;
+use crate::sensor::ouster::wire::ImuPacketLegacy;
+use crate::sensor::ouster::wire::ImuPacketNmea;
+use crate::sensor::DecodeError;
+use crate::sensor::DecodeOptions;
+use crate::sensor::WireError;
+use crate::sweep::Sweep;
 use crate::time::ClockSource;
-use crate::wire::ouster::{ImuPacketLegacy, ImuPacketNmea};
-use crate::wire::WireError;
 
 /// TAI − UTC since 2017-01-01, seconds (PTP time is TAI).
 pub const TAI_MINUS_UTC_S: u64 = 37;
@@ -50,9 +54,11 @@ impl OusterStreamConfig {
     pub fn imu_len_of(info: &OusterInfo) -> Option<usize> {
         match info.imu_profile {
             ImuProfile::Legacy => Some(48),
-            ImuProfile::Accel32Gyro32Nmea => Some(crate::wire::ouster::imu_nmea_packet_bytes(
-                info.imu_measurements_per_packet,
-            )),
+            ImuProfile::Accel32Gyro32Nmea => {
+                Some(crate::sensor::ouster::wire::imu_nmea_packet_bytes(
+                    info.imu_measurements_per_packet,
+                ))
+            }
             ImuProfile::Off => None,
         }
     }

@@ -35,11 +35,16 @@
 //!   (`range_mm`, `near_ir` come out in the SDK's units).
 //! - `t` = column timestamp − the sweep start the caller gives, clamped to `0..=u32::MAX` ns.
 
-use super::DecodeError;
-use crate::calib::ouster::OusterInfo;
-use crate::model::ouster::{Field, HeaderKind, Layout, PacketFormat};
 use crate::point::Point;
-use crate::wire::ouster::{read_field_at, Column, LidarPacket};
+use crate::sensor::ouster::calib::OusterInfo;
+use crate::sensor::ouster::model::Field;
+use crate::sensor::ouster::model::HeaderKind;
+use crate::sensor::ouster::model::Layout;
+use crate::sensor::ouster::model::PacketFormat;
+use crate::sensor::ouster::wire::read_field_at;
+use crate::sensor::ouster::wire::Column;
+use crate::sensor::ouster::wire::LidarPacket;
+use crate::sensor::DecodeError;
 
 /// The per-point values beyond the [`Point`] record.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -298,7 +303,7 @@ impl OusterDecoder {
     /// is turned off with it.
     pub fn with_header_kind(mut self, header: HeaderKind) -> Self {
         self.header = match (self.format.profile, header) {
-            (crate::model::ouster::Profile::Legacy, _) => HeaderKind::Legacy,
+            (crate::sensor::ouster::model::Profile::Legacy, _) => HeaderKind::Legacy,
             (_, HeaderKind::Legacy) => HeaderKind::Standard,
             (_, h) => h,
         };
@@ -419,7 +424,7 @@ impl OusterDecoder {
     fn pixel(&self, b: &[u8], at: usize) -> Pixel {
         let l = &self.layout;
         let get = |f| read_field_at(b, at, f);
-        let opt = |f: Option<crate::model::ouster::Field>| f.map_or(0, get);
+        let opt = |f: Option<crate::sensor::ouster::model::Field>| f.map_or(0, get);
         let near_ir = opt(l.near_ir) as u16;
         Pixel {
             r: [
@@ -1266,7 +1271,7 @@ mod tests {
     #[test]
     fn fixed_field_readers_serve_every_profile_and_read_as_the_generic_path() {
         let mut seed = 0x9E37_79B9_7F4A_7C15u64;
-        for p in crate::model::ouster::ALL_PROFILES {
+        for p in crate::sensor::ouster::model::ALL_PROFILES {
             let l = p.layout();
             let rd = Readers::new(&l).unwrap_or_else(|| panic!("{p}: no fixed readers"));
             match l.pixel_bytes {

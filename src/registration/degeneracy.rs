@@ -27,8 +27,9 @@
 
 use nalgebra::{Isometry3, Matrix6, SymmetricEigen, Vector3, Vector6};
 
-use super::icp::RegistrationConfigError;
-use super::map::{VoxelMap, VoxelPlane};
+use crate::registration::icp::RegistrationConfigError;
+use crate::registration::map::VoxelMap;
+use crate::registration::map::VoxelPlane;
 
 /// Parameters of the degeneracy analysis.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -222,7 +223,7 @@ pub fn analyse(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pipeline::map::VoxelMapConfig;
+    use crate::registration::map::VoxelMapConfig;
     use nalgebra::{Translation3, UnitQuaternion};
 
     fn map_of(points: &[Vector3<f64>]) -> VoxelMap {

@@ -16,7 +16,7 @@
 //!
 //! ```
 //! use nalgebra::{Isometry3, Vector3};
-//! use ringscan::calib::builtin::builtin;
+//! use ringscan::sensor::velodyne::calib::builtin::builtin;
 //! use ringscan::model::{ReturnMode, VelodyneModel};
 //! use ringscan::sim::{motion::Trajectory, scenes, velodyne::VelodyneSim};
 //! let t0 = 1_714_564_800_000_000_000;
@@ -37,11 +37,21 @@
 //! assert!((p.coords - Vector3::from(t.world)).norm() < 1e-9);
 //! ```
 
-use super::motion::Trajectory;
-use super::scene::{Hit, Scene};
-use crate::calib::VelodyneCalibration;
-use crate::model::velodyne::{ReturnMode, VelodyneModel, BLOCKS, DATA_PACKET_LEN, SLOTS};
-use crate::wire::velodyne::{FLAG_BANK2, FLAG_BANK3, FLAG_LOWER, FLAG_UPPER};
+pub mod hdl64;
+
+use crate::sensor::velodyne::calib::VelodyneCalibration;
+use crate::sensor::velodyne::model::ReturnMode;
+use crate::sensor::velodyne::model::VelodyneModel;
+use crate::sensor::velodyne::model::BLOCKS;
+use crate::sensor::velodyne::model::DATA_PACKET_LEN;
+use crate::sensor::velodyne::model::SLOTS;
+use crate::sensor::velodyne::wire::FLAG_BANK2;
+use crate::sensor::velodyne::wire::FLAG_BANK3;
+use crate::sensor::velodyne::wire::FLAG_LOWER;
+use crate::sensor::velodyne::wire::FLAG_UPPER;
+use crate::sim::motion::Trajectory;
+use crate::sim::scene::Hit;
+use crate::sim::scene::Scene;
 use nalgebra::{Isometry3, Point3, Vector3};
 
 /// One block's content.
@@ -112,7 +122,7 @@ pub struct Truth {
     pub xyz: [f64; 3],
     /// The same point in the world frame, metres.
     pub world: [f64; 3],
-    /// [`GROUND`](super::scene::GROUND) (0) or the id of the object hit. A dual-return last
+    /// [`GROUND`](crate::sim::scene::GROUND) (0) or the id of the object hit. A dual-return last
     /// return (a surface 1.5 m behind, which the scene does not hold) keeps the first's label.
     pub label: u32,
     /// Absolute firing time on the simulator's clock, ns (`host0_ns` + offset from the first
@@ -270,7 +280,9 @@ impl VelodyneSim {
                 if self.calib.advanced {
                     // HDL-64E corrections: the raw distance whose corrected point is on the
                     // scene (sim::hdl64); dual: a weaker surface 1.5 m behind, as below.
-                    let Some(first) = super::hdl64::measure(l, az, res, &posed) else {
+                    let Some(first) =
+                        crate::sensor::velodyne::sim::hdl64::measure(l, az, res, &posed)
+                    else {
                         continue;
                     };
                     let (m, ret) = if dual && is_last_block {
@@ -278,7 +290,9 @@ impl VelodyneSim {
                             blk.meas[s] = (first.raw, first.reflectivity);
                             continue;
                         }
-                        let Some(m) = super::hdl64::behind(l, az, res, &first, 1.5) else {
+                        let Some(m) =
+                            crate::sensor::velodyne::sim::hdl64::behind(l, az, res, &first, 1.5)
+                        else {
                             continue;
                         };
                         (m, 1)

@@ -38,8 +38,8 @@
 //! its measured distance, so that the simulator and the reference agree even at raw 12520
 //! (25.04 m).
 
-use super::scene::Scene;
-use crate::calib::LaserCalibration;
+use crate::sensor::velodyne::calib::LaserCalibration;
+use crate::sim::scene::Scene;
 
 /// Far calibration point of the two-point correction, metres (HDL-64E S2 manual App. F).
 pub const FAR_POINT_M: f64 = 25.04;
@@ -60,7 +60,7 @@ pub struct Measurement {
     pub xyz: [f64; 3],
     /// Reflectivity to write.
     pub reflectivity: u8,
-    /// Label of the surface hit ([`GROUND`](super::scene::GROUND) or an object id).
+    /// Label of the surface hit ([`GROUND`](crate::sim::scene::GROUND) or an object id).
     pub label: u32,
 }
 

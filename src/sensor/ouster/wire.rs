@@ -19,8 +19,11 @@
 //! after that no accessor can panic (column and pixel accessors return `Option` or 0 for an
 //! index outside the packet).
 
-use super::WireError;
-use crate::model::ouster::{Field, HeaderKind, PacketFormat, Profile};
+use crate::sensor::ouster::model::Field;
+use crate::sensor::ouster::model::HeaderKind;
+use crate::sensor::ouster::model::PacketFormat;
+use crate::sensor::ouster::model::Profile;
+use crate::sensor::WireError;
 
 /// `packet_type` of lidar packets.
 pub const PACKET_TYPE_LIDAR: u16 = 0x1;
@@ -725,7 +728,7 @@ impl ImuMeasurement {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::ouster::ALL_PROFILES;
+    use crate::sensor::ouster::model::ALL_PROFILES;
 
     #[test]
     fn crc64_xz_check_value() {

@@ -8,9 +8,15 @@
 //! (RNG15 profiles store `range_mm >> 3`, so only multiples of 8 survive), near-IR in the
 //! SDK's units (NIR8 stores `near_ir >> 4`); each value is masked to its field width.
 
-use crate::calib::ouster::OusterInfo;
-use crate::model::ouster::{Field, HeaderKind, PacketFormat, Profile};
-use crate::wire::ouster::{crc64_xz, write_field, HEADER_BYTES, PACKET_TYPE_IMU};
+use crate::sensor::ouster::calib::OusterInfo;
+use crate::sensor::ouster::model::Field;
+use crate::sensor::ouster::model::HeaderKind;
+use crate::sensor::ouster::model::PacketFormat;
+use crate::sensor::ouster::model::Profile;
+use crate::sensor::ouster::wire::crc64_xz;
+use crate::sensor::ouster::wire::write_field;
+use crate::sensor::ouster::wire::HEADER_BYTES;
+use crate::sensor::ouster::wire::PACKET_TYPE_IMU;
 
 /// Encoder counts per revolution of LEGACY packets.
 pub const ENCODER_TICKS_PER_REV: u32 = 90_112;
@@ -303,11 +309,12 @@ pub fn encode_imu_nmea(
     header: &SimHeader,
     nmea_ts_ns: u64,
     sentence: &[u8],
-    measurements: &[crate::wire::ouster::ImuMeasurement],
+    measurements: &[crate::sensor::ouster::wire::ImuMeasurement],
 ) -> Vec<u8> {
-    use crate::wire::ouster::{
-        imu_nmea_packet_bytes, IMU_MEASUREMENT_BYTES, IMU_NMEA_BLOCK_BYTES, NMEA_SENTENCE_BYTES,
-    };
+    use crate::sensor::ouster::wire::imu_nmea_packet_bytes;
+    use crate::sensor::ouster::wire::IMU_MEASUREMENT_BYTES;
+    use crate::sensor::ouster::wire::IMU_NMEA_BLOCK_BYTES;
+    use crate::sensor::ouster::wire::NMEA_SENTENCE_BYTES;
     let mut out = vec![0u8; imu_nmea_packet_bytes(measurements.len())];
     let h = SimHeader {
         packet_type: PACKET_TYPE_IMU,
@@ -345,7 +352,9 @@ pub fn encode_imu_nmea(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::wire::ouster::{ImuMeasurement, ImuPacketLegacy, ImuPacketNmea};
+    use crate::sensor::ouster::wire::ImuMeasurement;
+    use crate::sensor::ouster::wire::ImuPacketLegacy;
+    use crate::sensor::ouster::wire::ImuPacketNmea;
 
     #[test]
     fn imu_packets_round_trip() {
@@ -402,7 +411,7 @@ pub struct OusterTruth {
     pub xyz: [f64; 3],
     /// The same point in the world frame, metres.
     pub world: [f64; 3],
-    /// [`GROUND`](super::scene::GROUND) (0) or the id of the object hit.
+    /// [`GROUND`](crate::sim::scene::GROUND) (0) or the id of the object hit.
     pub label: u32,
     /// Absolute measurement time of the column on the simulator's clock, ns; the pose is
     /// `trajectory.pose(time_ns)`.
@@ -436,7 +445,7 @@ pub struct OusterSim {
     /// The packet encoder.
     pub encoder: OusterEncoder,
     /// `world_from_sensor` over time (default: the identity).
-    pub trajectory: super::motion::Trajectory,
+    pub trajectory: crate::sim::motion::Trajectory,
     /// Time of frame 0, column 0, ns on the simulator's clock.
     pub t0_ns: i64,
     /// Packets generated so far.
@@ -461,7 +470,7 @@ impl OusterSim {
         let max = ((1u64 << f.width.min(32)) - 1).saturating_mul(u64::from(unit));
         Self {
             encoder: OusterEncoder::new(&info),
-            trajectory: super::motion::Trajectory::identity(),
+            trajectory: crate::sim::motion::Trajectory::identity(),
             t0_ns,
             packet_index: 0,
             imu_period_ns: 10_000_000,
@@ -496,7 +505,7 @@ impl OusterSim {
     /// Generates the next lidar packet: (host receive time ns, payload), appending its truth.
     pub fn next_packet(
         &mut self,
-        scene: &dyn super::scene::Scene,
+        scene: &dyn crate::sim::scene::Scene,
         truth: &mut Vec<OusterTruth>,
     ) -> (i64, Vec<u8>) {
         let w = self.columns_per_frame() as u64;
@@ -506,7 +515,7 @@ impl OusterSim {
         let frame = self.packet_index / packets_per_frame;
         let first_col = (self.packet_index % packets_per_frame) * cpp;
         let dual = self.info.format.profile.is_dual();
-        let ptp = self.info.timestamp_mode == crate::calib::ouster::TimestampMode::Ptp1588;
+        let ptp = self.info.timestamp_mode == crate::sensor::ouster::calib::TimestampMode::Ptp1588;
         let col_period = self.column_period_ns();
         let mut columns = Vec::with_capacity(cpp as usize);
         let mut last_t = self.t0_ns;
@@ -531,10 +540,10 @@ impl OusterSim {
             } else {
                 1
             };
-            let posed = super::velodyne::Posed::new(scene, self.trajectory.pose(t));
+            let posed = crate::sensor::velodyne::sim::Posed::new(scene, self.trajectory.pose(t));
             for (row, px) in c.pixels.iter_mut().enumerate() {
                 let (dir, origin) = self.rays[col as usize * h + row];
-                let Some(hit) = super::scene::Scene::cast(&posed, origin, dir) else {
+                let Some(hit) = crate::sim::scene::Scene::cast(&posed, origin, dir) else {
                     continue;
                 };
                 let Some(mm) = self.quantise(hit.range * 1000.0) else {
@@ -614,8 +623,8 @@ impl OusterSim {
     /// the trajectory's specific force and angular rate at the IMU (lever arm included), in the
     /// IMU frame of `imu_to_sensor_transform`; timestamps as the lidar's.
     pub fn next_imu_packet(&mut self) -> Option<(i64, Vec<u8>)> {
-        use crate::calib::ouster::ImuProfile;
-        let ptp = self.info.timestamp_mode == crate::calib::ouster::TimestampMode::Ptp1588;
+        use crate::sensor::ouster::calib::ImuProfile;
+        let ptp = self.info.timestamp_mode == crate::sensor::ouster::calib::TimestampMode::Ptp1588;
         let off = if ptp { 37_000_000_000 } else { 0 };
         let s_from_i = self.sensor_from_imu();
         let sample = |sim: &mut Self| {
@@ -628,7 +637,7 @@ impl OusterSim {
             ImuProfile::Legacy => {
                 let (t, f, w) = sample(self);
                 let ts = (t + off).max(0) as u64;
-                let g = super::motion::GRAVITY;
+                let g = crate::sim::motion::GRAVITY;
                 let b = encode_imu_legacy(
                     ts,
                     ts,
@@ -649,7 +658,7 @@ impl OusterSim {
                 for i in 0..n {
                     let (t, f, w) = sample(self);
                     last = t;
-                    ms.push(crate::wire::ouster::ImuMeasurement {
+                    ms.push(crate::sensor::ouster::wire::ImuMeasurement {
                         timestamp_ns: (t + off).max(0) as u64,
                         measurement_id: i as u16,
                         status: 1,

@@ -21,7 +21,7 @@
 //!
 //! Correspondences come from a [`NearestNeighbors`] target: [`IndexedCloud`] (a voxel hash of
 //! a fixed cloud, optionally with normals) or the odometry's local map
-//! ([`super::map::VoxelMap`]), both searching the 27 voxels around the query. A pair is kept
+//! ([`crate::registration::map::VoxelMap`]), both searching the 27 voxels around the query. A pair is kept
 //! when the neighbour is closer than `max_correspondence_m`.
 //!
 //! **Honesty**: too few correspondences, an empty source or a singular system are errors
@@ -36,7 +36,9 @@ use std::collections::HashMap;
 
 use nalgebra::{Isometry3, Matrix3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
 
-use super::map::{smallest_eigenvector, voxel_key, BuildKeyHasher};
+use crate::registration::map::smallest_eigenvector;
+use crate::registration::map::voxel_key;
+use crate::registration::map::BuildKeyHasher;
 
 /// A registration parameter out of its valid range, found at construction.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
