@@ -3,20 +3,31 @@
 //! A LiDAR driver and packet decoder: raw Velodyne and Ouster traffic into timestamped,
 //! ring-tagged points assembled into sweeps, with packet loss counted, never hidden.
 //!
-//! The core (`wire`, `model`, `calib`, `decode`, `sweep`, `deskew`, `pipeline`) performs no
-//! I/O, reads no clock and allocates nothing per packet (nor, once their buffers are warm, per
-//! sweep in the pipeline stages); it builds with `--no-default-features`. Sources (pcap), sinks
-//! (MCAP), pipeline configuration files (`config`) and the command line are features on top.
+//! The data flow, one folder per step (`docs/architecture.md` draws it):
+//!
+//! - [`sensor`]: one folder per sensor family ([`sensor::velodyne`], [`sensor::ouster`]), each
+//!   with its packet views, model facts, calibration formats, decoder, sweep rules and packet
+//!   encoder, behind one interface ([`sensor::Family`], [`sensor::SensorStream`]);
+//! - [`sweep`]: the sweep record and the demultiplexer that gives each sensor its stream;
+//! - [`deskew`], [`pipeline`] (filters, voxel, ground, clusters) and [`registration`] (ICP,
+//!   local map, odometry);
+//! - edges: [`source`] (pcap, UDP), [`mod@sink`] (MCAP, live view), [`sim`] (the simulator).
+//!
+//! The core (`sensor`, `sweep`, `deskew`, `pipeline`, `registration`) performs no I/O, reads no
+//! clock and allocates nothing per packet (nor, once their buffers are warm, per sweep in the
+//! pipeline stages); it builds with `--no-default-features`. Sources (pcap), sinks (MCAP),
+//! pipeline configuration files (`config`) and the command line are features on top.
 //!
 //! ## Decoding one packet
 //!
 //! The sans-IO core: give it the bytes of one UDP payload, get points. The caller names the
-//! model (stream-level detection lives in [`sweep::VelodyneStream`]).
+//! model (stream-level detection lives in [`sensor::velodyne::VelodyneStream`]; any family's
+//! sensor is found by [`sensor::claim`]).
 //!
 //! ```
 //! use ringscan::sensor::velodyne::calib::builtin::builtin;
-//! use ringscan::sensor::decode::{DecodeOptions, VelodyneDecoder};
-//! use ringscan::model::{ReturnMode, VelodyneModel};
+//! use ringscan::sensor::velodyne::{ReturnMode, VelodyneDecoder, VelodyneModel};
+//! use ringscan::sensor::DecodeOptions;
 //! use ringscan::sensor::velodyne::wire::DataPacket;
 //!
 //! // A VLP-16 data packet: 12 blocks `FF EE`, azimuths 0.00°, 0.20°, …, one return.

@@ -16,24 +16,18 @@ use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use ringscan::sensor::ouster::calib::parse as parse_ouster;
-use ringscan::sensor::ouster::decode::OusterDecoder;
-use ringscan::sensor::ouster::wire::LidarPacket;
-use ringscan::sensor::velodyne::model::DATA_PACKET_LEN;
-use ringscan::sensor::velodyne::model::POSITION_PACKET_LEN;
+use ringscan::sensor::ouster::family::OusterCalibration;
+use ringscan::sensor::ouster::OusterStream;
+use ringscan::sensor::{Calibration, FAMILIES};
 use ringscan::sink::mcap::SinkSummary;
 use ringscan::sink::{McapSink, SinkError};
 use ringscan::source::udp::{self, BoundSocket, Queue, ReceiveStats, Received, SocketOptions};
-use ringscan::sweep::SensorStream;
 use serde_json::{json, Value};
 
 use super::run::{output_json, sink_options, RunError, Session, SessionOptions, Sink};
-use super::sensors::{load_calibs, CalibKind, CalibSpec};
+use super::sensors::load_calibs;
 use super::FormatArg;
 
-/// Ports listened on for a `--sensor IP` given without a port and without metadata naming its
-/// ports: Velodyne data and position, Ouster lidar and IMU defaults.
-pub const DEFAULT_PORTS: [u16; 4] = [2368, 8308, 7502, 7503];
 /// The Ouster HTTP API path of the sensor metadata.
 pub const METADATA_PATH: &str = "/api/v1/sensor/metadata";
 /// Datagrams the queue between the receive tasks and the decode thread holds at most.
@@ -172,16 +166,12 @@ impl Files {
 }
 
 /// Parses fetched Ouster metadata into a calibration bound to `addr`.
-fn metadata_spec(addr: Ipv4Addr, name: String, bytes: Vec<u8>) -> Result<CalibSpec, String> {
-    let text = std::str::from_utf8(&bytes).map_err(|e| format!("not UTF-8 ({e})"))?;
-    let info = parse_ouster(text, &name).map_err(|e| e.to_string())?;
-    OusterDecoder::new(&info).map_err(|e| e.to_string())?;
-    Ok(CalibSpec {
-        addr: Some(addr),
-        file_name: name,
-        bytes,
-        kind: CalibKind::Ouster(Box::new(info)),
-    })
+fn metadata_spec(addr: Ipv4Addr, name: String, bytes: Vec<u8>) -> Result<Calibration, String> {
+    let c = super::sensors::calibration(&bytes, &name, Some(addr))?;
+    if c.get::<OusterCalibration>().is_none() {
+        return Err("not Ouster metadata".into());
+    }
+    Ok(c)
 }
 
 /// An output error with the file's path and every cause (down to the OS error, e.g. "No space
@@ -274,8 +264,6 @@ struct DecodeThread {
     asked: HashMap<Ipv4Addr, Instant>,
     /// Ouster `init_id` epochs seen per sensor index.
     epochs: Vec<u64>,
-    /// Ouster alert flags per sensor index: (last, every flag seen, packets with a flag set).
-    alerts: Vec<(u8, u8, u64)>,
     /// When the last health diagnostics were written.
     last_health: Instant,
     /// Datagrams waiting for their sensor's metadata.
@@ -297,7 +285,6 @@ impl DecodeThread {
                         let _ = self.session.close_sink();
                         return Err(self.with_path(err));
                     }
-                    self.note_alerts(*r.src.ip(), &r.payload);
                     if self.session.demux().stats().ignored > ignored {
                         self.unclaimed(r);
                     }
@@ -333,12 +320,12 @@ impl DecodeThread {
         }
     }
 
-    /// A datagram from a sensor address that no configuration claimed: an Ouster sensor whose
-    /// metadata is not known yet; ask the sensor for it, and hold the datagram until it comes.
+    /// A datagram from a sensor address that no family claimed: a sensor whose calibration
+    /// is not known yet (an Ouster sensor without its metadata); ask the sensor for it, and
+    /// hold the datagram until it comes.
     fn unclaimed(&mut self, r: Received) {
         let addr = *r.src.ip();
-        let len = r.payload.len();
-        if matches!(len, DATA_PACKET_LEN | POSITION_PACKET_LEN) || !self.sensors.contains(&addr) {
+        if !self.sensors.contains(&addr) {
             return;
         }
         self.held.hold(r);
@@ -351,36 +338,6 @@ impl DecodeThread {
         }
         self.asked.insert(addr, Instant::now());
         let _ = self.events.send(Event::Fetch(addr));
-    }
-
-    /// Ouster lidar packets carry alert flags in their header: kept for the health messages.
-    fn note_alerts(&mut self, addr: Ipv4Addr, payload: &[u8]) {
-        let found = self
-            .session
-            .demux()
-            .sensors()
-            .enumerate()
-            .find(|(_, (a, _, _))| *a == addr);
-        let Some((idx, (_, SensorStream::Ouster(s), _))) = found else {
-            return;
-        };
-        if payload.len() != s.info().lidar_packet_bytes() {
-            return;
-        }
-        let header = s.decoder().header_kind();
-        let Ok(p) = LidarPacket::with_header(payload, &s.info().format, header) else {
-            return;
-        };
-        let flags = p.alert_flags();
-        if self.alerts.len() <= idx {
-            self.alerts.resize(idx + 1, (0, 0, 0));
-        }
-        let a = &mut self.alerts[idx];
-        a.0 = flags;
-        a.1 |= flags;
-        if flags != 0 {
-            a.2 += 1;
-        }
     }
 
     /// Once a second, per sensor: its counters and health (Velodyne PPS and GPS; Ouster alert
@@ -398,16 +355,10 @@ impl DecodeThread {
         });
         let mut msgs = Vec::new();
         for (idx, (_, stream, _)) in self.session.demux().sensors().enumerate() {
-            let (mut v, _) = super::sensors::sensor_summary(stream);
+            let (mut v, _) = stream.summary();
             if let Some(o) = v.as_object_mut() {
                 o.insert("health".into(), json!(true));
                 o.insert("receive".into(), receive.clone());
-                if let Some(&(last, seen, n)) = self.alerts.get(idx) {
-                    o.insert(
-                        "alert_flags".into(),
-                        json!({"last": last, "seen": seen, "packets": n}),
-                    );
-                }
             }
             msgs.push((idx, v));
         }
@@ -427,22 +378,17 @@ impl DecodeThread {
                 Control::Metadata(addr, name, bytes) => self.on_metadata(addr, name, bytes)?,
             }
         }
-        // Ouster re-initialised (new init_id): read its metadata again.
+        // A sensor re-initialised (Ouster: a new init_id): read its calibration again.
         let mut refetch = Vec::new();
         for (idx, (addr, stream, _)) in self.session.demux().sensors().enumerate() {
-            if let SensorStream::Ouster(s) = stream {
-                let e = s.stats().epochs;
-                if self.epochs.len() <= idx {
-                    self.epochs.resize(idx + 1, 0);
-                }
-                if e > self.epochs[idx] {
-                    self.epochs[idx] = e;
-                    tracing::info!(
-                        "sensor {addr}: new init_id {}; reading its metadata again",
-                        s.facts().init_id
-                    );
-                    refetch.push(addr);
-                }
+            let e = stream.epochs();
+            if self.epochs.len() <= idx {
+                self.epochs.resize(idx + 1, 0);
+            }
+            if e > self.epochs[idx] {
+                self.epochs[idx] = e;
+                tracing::info!("sensor {addr}: re-initialised; reading its metadata again");
+                refetch.push(addr);
             }
         }
         for addr in refetch {
@@ -475,9 +421,13 @@ impl DecodeThread {
             .demux()
             .sensors()
             .find(|(a, _, _)| *a == addr)
-            .and_then(|(_, s, _)| s.as_ouster().map(|o| o.info().clone()));
-        match (existing, &spec.kind) {
-            (Some(old), CalibKind::Ouster(new)) => {
+            .and_then(|(_, s, _)| {
+                s.as_any()
+                    .downcast_ref::<OusterStream>()
+                    .map(|o| o.info().clone())
+            });
+        match (existing, spec.get::<OusterCalibration>().map(|c| &c.info)) {
+            (Some(old), Some(new)) => {
                 let same = old.format == new.format
                     && old.columns_per_frame == new.columns_per_frame
                     && old.serial == new.serial;
@@ -511,7 +461,6 @@ impl DecodeThread {
             if self.session.demux().stats().ignored == ignored {
                 self.held.decoded += 1;
             }
-            self.note_alerts(addr, &r.payload);
         }
         Ok(())
     }
@@ -573,29 +522,29 @@ impl DecodeThread {
     }
 }
 
-/// The ports to listen on.
-fn ports_for(args: &ListenArgs, calibs: &[CalibSpec]) -> BTreeSet<u16> {
+/// The ports to listen on: a `--sensor`'s own, else those its calibrations name, else every
+/// family's defaults.
+fn ports_for(args: &ListenArgs, calibs: &[Calibration]) -> BTreeSet<u16> {
     let mut ports = BTreeSet::new();
     for (ip, port) in &args.sensors {
         if let Some(p) = port {
             ports.insert(*p);
             continue;
         }
-        let mut found = false;
-        for c in calibs {
-            if let CalibKind::Ouster(info) = &c.kind {
-                if c.addr.is_none() || c.addr == Some(*ip) {
-                    for p in [info.udp_port_lidar, info.udp_port_imu] {
-                        if p != 0 {
-                            ports.insert(p);
-                            found = true;
-                        }
-                    }
-                }
-            }
-        }
-        if !found {
-            ports.extend(DEFAULT_PORTS);
+        let named: Vec<u16> = calibs
+            .iter()
+            .filter(|c| c.addr.is_none() || c.addr == Some(*ip))
+            .flat_map(|c| {
+                FAMILIES
+                    .iter()
+                    .filter(|f| f.name() == c.family)
+                    .flat_map(|f| f.calibration_ports(c))
+            })
+            .collect();
+        if named.is_empty() {
+            ports.extend(FAMILIES.iter().flat_map(|f| f.default_ports()));
+        } else {
+            ports.extend(named);
         }
     }
     ports
@@ -751,7 +700,6 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
                     live,
                     asked: HashMap::new(),
                     epochs: Vec::new(),
-                    alerts: Vec::new(),
                     last_health: Instant::now(),
                     held: Held::default(),
                 };

@@ -6,23 +6,21 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
-use ringscan::sensor::velodyne::VelodyneModel;
 use ringscan::sensor::DecodeOptions;
 use ringscan::sensor::StreamError;
+use ringscan::sensor::{Calibration, Facts, FirstDatagram, StreamSettings};
 use ringscan::sink::mcap::{
     create_file, Compression, Format, SensorId, SensorInfo, SinkOptions, SinkSummary, SweepMsg,
 };
 use ringscan::sink::{McapSink, SinkError};
 use ringscan::source::pcap::{PcapSource, SourceError, SourceStats};
 use ringscan::sweep::Demux;
-use ringscan::sweep::Facts;
-use ringscan::sweep::SensorStream;
 use ringscan::sweep::Sweep;
 use serde_json::{json, Value};
 
 use super::odometry::{OdometryArgs, OdometryRunner};
 use super::pipeline::{PipelineArgs, PipelineRunner};
-use super::sensors::{self, load_calibs, CalibSpec, Chooser, Common};
+use super::sensors::{self, load_calibs, Chooser};
 use super::FormatArg;
 
 /// The example capture `ringscan demo` decodes: a simulated VLP-16 made by
@@ -93,14 +91,20 @@ pub enum RunError {
     Strict(String),
 }
 
-fn parse_model(m: Option<&str>) -> Result<Option<VelodyneModel>, RunError> {
+fn parse_model(m: Option<&str>) -> Result<Option<String>, RunError> {
     match m {
         None => Ok(None),
-        Some(s) => VelodyneModel::from_id(s).map(Some).ok_or_else(|| {
-            RunError::Usage(format!(
-                "--model {s}: expected one of vlp16, puck-hires, hdl32e, vlp32c, hdl64e-s2, hdl64e-s3, vls128"
-            ))
-        }),
+        Some(s) if ringscan::sensor::family_of_model(s).is_some() => Ok(Some(s.to_string())),
+        Some(s) => {
+            let all: Vec<&str> = ringscan::sensor::FAMILIES
+                .iter()
+                .flat_map(|f| f.models().iter().copied())
+                .collect();
+            Err(RunError::Usage(format!(
+                "--model {s}: expected one of {}",
+                all.join(", ")
+            )))
+        }
     }
 }
 
@@ -162,20 +166,20 @@ impl Output {
         &mut self,
         idx: usize,
         addr: Ipv4Addr,
-        facts: Facts<'_>,
+        facts: &dyn Facts,
         ports: &[u16],
     ) -> Result<(), SinkError> {
         let single = self.n_sensors_hint <= 1 && idx == 0;
         let mut name = match &self.name {
             Some(n) => n.clone(),
-            None => sensors::default_name(facts, addr),
+            None => facts.default_name(addr),
         };
         // Two sensors of one model whose addresses end alike: name them by the whole address.
         if self.sensors.iter().any(|s| s.registered && s.name == name) {
             let o = addr.octets();
             name = format!("{name}-{}-{}-{}", o[0], o[1], o[2]);
         }
-        let calib_name = sensors::calibration_name(facts);
+        let calib_name = facts.calibration_name();
         let calib = self
             .calibs
             .iter()
@@ -225,7 +229,7 @@ impl Output {
         idx: usize,
         addr: Ipv4Addr,
         sweep: &Sweep,
-        facts: Facts<'_>,
+        facts: &dyn Facts,
         ports: &[u16],
     ) {
         if self.error.is_some() {
@@ -337,10 +341,8 @@ impl Output {
             "frame_id": sweep.frame_id,
             "missing_columns": sweep.missing_columns,
         });
-        if let (Some(d), Value::Object(extra)) =
-            (diag.as_object_mut(), sensors::diagnostics_extra(facts))
-        {
-            d.extend(extra);
+        if let Some(d) = diag.as_object_mut() {
+            facts.diagnostics(d);
         }
         if let (Some(d), Some(o)) = (diag.as_object_mut(), odometry_diag) {
             d.insert("odometry".into(), o);
@@ -485,18 +487,17 @@ impl Session {
         let cut = (opts.cut_angle_deg * 100.0).round() as u16 % 36_000;
         let chooser = std::rc::Rc::new(std::cell::RefCell::new(Chooser::new(
             &calibs,
-            Common {
+            StreamSettings {
                 model,
                 decode,
                 cut_angle: cut,
                 keep_extras: opts.fields_all,
+                keep_columns: false,
                 crc: opts.crc,
             },
         )));
         let shared = chooser.clone();
-        let config_for = move |src: Ipv4Addr, port: u16, payload: &[u8]| {
-            shared.borrow_mut().choose(src, port, payload)
-        };
+        let config_for = move |d: &FirstDatagram<'_>| shared.borrow_mut().choose(d);
         let demux = Demux::new(Box::new(config_for), opts.port);
         let out = Output {
             sink: None,
@@ -506,7 +507,7 @@ impl Session {
             raw: opts.raw,
             calibs: calibs
                 .into_iter()
-                .map(|c| (c.addr, c.file_name, c.bytes))
+                .map(|c| (c.addr, c.file_name, c.bytes.to_vec()))
                 .collect(),
             error: None,
             sweeps: 0,
@@ -540,11 +541,11 @@ impl Session {
 
     /// Adds a calibration (e.g. Ouster metadata fetched from the sensor) for sensors not yet
     /// seen; it is attached to the output like a `--calib` file.
-    pub fn add_calib(&mut self, spec: CalibSpec) {
+    pub fn add_calib(&mut self, spec: Calibration) {
         self.chooser.borrow_mut().add(&spec);
         self.out
             .calibs
-            .push((spec.addr, spec.file_name, spec.bytes));
+            .push((spec.addr, spec.file_name, spec.bytes.to_vec()));
     }
 
     /// Closes the current output and continues into `next` (`--split-every`): every sensor
@@ -681,26 +682,30 @@ impl Session {
                 }
             }
         }
-        if let Some(SensorStream::Ouster(s)) = demux.stream_mut(idx) {
+        if let Some(stream) = demux.stream_mut(idx) {
             let id = out.sensors.get(idx).and_then(|x| x.id);
-            let imu_to_sensor = s.info().imu_to_sensor;
-            for smp in s.drain_imu() {
+            let mut failed = None;
+            stream.drain_imu(&mut |smp, imu_to_sensor| {
                 out.imu_samples += 1;
                 if let Some(p) = out.pipeline.as_mut() {
-                    p.push_imu(idx, &imu_to_sensor, &smp);
+                    p.push_imu(idx, imu_to_sensor, smp);
                 }
                 if let Some(o) = out.odometry.as_mut() {
-                    o.push_imu(idx, &imu_to_sensor, &smp);
+                    o.push_imu(idx, imu_to_sensor, smp);
                 }
-                if let (Some(sink), Some(id)) = (out.sink.as_mut(), id) {
+                if let (Some(sink), Some(id), None) = (out.sink.as_mut(), id, &failed) {
                     let msg = json!({
                         "timestamp_ns": smp.sensor_ns,
                         "linear_acceleration": smp.accel,
                         "angular_velocity": smp.gyro,
                     });
-                    sink.write_imu(id, smp.host_ns.max(0) as u64, &msg)
-                        .map_err(PumpError::Sink)?;
+                    if let Err(e) = sink.write_imu(id, smp.host_ns.max(0) as u64, &msg) {
+                        failed = Some(e);
+                    }
                 }
+            });
+            if let Some(e) = failed {
+                return Err(PumpError::Sink(e));
             }
         }
         if out.raw && out.sink.is_some() {
@@ -773,7 +778,7 @@ impl Session {
         let (mut decoded, mut malformed, mut missing, mut position) = (0u64, 0u64, 0u64, 0u64);
         let mut sensor_dropped = 0u64;
         for (idx, (addr, stream, ports)) in demux.sensors().enumerate() {
-            let (mut v, c) = sensors::sensor_summary(stream);
+            let (mut v, c) = stream.summary();
             decoded += c.decoded;
             malformed += c.malformed;
             missing += c.missing;

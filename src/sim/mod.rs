@@ -10,10 +10,11 @@
 //!   `flat`, `slope10`, `ramp`, `kerbs`).
 //! - [`motion`]: [`motion::Trajectory`] (`world_from_sensor` at any ns; constant twist, route,
 //!   TUM pose table) and IMU kinematics.
-//! - [`velodyne`]: [`velodyne::VelodyneSim`], every model and return mode, per-firing poses,
-//!   [`velodyne::Truth`]; [`hdl64`]: the HDL-64E correction model.
-//! - [`ouster`]: [`ouster::OusterEncoder`] and [`ouster::OusterSim`] (any metadata, profile
-//!   and mode; per-pixel [`ouster::OusterTruth`]; IMU packets from the motion).
+//! - each family's encoder lives in its folder: [`crate::sensor::velodyne::sim`]
+//!   (`VelodyneSim`, every model and return mode, per-firing poses, `Truth`; `hdl64`: the
+//!   HDL-64E correction model) and [`crate::sensor::ouster::sim`] (`OusterEncoder` and
+//!   `OusterSim`: any metadata, profile and mode; per-pixel `OusterTruth`; IMU packets from the
+//!   motion).
 //! - [`truth`]: the compact binary truth file (writer and reader); [`net`]: UDP frames, pcap.
 //!
 //! A moving VLP-16 in the urban scene, one packet:
@@ -21,8 +22,9 @@
 //! ```
 //! use nalgebra::{Isometry3, Vector3};
 //! use ringscan::sensor::velodyne::calib::builtin::builtin;
-//! use ringscan::model::{ReturnMode, VelodyneModel};
-//! use ringscan::sim::{motion::Trajectory, scenes, velodyne::VelodyneSim};
+//! use ringscan::sensor::velodyne::sim::VelodyneSim;
+//! use ringscan::sensor::velodyne::{ReturnMode, VelodyneModel};
+//! use ringscan::sim::{motion::Trajectory, scenes};
 //!
 //! let t0 = 1_714_564_800_000_000_000; // ns, the simulator's clock
 //! let model = VelodyneModel::Vlp16;

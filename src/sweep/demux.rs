@@ -10,11 +10,8 @@
 
 use std::net::Ipv4Addr;
 
-use super::Sweep;
-use crate::sensor::ouster::{OusterFacts, OusterStream, OusterStreamConfig};
-use crate::sensor::velodyne::model::DATA_PACKET_LEN;
-use crate::sensor::velodyne::{SensorFacts, StreamConfig, VelodyneStream};
-use crate::sensor::StreamError;
+use crate::sensor::{Claimed, Facts, FirstDatagram, SensorStream, StreamError};
+use crate::sweep::Sweep;
 
 /// Most sensors tracked at once.
 pub const MAX_SENSORS: usize = 64;
@@ -35,76 +32,13 @@ pub struct DemuxStats {
     pub dropped_sensor_limit: u64,
 }
 
-/// How a new sensor is to be decoded.
-#[derive(Clone, Debug)]
-pub enum SensorConfig {
-    /// A Velodyne stream.
-    Velodyne(StreamConfig),
-    /// An Ouster stream with its metadata.
-    Ouster(Box<OusterStreamConfig>),
-}
-
-/// One sensor's stream.
-// At most MAX_SENSORS of these exist; a few hundred bytes apart does not matter.
-#[allow(clippy::large_enum_variant)]
-#[derive(Debug)]
-pub enum SensorStream {
-    /// Velodyne.
-    Velodyne(VelodyneStream),
-    /// Ouster.
-    Ouster(Box<OusterStream>),
-}
-
-/// What a stream knows of its sensor.
-#[derive(Clone, Copy, Debug)]
-pub enum Facts<'a> {
-    /// Velodyne.
-    Velodyne(&'a SensorFacts),
-    /// Ouster.
-    Ouster(&'a OusterFacts),
-}
-
-impl SensorStream {
-    /// What is known of the sensor.
-    pub fn facts(&self) -> Facts<'_> {
-        match self {
-            Self::Velodyne(s) => Facts::Velodyne(s.facts()),
-            Self::Ouster(s) => Facts::Ouster(s.facts()),
-        }
-    }
-
-    /// The Velodyne stream, if this is one.
-    pub fn as_velodyne(&self) -> Option<&VelodyneStream> {
-        match self {
-            Self::Velodyne(s) => Some(s),
-            Self::Ouster(_) => None,
-        }
-    }
-
-    /// The Ouster stream, if this is one.
-    pub fn as_ouster(&self) -> Option<&OusterStream> {
-        match self {
-            Self::Ouster(s) => Some(s),
-            Self::Velodyne(_) => None,
-        }
-    }
-
-    /// Whether the stream knows how to decode (Velodyne: once its model is detected).
-    pub fn ready(&self) -> bool {
-        match self {
-            Self::Velodyne(s) => s.decoder().is_some(),
-            Self::Ouster(_) => true,
-        }
-    }
-}
-
-/// Chooses the configuration of a new sensor from its first datagram
-/// (`source, destination port, payload`); `None` leaves the datagram unclaimed.
-pub type ConfigFor = dyn FnMut(SensorKey, u16, &[u8]) -> Option<SensorConfig>;
+/// Builds the stream of a new sensor from its first datagram ([`crate::sensor::claim`] asks
+/// every family); `None` leaves the datagram unclaimed.
+pub type ConfigFor = dyn FnMut(&FirstDatagram<'_>) -> Option<Claimed>;
 
 /// Routes datagrams to per-sensor streams.
 pub struct Demux {
-    sensors: Vec<(SensorKey, SensorStream, Vec<u16>)>,
+    sensors: Vec<(SensorKey, Box<dyn SensorStream>, Vec<u16>)>,
     /// Datagrams per destination port, parallel to each sensor's port list.
     port_packets: Vec<Vec<u64>>,
     config_for: Box<ConfigFor>,
@@ -121,16 +55,10 @@ impl core::fmt::Debug for Demux {
     }
 }
 
-/// A Velodyne-only chooser: every address sending Velodyne-sized datagrams gets `cfg(addr)`.
-pub fn velodyne_only(mut cfg: impl FnMut(SensorKey) -> StreamConfig + 'static) -> Box<ConfigFor> {
-    Box::new(move |src, _port, payload: &[u8]| {
-        matches!(payload.len(), DATA_PACKET_LEN | 512).then(|| SensorConfig::Velodyne(cfg(src)))
-    })
-}
-
 impl Demux {
-    /// A demultiplexer; `config_for` is called once per new sensor address. With `data_port`
-    /// set, Velodyne data packets to other ports are ignored.
+    /// A demultiplexer; `config_for` is called with the datagrams of addresses no stream has
+    /// yet. With `data_port` set, lidar datagrams ([`SensorStream::is_lidar_datagram`]) to
+    /// other ports are ignored.
     pub fn new(config_for: Box<ConfigFor>, data_port: Option<u16>) -> Self {
         Self {
             sensors: Vec::new(),
@@ -147,8 +75,10 @@ impl Demux {
     }
 
     /// The sensors seen, in order of first appearance, with the destination ports they used.
-    pub fn sensors(&self) -> impl Iterator<Item = (SensorKey, &SensorStream, &[u16])> {
-        self.sensors.iter().map(|(k, s, p)| (*k, s, p.as_slice()))
+    pub fn sensors(&self) -> impl Iterator<Item = (SensorKey, &dyn SensorStream, &[u16])> {
+        self.sensors
+            .iter()
+            .map(|(k, s, p)| (*k, s.as_ref(), p.as_slice()))
     }
 
     /// Datagrams routed to sensor `idx`, per destination port (parallel to its port list).
@@ -157,13 +87,13 @@ impl Demux {
     }
 
     /// The stream of sensor `idx`.
-    pub fn stream(&self, idx: usize) -> Option<(SensorKey, &SensorStream)> {
-        self.sensors.get(idx).map(|(k, s, _)| (*k, s))
+    pub fn stream(&self, idx: usize) -> Option<(SensorKey, &dyn SensorStream)> {
+        self.sensors.get(idx).map(|(k, s, _)| (*k, s.as_ref()))
     }
 
     /// The stream of sensor `idx`, mutably (to drain IMU samples).
-    pub fn stream_mut(&mut self, idx: usize) -> Option<&mut SensorStream> {
-        self.sensors.get_mut(idx).map(|(_, s, _)| s)
+    pub fn stream_mut(&mut self, idx: usize) -> Option<&mut (dyn SensorStream + 'static)> {
+        self.sensors.get_mut(idx).map(|(_, s, _)| s.as_mut())
     }
 
     /// Routes one datagram; returns the index of the sensor it went to, if any. Finished
@@ -174,25 +104,27 @@ impl Demux {
         src: SensorKey,
         dst_port: u16,
         payload: &[u8],
-        on_sweep: &mut dyn FnMut(usize, &Sweep, Facts<'_>),
+        on_sweep: &mut dyn FnMut(usize, &Sweep, &dyn Facts),
     ) -> Result<Option<usize>, (usize, StreamError)> {
         let idx = match self.sensors.iter().position(|(k, _, _)| *k == src) {
             Some(i) => i,
             None => {
-                let Some(cfg) = (self.config_for)(src, dst_port, payload) else {
-                    self.stats.ignored += 1;
-                    return Ok(None);
+                let first = FirstDatagram {
+                    src,
+                    port: dst_port,
+                    payload,
                 };
                 if self.sensors.len() >= MAX_SENSORS {
                     self.stats.dropped_sensor_limit += 1;
                     return Ok(None);
                 }
-                let stream = match cfg {
-                    SensorConfig::Velodyne(c) => SensorStream::Velodyne(VelodyneStream::new(c)),
-                    SensorConfig::Ouster(c) => match OusterStream::new(*c) {
-                        Ok(s) => SensorStream::Ouster(Box::new(s)),
-                        Err(e) => return Err((self.sensors.len(), StreamError::Decode(e))),
-                    },
+                let stream = match (self.config_for)(&first) {
+                    None => {
+                        self.stats.ignored += 1;
+                        return Ok(None);
+                    }
+                    Some(Ok(s)) => s,
+                    Some(Err(e)) => return Err((self.sensors.len(), e)),
                 };
                 self.sensors.push((src, stream, Vec::new()));
                 self.port_packets.push(Vec::new());
@@ -200,11 +132,9 @@ impl Demux {
             }
         };
         let (_, stream, ports) = &mut self.sensors[idx];
-        if let SensorStream::Velodyne(_) = stream {
-            if payload.len() == DATA_PACKET_LEN && self.data_port.is_some_and(|p| p != dst_port) {
-                self.stats.other_port += 1;
-                return Ok(None);
-            }
+        if self.data_port.is_some_and(|p| p != dst_port) && stream.is_lidar_datagram(payload) {
+            self.stats.other_port += 1;
+            return Ok(None);
         }
         self.stats.routed += 1;
         match ports.iter().position(|&p| p == dst_port) {
@@ -221,37 +151,23 @@ impl Demux {
             }
             None => {}
         }
-        match stream {
-            SensorStream::Velodyne(s) => s
-                .push(host_ns, payload, &mut |sw, f| {
-                    on_sweep(idx, sw, Facts::Velodyne(f))
-                })
-                .map_err(|e| (idx, e))?,
-            SensorStream::Ouster(s) => s.push(host_ns, payload, &mut |sw, f| {
-                on_sweep(idx, sw, Facts::Ouster(f))
-            }),
-        }
+        stream
+            .push(host_ns, payload, &mut |sw, f| on_sweep(idx, sw, f))
+            .map_err(|e| (idx, e))?;
         Ok(Some(idx))
     }
 
     /// Ends every stream, emitting their last sweeps.
     pub fn finish(
         &mut self,
-        on_sweep: &mut dyn FnMut(usize, &Sweep, Facts<'_>),
+        on_sweep: &mut dyn FnMut(usize, &Sweep, &dyn Facts),
     ) -> Result<(), (usize, StreamError)> {
         // A stream that fails does not keep the others from finishing; the first error is
         // returned.
         let mut first_error = None;
         for (idx, (_, stream, _)) in self.sensors.iter_mut().enumerate() {
-            match stream {
-                SensorStream::Velodyne(s) => {
-                    if let Err(e) = s.finish(&mut |sw, f| on_sweep(idx, sw, Facts::Velodyne(f))) {
-                        first_error.get_or_insert((idx, e));
-                    }
-                }
-                SensorStream::Ouster(s) => {
-                    s.finish(&mut |sw, f| on_sweep(idx, sw, Facts::Ouster(f)))
-                }
+            if let Err(e) = stream.finish(&mut |sw, f| on_sweep(idx, sw, f)) {
+                first_error.get_or_insert((idx, e));
             }
         }
         first_error.map_or(Ok(()), Err)

@@ -16,6 +16,7 @@ use std::sync::OnceLock;
 
 use ringscan::point::Point;
 use ringscan::sensor::nmea::parse_rmc;
+use ringscan::sensor::ouster::OusterFacts;
 use ringscan::sensor::velodyne::calib::builtin::builtin;
 use ringscan::sensor::velodyne::calib::parse_velodyne;
 use ringscan::sensor::velodyne::calib::parse_velodyne_bytes;
@@ -37,7 +38,9 @@ use ringscan::sensor::velodyne::SensorFacts;
 use ringscan::sensor::velodyne::StreamConfig;
 use ringscan::sensor::velodyne::VelodyneDecoder;
 use ringscan::sensor::velodyne::VelodyneModel;
+use ringscan::sensor::velodyne::VelodyneStream;
 use ringscan::sensor::DecodeOptions;
+use ringscan::sensor::{Claimed, Facts, FirstDatagram, SensorStream};
 use ringscan::sink::mcap::{
     Compression, Format, McapSink, SensorId, SensorInfo, SinkError, SinkOptions, SweepMsg,
 };
@@ -46,9 +49,7 @@ use ringscan::source::reassembly::{
     FragmentKey, Push, Reassembler, ReassemblyConfig, MAX_IPV4_PAYLOAD,
 };
 use ringscan::sweep::Demux;
-use ringscan::sweep::Facts;
 use ringscan::sweep::Organized;
-use ringscan::sweep::SensorConfig;
 use ringscan::sweep::Sweep;
 
 // ----- issues found and not fixed yet ----------------------------------------------------------
@@ -874,10 +875,11 @@ pub fn velodyne_stream(data: &[u8]) {
         keep_columns,
         ..StreamConfig::default()
     };
-    let mut demux = Demux::new(
-        ringscan::sweep::velodyne_only(move |_| cfg.clone()),
-        data_port,
-    );
+    let velodyne_only = move |d: &FirstDatagram<'_>| -> Option<Claimed> {
+        matches!(d.payload.len(), DATA_PACKET_LEN | POSITION_PACKET_LEN)
+            .then(|| Ok(Box::new(VelodyneStream::new(cfg.clone())) as Box<dyn SensorStream>))
+    };
+    let mut demux = Demux::new(Box::new(velodyne_only), data_port);
     let mut seen = StreamCheck {
         keep_columns,
         ..StreamCheck::default()
@@ -950,7 +952,7 @@ pub fn velodyne_stream(data: &[u8]) {
             data_pushes += 1;
         }
         let r = demux.push(host, src, port, &payload, &mut |idx, s, f| {
-            if let ringscan::sweep::Facts::Velodyne(f) = f {
+            if let Some(f) = f.as_any().downcast_ref::<SensorFacts>() {
                 seen.on_sweep(idx, s, f)
             }
         });
@@ -960,7 +962,7 @@ pub fn velodyne_stream(data: &[u8]) {
         }
     }
     let finished = demux.finish(&mut |idx, s, f| {
-        if let ringscan::sweep::Facts::Velodyne(f) = f {
+        if let Some(f) = f.as_any().downcast_ref::<SensorFacts>() {
             seen.on_sweep(idx, s, f)
         }
     });
@@ -978,7 +980,7 @@ pub fn velodyne_stream(data: &[u8]) {
     );
     let mut total_points = 0u64;
     for (idx, (_, stream, ports)) in demux.sensors().enumerate() {
-        let Some(stream) = stream.as_velodyne() else {
+        let Some(stream) = stream.as_any().downcast_ref::<VelodyneStream>() else {
             continue;
         };
         let st = stream.stats();
@@ -1161,10 +1163,15 @@ struct Out {
 
 impl Out {
     /// Registers a sensor with the name and metadata `ringscan decode` gives it.
-    fn register_any(&mut self, idx: usize, addr: Ipv4Addr, facts: Facts<'_>, ports: &[u16]) {
-        match facts {
-            Facts::Velodyne(f) => self.register(idx, addr, f, ports),
-            Facts::Ouster(f) => {
+    fn register_any(&mut self, idx: usize, addr: Ipv4Addr, facts: &dyn Facts, ports: &[u16]) {
+        let any = facts.as_any();
+        match (
+            any.downcast_ref::<SensorFacts>(),
+            any.downcast_ref::<OusterFacts>(),
+        ) {
+            (Some(f), _) => self.register(idx, addr, f, ports),
+            (None, None) => {}
+            (None, Some(f)) => {
                 let mut md = BTreeMap::new();
                 md.insert("source_address".to_string(), addr.to_string());
                 md.insert("serial".to_string(), f.serial.to_string());
@@ -1255,7 +1262,7 @@ impl Out {
         *self.written.entry(topic).or_insert(0) += 1;
     }
 
-    fn on_sweep(&mut self, idx: usize, addr: Ipv4Addr, sweep: &Sweep, facts: Facts<'_>) {
+    fn on_sweep(&mut self, idx: usize, addr: Ipv4Addr, sweep: &Sweep, facts: &dyn Facts) {
         if self.error.is_some() {
             return;
         }
@@ -1365,12 +1372,19 @@ pub fn decode_to_mcap(data: &[u8]) {
         written: BTreeMap::new(),
         topics: Vec::new(),
     };
-    let config_for = move |_src: Ipv4Addr, _port: u16, payload: &[u8]| match payload.len() {
-        DATA_PACKET_LEN | POSITION_PACKET_LEN => {
-            Some(SensorConfig::Velodyne(StreamConfig::default()))
+    let config_for = move |d: &FirstDatagram<'_>| -> Option<Claimed> {
+        match d.payload.len() {
+            DATA_PACKET_LEN | POSITION_PACKET_LEN => Some(Ok(Box::new(VelodyneStream::new(
+                StreamConfig::default(),
+            ))
+                as Box<dyn SensorStream>)),
+            n if is_ouster(n) => Some(
+                OusterStream::new(ouster.clone())
+                    .map(|s| Box::new(s) as Box<dyn SensorStream>)
+                    .map_err(ringscan::sensor::StreamError::Decode),
+            ),
+            _ => None,
         }
-        n if is_ouster(n) => Some(SensorConfig::Ouster(Box::new(ouster.clone()))),
-        _ => None,
     };
     let mut demux = Demux::new(Box::new(config_for), None);
     let mut src = PcapSource::new(data).expect("opened once already");
@@ -1407,9 +1421,10 @@ pub fn decode_to_mcap(data: &[u8]) {
             }
         }
         // IMU samples, as `ringscan decode` writes them.
-        if let Some(ringscan::sweep::SensorStream::Ouster(s)) = demux.stream_mut(idx) {
+        if let Some(s) = demux.stream_mut(idx) {
             let id = out.sensors.get(idx).and_then(|x| x.id);
-            let samples: Vec<_> = s.drain_imu().collect();
+            let mut samples = Vec::new();
+            s.drain_imu(&mut |smp, _| samples.push(*smp));
             for smp in samples {
                 let Some(id) = id else { continue };
                 if out.error.is_some() {

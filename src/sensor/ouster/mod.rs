@@ -8,6 +8,7 @@
 
 pub mod calib;
 pub mod decode;
+pub mod family;
 pub mod model;
 #[cfg(feature = "sim")]
 pub mod sim;

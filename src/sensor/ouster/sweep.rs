@@ -130,6 +130,12 @@ pub struct OusterFacts {
     pub shot_limiting: u8,
     /// Worst thermal-shutdown state seen (0 = normal).
     pub thermal_shutdown: u8,
+    /// Alert flags (header byte 12) of the last lidar packet.
+    pub alert_flags_last: u8,
+    /// Every alert flag seen (or-ed).
+    pub alert_flags_seen: u8,
+    /// Lidar packets with any alert flag set.
+    pub alert_packets: u64,
 }
 
 #[derive(Debug)]
@@ -176,6 +182,9 @@ impl OusterStream {
             init_id: info.init_id,
             shot_limiting: 0,
             thermal_shutdown: 0,
+            alert_flags_last: 0,
+            alert_flags_seen: 0,
+            alert_packets: 0,
         };
         let frame_bits = if info.format.profile.header() == HeaderKind::Fusa {
             32
@@ -374,6 +383,10 @@ impl OusterStream {
         };
         self.facts.shot_limiting = self.facts.shot_limiting.max(packet.shot_limiting());
         self.facts.thermal_shutdown = self.facts.thermal_shutdown.max(packet.thermal_shutdown());
+        let alerts = packet.alert_flags();
+        self.facts.alert_flags_last = alerts;
+        self.facts.alert_flags_seen |= alerts;
+        self.facts.alert_packets += u64::from(alerts != 0);
         let fid = packet.frame_id();
         // Find or open the frame's sweep.
         let idx = match self.open.iter().position(|o| o.frame_id == fid) {

@@ -17,8 +17,9 @@
 //! ```
 //! use nalgebra::{Isometry3, Vector3};
 //! use ringscan::sensor::velodyne::calib::builtin::builtin;
-//! use ringscan::model::{ReturnMode, VelodyneModel};
-//! use ringscan::sim::{motion::Trajectory, scenes, velodyne::VelodyneSim};
+//! use ringscan::sensor::velodyne::sim::VelodyneSim;
+//! use ringscan::sensor::velodyne::{ReturnMode, VelodyneModel};
+//! use ringscan::sim::{motion::Trajectory, scenes};
 //! let t0 = 1_714_564_800_000_000_000;
 //! let calib = builtin(VelodyneModel::Vlp16).unwrap();
 //! let mut sim = VelodyneSim::new(VelodyneModel::Vlp16, ReturnMode::Strongest, calib, t0);
