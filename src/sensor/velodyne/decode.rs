@@ -215,7 +215,9 @@ impl VelodyneDecoder {
             let Some(b) = (0..BLOCKS).find(|&b| usize::from(expected_bank[b]) == bank) else {
                 continue;
             };
-            let (t0, c0) = model.firing(mode, b, 0);
+            // Times from the firing at which the block's azimuth was read.
+            let t0 = model.firing(mode, model.azimuth_block(b), 0).0;
+            let c0 = model.firing(mode, b, 0).1;
             for s in 0..SLOTS {
                 let (t, c) = model.firing(mode, b, s);
                 let id = model.laser_of(bank, s);
@@ -229,9 +231,10 @@ impl VelodyneDecoder {
         }
         let n_lanes = banks * SLOTS;
         let t0 = model.firing(mode, 0, 0).0;
-        let rate_span_ns = model.firing(mode, BLOCKS - 1, 0).0 - t0;
-        let resolution = calib
-            .distance_resolution
+        let rate_span_ns = model.firing(mode, model.azimuth_block(BLOCKS - 1), 0).0 - t0;
+        let resolution = model
+            .fixed_distance_resolution()
+            .or(calib.distance_resolution)
             .unwrap_or(model.distance_resolution()) as f32;
         Ok(Self {
             model,
@@ -347,8 +350,8 @@ impl VelodyneDecoder {
         } else {
             0.0
         };
-        // Per lane: rotation of the lane's firing after its block's first firing, minus the
-        // laser's rotational correction, as one (cos, sin) pair.
+        // Per lane: rotation of the lane's firing after the firing its block's azimuth was read
+        // at, minus the laser's rotational correction, as one (cos, sin) pair.
         let mut rot = [(1f32, 0f32); LANES];
         let to_rad = core::f64::consts::PI / 18_000.0;
         for (r, lane) in rot.iter_mut().zip(self.lanes.iter()).take(self.n_lanes) {

@@ -193,7 +193,22 @@ impl VelodyneModel {
         matches!(self, Self::Hdl64eS2 | Self::Hdl64eS3)
     }
 
-    /// Default distance unit in metres (a calibration's own value wins).
+    /// The distance unit when the packet format fixes it, whatever a calibration file says.
+    ///
+    /// VLS-128: 4 mm (VLS-128 manual, data packet format). Every reference decoder uses this
+    /// constant for the VLS-128 and ignores the calibration's `distance_resolution` (ROS
+    /// velodyne `VLS128_DISTANCE_RESOLUTION`, velodyne_decoder, nebula), and the VLS-128 yaml
+    /// nebula ships says 0.007: reading it scaled every range by 1.75 (on nebula's real
+    /// capture, medians over 2 m off).
+    pub fn fixed_distance_resolution(self) -> Option<f64> {
+        match self {
+            Self::Vls128 => Some(0.004),
+            _ => None,
+        }
+    }
+
+    /// Default distance unit in metres (a calibration's own value wins, unless the packet format
+    /// fixes it: [`Self::fixed_distance_resolution`]).
     pub fn distance_resolution(self) -> f64 {
         match self {
             Self::Vlp32c | Self::Vls128 => 0.004,
@@ -280,6 +295,19 @@ impl VelodyneModel {
                 let group = laser / 8 + laser / 64;
                 (53_300.0 * seq as f64 + 2_665.0 * group as f64, seq)
             }
+        }
+    }
+
+    /// The block at whose first firing `block`'s azimuth was read: the block itself, except on
+    /// the VLS-128, whose four blocks of one firing sequence (banks 0–3) all carry the azimuth
+    /// of the sequence's start (VLS-128 manual, packet format; on nebula's real capture every
+    /// run of four blocks has one azimuth). Interpolating from a bank's own first firing would
+    /// lose its offset in the sequence: up to 13 firing groups, 35 µs, 0.12° at 600 rpm.
+    #[inline]
+    pub fn azimuth_block(self, block: usize) -> usize {
+        match self {
+            Self::Vls128 => block - block % 4,
+            _ => block,
         }
     }
 

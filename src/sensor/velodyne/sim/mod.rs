@@ -263,7 +263,12 @@ impl VelodyneSim {
         for (b, blk) in blocks.iter_mut().enumerate() {
             let bank = (b % bpf) % banks;
             blk.flag = [FLAG_UPPER, FLAG_LOWER, FLAG_BANK2, FLAG_BANK3][bank];
-            let t_block = t_packet_ns + self.model.firing(self.mode, b, 0).0;
+            // The azimuth the sensor reads for this block (VLS-128: the firing sequence's).
+            let t_block = t_packet_ns
+                + self
+                    .model
+                    .firing(self.mode, self.model.azimuth_block(b), 0)
+                    .0;
             blk.azimuth = azimuth_cdeg(self.azimuth_at(t_block));
             // In dual mode, blocks [g, g+half) hold the last return, [g+half, g+bpf) the
             // strongest; the other way round where the model sends the strongest first (HDL-64E).
