@@ -66,18 +66,16 @@ pub fn load_calibs(list: &[String]) -> Result<Vec<CalibSpec>, RunError> {
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_default();
-        let kind = if text
+        if text
             .trim_start_matches('\u{feff}')
             .trim_start()
             .starts_with('{')
         {
-            let info = parse_ouster(text, &file_name).map_err(|e| cerr(e.to_string()))?;
-            // The decoder's own checks (beam tables, transforms) before anything is written.
-            OusterDecoder::new(&info).map_err(|e| cerr(e.to_string()))?;
-            CalibKind::Ouster(Box::new(info))
-        } else {
-            CalibKind::Velodyne(parse_velodyne(text, &file_name).map_err(|e| cerr(e.to_string()))?)
-        };
+            out.push(ouster_calib(addr, file_name, bytes).map_err(cerr)?);
+            continue;
+        }
+        let kind =
+            CalibKind::Velodyne(parse_velodyne(text, &file_name).map_err(|e| cerr(e.to_string()))?);
         out.push(CalibSpec {
             addr,
             file_name,
@@ -86,6 +84,25 @@ pub fn load_calibs(list: &[String]) -> Result<Vec<CalibSpec>, RunError> {
         });
     }
     Ok(out)
+}
+
+/// Ouster metadata JSON (a `--calib` file, or the metadata a bag holds) as a calibration.
+pub fn ouster_calib(
+    addr: Option<Ipv4Addr>,
+    file_name: String,
+    bytes: Vec<u8>,
+) -> Result<CalibSpec, String> {
+    let text = std::str::from_utf8(&bytes)
+        .map_err(|e| format!("not UTF-8 text (byte {})", e.valid_up_to()))?;
+    let info = parse_ouster(text, &file_name).map_err(|e| e.to_string())?;
+    // The decoder's own checks (beam tables, transforms) before anything is written.
+    OusterDecoder::new(&info).map_err(|e| e.to_string())?;
+    Ok(CalibSpec {
+        addr,
+        file_name,
+        bytes,
+        kind: CalibKind::Ouster(Box::new(info)),
+    })
 }
 
 /// Settings shared by every new sensor.

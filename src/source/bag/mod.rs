@@ -998,7 +998,7 @@ impl BagSource {
                 unknown
             };
         }
-        if !self.options.topics.is_empty() && !self.options.topics.iter().any(|t| *t == c.topic) {
+        if !self.options.topics.is_empty() && !self.options.topics.contains(&c.topic) {
             return Route {
                 kind: Some(kind),
                 encoding,
