@@ -13,7 +13,8 @@
 //! | MCAP (`ros1msg` or `ros2msg` / CDR schemas) | `\x89MCAP0\r\n` | [`mcap_in`] |
 //! | a zstd-compressed storage file (rosbag2 `FILE` mode) | zstd magic `28 b5 2f fd`, then the inner magic | sqlite3: decompressed to a temporary file (SQLite needs one); MCAP: decompressed as it is read |
 //!
-//! rosbag2 `MESSAGE` compression (each message one zstd frame) is undone per message.
+//! rosbag2 `MESSAGE` compression (each message one zstd frame) is undone per message (in a
+//! bare `.db3` / `.mcap` without its yaml, a CDR message that starts with the zstd magic is one).
 //!
 //! # Sensors, addresses and ports
 //! Streams downstream are keyed by source address, so each sensor gets a synthetic loopback
@@ -618,12 +619,7 @@ impl Messages {
             let Some((path, inner)) = self.current.as_mut() else {
                 return Ok(None);
             };
-            let target = if self.message_zstd {
-                &mut self.raw
-            } else {
-                &mut *out
-            };
-            let m = match inner.next_message(target) {
+            let m = match inner.next_message(out) {
                 Ok(Some(m)) => m,
                 Ok(None) => {
                     if self.next_file()? {
@@ -657,7 +653,11 @@ impl Messages {
                     g
                 }
             };
-            if self.message_zstd {
+            // rosbag2 MESSAGE compression; also recognised without its yaml (a bare .db3 or
+            // .mcap) by the zstd magic where CDR's encapsulation header belongs.
+            let cdr = self.conns.get(g as usize).and_then(|c| c.encoding) == Some(Encoding::Cdr);
+            if self.message_zstd || (cdr && out.starts_with(&ZSTD_MAGIC)) {
+                std::mem::swap(&mut self.raw, out);
                 out.clear();
                 let ok = zstd::stream::read::Decoder::with_buffer(&self.raw[..])
                     .and_then(|d| d.take(MAX_MESSAGE_BYTES as u64 + 1).read_to_end(out))
