@@ -1,7 +1,8 @@
 //! Fidelity against ouster-sdk 1.0.1 on every real Ouster pcap in `../shared/captures`.
 //!
-//! For every golden (`golden/index.json`, reference `ouster-sdk`, pcap captures; the ROS bag
-//! is out of scope: ringscan has no bag reader), for every sensor of the golden:
+//! For every golden (`golden/index.json`, reference `ouster-sdk`: the pcap captures, and the ROS 1
+//! bag `512x10_raw.bag` read by `source::bag` with the metadata it holds), for every sensor of
+//! the golden:
 //! - the metadata named by `sensors[i].metadata` is parsed with `calib::ouster::parse` and
 //!   checked against the golden's `as_parsed_by_sdk` values;
 //! - the capture is read with `PcapSource` (IPv4 reassembly); the sensor's lidar packets are
@@ -469,12 +470,14 @@ fn check_frame(
     }
 }
 
+/// `metadata`: the metadata text to use (a bag's) instead of the golden's metadata file.
 fn check_sensor(
     root: &Path,
     g: &Value,
     si: usize,
     datagrams: &[Dgram],
     golden_dir: &Path,
+    metadata: Option<&str>,
 ) -> Figures {
     let s = &g["sensors"][si];
     let capture = g["capture"].as_str().unwrap();
@@ -484,9 +487,15 @@ fn check_sensor(
         .to_string_lossy()
         .into_owned();
     let what = format!("{short} sensor {si}");
-    let meta = root.join(s["metadata"].as_str().unwrap());
-    let text = std::fs::read_to_string(&meta).unwrap();
-    let info = parse(&text, &meta.to_string_lossy()).unwrap_or_else(|e| panic!("{what}: {e}"));
+    let (text, meta_name) = match metadata {
+        Some(t) => (t.to_string(), "metadata in the bag".to_string()),
+        None => {
+            let meta = root.join(s["metadata"].as_str().unwrap());
+            let text = std::fs::read_to_string(&meta).unwrap();
+            (text, meta.to_string_lossy().into_owned())
+        }
+    };
+    let info = parse(&text, &meta_name).unwrap_or_else(|e| panic!("{what}: {e}"));
     check_info(&info, s, &what);
     let mut fig = Figures {
         capture: short,
@@ -652,6 +661,7 @@ fn ouster_goldens_match_ouster_sdk() {
                 si,
                 &datagrams,
                 gp.parent().unwrap(),
+                None,
             ));
         }
     }
@@ -687,4 +697,48 @@ fn ouster_goldens_match_ouster_sdk() {
     println!("total: {total} points compared, max |Δxyz| {max:.4} mm");
     let bad: Vec<_> = all.iter().filter(|f| f.mismatches > 0).collect();
     assert!(bad.is_empty(), "mismatches: {bad:#?}");
+}
+
+#[test]
+fn ouster_bag_golden_matches_ouster_sdk() {
+    use ringscan::source::bag::{BagOptions, BagSource};
+    let Some(root) = common::captures() else {
+        return;
+    };
+    let idx = json(&root.join("golden/index.json"));
+    let g = idx["goldens"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|g| g["capture"].as_str().is_some_and(|c| c.ends_with(".bag")))
+        .expect("the golden of the ROS 1 bag");
+    let gp = root.join("golden").join(g["golden"].as_str().unwrap());
+    let g = json(&gp);
+    let bag = root.join(g["capture"].as_str().unwrap());
+    let mut src = BagSource::open(&bag, BagOptions::default()).unwrap();
+    let metadata = src.sensors()[0]
+        .metadata
+        .clone()
+        .expect("metadata in the bag");
+    let mut datagrams = Vec::new();
+    while let Some(d) = src.next_datagram().unwrap() {
+        datagrams.push(Dgram {
+            src: d.src,
+            port: d.dst.port(),
+            payload: d.payload.to_vec(),
+        });
+    }
+    let fig = check_sensor(
+        &root,
+        &g,
+        0,
+        &datagrams,
+        gp.parent().unwrap(),
+        Some(&metadata),
+    );
+    println!("{fig:?}");
+    assert_eq!(fig.frames, 1);
+    assert_eq!(fig.packets, 32);
+    assert_eq!(fig.points_compared[0], 28_751);
+    assert_eq!(fig.mismatches, 0, "{fig:?}");
 }

@@ -49,6 +49,10 @@ fn replay(file: &str) {
         "tum_poses" => harness::tum_poses(&data),
         "http_response" => harness::http_response(&data),
         "live_view_requests" => harness::live_view_requests(&data),
+        "bag_ros1" => harness::bag_ros1(&data),
+        "bag_messages" => harness::bag_messages(&data),
+        "bag_metadata" => harness::bag_metadata(&data),
+        "bag_mcap" => harness::bag_mcap(&data),
         other => panic!("{file}: no fuzz target named {other:?}"),
     }
 }

@@ -8,6 +8,9 @@
 //!   (the reference rounds the interpolated azimuth to 0.01°), same ring, same return, time
 //!   relative to the frame's last packet within 1 µs; at least 99.9 % of points must match.
 //!
+//! The same frames are checked with the packets of nebula's `.db3` bags the two converted pcaps
+//! come from (read by `source::bag`), so a bag decodes to the reference's points too.
+//!
 //! The figures are printed (`cargo test --test velodyne_golden -- --nocapture`).
 
 mod common;
@@ -53,7 +56,12 @@ fn golden_files(root: &std::path::Path) -> Vec<std::path::PathBuf> {
     out
 }
 
-fn check_capture(root: &std::path::Path, golden_path: &std::path::Path) -> Figures {
+/// `bag`: take the packets from this bag instead of the golden's capture.
+fn check_capture(
+    root: &std::path::Path,
+    golden_path: &std::path::Path,
+    bag: Option<&std::path::Path>,
+) -> Figures {
     let g: Value = serde_json::from_slice(&std::fs::read(golden_path).unwrap()).unwrap();
     let capture = root.join(g["capture"].as_str().unwrap());
     let cfg = &g["config"];
@@ -65,7 +73,11 @@ fn check_capture(root: &std::path::Path, golden_path: &std::path::Path) -> Figur
     )
     .unwrap();
 
-    let packets: Vec<(i64, Vec<u8>)> = common::datagrams(&capture)
+    let datagrams = match bag {
+        Some(b) => common::bag_datagrams(b),
+        None => common::datagrams(&capture),
+    };
+    let packets: Vec<(i64, Vec<u8>)> = datagrams
         .into_iter()
         .filter(|(_, _, p)| p.len() == 1206)
         .map(|(t, _, p)| (t, p))
@@ -212,7 +224,7 @@ fn every_velodyne_capture_matches_velodyne_decoder() {
     println!("| capture | frames | points | dumped points | matched | max |Δxyz| mm | max Δt µs |");
     println!("|---|---|---|---|---|---|---|");
     for gp in files {
-        let fig = check_capture(&root, &gp);
+        let fig = check_capture(&root, &gp, None);
         let name = gp
             .file_name()
             .unwrap()
@@ -234,4 +246,39 @@ fn every_velodyne_capture_matches_velodyne_decoder() {
             "{name}: only {pct:.3} % of points match ({fig:?})"
         );
     }
+}
+
+#[test]
+fn nebula_bags_match_velodyne_decoder() {
+    let Some(root) = common::captures() else {
+        return;
+    };
+    let mut checked = 0;
+    for gp in golden_files(&root) {
+        let g: Value = serde_json::from_slice(&std::fs::read(&gp).unwrap()).unwrap();
+        let capture = root.join(g["capture"].as_str().unwrap());
+        let bag = capture.with_extension("db3");
+        if !bag.is_file() {
+            continue;
+        }
+        // The directory (metadata.yaml + .db3) and the bare .db3.
+        for input in [capture.parent().unwrap(), bag.as_path()] {
+            let fig = check_capture(&root, &gp, Some(input));
+            let pct = 100.0 * fig.binary_matched as f64 / fig.binary_points.max(1) as f64;
+            println!(
+                "{}: {} frames, {} points, {} of {} dumped points match ({pct:.4} %)",
+                input.display(),
+                fig.frames,
+                fig.points,
+                fig.binary_matched,
+                fig.binary_points
+            );
+            assert!(pct >= 99.9, "{}: only {pct:.3} % match", input.display());
+            checked += 1;
+        }
+    }
+    assert_eq!(
+        checked, 4,
+        "the VLP-16 and VLP-32C bags, as directory and as .db3"
+    );
 }

@@ -1,5 +1,6 @@
 //! Command-line front end: clap commands, progress, exit codes. No algorithms live here.
 
+mod input;
 mod listen;
 mod odometry;
 mod pipeline;
@@ -74,7 +75,8 @@ pub enum FieldsArg {
 
 #[derive(clap::Args, Debug)]
 struct DecodeCmd {
-    /// Input capture (.pcap or .pcapng).
+    /// Input capture (.pcap or .pcapng) or ROS bag (ROS 1 .bag; rosbag2 directory, .db3 or
+    /// .mcap), told apart by its bytes.
     input: PathBuf,
     /// Output MCAP file (omit to decode and count only).
     #[arg(long, short)]
@@ -130,6 +132,8 @@ struct DecodeCmd {
     odometry: odometry::OdometryArgs,
     #[command(flatten)]
     serve: serve::ServeArgs,
+    #[command(flatten)]
+    bag: input::BagArgs,
     /// With --serve: publish sweeps at this speed of their capture times (`1.0` = as recorded,
     /// `2`, `0.5`, or `max` = as fast as they are decoded).
     #[arg(long, value_name = "FACTOR|max", default_value = "1.0", value_parser = replay::parse_rate)]
@@ -138,7 +142,7 @@ struct DecodeCmd {
 
 #[derive(clap::Args, Debug)]
 struct InfoCmd {
-    /// Input capture (.pcap or .pcapng).
+    /// Input capture (.pcap or .pcapng) or ROS bag, as for `decode`.
     input: PathBuf,
     /// Sensor model, overriding detection.
     #[arg(long)]
@@ -149,6 +153,8 @@ struct InfoCmd {
     /// Print JSON instead of text.
     #[arg(long)]
     json: bool,
+    #[command(flatten)]
+    bag: input::BagArgs,
 }
 
 #[derive(clap::Args, Debug)]
@@ -238,7 +244,9 @@ struct ListenCmd {
 
 #[derive(clap::Args, Debug)]
 struct ReplayCmd {
-    /// Input capture (.pcap or .pcapng).
+    /// Input capture (.pcap or .pcapng) or ROS bag: a bag's packets go to their family's
+    /// ports (Velodyne, Hesai 2368; Ouster from the bag's metadata, else 7502 / 7503;
+    /// Robosense 6699 / 7788).
     input: PathBuf,
     /// Destination IPv4 address; each datagram goes to its original destination port.
     #[arg(long)]
@@ -253,7 +261,8 @@ struct ReplayCmd {
     #[arg(long = "loop", default_value_t = 1)]
     loops: u32,
     /// Send each original source address's datagrams from its own loopback address
-    /// (127.0.0.1, 127.0.0.2, … in order of appearance), so `listen` tells them apart.
+    /// (127.0.0.1, 127.0.0.2, … in order of appearance; a bag's sensors from the 127.0.0.N
+    /// `info` lists), so `listen` tells them apart.
     #[arg(long)]
     per_source_loopback: bool,
     /// Stop sending after this many seconds.
@@ -262,6 +271,8 @@ struct ReplayCmd {
     /// Print a JSON summary.
     #[arg(long)]
     json: bool,
+    #[command(flatten)]
+    bag: input::BagArgs,
 }
 
 fn init_logging(verbose: u8) {
@@ -311,10 +322,13 @@ pub fn main() -> ExitCode {
                 odometry: c.odometry,
                 serve: c.serve,
                 serve_rate: c.serve_rate,
+                bag: c.bag,
             };
             run::decode_command(&args)
         }
-        Command::Info(c) => run::info_command(&c.input, c.model.as_deref(), &c.calib, c.json),
+        Command::Info(c) => {
+            run::info_command(&c.input, c.model.as_deref(), &c.calib, &c.bag, c.json)
+        }
         Command::Demo(c) => run::demo_command(&c.out, c.json),
         Command::Listen(c) => {
             let duration = match c.duration {
@@ -376,6 +390,7 @@ pub fn main() -> ExitCode {
             loops: c.loops,
             per_source_loopback: c.per_source_loopback,
             json: c.json,
+            bag: c.bag,
         }),
         Command::Render(c) => render::render_command(&c),
     };

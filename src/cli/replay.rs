@@ -7,10 +7,10 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
-use ringscan::source::pcap::PcapSource;
 use ringscan::source::udp::{due_offset, Rate};
 use serde_json::json;
 
+use super::input::{self, BagArgs, Input};
 use super::run::RunError;
 
 /// Everything `replay` needs.
@@ -27,6 +27,8 @@ pub struct ReplayArgs {
     /// Stop sending after this long.
     pub duration: Option<Duration>,
     pub json: bool,
+    /// `--topic`, `--start`, `--end` (bags).
+    pub bag: BagArgs,
 }
 
 /// Parses `--rate`: a positive factor or `max`.
@@ -45,6 +47,8 @@ pub fn parse_rate(s: &str) -> Result<Rate, String> {
 /// Sockets, one per sending address.
 struct Senders {
     per_source: bool,
+    /// Bind to the source address itself (a bag's sensors already come from 127.0.0.N).
+    exact: bool,
     sockets: Vec<UdpSocket>,
     by_source: HashMap<Ipv4Addr, usize>,
 }
@@ -66,7 +70,11 @@ impl Senders {
                             "--per-source-loopback: more than 254 source addresses".into(),
                         ));
                     }
-                    Ipv4Addr::new(127, 0, 0, k as u8 + 1)
+                    if self.exact {
+                        src
+                    } else {
+                        Ipv4Addr::new(127, 0, 0, k as u8 + 1)
+                    }
                 } else {
                     Ipv4Addr::UNSPECIFIED
                 };
@@ -89,7 +97,7 @@ impl Senders {
 /// `ringscan replay`.
 pub fn replay_command(args: &ReplayArgs) -> Result<ExitCode, RunError> {
     let path_s = args.input.display().to_string();
-    let serr = |err| RunError::Source {
+    let serr = |err: input::InputError| RunError::Source {
         path: path_s.clone(),
         err,
     };
@@ -101,6 +109,7 @@ pub fn replay_command(args: &ReplayArgs) -> Result<ExitCode, RunError> {
     }
     let mut senders = Senders {
         per_source: args.per_source_loopback,
+        exact: false,
         sockets: Vec::new(),
         by_source: HashMap::new(),
     };
@@ -111,7 +120,8 @@ pub fn replay_command(args: &ReplayArgs) -> Result<ExitCode, RunError> {
     let mut last_rel_ns: i64 = 0;
     let over = |started: &Instant| args.duration.is_some_and(|d| started.elapsed() >= d);
     'loops: for _ in 0..args.loops.max(1) {
-        let mut src = PcapSource::open(&args.input).map_err(serr)?;
+        let mut src = input::open(&args.input, &args.bag)?;
+        senders.exact = matches!(src, Input::Bag(_));
         let mut loop_first: Option<i64> = None;
         while let Some(d) = src.next_datagram().map_err(serr)? {
             if over(&started) {

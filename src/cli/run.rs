@@ -13,11 +13,11 @@ use ringscan::sink::mcap::{
     create_file, Compression, Format, SensorId, SensorInfo, SinkOptions, SinkSummary, SweepMsg,
 };
 use ringscan::sink::{McapSink, SinkError};
-use ringscan::source::pcap::{PcapSource, SourceError, SourceStats};
-use ringscan::sweep::Demux;
-use ringscan::sweep::Sweep;
+use ringscan::source::pcap::PcapSource;
+use ringscan::sweep::{Demux, Sweep};
 use serde_json::{json, Value};
 
+use super::input::{self, BagArgs, Input, InputError};
 use super::odometry::{OdometryArgs, OdometryRunner};
 use super::pipeline::{PipelineArgs, PipelineRunner};
 use super::sensors::{self, load_calibs, Chooser};
@@ -63,6 +63,8 @@ pub struct DecodeArgs {
     pub pipeline: PipelineArgs,
     /// `--odometry`, `--trajectory`, `--map-every`.
     pub odometry: OdometryArgs,
+    /// `--topic`, `--start`, `--end` (bags).
+    pub bag: BagArgs,
 }
 
 /// Why a run failed.
@@ -71,9 +73,9 @@ pub enum RunError {
     /// Bad command-line usage (exit code 2).
     #[error("{0}")]
     Usage(String),
-    /// The capture could not be read.
+    /// The capture or bag could not be read.
     #[error("{path}: {err}")]
-    Source { path: String, err: SourceError },
+    Source { path: String, err: InputError },
     /// A calibration file could not be used.
     #[error("calibration {path}: {msg}")]
     Calib { path: String, msg: String },
@@ -359,7 +361,7 @@ pub struct Summary {
     pub lost: u64,
 }
 
-fn prescan<R: Read>(mut src: PcapSource<R>, port: Option<u16>, sizes: &[usize]) -> usize {
+fn prescan<R: Read>(mut src: Input<R>, port: Option<u16>, sizes: &[usize]) -> usize {
     let mut addrs: Vec<Ipv4Addr> = Vec::new();
     for _ in 0..PRESCAN_DATAGRAMS {
         match src.next_datagram() {
@@ -428,7 +430,7 @@ pub struct Session {
 
 /// Why [`Session::push`] or [`Session::finish_streams`] stopped.
 pub enum PumpError {
-    Source(SourceError),
+    Source(InputError),
     Stream(usize, StreamError),
     Sink(SinkError),
 }
@@ -930,20 +932,24 @@ impl std::str::FromStr for ChunkCompression {
 pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
     let started = Instant::now();
     let path_s = args.input.display().to_string();
-    let serr = |err: SourceError| RunError::Source {
-        path: path_s.clone(),
-        err,
+    let open = || -> Result<Input<Box<dyn Read>>, RunError> {
+        match args.input_bytes {
+            Some(b) => Ok(Input::Pcap(Box::new(
+                PcapSource::new(Box::new(b) as Box<dyn Read>).map_err(|err| RunError::Source {
+                    path: path_s.clone(),
+                    err: err.into(),
+                })?,
+            ))),
+            None => input::open(&args.input, &args.bag),
+        }
     };
     let mut session = Session::new(&args.session_options())?;
+    let first = open()?;
+    if let Some(b) = first.bag() {
+        add_bag_metadata(&mut session, b, &args.calib);
+    }
     let sizes = session.lidar_sizes();
-    let n_sensors_hint = match args.input_bytes {
-        Some(b) => prescan(PcapSource::new(b).map_err(serr)?, args.port, &sizes),
-        None => prescan(
-            PcapSource::open(&args.input).map_err(serr)?,
-            args.port,
-            &sizes,
-        ),
-    };
+    let n_sensors_hint = prescan(first, args.port, &sizes);
     if args.name.is_some() && n_sensors_hint > 1 {
         return Err(RunError::Usage(format!("--name: the capture holds {n_sensors_hint} sensors; names are given per sensor automatically")));
     }
@@ -960,52 +966,26 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
         &args.serve,
         Some(args.serve_rate),
     )?);
-    let result = match args.input_bytes {
-        Some(b) => pump(PcapSource::new(b).map_err(serr)?, &mut session, None),
-        None => {
-            let total = std::fs::metadata(&args.input).map(|m| m.len()).ok();
-            pump(
-                PcapSource::open(&args.input).map_err(serr)?,
-                &mut session,
-                total,
-            )
-        }
+    let total = match args.input_bytes {
+        Some(_) => None,
+        None => std::fs::metadata(&args.input)
+            .ok()
+            .filter(|m| m.is_file())
+            .map(|m| m.len()),
     };
+    let mut src = open()?;
     // Finalise the output on success and on error alike: the file is always a valid MCAP.
-    let source_stats = match result {
-        Ok(stats) => stats,
-        Err(e) => {
-            let _ = session.close_sink();
-            return Err(session.run_error(e, &path_s));
-        }
-    };
+    if let Err(e) = pump(&mut src, &mut session, total) {
+        let _ = session.close_sink();
+        return Err(session.run_error(e, &path_s));
+    }
     let sink_summary = session.close_sink()?;
     session.finish_odometry()?;
     let elapsed = started.elapsed().as_secs_f64();
 
     let (mut m, lost) = session.summary();
-    let cap = &source_stats;
-    let duration_s = match (cap.first_time_ns, cap.last_time_ns) {
-        (Some(a), Some(b)) => (b - a) as f64 * 1e-9,
-        _ => 0.0,
-    };
     m.insert("input".into(), json!(path_s));
-    m.insert(
-        "capture".into(),
-        json!({
-            "records": cap.records,
-            "bytes": cap.bytes,
-            "datagrams": cap.datagrams,
-            "non_udp": cap.non_udp,
-            "malformed_records": cap.malformed,
-            "fragments": cap.fragments,
-            "reassembled": cap.reassembled,
-            "fragments_expired": cap.fragments_expired,
-            "truncated_records": cap.truncated_records,
-            "truncated_tail_offset": cap.truncated_tail,
-            "duration_s": duration_s,
-        }),
-    );
+    m.insert("capture".into(), src.capture_json());
     m.insert(
         "output".into(),
         match &sink_summary {
@@ -1020,11 +1000,41 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
     })
 }
 
+/// A bag's Ouster metadata configures its sensor unless `--calib` binds a file to that
+/// sensor's address; an unbound `--calib` metadata that fits the sensor is matched first.
+fn add_bag_metadata(
+    session: &mut Session,
+    bag: &ringscan::source::bag::BagSource,
+    calib: &[String],
+) {
+    for s in bag.sensors() {
+        let Some(text) = &s.metadata else { continue };
+        let bound = calib.iter().any(|c| {
+            c.split_once('=')
+                .and_then(|(a, _)| a.parse::<Ipv4Addr>().ok())
+                == Some(s.address)
+        });
+        if bound {
+            continue;
+        }
+        let ns = s.namespace.trim_matches('/').replace('/', "_");
+        let name = if ns.is_empty() {
+            "metadata.json".to_string()
+        } else {
+            format!("{ns}.metadata.json")
+        };
+        match sensors::calibration(text.as_bytes(), &name, Some(s.address)) {
+            Ok(spec) => session.add_calib(spec),
+            Err(e) => tracing::warn!("{}: the bag's metadata is not used: {e}", s.namespace),
+        }
+    }
+}
+
 fn pump<R: Read>(
-    mut src: PcapSource<R>,
+    src: &mut Input<R>,
     session: &mut Session,
     total_bytes: Option<u64>,
-) -> Result<SourceStats, PumpError> {
+) -> Result<(), PumpError> {
     let progress = total_bytes.is_some() && std::io::stderr().is_terminal();
     let mut last_progress = Instant::now();
     loop {
@@ -1036,7 +1046,7 @@ fn pump<R: Read>(
         session.push(d.time_ns, d.src, d.dst.port(), d.payload)?;
         if progress && last_progress.elapsed().as_millis() >= 500 {
             last_progress = Instant::now();
-            let done = src.stats().bytes;
+            let done = src.bytes();
             let total = total_bytes.unwrap_or(1).max(1);
             let (sweeps, points) = session.totals();
             eprint!(
@@ -1052,7 +1062,7 @@ fn pump<R: Read>(
     if progress {
         eprintln!();
     }
-    Ok(src.stats().clone())
+    Ok(())
 }
 
 /// `ringscan decode`.
@@ -1077,6 +1087,7 @@ pub fn info_command(
     input: &Path,
     model: Option<&str>,
     calib: &[String],
+    bag: &BagArgs,
     json_out: bool,
 ) -> Result<ExitCode, RunError> {
     let args = DecodeArgs {
@@ -1101,6 +1112,7 @@ pub fn info_command(
         odometry: OdometryArgs::default(),
         serve: Default::default(),
         serve_rate: ringscan::source::udp::Rate::Max,
+        bag: bag.clone(),
     };
     let s = decode_capture(&args)?;
     if json_out {
@@ -1135,6 +1147,7 @@ pub fn demo_command(out: &Path, json_out: bool) -> Result<ExitCode, RunError> {
         odometry: OdometryArgs::default(),
         serve: Default::default(),
         serve_rate: ringscan::source::udp::Rate::Max,
+        bag: BagArgs::default(),
     };
     let s = decode_capture(&args)?;
     if json_out {
@@ -1164,6 +1177,34 @@ fn print_text(j: &Value) {
             None => String::new(),
         }
     );
+    if let Some(b) = c["bag"].as_object() {
+        println!(
+            "  bag ({}): {} messages, {} with packets; unknown types {}, malformed {}, other topics {}, outside the time window {}",
+            b["kind"].as_str().unwrap_or(""),
+            g(&b["messages"]),
+            g(&b["packet_messages"]),
+            g(&b["unknown_type"]),
+            g(&b["malformed"]),
+            g(&b["unselected"]),
+            g(&b["outside_time"])
+        );
+        for s in b["sensors"].as_array().into_iter().flatten() {
+            println!(
+                "    {} ({}) as {}, ports {}/{}: {}{}",
+                s["namespace"].as_str().unwrap_or(""),
+                s["family"].as_str().unwrap_or(""),
+                s["address"].as_str().unwrap_or(""),
+                s["data_port"],
+                s["aux_port"],
+                s["topics"],
+                if s["metadata_in_bag"] == true {
+                    ", metadata in the bag"
+                } else {
+                    ""
+                }
+            );
+        }
+    }
     for s in j["sensors"].as_array().into_iter().flatten() {
         let st = |k: &str| s[k].as_str().unwrap_or("-").to_string();
         if s["kind"] == "ouster" {

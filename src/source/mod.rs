@@ -1,9 +1,11 @@
-//! Edge: where datagrams come from (pcap / pcapng captures, live UDP sockets).
+//! Edge: where datagrams come from (pcap / pcapng captures, ROS bags, live UDP sockets).
 //!
 //! Knows nothing of packet formats: it yields [`Datagram`]s.
 
 use std::net::SocketAddrV4;
 
+#[cfg(feature = "bag")]
+pub mod bag;
 pub mod link;
 #[cfg(feature = "pcap")]
 pub mod pcap;

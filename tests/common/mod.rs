@@ -49,3 +49,19 @@ pub fn datagrams(path: &Path) -> Vec<(i64, u16, Vec<u8>)> {
     }
     out
 }
+
+/// Every datagram of a ROS bag (any kind `source::bag` reads) with its time and destination
+/// port, in bag order.
+pub fn bag_datagrams(path: &Path) -> Vec<(i64, u16, Vec<u8>)> {
+    use ringscan::source::bag::{BagOptions, BagSource};
+    let mut src = BagSource::open(path, BagOptions::default())
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut out = Vec::new();
+    while let Some(d) = src
+        .next_datagram()
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+    {
+        out.push((d.time_ns, d.dst.port(), d.payload.to_vec()));
+    }
+    out
+}

@@ -2132,3 +2132,128 @@ pub fn live_view_requests(data: &[u8]) {
         }
     }
 }
+
+// ----- bags (source::bag) ---------------------------------------------------------------------
+
+/// The packets of one message of `kind`: each inside the message; at most one per 1 byte of
+/// it (a packet takes at least its stamp or length field).
+fn bag_check_packets(
+    kind: ringscan::source::bag::messages::MsgKind,
+    enc: ringscan::source::bag::messages::Encoding,
+    msg: &[u8],
+    out: &mut Vec<ringscan::source::bag::messages::PacketRef>,
+) {
+    use ringscan::source::bag::messages;
+    match messages::packets(kind, enc, msg, out) {
+        Ok(()) => {
+            assert!(out.len() <= msg.len().max(1));
+            for p in out.iter() {
+                assert!(p.start.checked_add(p.len).is_some_and(|e| e <= msg.len()));
+            }
+        }
+        Err(_) => assert!(out.is_empty(), "packets left after an error"),
+    }
+    if let Ok((a, n)) = messages::string(enc, msg) {
+        assert!(a + n <= msg.len());
+    }
+}
+
+/// `bag_messages`: byte 0 picks the type and the encoding, the rest is one message.
+pub fn bag_messages(data: &[u8]) {
+    use ringscan::source::bag::messages::{Encoding, MsgKind};
+    let Some((&sel, msg)) = data.split_first() else {
+        return;
+    };
+    let kinds = [
+        MsgKind::VelodyneScan,
+        MsgKind::OusterPacket,
+        MsgKind::PandarScan,
+        MsgKind::NebulaPackets,
+        MsgKind::HesaiUdpFrame,
+        MsgKind::RobosenseScan,
+        MsgKind::RslidarPacket,
+        MsgKind::StdString,
+    ];
+    let kind = kinds[usize::from(sel & 7)];
+    let enc = if sel & 8 == 0 {
+        Encoding::Cdr
+    } else {
+        Encoding::Ros1
+    };
+    let mut out = Vec::new();
+    bag_check_packets(kind, enc, msg, &mut out);
+}
+
+/// Reads every message of a bag-format reader, checking each one's packets.
+fn bag_drain(
+    mut next: impl FnMut(
+        &mut Vec<u8>,
+    ) -> Option<(String, Option<ringscan::source::bag::messages::Encoding>)>,
+) -> usize {
+    use ringscan::source::bag::messages::MsgKind;
+    let (mut buf, mut out, mut n) = (Vec::new(), Vec::new(), 0usize);
+    while let Some((type_name, enc)) = next(&mut buf) {
+        assert!(buf.len() <= ringscan::source::bag::MAX_MESSAGE_BYTES);
+        if let (Some(kind), Some(enc)) = (MsgKind::from_type_name(&type_name), enc) {
+            bag_check_packets(kind, enc, &buf, &mut out);
+        }
+        n += 1;
+    }
+    n
+}
+
+/// `bag_ros1`: any bytes as a ROS 1 bag (`Ros1Reader` over a slice).
+pub fn bag_ros1(data: &[u8]) {
+    use ringscan::source::bag::ros1::Ros1Reader;
+    let Ok(mut r) = Ros1Reader::new(data) else {
+        return;
+    };
+    let mut errors = 0;
+    bag_drain(|buf| match r.next_message(buf) {
+        Ok(Some(m)) => {
+            let c = r.connection(m.conn);
+            Some((
+                c.map(|c| c.type_name.clone()).unwrap_or_default(),
+                c.and_then(|c| c.encoding),
+            ))
+        }
+        Ok(None) => None,
+        Err(_) => {
+            errors += 1;
+            None
+        }
+    });
+    assert!(r.offset() <= data.len() as u64);
+    // Fused after the end or an error.
+    let mut buf = Vec::new();
+    assert!(matches!(r.next_message(&mut buf), Ok(None)));
+}
+
+/// `bag_mcap`: any bytes as an MCAP file of ROS messages (`McapReader` over a slice).
+pub fn bag_mcap(data: &[u8]) {
+    use ringscan::source::bag::mcap_in::McapReader;
+    let mut r = McapReader::new(data);
+    bag_drain(|buf| match r.next_message(buf) {
+        Ok(Some(m)) => {
+            let c = r.connection(m.conn);
+            Some((
+                c.map(|c| c.type_name.clone()).unwrap_or_default(),
+                c.and_then(|c| c.encoding),
+            ))
+        }
+        _ => None,
+    });
+    assert!(r.offset() <= data.len() as u64);
+}
+
+/// `bag_metadata`: any bytes as a rosbag2 `metadata.yaml`.
+pub fn bag_metadata(data: &[u8]) {
+    use ringscan::source::bag::rosbag2::Metadata;
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    if let Ok(m) = Metadata::parse(text) {
+        assert!(m.files.len() <= text.len());
+        assert!(m.topics.len() <= text.len());
+    }
+}

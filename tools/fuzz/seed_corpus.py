@@ -386,6 +386,7 @@ def main():
             if hdr0 is not None:
                 put("ouster_stream", hdr0 + bytes([6]) + bytes(stream_ops[:60000]), "real")
     put("calib_ouster", b"\xa5" + ouster_header(1, 1, 0, 0), "gen")
+    bag_seeds()
     for prof in range(8):
         for hi in range(4):
             put("ouster_packet", ouster_header(prof, 1, hi, 0) + b"\0" + bytes(rng.randrange(256) for _ in range(3000)), "rand")
@@ -394,6 +395,45 @@ def main():
 
     for t in sorted(os.listdir(CORPUS)):
         print(f"{t}: {len(os.listdir(CORPUS / t))} seeds")
+
+
+def bag_seeds():
+    """Seeds of the bag targets from fixtures/bags: ROS 1 bags cut to 60 KB, the MCAP
+    decompressed, metadata.yaml files, and single messages of each type (from a ROS 1 bag's
+    uncompressed records where present, else synthesised)."""
+    bags = REPO / "fixtures" / "bags"
+    for p in sorted(bags.glob("*.bag")):
+        put("bag_ros1", p.read_bytes()[:60000], p.stem)
+    for p in sorted(bags.glob("*/metadata.yaml")):
+        put("bag_metadata", p.read_bytes(), p.parent.name)
+    try:
+        import zstandard  # noqa: F401  (only when available)
+    except ImportError:
+        zstandard = None
+    for p in sorted(bags.glob("*/*.mcap.zstd")):
+        if zstandard is not None:
+            raw = zstandard.ZstdDecompressor().decompressobj().decompress(p.read_bytes())
+        else:
+            import shutil
+            import subprocess
+
+            if not shutil.which("zstd"):
+                continue
+            raw = subprocess.run(["zstd", "-dc", str(p)], capture_output=True, check=True).stdout
+        put("bag_mcap", raw[:60000], p.stem)
+    for p in sorted(bags.glob("*/*.mcap")):
+        put("bag_mcap", p.read_bytes()[:60000], p.stem)
+    # CDR VelodyneScan with 2 packets, and small messages of the other types.
+    scan = bytearray(b"\x00\x01\x00\x00" + struct.pack("<iI", 1, 2) + struct.pack("<I", 2) + b"v\x00\x00\x00")
+    scan += struct.pack("<I", 2)
+    for i in range(2):
+        scan += struct.pack("<iI", 10 + i, 5) + bytes([i]) * 1206 + b"\x00\x00"
+    put("bag_messages", b"\x00" + bytes(scan), "velodyne-cdr")
+    put("bag_messages", b"\x01" + b"\x00\x01\x00\x00" + struct.pack("<I", 8) + bytes(8), "ouster-cdr")
+    put("bag_messages", b"\x09" + struct.pack("<I", 8) + bytes(8), "ouster-ros1")
+    put("bag_messages", b"\x07" + b"\x00\x01\x00\x00" + struct.pack("<I", 3) + b"{}\x00", "string-cdr")
+    for sel in (2, 3, 4, 5, 6):
+        put("bag_messages", bytes([sel]) + bytes(scan), f"scan-as-{sel}")
 
 
 if __name__ == "__main__":

@@ -1,0 +1,550 @@
+//! ROS packet messages → the UDP payloads they carry.
+//!
+//! In: a message's serialized bytes, its recorded type name and its encoding (ROS 1
+//! serialization or CDR). Out: one [`PacketRef`] per packet (a range of the message bytes and
+//! the packet's own stamp, when the type has one). Pure functions: no I/O, no allocation beyond
+//! the caller's `Vec`, never a panic on any input.
+//!
+//! # The message types (fields as recorded; names learnt from the public definitions)
+//!
+//! | type (ROS 2 name; ROS 1 without `/msg`) | layout | packet stamp |
+//! |---|---|---|
+//! | `velodyne_msgs/msg/VelodyneScan` | Header, `VelodynePacket[]` = {time stamp, uint8\[1206\] data} | each packet's |
+//! | `ouster_ros/PacketMsg`, `ouster_sensor_msgs/msg/PacketMsg`, `ouster_msgs/msg/PacketMsg` | uint8\[\] buf | none (record time) |
+//! | `pandar_msgs/msg/PandarScan` | Header, `PandarPacket[]` = {time stamp, uint8\[1500\] data, uint32 size}: the first `size` bytes | each packet's |
+//! | `nebula_msgs/msg/NebulaPackets` | Header, `NebulaPacket[]` = {time stamp, uint8\[\] data} | each packet's |
+//! | `hesai_ros_driver/msg/UdpFrame` | Header, `UdpPacket[]` = {time stamp, uint8\[\] data, uint32 size}: the first `size` bytes | each packet's |
+//! | `robosense_msgs/msg/RobosenseScan` | Header, `RobosensePacket[]`, either {time stamp, uint8 is_difop, uint8\[1500\] data, uint32 size} (nebula PR #79) or {time stamp, uint8\[1248\] data, uint32 size} (nebula main): the variant whose layout consumes the message exactly | each packet's |
+//! | `rslidar_msg/msg/RslidarPacket` | Header, uint8 is_difop, uint8 is_frame_begin, uint8\[\] data | its header's |
+//! | `std_msgs/msg/String` | string data (Ouster metadata JSON) | — |
+//!
+//! ROS 1 serialization: little-endian, no padding, `time` = u32 sec + u32 nsec, Header = u32
+//! seq + time + string, strings and arrays prefixed by a u32 count. CDR (ROS 2): a 4-byte
+//! encapsulation header (`00 01` little-endian, `00 00` big-endian), then every primitive aligned
+//! to its size counted from the end of that header; `builtin_interfaces/Time` = i32 sec + u32
+//! nanosec; Header = Time + string; strings carry their NUL in the count.
+
+use core::fmt;
+
+/// A decoded message's packets are never more than this many (a bound on the caller's `Vec`).
+pub const MAX_PACKETS_PER_MESSAGE: usize = 1 << 20;
+
+/// How a message is serialized.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Encoding {
+    /// ROS 1 serialization (ROS 1 bags; MCAP `ros1`).
+    Ros1,
+    /// CDR (rosbag2; MCAP `cdr`).
+    Cdr,
+}
+
+/// The message types ringscan reads, by recorded type name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum MsgKind {
+    /// `velodyne_msgs/VelodyneScan`.
+    VelodyneScan,
+    /// `ouster_ros/PacketMsg`, `ouster_sensor_msgs/PacketMsg`, `ouster_msgs/PacketMsg`.
+    OusterPacket,
+    /// `pandar_msgs/PandarScan`.
+    PandarScan,
+    /// `nebula_msgs/NebulaPackets`.
+    NebulaPackets,
+    /// `hesai_ros_driver/UdpFrame`.
+    HesaiUdpFrame,
+    /// `robosense_msgs/RobosenseScan`.
+    RobosenseScan,
+    /// `rslidar_msg/RslidarPacket`.
+    RslidarPacket,
+    /// `std_msgs/String` (Ouster metadata on `<ns>/metadata`).
+    StdString,
+}
+
+impl MsgKind {
+    /// The kind of a recorded type name (`pkg/Type` or `pkg/msg/Type`), if ringscan reads it.
+    pub fn from_type_name(name: &str) -> Option<Self> {
+        let name = name.trim();
+        let (pkg, ty) = name.split_once('/')?;
+        let ty = ty.strip_prefix("msg/").unwrap_or(ty);
+        Some(match (pkg, ty) {
+            ("velodyne_msgs", "VelodyneScan") => Self::VelodyneScan,
+            ("ouster_ros" | "ouster_sensor_msgs" | "ouster_msgs", "PacketMsg") => {
+                Self::OusterPacket
+            }
+            ("pandar_msgs", "PandarScan") => Self::PandarScan,
+            ("nebula_msgs", "NebulaPackets") => Self::NebulaPackets,
+            ("hesai_ros_driver", "UdpFrame") => Self::HesaiUdpFrame,
+            ("robosense_msgs", "RobosenseScan") => Self::RobosenseScan,
+            ("rslidar_msg" | "rslidar_msgs", "RslidarPacket") => Self::RslidarPacket,
+            ("std_msgs", "String") => Self::StdString,
+            _ => return None,
+        })
+    }
+
+    /// Whether messages of this kind carry packets (all but `std_msgs/String`).
+    pub fn carries_packets(self) -> bool {
+        self != Self::StdString
+    }
+}
+
+/// One packet inside a message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PacketRef {
+    /// Byte range of the payload in the message bytes.
+    pub start: usize,
+    /// Payload length.
+    pub len: usize,
+    /// The packet's own stamp (ns since the Unix epoch), where its type has one.
+    pub stamp_ns: Option<i64>,
+    /// A Robosense DIFOP (device information) packet rather than MSOP data.
+    pub difop: bool,
+}
+
+/// Why a message could not be read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum MsgError {
+    /// The message ends before a field.
+    #[error("message ends at byte {len}, a field at byte {offset} needs {need} bytes")]
+    Short {
+        /// Offset of the field.
+        offset: usize,
+        /// Bytes the field needs.
+        need: usize,
+        /// Message length.
+        len: usize,
+    },
+    /// A CDR encapsulation header other than plain CDR (big or little endian).
+    #[error("CDR encapsulation {0:#06x}: expected 0x0000 or 0x0001 (plain CDR)")]
+    Encapsulation(u16),
+    /// Bytes left over after the last field (a layout that does not fit the type).
+    #[error("{extra} bytes left after the last field of the message")]
+    Trailing {
+        /// Bytes left.
+        extra: usize,
+    },
+    /// More packets than a message may hold.
+    #[error("{0} packets claimed, more than the bytes or the limit allow")]
+    TooManyPackets(u64),
+}
+
+/// A cursor over message bytes that cannot panic (rustls' `Reader` pattern).
+struct Cursor<'a> {
+    buf: &'a [u8],
+    at: usize,
+    /// CDR: offsets are aligned relative to this (the end of the encapsulation header).
+    origin: usize,
+    /// CDR alignment on (ROS 1: off).
+    align: bool,
+    big_endian: bool,
+}
+
+impl<'a> Cursor<'a> {
+    fn new(buf: &'a [u8], enc: Encoding) -> Result<Self, MsgError> {
+        match enc {
+            Encoding::Ros1 => Ok(Self {
+                buf,
+                at: 0,
+                origin: 0,
+                align: false,
+                big_endian: false,
+            }),
+            Encoding::Cdr => {
+                let head = buf.get(..4).ok_or(MsgError::Short {
+                    offset: 0,
+                    need: 4,
+                    len: buf.len(),
+                })?;
+                let kind = u16::from_be_bytes([head[0], head[1]]);
+                let big_endian = match kind {
+                    0x0000 => true,
+                    0x0001 => false,
+                    k => return Err(MsgError::Encapsulation(k)),
+                };
+                Ok(Self {
+                    buf,
+                    at: 4,
+                    origin: 4,
+                    align: true,
+                    big_endian,
+                })
+            }
+        }
+    }
+
+    fn align_to(&mut self, n: usize) {
+        if self.align {
+            let rel = self.at - self.origin;
+            let pad = (n - rel % n) % n;
+            self.at = self.at.saturating_add(pad);
+        }
+    }
+
+    fn take(&mut self, n: usize) -> Result<&'a [u8], MsgError> {
+        let end = self.at.checked_add(n).filter(|&e| e <= self.buf.len());
+        match end {
+            Some(end) => {
+                let s = &self.buf[self.at..end];
+                self.at = end;
+                Ok(s)
+            }
+            None => Err(MsgError::Short {
+                offset: self.at,
+                need: n,
+                len: self.buf.len(),
+            }),
+        }
+    }
+
+    fn u8(&mut self) -> Result<u8, MsgError> {
+        Ok(self.take(1)?[0])
+    }
+
+    fn u32(&mut self) -> Result<u32, MsgError> {
+        self.align_to(4);
+        let b: [u8; 4] = self.take(4)?.try_into().unwrap_or([0; 4]);
+        Ok(if self.big_endian {
+            u32::from_be_bytes(b)
+        } else {
+            u32::from_le_bytes(b)
+        })
+    }
+
+    /// `time` (ROS 1: u32 sec) / `builtin_interfaces/Time` (CDR: i32 sec), as ns.
+    fn time(&mut self) -> Result<i64, MsgError> {
+        let sec = self.u32()?;
+        let nsec = self.u32()?;
+        let sec = if self.align {
+            i64::from(sec as i32)
+        } else {
+            i64::from(sec)
+        };
+        Ok(sec
+            .saturating_mul(1_000_000_000)
+            .saturating_add(i64::from(nsec)))
+    }
+
+    /// A string or byte sequence: u32 count then the bytes.
+    fn bytes(&mut self) -> Result<(usize, usize), MsgError> {
+        let n = self.u32()? as usize;
+        let start = self.at;
+        self.take(n)?;
+        Ok((start, n))
+    }
+
+    /// A std_msgs/Header (its stamp).
+    fn header(&mut self) -> Result<i64, MsgError> {
+        if !self.align {
+            self.u32()?; // seq
+        }
+        let stamp = self.time()?;
+        self.bytes()?; // frame_id
+        Ok(stamp)
+    }
+
+    /// The element count of a sequence whose elements take at least `min_elem` bytes.
+    fn count(&mut self, min_elem: usize) -> Result<usize, MsgError> {
+        let n = u64::from(self.u32()?);
+        let left = (self.buf.len() - self.at.min(self.buf.len())) as u64;
+        if n > MAX_PACKETS_PER_MESSAGE as u64 || n.saturating_mul(min_elem as u64) > left {
+            return Err(MsgError::TooManyPackets(n));
+        }
+        Ok(n as usize)
+    }
+
+    fn end(&self) -> Result<(), MsgError> {
+        // CDR writers may pad the end to a multiple of 4 (rosbag2's serializers do not, but
+        // some DDS ones do): up to 3 zero bytes are accepted.
+        let extra = self.buf.len().saturating_sub(self.at);
+        let pad_ok = self.align && extra < 4 && self.buf[self.at..].iter().all(|&b| b == 0);
+        if extra == 0 || pad_ok {
+            Ok(())
+        } else {
+            Err(MsgError::Trailing { extra })
+        }
+    }
+}
+
+/// Reads the packets of a message of `kind` (not [`MsgKind::StdString`]) into `out` (cleared
+/// first). On error `out` holds nothing.
+pub fn packets(
+    kind: MsgKind,
+    enc: Encoding,
+    msg: &[u8],
+    out: &mut Vec<PacketRef>,
+) -> Result<(), MsgError> {
+    out.clear();
+    let r = match kind {
+        MsgKind::VelodyneScan => scan_fixed(enc, msg, 1206, false, out),
+        MsgKind::OusterPacket => single_buf(enc, msg, out),
+        MsgKind::PandarScan => scan_fixed(enc, msg, 1500, true, out),
+        MsgKind::NebulaPackets => scan_var(enc, msg, false, out),
+        MsgKind::HesaiUdpFrame => scan_var(enc, msg, true, out),
+        MsgKind::RobosenseScan => robosense(enc, msg, out),
+        MsgKind::RslidarPacket => rslidar(enc, msg, out),
+        MsgKind::StdString => Ok(()),
+    };
+    if r.is_err() {
+        out.clear();
+    }
+    r
+}
+
+/// The text of a `std_msgs/String` message: the byte range of its data (without a trailing NUL).
+pub fn string(enc: Encoding, msg: &[u8]) -> Result<(usize, usize), MsgError> {
+    let mut c = Cursor::new(msg, enc)?;
+    let (start, mut len) = c.bytes()?;
+    c.end()?;
+    if enc == Encoding::Cdr && len > 0 && msg.get(start + len - 1) == Some(&0) {
+        len -= 1;
+    }
+    Ok((start, len))
+}
+
+/// Header + Packet[] where a packet is {time, uint8[N] data[, uint32 size]}.
+fn scan_fixed(
+    enc: Encoding,
+    msg: &[u8],
+    n: usize,
+    sized: bool,
+    out: &mut Vec<PacketRef>,
+) -> Result<(), MsgError> {
+    let mut c = Cursor::new(msg, enc)?;
+    c.header()?;
+    let count = c.count(8 + n)?;
+    out.reserve(count);
+    for _ in 0..count {
+        let stamp = c.time()?;
+        let start = c.at;
+        c.take(n)?;
+        let len = if sized { (c.u32()? as usize).min(n) } else { n };
+        out.push(PacketRef {
+            start,
+            len,
+            stamp_ns: Some(stamp),
+            difop: false,
+        });
+    }
+    c.end()
+}
+
+/// Header + Packet[] where a packet is {time, uint8[] data[, uint32 size]}.
+fn scan_var(
+    enc: Encoding,
+    msg: &[u8],
+    sized: bool,
+    out: &mut Vec<PacketRef>,
+) -> Result<(), MsgError> {
+    let mut c = Cursor::new(msg, enc)?;
+    c.header()?;
+    let count = c.count(12)?;
+    out.reserve(count);
+    for _ in 0..count {
+        let stamp = c.time()?;
+        let (start, mut len) = c.bytes()?;
+        if sized {
+            len = len.min(c.u32()? as usize);
+        }
+        out.push(PacketRef {
+            start,
+            len,
+            stamp_ns: Some(stamp),
+            difop: false,
+        });
+    }
+    c.end()
+}
+
+/// `uint8[] buf`: the whole message is one packet.
+fn single_buf(enc: Encoding, msg: &[u8], out: &mut Vec<PacketRef>) -> Result<(), MsgError> {
+    let mut c = Cursor::new(msg, enc)?;
+    let (start, len) = c.bytes()?;
+    c.end()?;
+    out.push(PacketRef {
+        start,
+        len,
+        stamp_ns: None,
+        difop: false,
+    });
+    Ok(())
+}
+
+/// Both RobosensePacket layouts; the one that consumes the message exactly wins.
+fn robosense(enc: Encoding, msg: &[u8], out: &mut Vec<PacketRef>) -> Result<(), MsgError> {
+    let with_difop = |out: &mut Vec<PacketRef>| -> Result<(), MsgError> {
+        let mut c = Cursor::new(msg, enc)?;
+        c.header()?;
+        let count = c.count(8 + 1 + 1500)?;
+        out.reserve(count);
+        for _ in 0..count {
+            let stamp = c.time()?;
+            let difop = c.u8()? != 0;
+            let start = c.at;
+            c.take(1500)?;
+            let len = (c.u32()? as usize).min(1500);
+            out.push(PacketRef {
+                start,
+                len,
+                stamp_ns: Some(stamp),
+                difop,
+            });
+        }
+        c.end()
+    };
+    match with_difop(out) {
+        Ok(()) => Ok(()),
+        Err(first) => {
+            out.clear();
+            scan_fixed(enc, msg, 1248, true, out).map_err(|_| first)
+        }
+    }
+}
+
+/// RslidarPacket: Header, is_difop, is_frame_begin, uint8[] data; stamp = the header's.
+fn rslidar(enc: Encoding, msg: &[u8], out: &mut Vec<PacketRef>) -> Result<(), MsgError> {
+    let mut c = Cursor::new(msg, enc)?;
+    let stamp = c.header()?;
+    let difop = c.u8()? != 0;
+    c.u8()?;
+    let (start, len) = c.bytes()?;
+    c.end()?;
+    out.push(PacketRef {
+        start,
+        len,
+        stamp_ns: Some(stamp),
+        difop,
+    });
+    Ok(())
+}
+
+impl fmt::Display for MsgKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let s = match self {
+            Self::VelodyneScan => "velodyne_msgs/VelodyneScan",
+            Self::OusterPacket => "ouster PacketMsg",
+            Self::PandarScan => "pandar_msgs/PandarScan",
+            Self::NebulaPackets => "nebula_msgs/NebulaPackets",
+            Self::HesaiUdpFrame => "hesai_ros_driver/UdpFrame",
+            Self::RobosenseScan => "robosense_msgs/RobosenseScan",
+            Self::RslidarPacket => "rslidar_msg/RslidarPacket",
+            Self::StdString => "std_msgs/String",
+        };
+        f.write_str(s)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A CDR VelodyneScan with `n` packets, written field by field from the layout above.
+    fn cdr_velodyne(n: usize, frame_id: &str) -> Vec<u8> {
+        let mut m = vec![0, 1, 0, 0];
+        m.extend_from_slice(&7_i32.to_le_bytes());
+        m.extend_from_slice(&9_u32.to_le_bytes());
+        m.extend_from_slice(&(frame_id.len() as u32 + 1).to_le_bytes());
+        m.extend_from_slice(frame_id.as_bytes());
+        m.push(0);
+        while (m.len() - 4) % 4 != 0 {
+            m.push(0);
+        }
+        m.extend_from_slice(&(n as u32).to_le_bytes());
+        for i in 0..n {
+            m.extend_from_slice(&(100 + i as i32).to_le_bytes());
+            m.extend_from_slice(&5_u32.to_le_bytes());
+            m.extend(std::iter::repeat_n(i as u8, 1206));
+            while (m.len() - 4) % 4 != 0 {
+                m.push(0);
+            }
+        }
+        m
+    }
+
+    #[test]
+    fn type_names_of_both_ros_versions() {
+        assert_eq!(
+            MsgKind::from_type_name("velodyne_msgs/msg/VelodyneScan"),
+            Some(MsgKind::VelodyneScan)
+        );
+        assert_eq!(
+            MsgKind::from_type_name("velodyne_msgs/VelodyneScan"),
+            Some(MsgKind::VelodyneScan)
+        );
+        assert_eq!(
+            MsgKind::from_type_name("ouster_sensor_msgs/msg/PacketMsg"),
+            Some(MsgKind::OusterPacket)
+        );
+        assert_eq!(MsgKind::from_type_name("sensor_msgs/msg/Imu"), None);
+        assert_eq!(MsgKind::from_type_name("garbage"), None);
+    }
+
+    #[test]
+    fn cdr_velodyne_scan_packets_and_stamps() {
+        // Header frame_id "velodyne" = 9 bytes with NUL: the packet count then needs padding.
+        let m = cdr_velodyne(3, "velodyne");
+        let mut out = Vec::new();
+        packets(MsgKind::VelodyneScan, Encoding::Cdr, &m, &mut out).unwrap();
+        assert_eq!(out.len(), 3);
+        for (i, p) in out.iter().enumerate() {
+            assert_eq!(p.len, 1206);
+            assert_eq!(p.stamp_ns, Some((100 + i as i64) * 1_000_000_000 + 5));
+            assert!(m[p.start..p.start + p.len].iter().all(|&b| b == i as u8));
+        }
+    }
+
+    #[test]
+    fn truncated_and_oversized_counts_are_errors_not_panics() {
+        let m = cdr_velodyne(2, "v");
+        let mut out = Vec::new();
+        // The last 2 bytes are padding to a multiple of 4, which a writer may leave out.
+        for cut in 0..m.len() - 2 {
+            assert!(packets(MsgKind::VelodyneScan, Encoding::Cdr, &m[..cut], &mut out).is_err());
+            assert!(out.is_empty());
+        }
+        let mut big = m.clone();
+        // The packet count sits after the 4-byte encapsulation, 8-byte stamp, 4+2 frame id, pad.
+        big[20..24].copy_from_slice(&u32::MAX.to_le_bytes());
+        assert_eq!(
+            packets(MsgKind::VelodyneScan, Encoding::Cdr, &big, &mut out),
+            Err(MsgError::TooManyPackets(u64::from(u32::MAX)))
+        );
+    }
+
+    #[test]
+    fn ros1_ouster_packet_msg_and_string() {
+        let mut m = 5_u32.to_le_bytes().to_vec();
+        m.extend_from_slice(b"abcde");
+        let mut out = Vec::new();
+        packets(MsgKind::OusterPacket, Encoding::Ros1, &m, &mut out).unwrap();
+        assert_eq!(
+            out,
+            vec![PacketRef {
+                start: 4,
+                len: 5,
+                stamp_ns: None,
+                difop: false
+            }]
+        );
+        assert_eq!(string(Encoding::Ros1, &m), Ok((4, 5)));
+        let cdr = [0, 1, 0, 0, 3, 0, 0, 0, b'{', b'}', 0];
+        assert_eq!(string(Encoding::Cdr, &cdr), Ok((8, 2)));
+    }
+
+    #[test]
+    fn pandar_packet_is_its_first_size_bytes() {
+        let mut m = vec![0, 1, 0, 0];
+        m.extend_from_slice(&[0; 8]); // stamp
+        m.extend_from_slice(&1_u32.to_le_bytes()); // frame_id: "" with NUL
+        m.extend_from_slice(&[0, 0, 0, 0]); // NUL + pad
+        m.extend_from_slice(&1_u32.to_le_bytes());
+        m.extend_from_slice(&1_i32.to_le_bytes());
+        m.extend_from_slice(&2_u32.to_le_bytes());
+        m.extend(std::iter::repeat_n(0xab, 1500));
+        m.extend_from_slice(&1080_u32.to_le_bytes());
+        let mut out = Vec::new();
+        packets(MsgKind::PandarScan, Encoding::Cdr, &m, &mut out).unwrap();
+        assert_eq!(out.len(), 1);
+        assert_eq!(out[0].len, 1080);
+        assert_eq!(out[0].stamp_ns, Some(1_000_000_002));
+    }
+}

@@ -1,0 +1,1250 @@
+//! ROS bags as a stream of UDP datagrams, like a pcap.
+//!
+//! In: a ROS 1 bag, a rosbag2 directory (or its `metadata.yaml`), a bare `.db3`, or an
+//! `.mcap` holding ROS packet messages; the kind is found from the bytes (magic numbers), never
+//! from the file name. Out: one [`Datagram`] per packet the messages carry, so every stream,
+//! sweep, loss count, pipeline and sink downstream works as it does for a capture.
+//!
+//! | input | detected by | read by |
+//! |---|---|---|
+//! | ROS 1 bag (chunks none / bz2 / lz4) | `#ROSBAG V2.0\n` | [`ros1`] |
+//! | rosbag2 directory | a `metadata.yaml` with `rosbag2_bagfile_information` | [`rosbag2`]: its files in order |
+//! | sqlite3 (`.db3`), also bare | `SQLite format 3\0` | [`rosbag2::SqliteReader`] |
+//! | MCAP (`ros1msg` or `ros2msg` / CDR schemas) | `\x89MCAP0\r\n` | [`mcap_in`] |
+//! | a zstd-compressed storage file (rosbag2 `FILE` mode) | zstd magic `28 b5 2f fd`, then the inner magic | sqlite3: decompressed to a temporary file (SQLite needs one); MCAP: decompressed as it is read |
+//!
+//! rosbag2 `MESSAGE` compression (each message one zstd frame) is undone per message (in a
+//! bare `.db3` / `.mcap` without its yaml, a CDR message that starts with the zstd magic is one).
+//!
+//! # Sensors, addresses and ports
+//! Streams downstream are keyed by source address, so each sensor gets a synthetic loopback
+//! source address: **127.0.0.N, N = 1, 2, … in order of first appearance of the sensor's first
+//! packet topic** (ROS 1 connection records — all of them up front when the bag has its index —,
+//! rosbag2 topic ids, MCAP channel records). A sensor is:
+//! - Ouster (`*/PacketMsg`): a topic namespace: `<ns>/lidar_packets`, `<ns>/imu_packets` and
+//!   `<ns>/metadata` (`std_msgs/String`, the sensor metadata JSON) are one sensor. Lidar
+//!   packets go to the metadata's `udp_port_lidar`, IMU packets (a topic whose last segment
+//!   names `imu`) to its `udp_port_imu`; 7502 / 7503 without metadata (or where it says 0).
+//! - every other packet topic is one sensor: Velodyne (`VelodyneScan`) and Hesai
+//!   (`PandarScan`, `UdpFrame`) data to 2368, Robosense MSOP to 6699 and DIFOP to 7788;
+//!   `nebula_msgs/NebulaPackets` by its first packet (1206 bytes: Velodyne; `EE FF`: Hesai;
+//!   `55 AA` / `A5 FF`: Robosense MSOP / DIFOP; else 2368).
+//!
+//! The source port equals the destination port; the destination address is 127.0.0.1.
+//! [`BagSource::sensors`] lists the assignment.
+//!
+//! # Time
+//! A datagram's time is its packet's own stamp where the message type has one
+//! (`VelodynePacket`, `PandarPacket`, `NebulaPacket`, `UdpPacket`, `RobosensePacket`, the
+//! header of an `RslidarPacket`), else the record time of its message (ROS 1 record `time`,
+//! rosbag2 `timestamp`, MCAP `log_time`). `--start` / `--end` ([`BagOptions`]) compare record
+//! times: a bound below 10⁹ s is seconds after the bag's first message, one above is absolute
+//! (seconds since the Unix epoch).
+//!
+//! # Order
+//! Messages come in storage order: ROS 1 chunk by chunk (the order recorded), rosbag2 sqlite3
+//! by `timestamp` (as `ros2 bag play`), MCAP in file order; the packets of one message in
+//! their order in it. Ouster metadata is looked for before the first datagram (a pre-scan of at
+//! most [`PRESCAN_BYTES`] of messages, stopping as soon as every Ouster namespace known has
+//! one), so a decoder can be configured before its first packet arrives.
+//!
+//! # Memory and errors
+//! The bag is never held in memory: one ROS 1 chunk or MCAP chunk at a time, sqlite3 rows in
+//! batches of at most [`rosbag2::BATCH_BYTES`]; a record or chunk larger than
+//! [`MAX_CHUNK_BYTES`], a message larger than [`MAX_MESSAGE_BYTES`], is refused before it is
+//! allocated (an error for ROS 1 / MCAP records, whose framing is then lost; a counted skip for
+//! sqlite3 rows). A message that does not parse as its type is counted in
+//! [`BagStats::malformed`] and skipped; topics of other types in `unknown_type`; a ROS 1 chunk
+//! that does not decompress in `bad_chunks`. A file cut short ends the stream with
+//! [`BagStats::truncated_at`] saying where; what came before is decoded.
+
+pub mod mcap_in;
+pub mod messages;
+pub mod ros1;
+pub mod rosbag2;
+
+use std::collections::{HashMap, VecDeque};
+use std::fs::File;
+use std::io::{self, BufReader, Read};
+use std::net::{Ipv4Addr, SocketAddrV4};
+use std::path::{Path, PathBuf};
+
+use self::mcap_in::McapReader;
+use self::messages::{Encoding, MsgKind, PacketRef};
+use self::ros1::Ros1Reader;
+use self::rosbag2::{Compression, Metadata, SqliteReader};
+use super::Datagram;
+
+/// Largest chunk (ROS 1 compressed or uncompressed; MCAP record) accepted.
+pub const MAX_CHUNK_BYTES: usize = 256 << 20;
+/// Largest single message accepted.
+pub const MAX_MESSAGE_BYTES: usize = 64 << 20;
+/// Message bytes the Ouster metadata pre-scan reads at most.
+pub const PRESCAN_BYTES: u64 = 64 << 20;
+/// Sensors (synthetic addresses 127.0.0.1 … 127.0.0.254) at most.
+pub const MAX_SENSORS: usize = 254;
+
+const ZSTD_MAGIC: [u8; 4] = [0x28, 0xb5, 0x2f, 0xfd];
+const SQLITE_MAGIC: &[u8; 16] = b"SQLite format 3\0";
+
+/// Errors of the bag source: the bag cannot be read further.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum BagError {
+    /// A file could not be opened.
+    #[error("cannot open {path}: {source}")]
+    Open {
+        /// Path.
+        path: PathBuf,
+        /// Underlying error.
+        #[source]
+        source: io::Error,
+    },
+    /// Reading failed.
+    #[error("I/O error at byte {offset}: {source}")]
+    Io {
+        /// Offset reached.
+        offset: u64,
+        /// Underlying error.
+        #[source]
+        source: io::Error,
+    },
+    /// Not the format expected.
+    #[error("not a {expected} file: it starts with {found:02x?}")]
+    BadMagic {
+        /// Format expected.
+        expected: &'static str,
+        /// The first bytes found.
+        found: Vec<u8>,
+    },
+    /// Nothing ringscan reads as a bag.
+    #[error(
+        "not a bag: expected a ROS 1 bag, a rosbag2 directory or metadata.yaml, a .db3 or an \
+         MCAP file, found {found:02x?}"
+    )]
+    NotABag {
+        /// The first bytes found.
+        found: Vec<u8>,
+    },
+    /// The structure contradicts itself.
+    #[error("corrupt bag at byte {offset}: {reason}")]
+    Corrupt {
+        /// Offset of the record at fault.
+        offset: u64,
+        /// What is wrong.
+        reason: String,
+    },
+    /// A record larger than the limits.
+    #[error("{what} at byte {offset} claims {len} bytes, more than the limit of {limit}")]
+    RecordTooLarge {
+        /// Offset of the record.
+        offset: u64,
+        /// What the length is of.
+        what: &'static str,
+        /// Length claimed.
+        len: u64,
+        /// Limit in force.
+        limit: u64,
+    },
+    /// A rosbag2 `metadata.yaml` that cannot be used.
+    #[error("{path}: {reason}")]
+    Metadata {
+        /// Path of the yaml.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+    /// SQLite refused the file or a query.
+    #[error("sqlite3 {path}: {reason}")]
+    Sqlite {
+        /// Path of the `.db3`.
+        path: PathBuf,
+        /// SQLite's message.
+        reason: String,
+    },
+    /// The MCAP reader refused the file.
+    #[error("MCAP at byte {offset}: {reason}")]
+    Mcap {
+        /// Bytes read when it stopped.
+        offset: u64,
+        /// The reader's message.
+        reason: String,
+    },
+    /// An error in one file of a bag of several.
+    #[error("{path}: {source}")]
+    InFile {
+        /// The file.
+        path: PathBuf,
+        /// The error.
+        #[source]
+        source: Box<BagError>,
+    },
+}
+
+/// A topic as its storage describes it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Connection {
+    /// Topic name.
+    pub topic: String,
+    /// Recorded type name (`pkg/Type` or `pkg/msg/Type`).
+    pub type_name: String,
+    /// Serialization; `None`: one ringscan does not read.
+    pub encoding: Option<Encoding>,
+}
+
+/// A message read from storage (its bytes are in the caller's buffer).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RawMessage {
+    /// Connection / topic / channel id (per file).
+    pub conn: u64,
+    /// Record time, ns since the Unix epoch.
+    pub time_ns: i64,
+}
+
+/// Reads until `out` is full or the reader ends; returns the bytes read.
+pub(crate) fn read_up_to<R: Read + ?Sized>(reader: &mut R, out: &mut [u8]) -> io::Result<usize> {
+    let mut filled = 0;
+    while filled < out.len() {
+        match reader.read(&mut out[filled..]) {
+            Ok(0) => break,
+            Ok(n) => filled += n.min(out.len() - filled),
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(filled)
+}
+
+// ----- kinds -----------------------------------------------------------------------------------
+
+/// The kind of one storage file, from its first bytes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FileKind {
+    /// ROS 1 bag.
+    Ros1,
+    /// sqlite3 database.
+    Sqlite3,
+    /// MCAP.
+    Mcap,
+    /// zstd-compressed sqlite3.
+    ZstdSqlite3,
+    /// zstd-compressed MCAP.
+    ZstdMcap,
+}
+
+/// What a path holds, as far as bags go.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum BagKind {
+    /// One storage file.
+    File(FileKind),
+    /// A rosbag2 directory; the path of its `metadata.yaml`.
+    Rosbag2(PathBuf),
+}
+
+fn head(path: &Path, n: usize) -> Result<Vec<u8>, BagError> {
+    let mut f = File::open(path).map_err(|source| BagError::Open {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let mut buf = vec![0u8; n];
+    let got = read_up_to(&mut f, &mut buf).map_err(|source| BagError::Io { offset: 0, source })?;
+    buf.truncate(got);
+    Ok(buf)
+}
+
+fn kind_of_bytes(b: &[u8]) -> Option<FileKind> {
+    if b.starts_with(ros1::MAGIC) {
+        Some(FileKind::Ros1)
+    } else if b.starts_with(SQLITE_MAGIC) {
+        Some(FileKind::Sqlite3)
+    } else if b.starts_with(mcap_in::MAGIC) {
+        Some(FileKind::Mcap)
+    } else {
+        None
+    }
+}
+
+/// The kind of a storage file from its bytes (a zstd file by what it decompresses to).
+pub fn file_kind(path: &Path) -> Result<Option<FileKind>, BagError> {
+    let b = head(path, 16)?;
+    if let Some(k) = kind_of_bytes(&b) {
+        return Ok(Some(k));
+    }
+    if b.starts_with(&ZSTD_MAGIC) {
+        let f = File::open(path).map_err(|source| BagError::Open {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let Ok(mut d) = zstd::stream::read::Decoder::new(f) else {
+            return Ok(None);
+        };
+        let mut inner = [0u8; 16];
+        let n = read_up_to(&mut d, &mut inner).unwrap_or(0);
+        return Ok(match kind_of_bytes(&inner[..n]) {
+            Some(FileKind::Sqlite3) => Some(FileKind::ZstdSqlite3),
+            Some(FileKind::Mcap) => Some(FileKind::ZstdMcap),
+            _ => None,
+        });
+    }
+    Ok(None)
+}
+
+/// What `path` is, if a bag: a directory with a rosbag2 `metadata.yaml`, that yaml itself, or a
+/// storage file recognised by its magic number. `Ok(None)`: not a bag (a pcap, for instance).
+pub fn detect(path: &Path) -> Result<Option<BagKind>, BagError> {
+    if path.is_dir() {
+        let yaml = path.join("metadata.yaml");
+        return Ok(yaml.is_file().then_some(BagKind::Rosbag2(yaml)));
+    }
+    let b = head(path, 64)?;
+    if String::from_utf8_lossy(&b)
+        .trim_start()
+        .starts_with("rosbag2_bagfile_information")
+    {
+        return Ok(Some(BagKind::Rosbag2(path.to_path_buf())));
+    }
+    Ok(file_kind(path)?.map(BagKind::File))
+}
+
+// ----- one storage file ------------------------------------------------------------------------
+
+/// A temporary file removed when dropped (a decompressed `.db3.zstd`).
+struct TempPath(PathBuf);
+
+impl Drop for TempPath {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
+}
+
+fn decompress_to_temp(path: &Path) -> Result<TempPath, BagError> {
+    use std::sync::atomic::{AtomicU64, Ordering};
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let open = |p: &Path, source| BagError::Open {
+        path: p.to_path_buf(),
+        source,
+    };
+    let name = format!(
+        "ringscan-bag-{}-{}.db3",
+        std::process::id(),
+        COUNTER.fetch_add(1, Ordering::Relaxed)
+    );
+    let tmp = TempPath(std::env::temp_dir().join(name));
+    let mut out = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&tmp.0)
+        .map_err(|e| open(&tmp.0, e))?;
+    let f = File::open(path).map_err(|e| open(path, e))?;
+    let mut d = zstd::stream::read::Decoder::new(f).map_err(|e| open(path, e))?;
+    io::copy(&mut d, &mut out).map_err(|source| BagError::Corrupt {
+        offset: 0,
+        reason: format!("zstd-compressed file does not decompress: {source}"),
+    })?;
+    Ok(tmp)
+}
+
+type BoxRead = Box<dyn Read>;
+
+/// One storage file being read.
+enum Inner {
+    Ros1(Box<Ros1Reader<BufReader<File>>>),
+    Sqlite(Box<SqliteReader>, #[allow(dead_code)] Option<TempPath>), // the file lives as long as its reader
+    Mcap(Box<McapReader<BoxRead>>),
+}
+
+impl Inner {
+    fn open(path: &Path, kind: FileKind) -> Result<Self, BagError> {
+        let open = |source| BagError::Open {
+            path: path.to_path_buf(),
+            source,
+        };
+        Ok(match kind {
+            FileKind::Ros1 => {
+                let mut f = BufReader::with_capacity(1 << 16, File::open(path).map_err(open)?);
+                let r = Ros1Reader::new(&mut f)?;
+                let (index_pos, at) = (r.index_pos(), r.offset());
+                drop(r);
+                let conns = ros1::read_index_connections(&mut f, index_pos).unwrap_or_default();
+                // Re-read the (small) bag header through a reader that owns the file.
+                use std::io::Seek;
+                f.seek(io::SeekFrom::Start(0)).map_err(open)?;
+                let mut r = Ros1Reader::new(f)?;
+                debug_assert_eq!(r.offset(), at);
+                r.add_connections(conns);
+                Self::Ros1(Box::new(r))
+            }
+            FileKind::Sqlite3 => Self::Sqlite(Box::new(SqliteReader::open(path)?), None),
+            FileKind::ZstdSqlite3 => {
+                let tmp = decompress_to_temp(path)?;
+                Self::Sqlite(Box::new(SqliteReader::open(&tmp.0)?), Some(tmp))
+            }
+            FileKind::Mcap => {
+                let f = BufReader::with_capacity(1 << 16, File::open(path).map_err(open)?);
+                Self::Mcap(Box::new(McapReader::new(Box::new(f) as BoxRead)))
+            }
+            FileKind::ZstdMcap => {
+                let f = File::open(path).map_err(open)?;
+                let d = zstd::stream::read::Decoder::new(f).map_err(open)?;
+                Self::Mcap(Box::new(McapReader::new(Box::new(d) as BoxRead)))
+            }
+        })
+    }
+
+    fn next_message(&mut self, out: &mut Vec<u8>) -> Result<Option<RawMessage>, BagError> {
+        match self {
+            Self::Ros1(r) => r.next_message(out),
+            Self::Sqlite(r, _) => r.next_message(out),
+            Self::Mcap(r) => r.next_message(out),
+        }
+    }
+
+    fn connection(&self, id: u64) -> Option<&Connection> {
+        match self {
+            Self::Ros1(r) => r.connection(id),
+            Self::Sqlite(r, _) => r.connection(id),
+            Self::Mcap(r) => r.connection(id),
+        }
+    }
+
+    fn connections(&self) -> Vec<(u64, Connection)> {
+        match self {
+            Self::Ros1(r) => r.connections(),
+            Self::Sqlite(r, _) => r.connections(),
+            Self::Mcap(r) => r.connections(),
+        }
+    }
+
+    fn position(&self) -> u64 {
+        match self {
+            Self::Ros1(r) => r.offset(),
+            Self::Sqlite(r, _) => r.bytes,
+            Self::Mcap(r) => r.offset(),
+        }
+    }
+
+    /// (truncated at, bad chunks, first bad chunk, oversized messages)
+    fn damage(&self) -> (Option<u64>, u64, Option<u64>, u64) {
+        match self {
+            Self::Ros1(r) => (r.truncated_at, r.bad_chunks, r.first_bad_chunk, 0),
+            Self::Sqlite(r, _) => (None, 0, None, r.oversized),
+            Self::Mcap(r) => (r.truncated_at, 0, None, r.oversized),
+        }
+    }
+}
+
+// ----- the files of a bag ----------------------------------------------------------------------
+
+/// Damage found while reading (summed over files).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+struct Damage {
+    truncated: Option<(PathBuf, u64)>,
+    bad_chunks: u64,
+    first_bad_chunk: Option<(PathBuf, u64)>,
+    oversized: u64,
+    bad_compressed: u64,
+}
+
+/// Messages of all the files of a bag, with connection ids made global (one per topic name and
+/// type across files).
+struct Messages {
+    files: VecDeque<(PathBuf, FileKind)>,
+    current: Option<(PathBuf, Inner)>,
+    message_zstd: bool,
+    conns: Vec<Connection>,
+    by_name: HashMap<(String, String), u64>,
+    local: HashMap<u64, u64>,
+    /// Serialization formats from `metadata.yaml`, by topic (for storage that lacks them).
+    formats: HashMap<String, Option<Encoding>>,
+    done_bytes: u64,
+    damage: Damage,
+    raw: Vec<u8>,
+}
+
+impl Messages {
+    fn open(path: &Path, kind: &BagKind) -> Result<Self, BagError> {
+        let mut m = Self {
+            files: VecDeque::new(),
+            current: None,
+            message_zstd: false,
+            conns: Vec::new(),
+            by_name: HashMap::new(),
+            local: HashMap::new(),
+            formats: HashMap::new(),
+            done_bytes: 0,
+            damage: Damage::default(),
+            raw: Vec::new(),
+        };
+        match kind {
+            BagKind::File(k) => m.files.push_back((path.to_path_buf(), *k)),
+            BagKind::Rosbag2(yaml) => {
+                let text = std::fs::read_to_string(yaml).map_err(|source| BagError::Open {
+                    path: yaml.clone(),
+                    source,
+                })?;
+                let meta = Metadata::parse(&text).map_err(|reason| BagError::Metadata {
+                    path: yaml.clone(),
+                    reason,
+                })?;
+                let dir = yaml.parent().unwrap_or(Path::new("."));
+                m.message_zstd = meta.compression == Compression::Message;
+                for (name, ty, fmt) in &meta.topics {
+                    let enc = rosbag2::encoding_of(fmt);
+                    m.formats.insert(name.clone(), enc);
+                    m.global(Connection {
+                        topic: name.clone(),
+                        type_name: ty.clone(),
+                        encoding: enc,
+                    });
+                }
+                let files: Vec<String> = if meta.files.is_empty() {
+                    // No list: every storage file of the directory, by name.
+                    let mut v: Vec<String> = std::fs::read_dir(dir)
+                        .map(|rd| {
+                            rd.filter_map(|e| e.ok())
+                                .map(|e| e.file_name().to_string_lossy().into_owned())
+                                .filter(|n| {
+                                    n.ends_with(".db3")
+                                        || n.ends_with(".mcap")
+                                        || n.ends_with(".zstd")
+                                })
+                                .collect()
+                        })
+                        .unwrap_or_default();
+                    v.sort();
+                    v
+                } else {
+                    meta.files.clone()
+                };
+                for f in files {
+                    let p = dir.join(&f);
+                    let k = file_kind(&p)?.ok_or_else(|| BagError::Metadata {
+                        path: yaml.clone(),
+                        reason: format!(
+                            "{f}: neither sqlite3 nor MCAP ({:?} storage)",
+                            meta.storage
+                        ),
+                    })?;
+                    // A file whose kind differs from the yaml's storage identifier is read by
+                    // its bytes, like every input.
+                    m.files.push_back((p, k));
+                }
+            }
+        }
+        m.next_file()?;
+        Ok(m)
+    }
+
+    /// The global id of a connection (by topic name and type).
+    fn global(&mut self, c: Connection) -> u64 {
+        let key = (c.topic.clone(), c.type_name.clone());
+        if let Some(&g) = self.by_name.get(&key) {
+            return g;
+        }
+        let g = self.conns.len() as u64;
+        self.conns.push(c);
+        self.by_name.insert(key, g);
+        g
+    }
+
+    fn next_file(&mut self) -> Result<bool, BagError> {
+        if let Some((path, inner)) = self.current.take() {
+            self.done_bytes += inner.position();
+            self.note_damage(&path, &inner);
+        }
+        let Some((path, kind)) = self.files.pop_front() else {
+            return Ok(false);
+        };
+        let inner = Inner::open(&path, kind).map_err(|e| in_file(&path, e))?;
+        self.local.clear();
+        for (id, c) in inner.connections() {
+            let g = self.localize(c);
+            self.local.insert(id, g);
+        }
+        self.current = Some((path, inner));
+        Ok(true)
+    }
+
+    /// A file's connection with the yaml's serialization format where the file has none.
+    fn localize(&mut self, mut c: Connection) -> u64 {
+        if let Some(enc) = self.formats.get(&c.topic) {
+            if c.encoding.is_none() {
+                c.encoding = *enc;
+            }
+        }
+        self.global(c)
+    }
+
+    fn note_damage(&mut self, path: &Path, inner: &Inner) {
+        let (t, bad, first_bad, oversized) = inner.damage();
+        if let Some(t) = t {
+            self.damage.truncated.get_or_insert((path.to_path_buf(), t));
+        }
+        self.damage.bad_chunks += bad;
+        if let Some(b) = first_bad {
+            self.damage
+                .first_bad_chunk
+                .get_or_insert((path.to_path_buf(), b));
+        }
+        self.damage.oversized += oversized;
+    }
+
+    fn position(&self) -> u64 {
+        self.done_bytes + self.current.as_ref().map_or(0, |(_, i)| i.position())
+    }
+
+    fn damage(&self) -> Damage {
+        let mut d = self.damage.clone();
+        if let Some((path, inner)) = &self.current {
+            let (t, bad, first_bad, oversized) = inner.damage();
+            if let Some(t) = t {
+                d.truncated.get_or_insert((path.clone(), t));
+            }
+            d.bad_chunks += bad;
+            if let Some(b) = first_bad {
+                d.first_bad_chunk.get_or_insert((path.clone(), b));
+            }
+            d.oversized += oversized;
+        }
+        d
+    }
+
+    fn connection(&self, g: u64) -> Option<&Connection> {
+        self.conns.get(usize::try_from(g).ok()?)
+    }
+
+    /// The next message (global connection id); its bytes go to `out`.
+    fn next_message(&mut self, out: &mut Vec<u8>) -> Result<Option<RawMessage>, BagError> {
+        loop {
+            let Some((path, inner)) = self.current.as_mut() else {
+                return Ok(None);
+            };
+            let m = match inner.next_message(out) {
+                Ok(Some(m)) => m,
+                Ok(None) => {
+                    if self.next_file()? {
+                        continue;
+                    }
+                    return Ok(None);
+                }
+                Err(e) => {
+                    let e = in_file(path, e);
+                    return Err(e);
+                }
+            };
+            let g = match self.local.get(&m.conn) {
+                Some(&g) => g,
+                None => {
+                    let Some(c) = inner.connection(m.conn).cloned() else {
+                        // A message before (or without) its connection record: unknown topic.
+                        let g = self.global(Connection {
+                            topic: format!("<connection {}>", m.conn),
+                            type_name: String::new(),
+                            encoding: None,
+                        });
+                        self.local.insert(m.conn, g);
+                        return Ok(Some(RawMessage {
+                            conn: g,
+                            time_ns: m.time_ns,
+                        }));
+                    };
+                    let g = self.localize(c);
+                    self.local.insert(m.conn, g);
+                    g
+                }
+            };
+            // rosbag2 MESSAGE compression; also recognised without its yaml (a bare .db3 or
+            // .mcap) by the zstd magic where CDR's encapsulation header belongs.
+            let cdr = self.conns.get(g as usize).and_then(|c| c.encoding) == Some(Encoding::Cdr);
+            if self.message_zstd || (cdr && out.starts_with(&ZSTD_MAGIC)) {
+                std::mem::swap(&mut self.raw, out);
+                out.clear();
+                let ok = zstd::stream::read::Decoder::with_buffer(&self.raw[..])
+                    .and_then(|d| d.take(MAX_MESSAGE_BYTES as u64 + 1).read_to_end(out))
+                    .is_ok_and(|n| n <= MAX_MESSAGE_BYTES);
+                if !ok {
+                    self.damage.bad_compressed += 1;
+                    continue;
+                }
+            }
+            return Ok(Some(RawMessage {
+                conn: g,
+                time_ns: m.time_ns,
+            }));
+        }
+    }
+}
+
+fn in_file(path: &Path, e: BagError) -> BagError {
+    match e {
+        e @ (BagError::Open { .. } | BagError::Sqlite { .. } | BagError::InFile { .. }) => e,
+        e => BagError::InFile {
+            path: path.to_path_buf(),
+            source: Box::new(e),
+        },
+    }
+}
+
+// ----- the source ------------------------------------------------------------------------------
+
+/// A time bound of [`BagOptions`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum TimeBound {
+    /// Seconds after the bag's first message.
+    Relative(f64),
+    /// ns since the Unix epoch.
+    Absolute(i64),
+}
+
+impl TimeBound {
+    /// A bound given in seconds: below 10⁹ relative to the bag's start, else absolute.
+    pub fn from_seconds(s: f64) -> Self {
+        if s >= 1e9 {
+            Self::Absolute((s * 1e9).round() as i64)
+        } else {
+            Self::Relative(s)
+        }
+    }
+
+    fn ns(self, first_ns: i64) -> i64 {
+        match self {
+            Self::Absolute(ns) => ns,
+            Self::Relative(s) => first_ns.saturating_add((s * 1e9).round() as i64),
+        }
+    }
+}
+
+/// What to read of a bag.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct BagOptions {
+    /// Topics to read (all packet topics when empty). Ouster metadata is read whatever this says.
+    pub topics: Vec<String>,
+    /// Messages recorded before this are skipped.
+    pub start: Option<TimeBound>,
+    /// Messages recorded after this are skipped.
+    pub end: Option<TimeBound>,
+}
+
+/// A sensor family, as the bag's message types tell it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum Family {
+    /// Velodyne.
+    Velodyne,
+    /// Ouster.
+    Ouster,
+    /// Hesai.
+    Hesai,
+    /// Robosense.
+    Robosense,
+    /// Not known (nebula packets whose first packet says nothing).
+    Unknown,
+}
+
+impl Family {
+    /// Lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Velodyne => "velodyne",
+            Self::Ouster => "ouster",
+            Self::Hesai => "hesai",
+            Self::Robosense => "robosense",
+            Self::Unknown => "unknown",
+        }
+    }
+}
+
+/// One sensor of a bag and the synthetic address its packets come from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct BagSensor {
+    /// Topic namespace (Ouster) or topic (the others).
+    pub namespace: String,
+    /// Family.
+    pub family: Family,
+    /// Synthetic source address, 127.0.0.N.
+    pub address: Ipv4Addr,
+    /// Destination port of its main packets (lidar / MSOP / data).
+    pub data_port: u16,
+    /// Destination port of its other packets (Ouster IMU, Robosense DIFOP).
+    pub aux_port: u16,
+    /// Packet topics read for it.
+    pub topics: Vec<String>,
+    /// Ouster metadata JSON found in the bag (its `<ns>/metadata` topic).
+    pub metadata: Option<String>,
+}
+
+/// What a [`BagSource`] saw so far.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct BagStats {
+    /// Messages read (every topic).
+    pub messages: u64,
+    /// Messages whose packets were returned.
+    pub packet_messages: u64,
+    /// Datagrams returned.
+    pub datagrams: u64,
+    /// Ouster metadata messages read.
+    pub metadata_messages: u64,
+    /// Messages of topics not selected (`--topic`).
+    pub unselected: u64,
+    /// Messages recorded outside `--start` / `--end`.
+    pub outside_time: u64,
+    /// Messages of types (or serializations) ringscan does not read.
+    pub unknown_type: u64,
+    /// Messages that did not parse as their type: skipped.
+    pub malformed: u64,
+    /// The first malformed message: topic and why.
+    pub first_malformed: Option<String>,
+    /// Messages larger than [`MAX_MESSAGE_BYTES`]: skipped.
+    pub oversized: u64,
+    /// Compressed messages (rosbag2 `MESSAGE` mode) that did not decompress: skipped.
+    pub bad_compressed_messages: u64,
+    /// ROS 1 chunks that did not decompress or whose records were inconsistent: skipped.
+    pub bad_chunks: u64,
+    /// File and byte offset of the first skipped chunk.
+    pub first_bad_chunk: Option<(PathBuf, u64)>,
+    /// Packets of sensors beyond [`MAX_SENSORS`]: dropped.
+    pub sensor_limit: u64,
+    /// Storage bytes consumed (for progress).
+    pub bytes: u64,
+    /// Where a file cut short ended the stream: the file and its byte offset.
+    pub truncated_at: Option<(PathBuf, u64)>,
+    /// Time of the first datagram returned, ns since the Unix epoch.
+    pub first_time_ns: Option<i64>,
+    /// Time of the last datagram returned.
+    pub last_time_ns: Option<i64>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Role {
+    /// Packets of a sensor: its data port, or its aux port for difop / IMU packets.
+    Packets {
+        sensor: usize,
+        imu: bool,
+    },
+    /// Ouster metadata of a namespace.
+    Metadata,
+    Unselected,
+    Unknown,
+    /// Over the sensor limit.
+    Dropped,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Route {
+    kind: Option<MsgKind>,
+    encoding: Encoding,
+    role: Role,
+}
+
+/// UDP datagrams from a ROS bag. See the [module documentation](self).
+///
+/// ```no_run
+/// # fn main() -> Result<(), ringscan::source::bag::BagError> {
+/// use ringscan::source::bag::{BagOptions, BagSource};
+/// let mut source = BagSource::open("drive.bag".as_ref(), BagOptions::default())?;
+/// for s in source.sensors() {
+///     println!("{} ({}) from {}", s.namespace, s.family.name(), s.address);
+/// }
+/// while let Some(d) = source.next_datagram()? {
+///     println!("{} bytes from {} to port {}", d.payload.len(), d.src, d.dst.port());
+/// }
+/// # Ok(()) }
+/// ```
+pub struct BagSource {
+    kind: BagKind,
+    messages: Messages,
+    options: BagOptions,
+    routes: HashMap<u64, Route>,
+    sensors: Vec<BagSensor>,
+    /// Ouster metadata by namespace (from the pre-scan and the stream).
+    metadata: HashMap<String, String>,
+    msg: Vec<u8>,
+    packets: Vec<PacketRef>,
+    cursor: usize,
+    current: (usize, i64, bool),
+    first_message_ns: Option<i64>,
+    bounds: Option<(i64, i64)>,
+    stats: BagStats,
+}
+
+/// The namespace of a topic (`/a/b/lidar_packets` → `/a/b`; `/lidar_packets` → `/`).
+fn namespace(topic: &str) -> &str {
+    match topic.rfind('/') {
+        Some(0) | None => "/",
+        Some(i) => &topic[..i],
+    }
+}
+
+/// The udp_port_lidar / udp_port_imu of Ouster metadata JSON (flat or nested layout).
+fn ouster_ports(json: &str) -> (Option<u16>, Option<u16>) {
+    let Ok(v) = serde_json::from_str::<serde_json::Value>(json) else {
+        return (None, None);
+    };
+    let port = |key: &str| {
+        [&v[key], &v["config_params"][key]]
+            .into_iter()
+            .find_map(|x| x.as_u64())
+            .and_then(|p| u16::try_from(p).ok())
+            .filter(|&p| p != 0)
+    };
+    (port("udp_port_lidar"), port("udp_port_imu"))
+}
+
+/// Nebula packets: a family (and its data / aux ports) from a packet's bytes.
+fn sniff(payload: &[u8]) -> Option<(Family, u16, u16)> {
+    match payload {
+        p if p.len() == 1206 => Some((Family::Velodyne, 2368, 2368)),
+        [0xee, 0xff, ..] | [0xff, 0xee, ..] => Some((Family::Hesai, 2368, 2368)),
+        [0x55, 0xaa, ..] | [0xa5, 0xff, ..] => Some((Family::Robosense, 6699, 7788)),
+        _ => None,
+    }
+}
+
+impl BagSource {
+    /// Opens a bag of any kind ([`detect`]), looks for Ouster metadata, and lists the topics
+    /// known up front.
+    pub fn open(path: &Path, options: BagOptions) -> Result<Self, BagError> {
+        let kind = detect(path)?.ok_or_else(|| {
+            let found = head(path, 16).unwrap_or_default();
+            BagError::NotABag { found }
+        })?;
+        let metadata = prescan_metadata(path, &kind)?;
+        let messages = Messages::open(path, &kind)?;
+        let mut s = Self {
+            kind,
+            messages,
+            options,
+            routes: HashMap::new(),
+            sensors: Vec::new(),
+            metadata,
+            msg: Vec::new(),
+            packets: Vec::new(),
+            cursor: 0,
+            current: (0, 0, false),
+            first_message_ns: None,
+            bounds: None,
+            stats: BagStats::default(),
+        };
+        for g in 0..s.messages.conns.len() as u64 {
+            s.route(g);
+        }
+        Ok(s)
+    }
+
+    /// What the path is.
+    pub fn kind(&self) -> &BagKind {
+        &self.kind
+    }
+
+    /// The sensors known so far, in address order.
+    pub fn sensors(&self) -> &[BagSensor] {
+        &self.sensors
+    }
+
+    /// Counters so far.
+    pub fn stats(&self) -> BagStats {
+        let mut s = self.stats.clone();
+        let d = self.messages.damage();
+        s.bytes = self.messages.position();
+        s.truncated_at = d.truncated;
+        s.bad_chunks = d.bad_chunks;
+        s.first_bad_chunk = d.first_bad_chunk;
+        s.oversized = d.oversized;
+        s.bad_compressed_messages = d.bad_compressed;
+        s
+    }
+
+    /// The route of a (global) connection, made on first sight: this is where sensors get
+    /// their addresses.
+    fn route(&mut self, g: u64) -> Route {
+        if let Some(r) = self.routes.get(&g) {
+            return *r;
+        }
+        let conn = self.messages.connection(g).cloned();
+        let route = match conn {
+            None => Route {
+                kind: None,
+                encoding: Encoding::Cdr,
+                role: Role::Unknown,
+            },
+            Some(c) => self.new_route(&c),
+        };
+        self.routes.insert(g, route);
+        route
+    }
+
+    fn new_route(&mut self, c: &Connection) -> Route {
+        let kind = MsgKind::from_type_name(&c.type_name);
+        let (Some(kind), Some(encoding)) = (kind, c.encoding) else {
+            return Route {
+                kind: None,
+                encoding: Encoding::Cdr,
+                role: Role::Unknown,
+            };
+        };
+        let unknown = Route {
+            kind: None,
+            encoding,
+            role: Role::Unknown,
+        };
+        if kind == MsgKind::StdString {
+            return if c.topic.ends_with("/metadata") {
+                Route {
+                    kind: Some(kind),
+                    encoding,
+                    role: Role::Metadata,
+                }
+            } else {
+                unknown
+            };
+        }
+        if !self.options.topics.is_empty() && !self.options.topics.contains(&c.topic) {
+            return Route {
+                kind: Some(kind),
+                encoding,
+                role: Role::Unselected,
+            };
+        }
+        let (key, family) = match kind {
+            MsgKind::OusterPacket => (namespace(&c.topic).to_string(), Family::Ouster),
+            MsgKind::VelodyneScan => (c.topic.clone(), Family::Velodyne),
+            MsgKind::PandarScan | MsgKind::HesaiUdpFrame => (c.topic.clone(), Family::Hesai),
+            MsgKind::RobosenseScan | MsgKind::RslidarPacket => (c.topic.clone(), Family::Robosense),
+            _ => (c.topic.clone(), Family::Unknown),
+        };
+        let imu = kind == MsgKind::OusterPacket
+            && c.topic
+                .rsplit('/')
+                .next()
+                .is_some_and(|l| l.contains("imu"));
+        let sensor = match self.sensors.iter().position(|s| s.namespace == key) {
+            Some(i) => i,
+            None => {
+                if self.sensors.len() >= MAX_SENSORS {
+                    return Route {
+                        kind: Some(kind),
+                        encoding,
+                        role: Role::Dropped,
+                    };
+                }
+                let n = self.sensors.len() as u8 + 1;
+                let mut s = BagSensor {
+                    namespace: key.clone(),
+                    family,
+                    address: Ipv4Addr::new(127, 0, 0, n),
+                    data_port: 2368,
+                    aux_port: 2368,
+                    topics: Vec::new(),
+                    metadata: None,
+                };
+                match family {
+                    Family::Ouster => {
+                        s.data_port = 7502;
+                        s.aux_port = 7503;
+                        if let Some(m) = self.metadata.get(&key) {
+                            let (l, i) = ouster_ports(m);
+                            s.data_port = l.unwrap_or(7502);
+                            s.aux_port = i.unwrap_or(7503);
+                            s.metadata = Some(m.clone());
+                        }
+                    }
+                    Family::Robosense => {
+                        s.data_port = 6699;
+                        s.aux_port = 7788;
+                    }
+                    _ => {}
+                }
+                self.sensors.push(s);
+                self.sensors.len() - 1
+            }
+        };
+        self.sensors[sensor].topics.push(c.topic.clone());
+        Route {
+            kind: Some(kind),
+            encoding,
+            role: Role::Packets { sensor, imu },
+        }
+    }
+
+    /// The next datagram, `Ok(None)` at the end of the bag (or where it is cut short: see
+    /// [`BagStats::truncated_at`]).
+    pub fn next_datagram(&mut self) -> Result<Option<Datagram<'_>>, BagError> {
+        while self.cursor >= self.packets.len() {
+            if !self.next_packet_message()? {
+                return Ok(None);
+            }
+        }
+        let p = self.packets[self.cursor];
+        self.cursor += 1;
+        let (sensor, msg_time, imu) = self.current;
+        if self.sensors[sensor].family == Family::Unknown {
+            let payload = self.msg.get(p.start..p.start + p.len).unwrap_or(&[]);
+            if let Some((family, data, aux)) = sniff(payload) {
+                let s = &mut self.sensors[sensor];
+                (s.family, s.data_port, s.aux_port) = (family, data, aux);
+            }
+        }
+        let s = &self.sensors[sensor];
+        let port = if imu || p.difop {
+            s.aux_port
+        } else {
+            s.data_port
+        };
+        let time_ns = p.stamp_ns.unwrap_or(msg_time);
+        self.stats.datagrams += 1;
+        self.stats.first_time_ns.get_or_insert(time_ns);
+        self.stats.last_time_ns = Some(time_ns);
+        Ok(Some(Datagram {
+            time_ns,
+            src: SocketAddrV4::new(s.address, port),
+            dst: SocketAddrV4::new(Ipv4Addr::LOCALHOST, port),
+            payload: self.msg.get(p.start..p.start + p.len).unwrap_or(&[]),
+        }))
+    }
+
+    /// Reads messages until one with packets; false at the end.
+    fn next_packet_message(&mut self) -> Result<bool, BagError> {
+        self.packets.clear();
+        self.cursor = 0;
+        loop {
+            let Some(m) = self.messages.next_message(&mut self.msg)? else {
+                return Ok(false);
+            };
+            self.stats.messages += 1;
+            let first = *self.first_message_ns.get_or_insert(m.time_ns);
+            let route = self.route(m.conn);
+            let (start, end) = *self.bounds.get_or_insert_with(|| {
+                (
+                    self.options.start.map_or(i64::MIN, |b| b.ns(first)),
+                    self.options.end.map_or(i64::MAX, |b| b.ns(first)),
+                )
+            });
+            match route.role {
+                Role::Unknown => self.stats.unknown_type += 1,
+                Role::Unselected => self.stats.unselected += 1,
+                Role::Metadata => {
+                    self.stats.metadata_messages += 1;
+                    if let Ok((a, n)) = messages::string(route.encoding, &self.msg) {
+                        let text = String::from_utf8_lossy(&self.msg[a..a + n]).into_owned();
+                        let topic = self
+                            .messages
+                            .connection(m.conn)
+                            .map(|c| namespace(&c.topic).to_string())
+                            .unwrap_or_default();
+                        self.metadata.entry(topic).or_insert(text);
+                    }
+                }
+                Role::Dropped => self.stats.sensor_limit += 1,
+                Role::Packets { .. } if m.time_ns < start || m.time_ns > end => {
+                    self.stats.outside_time += 1;
+                }
+                Role::Packets { sensor, imu } => {
+                    let kind = route.kind.unwrap_or(MsgKind::StdString);
+                    match messages::packets(kind, route.encoding, &self.msg, &mut self.packets) {
+                        Ok(()) => {
+                            self.stats.packet_messages += 1;
+                            self.current = (sensor, m.time_ns, imu);
+                            if !self.packets.is_empty() {
+                                return Ok(true);
+                            }
+                        }
+                        Err(e) => {
+                            self.stats.malformed += 1;
+                            if self.stats.first_malformed.is_none() {
+                                let topic = self
+                                    .messages
+                                    .connection(m.conn)
+                                    .map(|c| c.topic.clone())
+                                    .unwrap_or_default();
+                                self.stats.first_malformed =
+                                    Some(format!("{topic} ({kind}) at {} ns: {e}", m.time_ns));
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Ouster metadata (`std_msgs/String` on `<ns>/metadata`) by namespace, read from the start of
+/// the bag until every Ouster namespace known has one, or [`PRESCAN_BYTES`] of messages.
+fn prescan_metadata(path: &Path, kind: &BagKind) -> Result<HashMap<String, String>, BagError> {
+    let mut m = Messages::open(path, kind)?;
+    let mut found: HashMap<String, String> = HashMap::new();
+    let is_ouster =
+        |c: &Connection| MsgKind::from_type_name(&c.type_name) == Some(MsgKind::OusterPacket);
+    let is_meta = |c: &Connection| {
+        MsgKind::from_type_name(&c.type_name) == Some(MsgKind::StdString)
+            && c.topic.ends_with("/metadata")
+    };
+    let wanted = |m: &Messages| -> Vec<String> {
+        m.conns
+            .iter()
+            .filter(|c| is_ouster(c))
+            .map(|c| namespace(&c.topic).to_string())
+            .collect()
+    };
+    // Nothing to look for when every topic is known up front and none is Ouster's.
+    let upfront_complete =
+        !matches!(kind, BagKind::File(FileKind::Mcap | FileKind::ZstdMcap)) && !m.conns.is_empty();
+    if upfront_complete && wanted(&m).is_empty() {
+        return Ok(found);
+    }
+    let mut buf = Vec::new();
+    let mut read = 0u64;
+    // A damaged bag is reported by the main pass; the pre-scan keeps what it found.
+    while let Ok(Some(msg)) = m.next_message(&mut buf) {
+        read += buf.len() as u64;
+        if let Some(c) = m.connection(msg.conn).filter(|c| is_meta(c)) {
+            let text = c.encoding.and_then(|enc| messages::string(enc, &buf).ok());
+            if let Some((a, n)) = text {
+                found
+                    .entry(namespace(&c.topic).to_string())
+                    .or_insert_with(|| String::from_utf8_lossy(&buf[a..a + n]).into_owned());
+            }
+        }
+        let want = wanted(&m);
+        if (!want.is_empty() && want.iter().all(|ns| found.contains_key(ns)))
+            || read > PRESCAN_BYTES
+        {
+            break;
+        }
+    }
+    Ok(found)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn namespaces_of_topics() {
+        assert_eq!(namespace("/os_node0/lidar_packets"), "/os_node0");
+        assert_eq!(namespace("/a/b/imu_packets"), "/a/b");
+        assert_eq!(namespace("/lidar_packets"), "/");
+        assert_eq!(namespace("lidar_packets"), "/");
+    }
+
+    #[test]
+    fn ouster_ports_flat_and_nested() {
+        assert_eq!(
+            ouster_ports(r#"{"udp_port_lidar": 53750, "udp_port_imu": 7503}"#),
+            (Some(53750), Some(7503))
+        );
+        assert_eq!(
+            ouster_ports(r#"{"config_params": {"udp_port_lidar": 7502, "udp_port_imu": 0}}"#),
+            (Some(7502), None)
+        );
+        assert_eq!(ouster_ports("not json"), (None, None));
+    }
+
+    #[test]
+    fn time_bounds() {
+        assert_eq!(TimeBound::from_seconds(1.5).ns(10), 1_500_000_010);
+        assert_eq!(
+            TimeBound::from_seconds(1_700_000_000.0).ns(10),
+            1_700_000_000_000_000_000
+        );
+    }
+}

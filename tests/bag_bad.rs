@@ -1,0 +1,266 @@
+//! Damaged bags: a clear error or a counted skip, never a panic, memory bounded.
+//!
+//! Made from the bag fixtures (copies in the test's temporary directory) and from small ROS 1
+//! bags written here record by record (ROS wiki "Bags/Format/2.0").
+
+use std::path::{Path, PathBuf};
+
+use ringscan::source::bag::{BagError, BagOptions, BagSource, BagStats};
+
+fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("fixtures/bags")
+        .join(name)
+}
+
+fn tmp(name: &str, bytes: &[u8]) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("bag_bad");
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join(name);
+    std::fs::write(&p, bytes).unwrap();
+    p
+}
+
+/// Reads a bag to its end: datagrams, stats, or the error that stopped it.
+fn read_all(path: &Path) -> Result<(usize, BagStats), BagError> {
+    let mut src = BagSource::open(path, BagOptions::default())?;
+    let mut n = 0;
+    loop {
+        match src.next_datagram() {
+            Ok(Some(_)) => n += 1,
+            Ok(None) => return Ok((n, src.stats())),
+            Err(e) => return Err(e),
+        }
+    }
+}
+
+/// Top-level records of a ROS 1 bag: (offset, op, header range, data-length offset, data range).
+fn records(b: &[u8]) -> Vec<(usize, u8, usize, std::ops::Range<usize>)> {
+    let le = |i: usize| u32::from_le_bytes(b[i..i + 4].try_into().unwrap()) as usize;
+    let mut out = Vec::new();
+    let mut at = 13;
+    while at + 4 <= b.len() {
+        let hl = le(at);
+        let h = &b[at + 4..at + 4 + hl];
+        let op = h
+            .windows(3)
+            .position(|w| w == b"op=")
+            .map(|i| h[i + 3])
+            .unwrap();
+        let dl_at = at + 4 + hl;
+        let dl = le(dl_at);
+        out.push((at, op, dl_at, dl_at + 4..dl_at + 4 + dl));
+        at = dl_at + 4 + dl;
+    }
+    out
+}
+
+fn field(name: &str, value: &[u8]) -> Vec<u8> {
+    let mut f = ((name.len() + 1 + value.len()) as u32)
+        .to_le_bytes()
+        .to_vec();
+    f.extend_from_slice(name.as_bytes());
+    f.push(b'=');
+    f.extend_from_slice(value);
+    f
+}
+
+fn record(header: &[Vec<u8>], data: &[u8]) -> Vec<u8> {
+    let h: Vec<u8> = header.concat();
+    let mut r = (h.len() as u32).to_le_bytes().to_vec();
+    r.extend_from_slice(&h);
+    r.extend_from_slice(&(data.len() as u32).to_le_bytes());
+    r.extend_from_slice(data);
+    r
+}
+
+/// An uncompressed, unindexed ROS 1 bag: one chunk with a connection of `type_name` on `topic`
+/// and one message of `body`.
+fn small_bag(topic: &str, type_name: &str, body: &[u8]) -> Vec<u8> {
+    let mut b = b"#ROSBAG V2.0\n".to_vec();
+    b.extend(record(
+        &[field("op", &[3]), field("index_pos", &0u64.to_le_bytes())],
+        &[b' '; 32],
+    ));
+    let conn = [
+        field("topic", topic.as_bytes()),
+        field("type", type_name.as_bytes()),
+    ]
+    .concat();
+    let mut chunk = record(
+        &[
+            field("op", &[7]),
+            field("conn", &0u32.to_le_bytes()),
+            field("topic", topic.as_bytes()),
+        ],
+        &conn,
+    );
+    let mut t = 1_700_000_000u32.to_le_bytes().to_vec();
+    t.extend_from_slice(&0u32.to_le_bytes());
+    chunk.extend(record(
+        &[
+            field("op", &[2]),
+            field("conn", &0u32.to_le_bytes()),
+            field("time", &t),
+        ],
+        body,
+    ));
+    b.extend(record(
+        &[
+            field("op", &[5]),
+            field("compression", b"none"),
+            field("size", &(chunk.len() as u32).to_le_bytes()),
+        ],
+        &chunk,
+    ));
+    b
+}
+
+/// Peak resident memory of this process (Linux), bytes.
+fn peak_rss() -> Option<u64> {
+    let s = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+#[test]
+fn every_truncation_of_a_ros1_bag_ends_cleanly_with_what_was_readable() {
+    let full = std::fs::read(fixture("demo-vlp16.ros1-lz4.bag")).unwrap();
+    let (all, _) = read_all(&fixture("demo-vlp16.ros1-lz4.bag")).unwrap();
+    let mut cuts = 0;
+    for cut in (0..full.len()).step_by(997).chain([full.len() - 1]) {
+        let p = tmp("cut.bag", &full[..cut]);
+        match read_all(&p) {
+            Ok((n, st)) => {
+                assert!(n <= all, "cut {cut}");
+                // Cut inside the data section: the stream says where it stopped (a cut in the
+                // trailing index section loses nothing).
+                if n < all {
+                    assert!(st.truncated_at.is_some(), "cut {cut}: {st:?}");
+                }
+                cuts += 1;
+            }
+            Err(e) => assert!(cut < 4200, "cut {cut}: {e}"), // only inside the bag header
+        }
+    }
+    assert!(cuts > 10);
+}
+
+#[test]
+fn wrong_magic_is_not_a_bag() {
+    let mut b = std::fs::read(fixture("demo-vlp16.ros1-bz2.bag")).unwrap();
+    b[9..12].copy_from_slice(b"1.2");
+    let e = read_all(&tmp("v12.bag", &b)).unwrap_err();
+    assert!(matches!(e, BagError::NotABag { .. }), "{e}");
+    assert!(e.to_string().contains("not a bag"));
+}
+
+#[test]
+fn a_chunk_longer_than_the_file_is_a_truncation() {
+    let mut b = std::fs::read(fixture("demo-vlp16.ros1-bz2.bag")).unwrap();
+    let recs = records(&b);
+    let chunks: Vec<_> = recs.iter().filter(|r| r.1 == 5).collect();
+    assert!(chunks.len() >= 3, "the fixture has several chunks");
+    let (at, _, dl_at, _) = chunks[2].clone();
+    b[dl_at..dl_at + 4].copy_from_slice(&(100u32 << 20).to_le_bytes());
+    let (n, st) = read_all(&tmp("long-chunk.bag", &b)).unwrap();
+    assert!(n > 0, "the first two chunks are decoded");
+    assert_eq!(st.truncated_at.map(|t| t.1), Some(at as u64));
+}
+
+#[test]
+fn a_chunk_that_does_not_inflate_is_counted_and_skipped() {
+    for name in ["demo-vlp16.ros1-bz2.bag", "demo-vlp16.ros1-lz4.bag"] {
+        let (all, _) = read_all(&fixture(name)).unwrap();
+        let mut b = std::fs::read(fixture(name)).unwrap();
+        let recs = records(&b);
+        let chunk = recs.iter().filter(|r| r.1 == 5).nth(1).unwrap().clone();
+        let mid = chunk.3.start + chunk.3.len() / 2;
+        for x in &mut b[mid..mid + 64] {
+            *x ^= 0x5a;
+        }
+        let (n, st) = read_all(&tmp("bad-chunk.bag", &b)).unwrap();
+        assert_eq!(st.bad_chunks, 1, "{name}: {st:?}");
+        assert_eq!(
+            st.first_bad_chunk.as_ref().map(|c| c.1),
+            Some(chunk.0 as u64)
+        );
+        assert!(
+            n > 0 && n < all,
+            "{name}: the other chunks are decoded ({n} of {all})"
+        );
+    }
+}
+
+#[test]
+fn a_gigabyte_record_claim_is_an_error_not_an_allocation() {
+    let mut b = std::fs::read(fixture("demo-vlp16.ros1-lz4.bag")).unwrap();
+    let recs = records(&b);
+    let (at, _, dl_at, _) = recs.iter().filter(|r| r.1 == 5).nth(1).unwrap().clone();
+    b[dl_at..dl_at + 4].copy_from_slice(&(1u32 << 30).to_le_bytes());
+    let before = peak_rss();
+    let e = read_all(&tmp("gigabyte.bag", &b)).unwrap_err();
+    match &e {
+        BagError::InFile { source, .. } => match **source {
+            BagError::RecordTooLarge { offset, len, .. } => {
+                assert_eq!((offset, len), (at as u64, 1 << 30));
+            }
+            ref other => panic!("{other}"),
+        },
+        other => panic!("{other}"),
+    }
+    assert!(e.to_string().contains("claims 1073741824 bytes"), "{e}");
+    if let (Some(a), Some(b)) = (before, peak_rss()) {
+        assert!(b < a + (64 << 20), "peak memory grew by {} bytes", b - a);
+    }
+}
+
+#[test]
+fn a_connection_of_an_unknown_type_is_counted() {
+    let b = small_bag("/imu", "sensor_msgs/Imu", &[0; 16]);
+    let (n, st) = read_all(&tmp("unknown.bag", &b)).unwrap();
+    assert_eq!((n, st.messages, st.unknown_type), (0, 1, 1));
+}
+
+#[test]
+fn a_message_that_does_not_fit_its_type_is_counted() {
+    // A VelodyneScan claiming 1000 packets in 16 bytes.
+    let mut body = vec![0u8; 16];
+    body[12..16].copy_from_slice(&1000u32.to_le_bytes());
+    let b = small_bag("/velodyne_packets", "velodyne_msgs/VelodyneScan", &body);
+    let (n, st) = read_all(&tmp("malformed.bag", &b)).unwrap();
+    assert_eq!((n, st.malformed), (0, 1));
+    assert!(st.first_malformed.unwrap().contains("/velodyne_packets"));
+}
+
+#[test]
+fn damaged_sqlite_and_mcap_files_give_errors_or_truncations() {
+    let db3 = fixture("demo-vlp16.sqlite3-message/demo-vlp16.sqlite3-message.db3");
+    let bytes = std::fs::read(&db3).unwrap();
+    for cut in [100, 4096, bytes.len() / 2, bytes.len() - 1000] {
+        // No panic: an SQLite error or fewer messages.
+        let _ = read_all(&tmp("cut.db3", &bytes[..cut]));
+    }
+    let mcap = fixture("demo-vlp16.mcap-file/demo-vlp16.mcap-file.mcap.zstd");
+    let mut inner = Vec::new();
+    std::io::Read::read_to_end(
+        &mut zstd::stream::read::Decoder::new(std::fs::File::open(mcap).unwrap()).unwrap(),
+        &mut inner,
+    )
+    .unwrap();
+    let (all, _) = read_all(&tmp("whole.mcap", &inner)).unwrap();
+    for cut in [20, inner.len() / 3, inner.len() / 2, inner.len() - 10] {
+        match read_all(&tmp("cut.mcap", &inner[..cut])) {
+            Ok((n, st)) => {
+                assert!(n <= all);
+                assert!(st.truncated_at.is_some(), "cut {cut}");
+            }
+            Err(e) => assert!(e.to_string().contains("MCAP"), "{e}"),
+        }
+    }
+    let mut flipped = inner.clone();
+    let mid = flipped.len() / 2;
+    flipped[mid] ^= 0xff;
+    let _ = read_all(&tmp("flipped.mcap", &flipped));
+}
