@@ -19,14 +19,17 @@ use std::time::{Duration, Instant};
 use ringscan::calib::ouster::parse as parse_ouster;
 use ringscan::decode::ouster::OusterDecoder;
 use ringscan::model::velodyne::{DATA_PACKET_LEN, POSITION_PACKET_LEN};
-use ringscan::sink::mcap::SinkSummary;
+use ringscan::sink::mcap::{Behind, SinkOptions, SinkSummary};
 use ringscan::sink::{McapSink, SinkError};
 use ringscan::source::udp::{self, BoundSocket, Queue, ReceiveStats, Received, SocketOptions};
 use ringscan::sweep::SensorStream;
 use ringscan::wire::ouster::LidarPacket;
 use serde_json::{json, Value};
 
-use super::run::{output_json, sink_options, RunError, Session, SessionOptions, Sink};
+use super::run::{
+    fields_name, output_json, sink_options_with, ChunkCompression, RunError, Session,
+    SessionOptions, Sink,
+};
 use super::sensors::{load_calibs, CalibKind, CalibSpec};
 use super::FormatArg;
 
@@ -90,6 +93,10 @@ pub struct ListenArgs {
     pub split_every: Option<Split>,
     pub session: SessionOptions,
     pub format: FormatArg,
+    /// `--fields minimal`.
+    pub fields_minimal: bool,
+    /// `--threads`: MCAP chunk compression threads.
+    pub threads: usize,
     pub multicast: Option<Ipv4Addr>,
     pub interface: Ipv4Addr,
     /// Port of the sensors' HTTP API (Ouster metadata).
@@ -128,7 +135,7 @@ struct Live {
 struct Files {
     base: PathBuf,
     split: Option<Split>,
-    format: FormatArg,
+    opts: SinkOptions,
     index: usize,
     current: PathBuf,
     opened: Instant,
@@ -158,7 +165,7 @@ impl Files {
             context: format!("creating {}", path.display()),
             source,
         })?;
-        McapSink::new(std::io::BufWriter::new(f), sink_options(self.format))
+        McapSink::new(std::io::BufWriter::new(f), self.opts.clone())
     }
 
     fn due(&self) -> bool {
@@ -167,6 +174,20 @@ impl Files {
             Some(Split::Seconds(s)) => self.opened.elapsed().as_secs_f64() >= s,
             Some(Split::Bytes(b)) => std::fs::metadata(&self.current).is_ok_and(|m| m.len() >= b),
         }
+    }
+}
+
+/// The MCAP settings of `listen`: the default compression on `--threads` threads, which the
+/// decode thread never waits for (a chunk they cannot take in time is written uncompressed).
+fn listen_sink_options(args: &ListenArgs) -> SinkOptions {
+    SinkOptions {
+        behind: Behind::WriteUncompressed,
+        ..sink_options_with(
+            args.format,
+            ChunkCompression::default(),
+            args.threads,
+            args.fields_minimal,
+        )
     }
 }
 
@@ -395,12 +416,21 @@ impl DecodeThread {
             "other_source": self.stats.other_source.load(Ordering::Relaxed),
             "queued_bytes": self.stats.queued_bytes.load(Ordering::Relaxed),
         });
+        // The current file's chunks, and those written uncompressed because the compression
+        // threads were behind.
+        let mcap = self
+            .session
+            .chunk_stats()
+            .map(|c| json!({"chunks": c.chunks, "chunks_uncompressed": c.chunks_uncompressed}));
         let mut msgs = Vec::new();
         for (idx, (_, stream, _)) in self.session.demux().sensors().enumerate() {
             let (mut v, _) = super::sensors::sensor_summary(stream);
             if let Some(o) = v.as_object_mut() {
                 o.insert("health".into(), json!(true));
                 o.insert("receive".into(), receive.clone());
+                if let Some(m) = &mcap {
+                    o.insert("mcap".into(), m.clone());
+                }
                 if let Some(&(last, seen, n)) = self.alerts.get(idx) {
                     o.insert(
                         "alert_flags".into(),
@@ -696,7 +726,7 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
         let opts = args.session.clone();
         let out = args.out.clone();
         let split = args.split_every;
-        let format = args.format;
+        let sink_opts = listen_sink_options(args);
         let stats = stats.clone();
         let live = live.clone();
         let sensors = addrs.clone();
@@ -714,7 +744,7 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
                             let files = Files {
                                 base,
                                 split,
-                                format,
+                                opts: sink_opts,
                                 index: 0,
                                 current: current.clone(),
                                 opened: Instant::now(),
@@ -896,11 +926,12 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
             "sockets": socket_json,
         }),
     );
-    let fields_all = args.session.fields_all;
+    let sink_opts = listen_sink_options(args);
+    let fields = fields_name(args.session.fields_all, args.fields_minimal);
     m.insert(
         "output".into(),
         match result.files.last() {
-            Some((p, s)) => output_json(s, Some(p), args.format, fields_all),
+            Some((p, s)) => output_json(s, Some(p), &sink_opts, fields),
             None => Value::Null,
         },
     );
@@ -910,7 +941,7 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
             result
                 .files
                 .iter()
-                .map(|(p, s)| output_json(s, Some(p), args.format, fields_all))
+                .map(|(p, s)| output_json(s, Some(p), &sink_opts, fields))
                 .collect(),
         ),
     );
