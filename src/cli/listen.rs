@@ -97,6 +97,8 @@ pub struct ListenArgs {
     pub fields_minimal: bool,
     /// `--threads`: MCAP chunk compression threads.
     pub threads: usize,
+    /// `--chunk-size`, bytes.
+    pub chunk_size: u64,
     pub multicast: Option<Ipv4Addr>,
     pub interface: Ipv4Addr,
     /// Port of the sensors' HTTP API (Ouster metadata).
@@ -186,6 +188,7 @@ fn listen_sink_options(args: &ListenArgs) -> SinkOptions {
             args.format,
             ChunkCompression::default(),
             args.threads,
+            args.chunk_size,
             args.fields_minimal,
         )
     }

@@ -118,6 +118,9 @@ struct DecodeCmd {
     /// on one thread.
     #[arg(long, value_name = "N", value_parser = parse_threads)]
     threads: Option<usize>,
+    /// Uncompressed size of an MCAP chunk, MiB (fractions allowed).
+    #[arg(long, value_name = "MIB", default_value = "4", value_parser = parse_chunk_size)]
+    chunk_size: u64,
     /// Also write every UDP payload to `/raw`, so the drive can be decoded again later.
     #[arg(long)]
     raw: bool,
@@ -221,6 +224,9 @@ struct ListenCmd {
     /// (`output.chunks_uncompressed`); 1 = compress on the decode thread.
     #[arg(long, value_name = "N", value_parser = parse_threads)]
     threads: Option<usize>,
+    /// Uncompressed size of an MCAP chunk, MiB (fractions allowed).
+    #[arg(long, value_name = "MIB", default_value = "4", value_parser = parse_chunk_size)]
+    chunk_size: u64,
     /// Ouster footer CRC-64 check.
     #[arg(long, value_enum, default_value_t = CrcArg::Auto)]
     crc: CrcArg,
@@ -283,6 +289,14 @@ fn parse_threads(s: &str) -> Result<usize, String> {
     }
 }
 
+/// `--chunk-size`: MiB, 1/64 … 1024, into bytes.
+fn parse_chunk_size(s: &str) -> Result<u64, String> {
+    match s.parse::<f64>() {
+        Ok(m) if (1.0 / 64.0..=1024.0).contains(&m) => Ok((m * 1_048_576.0) as u64),
+        _ => Err(format!("`{s}`: expected MiB, 1/64 … 1024 (e.g. 4 or 0.5)")),
+    }
+}
+
 /// The default of `--threads`: the cores this process may use.
 pub fn default_threads() -> usize {
     std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
@@ -324,6 +338,7 @@ pub fn main() -> ExitCode {
                 format: c.format,
                 compression: c.compression,
                 threads: c.threads.unwrap_or_else(default_threads),
+                chunk_size: c.chunk_size,
                 raw: c.raw,
                 strict: c.strict,
                 crc: match c.crc {
@@ -377,6 +392,7 @@ pub fn main() -> ExitCode {
                 format: c.format,
                 fields_minimal: c.fields == FieldsArg::Minimal,
                 threads: c.threads.unwrap_or_else(default_threads),
+                chunk_size: c.chunk_size,
                 multicast: c.multicast,
                 interface: c.interface,
                 api_port: c.api_port,

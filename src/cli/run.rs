@@ -50,6 +50,8 @@ pub struct DecodeArgs {
     pub compression: ChunkCompression,
     /// `--threads`: MCAP chunk compression threads.
     pub threads: usize,
+    /// `--chunk-size`, bytes.
+    pub chunk_size: u64,
     pub format: FormatArg,
     pub raw: bool,
     pub strict: bool,
@@ -864,13 +866,15 @@ pub fn fields_name(all: bool, minimal: bool) -> &'static str {
     }
 }
 
-/// The sink options of `--format`, `--compression`, `--threads` and `--fields minimal`; the
+/// The sink options of `--format`, `--compression`, `--threads`, `--chunk-size` and `--fields
+/// minimal`; the
 /// compression threads are waited for when behind (`decode`; `listen` sets
 /// [`Behind::WriteUncompressed`]).
 pub fn sink_options_with(
     format: FormatArg,
     compression: ChunkCompression,
     threads: usize,
+    chunk_size: u64,
     fields_minimal: bool,
 ) -> SinkOptions {
     SinkOptions {
@@ -882,6 +886,7 @@ pub fn sink_options_with(
         compression: compression.kind,
         zstd_level: compression.zstd_level,
         threads,
+        chunk_size,
         behind: Behind::Wait,
         fields: if fields_minimal {
             PointFields::Minimal
@@ -973,6 +978,7 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
         args.format,
         args.compression,
         args.threads,
+        args.chunk_size,
         args.fields_minimal,
     );
     let sink = match &args.out {
@@ -1122,6 +1128,7 @@ pub fn info_command(
         fields_minimal: false,
         compression: ChunkCompression::default(),
         threads: super::default_threads(),
+        chunk_size: ringscan::sink::mcap::DEFAULT_CHUNK_SIZE,
         format: FormatArg::Foxglove,
         raw: false,
         strict: false,
@@ -1158,6 +1165,7 @@ pub fn demo_command(out: &Path, json_out: bool) -> Result<ExitCode, RunError> {
         fields_minimal: false,
         compression: ChunkCompression::default(),
         threads: super::default_threads(),
+        chunk_size: ringscan::sink::mcap::DEFAULT_CHUNK_SIZE,
         format: FormatArg::Foxglove,
         raw: false,
         strict: false,
