@@ -299,9 +299,11 @@ fn an_output_error_with_workers_is_an_error_not_a_panic() {
     }
 }
 
-/// The `foxglove.PointCloud` (or `PointCloud2`) of each `/points` message: (stride, field names
-/// and offsets, data).
-fn point_records(bytes: &[u8], format: Format) -> Vec<(u32, Vec<(String, u32)>, Vec<u8>)> {
+/// One points message: stride, (name, offset) of x, y, z and intensity, the record bytes.
+type Cloud = (u32, Vec<(String, u32)>, Vec<u8>);
+
+/// The `foxglove.PointCloud` (or `PointCloud2`) of each `/points` message.
+fn point_records(bytes: &[u8], format: Format) -> Vec<Cloud> {
     use prost::Message as _;
     messages(bytes)
         .into_iter()
@@ -326,7 +328,7 @@ fn point_records(bytes: &[u8], format: Format) -> Vec<(u32, Vec<(String, u32)>, 
 }
 
 /// A small CDR reader for `sensor_msgs/msg/PointCloud2` (little-endian, as written).
-fn ros2_cloud(b: &[u8]) -> (u32, Vec<(String, u32)>, Vec<u8>) {
+fn ros2_cloud(b: &[u8]) -> Cloud {
     let b = &b[4..];
     let mut at = 0usize;
     let u32_at = |at: &mut usize| {

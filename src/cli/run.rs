@@ -893,7 +893,6 @@ pub fn sink_options_with(
         } else {
             PointFields::Default
         },
-        ..SinkOptions::default()
     }
 }
 

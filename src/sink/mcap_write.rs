@@ -773,8 +773,7 @@ impl<W: Write> ChunkedWriter<W> {
     /// Writes whatever chunks are compressed and next in order, without waiting.
     pub fn poll(&mut self) -> Result<(), SinkError> {
         self.check()?;
-        loop {
-            let Some(pool) = &self.pool else { break };
+        while let Some(pool) = &self.pool {
             match pool.results.try_recv() {
                 Ok(d) => self.absorb(d),
                 Err(TryRecvError::Empty) => break,

@@ -373,28 +373,28 @@ fn main() {
         println!("\n### What each point field costs ({}, 4 MiB chunks, one thread, median of {rounds} rounds)\n", first.name());
         println!("| record | bytes per point | compressed MB | compress s | ratio | saves vs the whole record: MB, s |");
         println!("|---|---:|---:|---:|---:|---|");
-        // (name, byte ranges of the 24-byte record kept)
-        let layouts: Vec<(&str, Vec<std::ops::Range<usize>>)> = vec![
-            ("whole (default)", vec![0..24]),
-            ("without x", vec![4..24]),
-            ("without y", vec![0..4, 8..24]),
-            ("without z", vec![0..8, 12..24]),
-            ("without intensity", vec![0..12, 16..24]),
-            ("without t", vec![0..16, 20..24]),
-            ("without ring", vec![0..20, 22..24]),
-            ("without return and padding", vec![0..22]),
-            ("minimal (x, y, z, intensity)", vec![0..16]),
+        // (name, byte ranges [from, to) of the 24-byte record kept)
+        let layouts: Vec<(&str, Vec<(usize, usize)>)> = vec![
+            ("whole (default)", vec![(0, 24)]),
+            ("without x", vec![(4, 24)]),
+            ("without y", vec![(0, 4), (8, 24)]),
+            ("without z", vec![(0, 8), (12, 24)]),
+            ("without intensity", vec![(0, 12), (16, 24)]),
+            ("without t", vec![(0, 16), (20, 24)]),
+            ("without ring", vec![(0, 20), (22, 24)]),
+            ("without return and padding", vec![(0, 22)]),
+            ("minimal (x, y, z, intensity)", vec![(0, 16)]),
         ];
         let mut base: Option<(f64, f64)> = None;
         for (name, keep) in layouts {
-            let stride: usize = keep.iter().map(|r| r.len()).sum();
+            let stride: usize = keep.iter().map(|(a, b)| b - a).sum();
             let mut chunks: Vec<Vec<u8>> = vec![Vec::new()];
             for s in &sweeps {
                 let c = chunks.last_mut().expect("one chunk");
                 for p in &s.points {
                     let b = bytemuck::bytes_of(p);
-                    for r in &keep {
-                        c.extend_from_slice(&b[r.clone()]);
+                    for &(from, to) in &keep {
+                        c.extend_from_slice(&b[from..to]);
                     }
                 }
                 if c.len() >= 4 << 20 {
