@@ -22,8 +22,11 @@
 //!
 //! **Memory bound.** At most [`in_flight_limit`]`(threads)` = 2 × `threads` sealed chunks are
 //! in flight (queued, compressing, or compressed and waiting for an older one), plus the open
-//! chunk: about (2 × threads + 1) × chunk size of records and at most as much compressed
-//! output. When the limit is reached, [`Behind::Wait`] blocks the caller until the oldest chunk
+//! chunk: about (2 × threads + 1) × 1.5 × chunk size of record buffers (each has room for a
+//! chunk and the message that passes the size; they are reused, never regrown) and at most as
+//! many compressed-output buffers (zstd's bound: the chunk size and a little), plus the records
+//! a worker still holds after the caller wrote its chunk uncompressed (≤ threads). With the
+//! default 4 MiB chunks and 2 threads: 5 × 6 MiB + 5 × 4 MiB ≈ 50 MiB at most. When the limit is reached, [`Behind::Wait`] blocks the caller until the oldest chunk
 //! is written (`decode`); [`Behind::WriteUncompressed`] never waits for compression (`listen`):
 //! the oldest chunk is written uncompressed at once, which is valid MCAP, and counted in
 //! [`WriterStats::chunks_uncompressed`]; nothing is dropped.
@@ -565,8 +568,11 @@ impl<W: Write> ChunkedWriter<W> {
                 failed: false,
             },
             inline: Compressor::new(opts.codec),
+            open: OpenChunk {
+                records: Vec::with_capacity(opts.chunk_size + opts.chunk_size / 2),
+                ..OpenChunk::default()
+            },
             opts,
-            open: OpenChunk::default(),
             slots: VecDeque::new(),
             first_seq: 0,
             chunks_in_flight: 0,
@@ -788,7 +794,10 @@ impl<W: Write> ChunkedWriter<W> {
         if self.open.records.is_empty() {
             return Ok(());
         }
-        let spare = self.spare.pop().unwrap_or_default();
+        let spare = self.spare.pop().unwrap_or_else(|| {
+            // Room for a chunk and the message that passes the size, without regrowing.
+            Vec::with_capacity(self.opts.chunk_size + self.opts.chunk_size / 2)
+        });
         let mut open = std::mem::replace(
             &mut self.open,
             OpenChunk {
@@ -1004,15 +1013,18 @@ impl<W: Write> ChunkedWriter<W> {
         self.write_ready()
     }
 
+    /// Buffers circulate: a new one is allocated only when no spare is left, so at most
+    /// `in_flight_limit + 1` record buffers (and as many output buffers) ever exist, plus those a
+    /// worker still holds after its chunk was written uncompressed.
     fn recycle(&mut self, mut v: Vec<u8>) {
-        if self.spare.len() < 2 {
+        if self.spare.len() <= in_flight_limit(self.opts.threads) {
             v.clear();
             self.spare.push(v);
         }
     }
 
     fn recycle_out(&mut self, mut v: Vec<u8>) {
-        if self.spare_out.len() < 2 {
+        if self.spare_out.len() <= in_flight_limit(self.opts.threads) {
             v.clear();
             self.spare_out.push(v);
         }
