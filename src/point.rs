@@ -103,6 +103,26 @@ pub const POINT_FIELDS: [(&str, usize, FieldType); 7] = [
     ("return", 22, FieldType::U8),
 ];
 
+/// Stride of the minimal record written with `--fields minimal`: x, y, z, intensity.
+pub const MINIMAL_STRIDE: usize = 16;
+
+/// Fields of the minimal record: the first four of [`POINT_FIELDS`], at the same offsets.
+pub const MINIMAL_FIELDS: [(&str, usize, FieldType); 4] = [
+    ("x", 0, FieldType::F32),
+    ("y", 4, FieldType::F32),
+    ("z", 8, FieldType::F32),
+    ("intensity", 12, FieldType::F32),
+];
+
+/// Appends the minimal records (x, y, z, intensity: the first [`MINIMAL_STRIDE`] bytes of each
+/// point) to `out`.
+pub fn extend_minimal(points: &[Point], out: &mut Vec<u8>) {
+    out.reserve(points.len() * MINIMAL_STRIDE);
+    for p in points {
+        out.extend_from_slice(&bytemuck::bytes_of(p)[..MINIMAL_STRIDE]);
+    }
+}
+
 /// Scalar type of a point field.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum FieldType {

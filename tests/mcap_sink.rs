@@ -152,6 +152,7 @@ fn write_file_at(format: Format, compression: Compression, zstd_level: i32) -> W
         compression,
         chunk_size: 16 * 1024,
         zstd_level,
+        ..SinkOptions::default()
     };
     let mut sink = McapSink::new(buf.clone(), opts).unwrap();
     let sweeps = write_into(&mut sink);

@@ -14,9 +14,11 @@ its peak RSS. Scenarios:
 
 * count only (no --out), 10x the real packet rate, T = --seconds: the HDL-64E S3 input and the
   OS-2-128 RNG19 input (same packet format as an OS-1-128 RNG19 stream);
-* with --out: 1x and 5x of each input, T = --seconds;
+* with --out: 1x and 5x of each input, T = --seconds (`--threads N` is passed on to listen;
+  the MCAP chunks its compression threads could not take in time are reported, written
+  uncompressed by listen, never dropped);
 * ramp (count only, T = --ramp-seconds each): HDL-64E at 10, 15, 20, 30, 40x and max, to find
-  where loss begins;
+  where loss begins; the same with --out (zstd MCAP) at 5, 10, 15, 20, 30x and max;
 * garbage flood (count only, T = --ramp-seconds): random datagrams of random sizes (1 to 65507
   bytes) as fast as one Python sender can, half from the sensor's address (queued, then ignored
   by the decoder) and half from another loopback address (filtered); peak RSS shows whether
@@ -118,6 +120,8 @@ def scenario(args, name, pcap, ports, calib, rate, seconds, out=False, garbage=F
         listen += ["--calib", c]
     if out:
         listen += ["--out", os.path.join(tmp, "out.mcap")]
+        if args.threads:
+            listen += ["--threads", str(args.threads)]
     la0 = loadavg()
     proc = subprocess.Popen(["/usr/bin/time", "-v", *listen], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
@@ -172,6 +176,9 @@ def scenario(args, name, pcap, ports, calib, rate, seconds, out=False, garbage=F
         "load_before": la0,
         "load_after": la1,
         "out_mib": (os.path.getsize(os.path.join(tmp, "out.mcap")) / 2**20) if out else None,
+        "chunks": j["output"]["chunks"] if out else None,
+        "chunks_uncompressed": j["output"]["chunks_uncompressed"] if out else None,
+        "threads": j["output"]["threads"] if out else None,
     }
     if out:
         os.remove(os.path.join(tmp, "out.mcap"))
@@ -191,6 +198,8 @@ def main():
     ap.add_argument("--ramp-seconds", type=float, default=10)
     ap.add_argument("--only", default="", help="comma-separated scenario names")
     ap.add_argument("--report", default="/tmp/bench_listen.md")
+    ap.add_argument("--threads", type=int, default=None,
+                    help="listen --threads with --out (default: listen's, the machine's cores)")
     a = ap.parse_args()
     a.bin = os.path.abspath(a.bin)
     # Velodyne inputs loop (the stream only sees its clock jump back: a discontinuity); the
@@ -210,6 +219,8 @@ def main():
         plan.append((f"hdl64e-{r}x-count", H, r, a.ramp_seconds, False, False))
     for r in (20, 40, "max"):
         plan.append((f"os-rng19-{r}x-count", O, r, a.ramp_seconds, False, False))
+    for r in (5, 10, 15, 20, 30, "max"):
+        plan.append((f"hdl64e-{r}x-out-ramp", H, r, a.ramp_seconds, True, False))
     plan.append(("garbage-flood", H, 1, a.ramp_seconds, False, True))
     only = [x for x in a.only.split(",") if x]
     rows = []
@@ -219,15 +230,17 @@ def main():
         rows.append(scenario(a, name, pcap, ports, calib, rate, secs, out, garbage, loop))
     lines = [
         "| scenario | send rate (datagrams/s) | sent for (s) | sent | received | queue drops | kernel drops | "
-        "sweeps | points | listen CPU % | peak RSS MiB | queue peak MiB | load avg before/after |",
-        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |",
+        "sweeps | points | listen CPU % | peak RSS MiB | queue peak MiB | MCAP chunks (uncompressed) | load avg before/after |",
+        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- | --- |",
     ]
     for r in rows:
         rate = f"{r['send_rate_pps']:.0f}" if r["send_rate_pps"] else "flood"
         lines.append(
             f"| {r['scenario']} | {rate} | {r['send_s']:.1f} | {r['sent']} | {r['received']} | {r['queue_dropped']} | "
             f"{r['kernel_dropped']} | {r['sweeps']} | {r['points']} | {r['cpu_pct']:.0f} | "
-            f"{r['rss_mib']:.0f} | {r['queue_peak_mib']:.1f} | {r['load_before']} / {r['load_after']} |"
+            f"{r['rss_mib']:.0f} | {r['queue_peak_mib']:.1f} | "
+            + (f"{r['chunks']} ({r['chunks_uncompressed']}), {r['threads']} threads" if r["out"] else "")
+            + f" | {r['load_before']} / {r['load_after']} |"
         )
     text = "\n".join(lines) + "\n"
     with open(a.report, "w") as f:

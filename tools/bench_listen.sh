@@ -7,7 +7,8 @@
 #
 # Environment (optional): BENCH_DIR scratch folder (default bench-data/listen, git-ignored;
 # deleted when done if made here), BENCH_REPORT (default /tmp/bench_listen.md), BENCH_ONLY
-# (comma-separated scenario names).
+# (comma-separated scenario names), BENCH_THREADS (listen --threads with --out; default its own,
+# the machine's cores).
 #
 # Inputs, made here:
 # * HDL-64E S3: 10 s of the simulator (`--model hdl64e-s3 --mode dual`, 10 Hz, the
@@ -40,4 +41,5 @@ python3 tools/bench_listen.py --bin target/release/ringscan \
   --hdl64 "$DIR/hdl64e.pcap" --hdl64-calib "$CALIB" \
   --ouster "$DIR/ouster.pcap" --ouster-meta "$O/OS-2-128-U1_v2.3.0_1024x10.json" \
   --seconds "$SECS" --ramp-seconds "$RAMP" --only "${BENCH_ONLY:-}" \
+  ${BENCH_THREADS:+--threads "$BENCH_THREADS"} \
   --report "${BENCH_REPORT:-/tmp/bench_listen.md}"

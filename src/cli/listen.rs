@@ -19,12 +19,15 @@ use std::time::{Duration, Instant};
 use ringscan::sensor::ouster::family::OusterCalibration;
 use ringscan::sensor::ouster::OusterStream;
 use ringscan::sensor::{Calibration, FAMILIES};
-use ringscan::sink::mcap::SinkSummary;
+use ringscan::sink::mcap::{Behind, SinkOptions, SinkSummary};
 use ringscan::sink::{McapSink, SinkError};
 use ringscan::source::udp::{self, BoundSocket, Queue, ReceiveStats, Received, SocketOptions};
 use serde_json::{json, Value};
 
-use super::run::{output_json, sink_options, RunError, Session, SessionOptions, Sink};
+use super::run::{
+    fields_name, output_json, sink_options_with, ChunkCompression, RunError, Session,
+    SessionOptions, Sink,
+};
 use super::sensors::load_calibs;
 use super::FormatArg;
 
@@ -85,6 +88,12 @@ pub struct ListenArgs {
     pub split_every: Option<Split>,
     pub session: SessionOptions,
     pub format: FormatArg,
+    /// `--fields minimal`.
+    pub fields_minimal: bool,
+    /// `--threads`: MCAP chunk compression threads.
+    pub threads: usize,
+    /// `--chunk-size`, bytes.
+    pub chunk_size: u64,
     pub multicast: Option<Ipv4Addr>,
     pub interface: Ipv4Addr,
     /// Port of the sensors' HTTP API (Ouster metadata).
@@ -123,7 +132,7 @@ struct Live {
 struct Files {
     base: PathBuf,
     split: Option<Split>,
-    format: FormatArg,
+    opts: SinkOptions,
     index: usize,
     current: PathBuf,
     opened: Instant,
@@ -153,7 +162,7 @@ impl Files {
             context: format!("creating {}", path.display()),
             source,
         })?;
-        McapSink::new(std::io::BufWriter::new(f), sink_options(self.format))
+        McapSink::new(std::io::BufWriter::new(f), self.opts.clone())
     }
 
     fn due(&self) -> bool {
@@ -162,6 +171,21 @@ impl Files {
             Some(Split::Seconds(s)) => self.opened.elapsed().as_secs_f64() >= s,
             Some(Split::Bytes(b)) => std::fs::metadata(&self.current).is_ok_and(|m| m.len() >= b),
         }
+    }
+}
+
+/// The MCAP settings of `listen`: the default compression on `--threads` threads, which the
+/// decode thread never waits for (a chunk they cannot take in time is written uncompressed).
+fn listen_sink_options(args: &ListenArgs) -> SinkOptions {
+    SinkOptions {
+        behind: Behind::WriteUncompressed,
+        ..sink_options_with(
+            args.format,
+            ChunkCompression::default(),
+            args.threads,
+            args.chunk_size,
+            args.fields_minimal,
+        )
     }
 }
 
@@ -353,12 +377,21 @@ impl DecodeThread {
             "other_source": self.stats.other_source.load(Ordering::Relaxed),
             "queued_bytes": self.stats.queued_bytes.load(Ordering::Relaxed),
         });
+        // The current file's chunks, and those written uncompressed because the compression
+        // threads were behind.
+        let mcap = self
+            .session
+            .chunk_stats()
+            .map(|c| json!({"chunks": c.chunks, "chunks_uncompressed": c.chunks_uncompressed}));
         let mut msgs = Vec::new();
         for (idx, (_, stream, _)) in self.session.demux().sensors().enumerate() {
             let (mut v, _) = stream.summary();
             if let Some(o) = v.as_object_mut() {
                 o.insert("health".into(), json!(true));
                 o.insert("receive".into(), receive.clone());
+                if let Some(m) = &mcap {
+                    o.insert("mcap".into(), m.clone());
+                }
             }
             msgs.push((idx, v));
         }
@@ -646,7 +679,7 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
         let opts = args.session.clone();
         let out = args.out.clone();
         let split = args.split_every;
-        let format = args.format;
+        let sink_opts = listen_sink_options(args);
         let stats = stats.clone();
         let live = live.clone();
         let sensors = addrs.clone();
@@ -664,7 +697,7 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
                             let files = Files {
                                 base,
                                 split,
-                                format,
+                                opts: sink_opts,
                                 index: 0,
                                 current: current.clone(),
                                 opened: Instant::now(),
@@ -845,11 +878,12 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
             "sockets": socket_json,
         }),
     );
-    let fields_all = args.session.fields_all;
+    let sink_opts = listen_sink_options(args);
+    let fields = fields_name(args.session.fields_all, args.fields_minimal);
     m.insert(
         "output".into(),
         match result.files.last() {
-            Some((p, s)) => output_json(s, Some(p), args.format, fields_all),
+            Some((p, s)) => output_json(s, Some(p), &sink_opts, fields),
             None => Value::Null,
         },
     );
@@ -859,7 +893,7 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
             result
                 .files
                 .iter()
-                .map(|(p, s)| output_json(s, Some(p), args.format, fields_all))
+                .map(|(p, s)| output_json(s, Some(p), &sink_opts, fields))
                 .collect(),
         ),
     );

@@ -67,8 +67,10 @@ pub enum CrcArg {
 /// Which point fields are written.
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
 pub enum FieldsArg {
-    /// x, y, z, intensity, t, ring, return.
+    /// x, y, z, intensity, t, ring, return (24-byte records).
     Default,
+    /// x, y, z, intensity only (16-byte records).
+    Minimal,
     /// The default fields plus every extra field the sensor has (none for Velodyne).
     All,
 }
@@ -114,6 +116,13 @@ struct DecodeCmd {
     /// zstd's fast modes), `lz4` or `none`.
     #[arg(long, default_value = "zstd")]
     compression: run::ChunkCompression,
+    /// Threads compressing MCAP chunks (default: the machine's cores); 1 = decode and compress
+    /// on one thread.
+    #[arg(long, value_name = "N", value_parser = parse_threads)]
+    threads: Option<usize>,
+    /// Uncompressed size of an MCAP chunk, MiB (fractions allowed).
+    #[arg(long, value_name = "MIB", default_value = "4", value_parser = parse_chunk_size)]
+    chunk_size: u64,
     /// Also write every UDP payload to `/raw`, so the drive can be decoded again later.
     #[arg(long)]
     raw: bool,
@@ -216,6 +225,14 @@ struct ListenCmd {
     /// Also write every UDP payload to `/raw`.
     #[arg(long)]
     raw: bool,
+    /// Threads compressing MCAP chunks (default: the machine's cores). The decode thread never
+    /// waits for them: a chunk they cannot take in time is written uncompressed and counted
+    /// (`output.chunks_uncompressed`); 1 = compress on the decode thread.
+    #[arg(long, value_name = "N", value_parser = parse_threads)]
+    threads: Option<usize>,
+    /// Uncompressed size of an MCAP chunk, MiB (fractions allowed).
+    #[arg(long, value_name = "MIB", default_value = "4", value_parser = parse_chunk_size)]
+    chunk_size: u64,
     /// Ouster footer CRC-64 check.
     #[arg(long, value_enum, default_value_t = CrcArg::Auto)]
     crc: CrcArg,
@@ -275,6 +292,27 @@ struct ReplayCmd {
     bag: input::BagArgs,
 }
 
+/// `--threads`: a positive number.
+fn parse_threads(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(n) if (1..=1024).contains(&n) => Ok(n),
+        _ => Err(format!("`{s}`: expected a number of threads, 1 … 1024")),
+    }
+}
+
+/// `--chunk-size`: MiB, 1/64 … 1024, into bytes.
+fn parse_chunk_size(s: &str) -> Result<u64, String> {
+    match s.parse::<f64>() {
+        Ok(m) if (1.0 / 64.0..=1024.0).contains(&m) => Ok((m * 1_048_576.0) as u64),
+        _ => Err(format!("`{s}`: expected MiB, 1/64 … 1024 (e.g. 4 or 0.5)")),
+    }
+}
+
+/// The default of `--threads`: the cores this process may use.
+pub fn default_threads() -> usize {
+    std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
+}
+
 fn init_logging(verbose: u8) {
     use tracing_subscriber::EnvFilter;
     let default = match verbose {
@@ -307,8 +345,11 @@ pub fn main() -> ExitCode {
                 min_range: c.min_range,
                 max_range: c.max_range,
                 fields_all: c.fields == FieldsArg::All,
+                fields_minimal: c.fields == FieldsArg::Minimal,
                 format: c.format,
                 compression: c.compression,
+                threads: c.threads.unwrap_or_else(default_threads),
+                chunk_size: c.chunk_size,
                 raw: c.raw,
                 strict: c.strict,
                 crc: match c.crc {
@@ -363,6 +404,9 @@ pub fn main() -> ExitCode {
                     odometry: c.odometry,
                 },
                 format: c.format,
+                fields_minimal: c.fields == FieldsArg::Minimal,
+                threads: c.threads.unwrap_or_else(default_threads),
+                chunk_size: c.chunk_size,
                 multicast: c.multicast,
                 interface: c.interface,
                 api_port: c.api_port,

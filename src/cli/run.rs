@@ -10,7 +10,8 @@ use ringscan::sensor::DecodeOptions;
 use ringscan::sensor::StreamError;
 use ringscan::sensor::{Calibration, Facts, FirstDatagram, StreamSettings};
 use ringscan::sink::mcap::{
-    create_file, Compression, Format, SensorId, SensorInfo, SinkOptions, SinkSummary, SweepMsg,
+    create_file, Behind, Compression, Format, PointFields, SensorId, SensorInfo, SinkOptions,
+    SinkSummary, SweepMsg,
 };
 use ringscan::sink::{McapSink, SinkError};
 use ringscan::source::pcap::PcapSource;
@@ -45,8 +46,14 @@ pub struct DecodeArgs {
     pub min_range: Option<f32>,
     pub max_range: Option<f32>,
     pub fields_all: bool,
+    /// `--fields minimal`: x, y, z, intensity only.
+    pub fields_minimal: bool,
     /// `--compression`.
     pub compression: ChunkCompression,
+    /// `--threads`: MCAP chunk compression threads.
+    pub threads: usize,
+    /// `--chunk-size`, bytes.
+    pub chunk_size: u64,
     pub format: FormatArg,
     pub raw: bool,
     pub strict: bool,
@@ -620,6 +627,11 @@ impl Session {
         }
     }
 
+    /// The output's chunk counters so far, if there is an output.
+    pub fn chunk_stats(&self) -> Option<ringscan::sink::mcap::WriterStats> {
+        self.out.sink.as_ref().map(|s| s.chunk_stats())
+    }
+
     /// Sweeps and points so far.
     pub fn totals(&self) -> (u64, u64) {
         (self.out.sweeps, self.out.points)
@@ -840,27 +852,42 @@ impl Session {
 pub fn output_json(
     s: &SinkSummary,
     path: Option<&Path>,
-    format: FormatArg,
-    fields_all: bool,
+    opts: &SinkOptions,
+    fields: &str,
 ) -> Value {
     json!({
         "path": path.map(|p| p.display().to_string()),
-        "format": if format == FormatArg::Ros2 { "ros2" } else { "foxglove" },
+        "format": if opts.format == Format::Ros2 { "ros2" } else { "foxglove" },
         // Velodyne points have no extra fields: `--fields all` writes the default ones.
-        "fields": if fields_all { "all" } else { "default" },
+        "fields": fields,
         "topics": s.messages,
         "attachments": s.attachments.iter().map(|a| json!({"name": a.name, "media_type": a.media_type, "size": a.size})).collect::<Vec<_>>(),
         "chunks": s.chunks,
+        "chunks_uncompressed": s.chunks_uncompressed,
+        "threads": opts.threads,
     })
 }
 
-/// Sink options for `--format`.
-pub fn sink_options(format: FormatArg) -> SinkOptions {
-    sink_options_with(format, ChunkCompression::default())
+/// The name of `--fields` in summaries.
+pub fn fields_name(all: bool, minimal: bool) -> &'static str {
+    match (all, minimal) {
+        (true, _) => "all",
+        (false, true) => "minimal",
+        (false, false) => "default",
+    }
 }
 
-/// The sink options of `--format` and `--compression`.
-pub fn sink_options_with(format: FormatArg, compression: ChunkCompression) -> SinkOptions {
+/// The sink options of `--format`, `--compression`, `--threads`, `--chunk-size` and `--fields
+/// minimal`; the
+/// compression threads are waited for when behind (`decode`; `listen` sets
+/// [`Behind::WriteUncompressed`]).
+pub fn sink_options_with(
+    format: FormatArg,
+    compression: ChunkCompression,
+    threads: usize,
+    chunk_size: u64,
+    fields_minimal: bool,
+) -> SinkOptions {
     SinkOptions {
         format: if format == FormatArg::Ros2 {
             Format::Ros2
@@ -869,7 +896,14 @@ pub fn sink_options_with(format: FormatArg, compression: ChunkCompression) -> Si
         },
         compression: compression.kind,
         zstd_level: compression.zstd_level,
-        ..SinkOptions::default()
+        threads,
+        chunk_size,
+        behind: Behind::Wait,
+        fields: if fields_minimal {
+            PointFields::Minimal
+        } else {
+            PointFields::Default
+        },
     }
 }
 
@@ -954,11 +988,15 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
         return Err(RunError::Usage(format!("--name: the capture holds {n_sensors_hint} sensors; names are given per sensor automatically")));
     }
     session.set_sensor_hint(n_sensors_hint);
+    let sink_opts = sink_options_with(
+        args.format,
+        args.compression,
+        args.threads,
+        args.chunk_size,
+        args.fields_minimal,
+    );
     let sink = match &args.out {
-        Some(p) => Some(create_file(
-            p,
-            sink_options_with(args.format, args.compression),
-        )?),
+        Some(p) => Some(create_file(p, sink_opts.clone())?),
         None => None,
     };
     session.set_sink(sink);
@@ -989,7 +1027,12 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
     m.insert(
         "output".into(),
         match &sink_summary {
-            Some(s) => output_json(s, args.out.as_deref(), args.format, args.fields_all),
+            Some(s) => output_json(
+                s,
+                args.out.as_deref(),
+                &sink_opts,
+                fields_name(args.fields_all, args.fields_minimal),
+            ),
             None => Value::Null,
         },
     );
@@ -1101,7 +1144,10 @@ pub fn info_command(
         min_range: None,
         max_range: None,
         fields_all: false,
+        fields_minimal: false,
         compression: ChunkCompression::default(),
+        threads: super::default_threads(),
+        chunk_size: ringscan::sink::mcap::DEFAULT_CHUNK_SIZE,
         format: FormatArg::Foxglove,
         raw: false,
         strict: false,
@@ -1136,7 +1182,10 @@ pub fn demo_command(out: &Path, json_out: bool) -> Result<ExitCode, RunError> {
         min_range: None,
         max_range: None,
         fields_all: false,
+        fields_minimal: false,
         compression: ChunkCompression::default(),
+        threads: super::default_threads(),
+        chunk_size: ringscan::sink::mcap::DEFAULT_CHUNK_SIZE,
         format: FormatArg::Foxglove,
         raw: false,
         strict: false,

@@ -215,18 +215,38 @@ pub fn encode_point_cloud_bytes(
     prefix: &PointCloudPrefix,
     data: &[u8],
 ) -> Option<()> {
+    buf.clear();
+    append_point_cloud_with(buf, timestamp_ns, prefix, data.len(), |b| {
+        b.extend_from_slice(data)
+    })
+}
+
+/// Appends one `foxglove.PointCloud` to `buf` (not cleared: the MCAP sink encodes into the
+/// chunk itself), whose `data` is the `data_len` bytes `write_data` appends.
+///
+/// Returns `None` (and appends nothing) when the message would exceed [`MAX_MESSAGE_LEN`].
+pub fn append_point_cloud_with(
+    buf: &mut Vec<u8>,
+    timestamp_ns: u64,
+    prefix: &PointCloudPrefix,
+    data_len: usize,
+    write_data: impl FnOnce(&mut Vec<u8>),
+) -> Option<()> {
     // timestamp (≤ 2 + 2·10 bytes) + prefix + data key and length (≤ 1 + 10) + data
-    let len = 22 + prefix.bytes.len() + 11 + data.len();
+    let len = 22usize
+        .checked_add(prefix.bytes.len() + 11)?
+        .checked_add(data_len)?;
     if len > MAX_MESSAGE_LEN {
         return None;
     }
-    buf.clear();
     buf.reserve(len);
     put_timestamp_field(buf, 1, timestamp_ns);
     buf.extend_from_slice(&prefix.bytes);
     put_key(buf, 6, WIRE_LEN);
-    put_varint(buf, data.len() as u64);
-    buf.extend_from_slice(data);
+    put_varint(buf, data_len as u64);
+    let at = buf.len();
+    write_data(buf);
+    debug_assert_eq!(buf.len() - at, data_len);
     Some(())
 }
 

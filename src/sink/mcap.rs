@@ -1,5 +1,6 @@
-//! The MCAP writer: channels per sensor, sweeps, raw packets, diagnostics, attachments, and the
-//! atomic file commit of [`create_file`].
+//! The MCAP sink: channels per sensor, sweeps, raw packets, diagnostics, attachments, and the
+//! atomic file commit of [`create_file`]. The records, chunks and their compression on worker
+//! threads are [`super::mcap_write`]'s.
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -7,12 +8,11 @@ use std::io::{self, BufWriter, Seek, Write};
 use std::net::SocketAddrV4;
 use std::path::{Path, PathBuf};
 
-use ::mcap::records::MessageHeader;
-use ::mcap::{McapError, WriteOptions, Writer};
-
 use super::foxglove::{self, PointCloudPrefix};
+pub use super::mcap_write::{in_flight_limit, Behind, WriterStats};
+use super::mcap_write::{ChunkedWriter, Codec, MessageHeader, WriterOptions};
 use super::ros2::{self, Ros2EncodeError};
-use crate::point::{Point, POINT_STRIDE};
+use crate::point::{Point, MINIMAL_FIELDS, MINIMAL_STRIDE, POINT_STRIDE};
 
 /// Default target size of an uncompressed chunk (4 MiB: a few sweeps of a 64-beam sensor).
 pub const DEFAULT_CHUNK_SIZE: u64 = 4 * 1024 * 1024;
@@ -49,9 +49,8 @@ pub enum Format {
 /// −3, one of zstd's fast levels. A driver records beside the perception stack on the vehicle,
 /// so the default spends the least CPU that still compresses: on the HDL-32E capture level −3
 /// takes 0.59× the CPU of level 1 for files 1.30× as large (ratio 1.22 vs 1.59; LZ4 is both
-/// slower and larger, 1.29), which is what keeps `decode --out` above 50× real time on two
-/// cores (`tools/bench_mcap_e2e.sh`, BENCHMARKS.md). `--compression zstd:1` (or higher) when
-/// size matters more.
+/// slower and larger, 1.29) (`tools/bench_mcap_e2e.sh`, BENCHMARKS.md). `--compression zstd:1`
+/// (or higher) when size matters more.
 pub const DEFAULT_ZSTD_LEVEL: i32 = -3;
 
 /// Zstandard levels [`SinkOptions::zstd_level`] accepts: zstd's "fast" levels down to −7 and the
@@ -61,15 +60,26 @@ pub const ZSTD_LEVELS: core::ops::RangeInclusive<i32> = -7..=19;
 /// Chunk compression.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Compression {
-    /// Zstandard at [`SinkOptions::zstd_level`] ([`DEFAULT_ZSTD_LEVEL`] unless set),
-    /// multi-threaded (the default). Levels and what they cost: `tools/bench/mcap_compression.rs`,
-    /// `tools/bench_mcap_e2e.sh`, figures in BENCHMARKS.md.
+    /// Zstandard at [`SinkOptions::zstd_level`] ([`DEFAULT_ZSTD_LEVEL`] unless set), the
+    /// default. Each chunk is one zstd frame compressed by one thread; chunks are compressed in
+    /// parallel with [`SinkOptions::threads`] > 1. Levels and what they cost:
+    /// `tools/bench/mcap_compression.rs`, `tools/bench_mcap_threads.sh`.
     #[default]
     Zstd,
     /// LZ4 (faster, larger).
     Lz4,
     /// Chunks stored uncompressed.
     None,
+}
+
+/// Which fields the points channels' records carry ([`McapSink::write_sweep`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PointFields {
+    /// The whole [`Point`] record: x, y, z, intensity, t, ring, return (24 bytes).
+    #[default]
+    Default,
+    /// x, y, z, intensity only ([`MINIMAL_FIELDS`], 16 bytes): `--fields minimal`.
+    Minimal,
 }
 
 /// How the file is written.
@@ -85,6 +95,16 @@ pub struct SinkOptions {
     /// Zstandard level (with [`Compression::Zstd`]), within [`ZSTD_LEVELS`]; negative levels are
     /// zstd's fast modes.
     pub zstd_level: i32,
+    /// Threads compressing chunks: 1 (the default) compresses on the caller's thread and starts
+    /// none; N > 1 starts N worker threads, and the caller only fills and writes chunks, in
+    /// order. The file's bytes do not depend on it (except for [`Behind::WriteUncompressed`]
+    /// fallbacks). At most [`in_flight_limit`]`(threads)` sealed chunks are held at once.
+    pub threads: usize,
+    /// With `threads` > 1, what happens when the workers fall behind: wait for them, or write
+    /// the oldest chunk uncompressed and count it ([`SinkSummary::chunks_uncompressed`]).
+    pub behind: Behind,
+    /// Fields of the points records written by [`McapSink::write_sweep`].
+    pub fields: PointFields,
 }
 
 impl Default for SinkOptions {
@@ -94,6 +114,9 @@ impl Default for SinkOptions {
             compression: Compression::Zstd,
             chunk_size: DEFAULT_CHUNK_SIZE,
             zstd_level: DEFAULT_ZSTD_LEVEL,
+            threads: 1,
+            behind: Behind::Wait,
+            fields: PointFields::Default,
         }
     }
 }
@@ -150,6 +173,8 @@ pub struct SensorChannels {
     point_cloud_prefix: PointCloudPrefix,
     /// The same for the extended record (`--fields all`), made on first use.
     extended_prefix: Option<PointCloudPrefix>,
+    /// The same for the minimal record (`--fields minimal`).
+    minimal_prefix: Option<PointCloudPrefix>,
 }
 
 #[derive(Debug)]
@@ -160,14 +185,23 @@ struct Channel {
 
 impl Channel {
     fn next_header(&mut self, log_time: u64) -> MessageHeader {
-        let sequence = self.sequence;
+        let header = self.header(log_time);
         self.sequence = self.sequence.wrapping_add(1);
+        header
+    }
+
+    /// The next message's header, without taking its sequence number (see [`Self::advance`]).
+    fn header(&self, log_time: u64) -> MessageHeader {
         MessageHeader {
             channel_id: self.id,
-            sequence,
+            sequence: self.sequence,
             log_time,
             publish_time: log_time,
         }
+    }
+
+    fn advance(&mut self) {
+        self.sequence = self.sequence.wrapping_add(1);
     }
 }
 
@@ -237,6 +271,9 @@ pub struct SinkSummary {
     pub attachments: Vec<AttachmentSummary>,
     /// Number of chunks.
     pub chunks: usize,
+    /// Chunks written uncompressed because the compression threads were behind
+    /// ([`Behind::WriteUncompressed`]).
+    pub chunks_uncompressed: u64,
     /// Where the file was committed, when created with [`create_file`].
     pub path: Option<PathBuf>,
 }
@@ -252,15 +289,6 @@ pub enum SinkError {
         /// The underlying error.
         #[source]
         source: io::Error,
-    },
-    /// The MCAP writer failed (usually an I/O error underneath).
-    #[error("MCAP writer failed while {context}: {source}")]
-    Mcap {
-        /// What was being written.
-        context: String,
-        /// The underlying error.
-        #[source]
-        source: McapError,
     },
     /// A [`SensorId`] that this sink did not hand out.
     #[error("unknown sensor id {id}: this sink has {registered} sensor(s)")]
@@ -311,11 +339,6 @@ pub enum SinkError {
     },
 }
 
-fn mcap_err(context: impl Into<String>) -> impl FnOnce(McapError) -> SinkError {
-    let context = context.into();
-    move |source| SinkError::Mcap { context, source }
-}
-
 fn io_err(context: impl Into<String>) -> impl FnOnce(io::Error) -> SinkError {
     let context = context.into();
     move |source| SinkError::Io { context, source }
@@ -346,8 +369,9 @@ struct FileCommit<W> {
 /// when it was made by [`create_file`].
 pub struct McapSink<W: Write + Seek> {
     /// `None` once finished or aborted.
-    writer: Option<Writer<W>>,
+    writer: Option<ChunkedWriter<W>>,
     format: Format,
+    fields: PointFields,
     points_schema: u16,
     diagnostics_schema: u16,
     raw_schema: Option<u16>,
@@ -383,33 +407,29 @@ impl<W: Write + Seek> std::fmt::Debug for McapSink<W> {
 impl<W: Write + Seek> McapSink<W> {
     /// Starts an MCAP stream on `w` and registers the points and diagnostics schemas.
     pub fn new(w: W, opts: SinkOptions) -> Result<Self, SinkError> {
-        let compression = match opts.compression {
-            Compression::Zstd => Some(::mcap::Compression::Zstd),
-            Compression::Lz4 => Some(::mcap::Compression::Lz4),
-            Compression::None => None,
+        let codec = match opts.compression {
+            Compression::Zstd => Codec::Zstd(
+                opts.zstd_level
+                    .clamp(*ZSTD_LEVELS.start(), *ZSTD_LEVELS.end()),
+            ),
+            Compression::Lz4 => Codec::Lz4,
+            Compression::None => Codec::None,
         };
         let chunk_size = if opts.chunk_size == 0 {
             DEFAULT_CHUNK_SIZE
         } else {
             opts.chunk_size
         };
-        // zstd's own worker threads: one per core the process may use (at most 4).
-        let threads = std::thread::available_parallelism().map_or(1, |n| n.get().min(4)) as u32;
-        let mut writer = WriteOptions::new()
-            .compression(compression)
-            // The mcap crate takes the level as a u32 and hands it to zstd as an i32: a negative
-            // (fast) level travels as its two's complement.
-            .compression_level(if opts.compression == Compression::Zstd {
-                opts.zstd_level
-                    .clamp(*ZSTD_LEVELS.start(), *ZSTD_LEVELS.end()) as u32
-            } else {
-                0
-            })
-            .compression_threads(if threads > 1 { threads } else { 0 })
-            .chunk_size(Some(chunk_size))
-            .library(format!("ringscan {}", env!("CARGO_PKG_VERSION")))
-            .create(w)
-            .map_err(mcap_err("writing the MCAP header"))?;
+        let mut writer = ChunkedWriter::new(
+            w,
+            WriterOptions {
+                library: format!("ringscan {}", env!("CARGO_PKG_VERSION")),
+                codec,
+                chunk_size: usize::try_from(chunk_size).unwrap_or(usize::MAX),
+                threads: opts.threads,
+                behind: opts.behind,
+            },
+        )?;
         let points_schema = match opts.format {
             Format::Foxglove => writer.add_schema(
                 foxglove::POINT_CLOUD_SCHEMA,
@@ -421,18 +441,16 @@ impl<W: Write + Seek> McapSink<W> {
                 "ros2msg",
                 ros2::point_cloud2_schema_text().as_bytes(),
             ),
-        }
-        .map_err(mcap_err("writing the points schema"))?;
-        let diagnostics_schema = writer
-            .add_schema(
-                DIAGNOSTICS_SCHEMA,
-                "jsonschema",
-                DIAGNOSTICS_JSON_SCHEMA.as_bytes(),
-            )
-            .map_err(mcap_err("writing the diagnostics schema"))?;
+        }?;
+        let diagnostics_schema = writer.add_schema(
+            DIAGNOSTICS_SCHEMA,
+            "jsonschema",
+            DIAGNOSTICS_JSON_SCHEMA.as_bytes(),
+        )?;
         Ok(Self {
             writer: Some(writer),
             format: opts.format,
+            fields: opts.fields,
             points_schema,
             diagnostics_schema,
             raw_schema: None,
@@ -448,6 +466,15 @@ impl<W: Write + Seek> McapSink<W> {
             extra_schemas: Vec::new(),
             extra_channels: Vec::new(),
         })
+    }
+
+    /// Chunks written so far, and how many of them uncompressed because the compression threads
+    /// were behind (`listen` reports it in its health diagnostics).
+    pub fn chunk_stats(&self) -> WriterStats {
+        self.writer
+            .as_ref()
+            .map(ChunkedWriter::stats)
+            .unwrap_or_default()
     }
 
     /// The channels of a sensor.
@@ -477,18 +504,15 @@ impl<W: Write + Seek> McapSink<W> {
             Format::Foxglove => "protobuf",
             Format::Ros2 => "cdr",
         };
-        let points = writer
-            .add_channel(self.points_schema, &points_topic, encoding, &info.metadata)
-            .map_err(mcap_err(format!("adding channel {points_topic}")))?;
+        let points =
+            writer.add_channel(self.points_schema, &points_topic, encoding, &info.metadata)?;
         let diagnostics_topic = format!("{}/diagnostics", info.topic_prefix);
-        let diagnostics = writer
-            .add_channel(
-                self.diagnostics_schema,
-                &diagnostics_topic,
-                "json",
-                &info.metadata,
-            )
-            .map_err(mcap_err(format!("adding channel {diagnostics_topic}")))?;
+        let diagnostics = writer.add_channel(
+            self.diagnostics_schema,
+            &diagnostics_topic,
+            "json",
+            &info.metadata,
+        )?;
         if let Some((file_name, data)) = &info.calibration {
             let already = self
                 .attached
@@ -519,51 +543,75 @@ impl<W: Write + Seek> McapSink<W> {
             imu: None,
             point_cloud_prefix: PointCloudPrefix::new(&info.name),
             extended_prefix: None,
+            minimal_prefix: (self.fields == PointFields::Minimal).then(|| {
+                PointCloudPrefix::with_fields(&info.name, MINIMAL_STRIDE, &MINIMAL_FIELDS)
+            }),
         });
         Ok(SensorId(self.sensors.len() - 1))
     }
 
     /// Writes one sweep to `<prefix>/points`: `log_time` = `publish_time` = host receive time,
-    /// the message's own timestamp = the sweep's first firing.
+    /// the message's own timestamp = the sweep's first firing. The records carry the fields of
+    /// [`SinkOptions::fields`]; they are encoded straight into the chunk.
     pub fn write_sweep(&mut self, s: SensorId, sweep: &SweepMsg) -> Result<(), SinkError> {
         self.before_message(sweep.log_time_ns)?;
         let sensor = sensor_at(&mut self.sensors, s)?;
-        let buf = &mut self.buf;
-        match self.format {
-            Format::Foxglove => foxglove::encode_point_cloud(
+        let writer = self.writer.as_mut().ok_or_else(finished_error)?;
+        let header = sensor.points.header(sweep.log_time_ns);
+        let minimal = sensor.minimal_prefix.as_ref();
+        let (stride, fields): (usize, &[_]) = match minimal {
+            Some(_) => (MINIMAL_STRIDE, &MINIMAL_FIELDS),
+            None => (POINT_STRIDE, &crate::point::POINT_FIELDS),
+        };
+        let data_len = sweep.points.len().saturating_mul(stride);
+        let write_data = |b: &mut Vec<u8>| match minimal {
+            Some(_) => crate::point::extend_minimal(sweep.points, b),
+            None => b.extend_from_slice(crate::point::as_bytes(sweep.points)),
+        };
+        let format = self.format;
+        let sensor_ref = &*sensor;
+        writer.write_message_with(&header, |buf| match format {
+            Format::Foxglove => {
+                let prefix = minimal.unwrap_or(&sensor_ref.point_cloud_prefix);
+                foxglove::append_point_cloud_with(
+                    buf,
+                    sweep.timestamp_ns,
+                    prefix,
+                    data_len,
+                    write_data,
+                )
+                .ok_or_else(|| SinkError::TooLarge {
+                    topic: sensor_ref.points_topic(),
+                    what: "point data",
+                    found: data_len,
+                    max: foxglove::MAX_MESSAGE_LEN - 1024,
+                })
+            }
+            Format::Ros2 => ros2::append_point_cloud2_with(
                 buf,
                 sweep.timestamp_ns,
-                &sensor.point_cloud_prefix,
-                sweep.points,
+                &sensor_ref.name,
+                stride,
+                fields,
+                data_len,
+                write_data,
             )
-            .ok_or_else(|| SinkError::TooLarge {
-                topic: sensor.points_topic(),
-                what: "point data",
-                found: sweep.points.len().saturating_mul(POINT_STRIDE),
-                max: foxglove::MAX_MESSAGE_LEN - 1024,
-            })?,
-            Format::Ros2 => {
-                ros2::encode_point_cloud2(buf, sweep.timestamp_ns, &sensor.name, sweep.points)
-                    .map_err(|e| match e {
-                        Ros2EncodeError::TimestampOutOfRange => SinkError::TimestampOutOfRange {
-                            topic: sensor.points_topic(),
-                            timestamp_ns: sweep.timestamp_ns,
-                            format: ros2::POINT_CLOUD2_SCHEMA,
-                        },
-                        Ros2EncodeError::TooLarge => SinkError::TooLarge {
-                            topic: sensor.points_topic(),
-                            what: "point data",
-                            found: sweep.points.len().saturating_mul(POINT_STRIDE),
-                            max: ros2::MAX_DATA_LEN,
-                        },
-                    })?
-            }
-        }
-        let header = sensor.points.next_header(sweep.log_time_ns);
-        let writer = self.writer.as_mut().ok_or_else(finished_error)?;
-        write_known(writer, &header, &self.buf, || {
-            format!("writing a sweep to {}", sensor.points_topic())
-        })
+            .map_err(|e| match e {
+                Ros2EncodeError::TimestampOutOfRange => SinkError::TimestampOutOfRange {
+                    topic: sensor_ref.points_topic(),
+                    timestamp_ns: sweep.timestamp_ns,
+                    format: ros2::POINT_CLOUD2_SCHEMA,
+                },
+                Ros2EncodeError::TooLarge => SinkError::TooLarge {
+                    topic: sensor_ref.points_topic(),
+                    what: "point data",
+                    found: data_len,
+                    max: ros2::MAX_DATA_LEN,
+                },
+            }),
+        })?;
+        sensor.points.advance();
+        Ok(())
     }
 
     /// Writes one sweep with its extra fields (`--fields all`): records of
@@ -751,16 +799,12 @@ impl<W: Write + Seek> McapSink<W> {
         let schema_id = match self.extra_schemas.iter().find(|(n, _)| n == schema.name) {
             Some(&(_, id)) => id,
             None => {
-                let id = writer
-                    .add_schema(schema.name, schema.encoding, &(schema.data)())
-                    .map_err(mcap_err(format!("writing the {} schema", schema.name)))?;
+                let id = writer.add_schema(schema.name, schema.encoding, &(schema.data)())?;
                 self.extra_schemas.push((schema.name.to_string(), id));
                 id
             }
         };
-        let id = writer
-            .add_channel(schema_id, topic, schema.message_encoding, metadata)
-            .map_err(mcap_err(format!("adding channel {topic}")))?;
+        let id = writer.add_channel(schema_id, topic, schema.message_encoding, metadata)?;
         self.extra_channels
             .push((topic.to_string(), Channel { id, sequence: 0 }));
         Ok(TopicId(self.extra_channels.len() - 1))
@@ -802,35 +846,20 @@ impl<W: Write + Seek> McapSink<W> {
     fn finish_inner(&mut self) -> Result<SinkSummary, SinkError> {
         let log_time = self.first_log_time.unwrap_or(0);
         self.write_pending_attachments(log_time)?;
-        let mut writer = self.writer.take().ok_or_else(finished_error)?;
-        let summary = match writer.finish() {
-            Ok(summary) => summary,
-            Err(source) => {
-                // Keep the writer so `discard` can close it and remove a temporary file.
-                self.writer = Some(writer);
-                return Err(SinkError::Mcap {
-                    context: "writing the summary section".into(),
-                    source,
-                });
-            }
-        };
-        let counts = summary
-            .stats
-            .as_ref()
-            .map(|s| s.channel_message_counts.clone())
-            .unwrap_or_default();
+        let writer = self.writer.take().ok_or_else(finished_error)?;
+        // On an error the writer is gone (its stream closed); `discard` removes a temporary file.
+        let (inner, summary) = writer.finish()?;
         let mut messages = BTreeMap::new();
-        for (id, channel) in &summary.channels {
-            *messages.entry(channel.topic.clone()).or_insert(0) +=
-                counts.get(id).copied().unwrap_or(0);
+        for (topic, n) in summary.channel_messages {
+            *messages.entry(topic).or_insert(0) += n;
         }
         let mut out = SinkSummary {
             messages,
             attachments: std::mem::take(&mut self.attachments),
-            chunks: summary.chunk_indexes.len(),
+            chunks: summary.stats.chunks as usize,
+            chunks_uncompressed: summary.stats.chunks_uncompressed,
             path: None,
         };
-        let inner = writer.into_inner();
         match self.commit.take() {
             None => {
                 let mut inner = inner;
@@ -867,8 +896,8 @@ impl<W: Write + Seek> McapSink<W> {
     /// Closes the output without a summary and removes the temporary file, if any.
     fn discard(&mut self) {
         if let Some(writer) = self.writer.take() {
-            // `into_inner` hands back the stream without writing a summary (dropping a `Writer`
-            // would finish the file).
+            // `into_inner` stops the compression threads and hands back the stream as it is,
+            // without a summary.
             drop(writer.into_inner());
         }
         if let Some(commit) = self.commit.take() {
@@ -892,20 +921,11 @@ impl<W: Write + Seek> McapSink<W> {
         let pending = std::mem::take(&mut self.pending_attachments);
         let writer = self.writer.as_mut().ok_or_else(finished_error)?;
         for a in pending {
-            let attachment = ::mcap::Attachment {
-                log_time,
-                create_time: log_time,
+            writer.attach(log_time, log_time, &a.name, a.media_type, &a.data)?;
+            self.attachments.push(AttachmentSummary {
                 name: a.name,
                 media_type: a.media_type.to_owned(),
-                data: std::borrow::Cow::Owned(a.data),
-            };
-            writer
-                .attach(&attachment)
-                .map_err(mcap_err(format!("attaching {}", attachment.name)))?;
-            self.attachments.push(AttachmentSummary {
-                name: attachment.name,
-                media_type: attachment.media_type,
-                size: attachment.data.len() as u64,
+                size: a.data.len() as u64,
             });
         }
         Ok(())
@@ -919,8 +939,8 @@ impl<W: Write + Seek> Drop for McapSink<W> {
 }
 
 /// Creates a channel on its first use (and its schema on the first use of any such channel).
-fn lazy_channel<W: Write + Seek>(
-    writer: &mut Writer<W>,
+fn lazy_channel<W: Write>(
+    writer: &mut ChunkedWriter<W>,
     schema_id: &mut Option<u16>,
     schema: (&str, &str, &dyn Fn() -> Vec<u8>),
     channel: &mut Option<Channel>,
@@ -935,16 +955,12 @@ fn lazy_channel<W: Write + Seek>(
     let id = match *schema_id {
         Some(id) => id,
         None => {
-            let id = writer
-                .add_schema(name, encoding, &data())
-                .map_err(mcap_err(format!("writing the {name} schema")))?;
+            let id = writer.add_schema(name, encoding, &data())?;
             *schema_id = Some(id);
             id
         }
     };
-    let id = writer
-        .add_channel(id, topic, message_encoding, metadata)
-        .map_err(mcap_err(format!("adding channel {topic}")))?;
+    let id = writer.add_channel(id, topic, message_encoding, metadata)?;
     *channel = Some(Channel { id, sequence: 0 });
     Ok(())
 }
@@ -963,18 +979,19 @@ fn sensor_at(
 
 /// Writes `data` to a channel already added; `context` (which names the topic) is built only
 /// when the write fails, so a message costs no formatting.
-fn write_known<W: Write + Seek>(
-    writer: &mut Writer<W>,
+fn write_known<W: Write>(
+    writer: &mut ChunkedWriter<W>,
     header: &MessageHeader,
     data: &[u8],
     context: impl FnOnce() -> String,
 ) -> Result<(), SinkError> {
-    writer
-        .write_to_known_channel(header, data)
-        .map_err(|source| SinkError::Mcap {
-            context: context(),
+    writer.write_message(header, data).map_err(|e| match e {
+        SinkError::Io { context: c, source } => SinkError::Io {
+            context: format!("{}: {c}", context()),
             source,
-        })
+        },
+        e => e,
+    })
 }
 
 fn finished_error() -> SinkError {

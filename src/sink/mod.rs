@@ -14,7 +14,8 @@
 //!
 //! `<prefix>` is [`SensorInfo::topic_prefix`]: empty for a single sensor, `/<name>` when there are
 //! several. Calibration files are stored as MCAP attachments. The file is chunked, compressed
-//! (zstd by default) and ends with a summary section (schemas, channels, statistics, chunk and
+//! (zstd by default; on [`SinkOptions::threads`] worker threads, written in order: see
+//! [`mcap_write`]) and ends with a summary section (schemas, channels, statistics, chunk and
 //! attachment indexes), so readers seek instead of scanning.
 //!
 //! [`live_view`] (feature `serve`) publishes the same messages live over the Foxglove WebSocket
@@ -28,12 +29,13 @@ pub mod foxglove;
 #[cfg(feature = "serve")]
 pub mod live_view;
 pub mod mcap;
+pub mod mcap_write;
 pub mod read;
 pub mod ros2;
 pub mod scene;
 
 pub use self::mcap::{
-    create_file, temp_path, AttachmentSummary, Compression, Format, McapSink, SensorChannels,
-    SensorId, SensorInfo, SinkError, SinkOptions, SinkSummary, SweepMsg, TopicId, TopicSchema,
-    DEFAULT_CHUNK_SIZE,
+    create_file, temp_path, AttachmentSummary, Behind, Compression, Format, McapSink, PointFields,
+    SensorChannels, SensorId, SensorInfo, SinkError, SinkOptions, SinkSummary, SweepMsg, TopicId,
+    TopicSchema, DEFAULT_CHUNK_SIZE,
 };

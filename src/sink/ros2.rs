@@ -204,21 +204,44 @@ pub fn encode_point_cloud2_fields(
     fields: &[(&str, usize, FieldType)],
     data: &[u8],
 ) -> Result<(), Ros2EncodeError> {
+    buf.clear();
+    append_point_cloud2_with(
+        buf,
+        timestamp_ns,
+        frame_id,
+        stride,
+        fields,
+        data.len(),
+        |b| b.extend_from_slice(data),
+    )
+}
+
+/// Appends one `PointCloud2` to `buf` (not cleared: the MCAP sink encodes into the chunk
+/// itself; CDR alignment counts from the encapsulation header, wherever it starts), whose `data`
+/// is the `data_len` bytes `write_data` appends. On an error nothing is appended.
+pub fn append_point_cloud2_with(
+    buf: &mut Vec<u8>,
+    timestamp_ns: u64,
+    frame_id: &str,
+    stride: usize,
+    fields: &[(&str, usize, FieldType)],
+    data_len: usize,
+    write_data: impl FnOnce(&mut Vec<u8>),
+) -> Result<(), Ros2EncodeError> {
     if stride == 0 {
         return Err(Ros2EncodeError::TooLarge);
     }
-    if data.len() > MAX_DATA_LEN || frame_id.len() > MAX_FRAME_ID_LEN {
+    if data_len > MAX_DATA_LEN || frame_id.len() > MAX_FRAME_ID_LEN {
         return Err(Ros2EncodeError::TooLarge);
     }
     let sec = i32::try_from(timestamp_ns / 1_000_000_000)
         .map_err(|_| Ros2EncodeError::TimestampOutOfRange)?;
     let nanosec = (timestamp_ns % 1_000_000_000) as u32;
-    // Both fit: data.len() < 2^31.
-    let width = (data.len() / stride) as u32;
-    let row_step = data.len() as u32;
+    // Both fit: data_len < 2^31.
+    let width = (data_len / stride) as u32;
+    let row_step = data_len as u32;
 
-    buf.clear();
-    buf.reserve(4 + 16 + frame_id.len() + 16 + fields.len() * 28 + 16 + data.len() + 4);
+    buf.reserve(4 + 16 + frame_id.len() + 16 + fields.len() * 28 + 16 + data_len + 4);
     let mut w = Cdr::new(buf);
     // header: std_msgs/Header { builtin_interfaces/Time stamp; string frame_id }
     w.i32(sec);
@@ -237,7 +260,9 @@ pub fn encode_point_cloud2_fields(
     w.u32(stride as u32); // point_step
     w.u32(row_step);
     w.u32(row_step); // data: sequence<uint8> length
-    w.buf.extend_from_slice(data);
+    let at = w.buf.len();
+    write_data(w.buf);
+    debug_assert_eq!(w.buf.len() - at, data_len);
     w.u8(1); // is_dense
     Ok(())
 }

@@ -1343,6 +1343,7 @@ pub fn decode_to_mcap(data: &[u8]) {
         compression: [Compression::Zstd, Compression::Lz4, Compression::None][variant / 2 % 3],
         chunk_size: if variant >= 6 { 64 * 1024 } else { 0 },
         zstd_level: [1, -3, 3][variant % 3],
+        ..SinkOptions::default()
     };
     let raw = variant % 4 == 3;
     // An Ouster sensor beside the Velodyne ones: datagrams of its lidar or IMU size go to it.
