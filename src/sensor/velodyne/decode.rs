@@ -68,6 +68,9 @@ struct Lane {
     id: u16,
     /// Firing time after the block's first firing, ns.
     dt_ns: u32,
+    /// Firing time after the firing the block's azimuth was read at, ns (VLS-128: the firing
+    /// sequence's start; every other model: the block's first firing, `dt_ns`).
+    az_dt_ns: u32,
     /// Firing column after the block's first column (VLP-16: the second sequence is +1).
     col_off: u16,
 }
@@ -215,9 +218,9 @@ impl VelodyneDecoder {
             let Some(b) = (0..BLOCKS).find(|&b| usize::from(expected_bank[b]) == bank) else {
                 continue;
             };
-            // Times from the firing at which the block's azimuth was read.
-            let t0 = model.firing(mode, model.azimuth_block(b), 0).0;
-            let c0 = model.firing(mode, b, 0).1;
+            let (t0, c0) = model.firing(mode, b, 0);
+            // The firing at which the block's azimuth was read.
+            let t_az = model.firing(mode, model.azimuth_block(b), 0).0;
             for s in 0..SLOTS {
                 let (t, c) = model.firing(mode, b, s);
                 let id = model.laser_of(bank, s);
@@ -225,6 +228,7 @@ impl VelodyneDecoder {
                     laser: lasers.get(id).copied().unwrap_or_default(),
                     id: id as u16,
                     dt_ns: (t - t0).round() as u32,
+                    az_dt_ns: (t - t_az).round() as u32,
                     col_off: (c - c0) as u16,
                 };
             }
@@ -355,7 +359,7 @@ impl VelodyneDecoder {
         let mut rot = [(1f32, 0f32); LANES];
         let to_rad = core::f64::consts::PI / 18_000.0;
         for (r, lane) in rot.iter_mut().zip(self.lanes.iter()).take(self.n_lanes) {
-            let (cd, sd) = small_sin_cos(rate * f64::from(lane.dt_ns) * to_rad);
+            let (cd, sd) = small_sin_cos(rate * f64::from(lane.az_dt_ns) * to_rad);
             let (cr, sr) = (lane.laser.cos_rot, lane.laser.sin_rot);
             // cos(δ − r), sin(δ − r)
             *r = ((cd * cr + sd * sr) as f32, (sd * cr - cd * sr) as f32);
