@@ -621,7 +621,15 @@ fn choose_model(
     };
     let fits = |m: VelodyneModel, d: f64| {
         let p = m.packet_period_ns(mode) / 1_000.0;
-        m.supports(mode) && (p - d).abs() <= 0.03 * p
+        // The VLS-128's firing sequence depends on its firmware: 3 × 53.3 = 160 µs per packet
+        // (manual Rev 3, FW 5.1.7.1), 173.3 µs (Rev 4, FW ≥ 5.2.3.0; VeloView, velodyne_decoder),
+        // and 165–166 µs on nebula's real capture.
+        let slack = if m == VelodyneModel::Vls128 {
+            (173.3 - p) * 1.03
+        } else {
+            0.0
+        };
+        m.supports(mode) && d >= p * 0.97 && d <= p * 1.03 + slack
     };
     match period_us {
         Some(d) => {
@@ -677,6 +685,21 @@ fn choose_model(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn every_vls128_firmware_cadence_is_confirmed() {
+        for period in [159.9, 165.8, 173.3] {
+            let (m, why) = choose_model(
+                Some(VelodyneModel::Vls128),
+                false,
+                ReturnMode::Strongest,
+                Some(period),
+            )
+            .unwrap();
+            assert_eq!(m, VelodyneModel::Vls128);
+            assert!(why.contains("confirmed"), "{period}: {why}");
+        }
+    }
 
     #[test]
     fn cadence_overrides_a_wrong_product_id() {
