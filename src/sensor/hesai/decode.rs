@@ -1,0 +1,462 @@
+//! The Hesai decoder: one table-driven loop for every model, return mode and correction.
+//!
+//! Built once per (model, correction, options) ([`HesaiDecoder::new`]): per-channel sin / cos of
+//! the elevation and of the azimuth offset, the channel's ring (rank of its elevation, 0 =
+//! lowest), its azimuth offset in µ° for the sweep cut; a cos / sin table of the 36 000 block
+//! azimuths (0.01°). Per block group one table look-up; per point a complex multiply (block
+//! azimuth rotated by the channel's offset) and three products. The AT128's azimuth-dependent
+//! correction ([`super::at128`]) is evaluated per point instead.
+//!
+//! **Coordinates.** Hesai azimuth α grows clockwise seen from above with 0 on the sensor's
+//! forward (Hesai's and nebula's +y); ringscan's frame is REP 103, so
+//! `x = d·cos(ε)·cos(α)`, `y = −d·cos(ε)·sin(α)`, `z = d·sin(ε)` (nebula's `(x, y, z)` is ringscan's
+//! `(−y, x, z)`).
+//!
+//! **Returns** (DESIGN.md): see [`super::model::return_index`]. Within a return group (the 1, 2
+//! or 3 blocks of one firing, by the tail's return mode) a return whose raw distance and
+//! reflectivity equal another's is kept only in the group's last block (one point, as Velodyne's
+//! equal dual returns are one point); with [`HesaiOptions::dual_return_threshold_m`] > 0 a
+//! return that is not the group's last is also dropped when within that distance of another
+//! return of the group (nebula's `dual_return_distance_threshold`).
+
+use super::at128::{At128Correction, TURN as AT128_TURN, UNITS_PER_DEG};
+use super::calib::HesaiCalibration;
+use super::model::{return_index, returns_of_mode, HesaiModel, TailFlags};
+use super::wire::HesaiPacket;
+use crate::point::Point;
+use crate::sensor::{DecodeError, DecodeOptions};
+
+/// A full turn in µ°.
+pub const TURN_UDEG: i64 = 360_000_000;
+
+/// Options of the Hesai decoder beyond the range filter every family has.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HesaiOptions {
+    /// Range filter (`--min-range`, `--max-range`); a distance equal to a bound is kept.
+    pub range: DecodeOptions,
+    /// Also drop distances outside the model's own measuring range (the user manual's
+    /// specification, nebula's sensor-class limits: Pandar40P / 64 0.3–200 m, QT64 0.1–60 m,
+    /// QT128 0.05–50 m, XT16 / XT32 0.05–120 m, XT32M 0.5–300 m, AT128 1–180 m, OT128 0.1–230 m).
+    /// On by default: returns inside the blind zone are not measurements the sensor stands by
+    /// (the shared QT64 capture sends thousands below 0.1 m).
+    pub sensor_range: bool,
+    /// Drop a return that is not its group's last when it lies within this distance (m) of
+    /// another return of its group (nebula: 0.1). 0 = only identical returns are merged.
+    pub dual_return_threshold_m: f32,
+    /// Keep only points whose corrected azimuth lies in this range (0.01°, start → end
+    /// clockwise, inclusive); `None` = all.
+    pub fov_cdeg: Option<(u32, u32)>,
+}
+
+impl Default for HesaiOptions {
+    fn default() -> Self {
+        Self {
+            range: DecodeOptions::default(),
+            sensor_range: true,
+            dual_return_threshold_m: 0.0,
+            fov_cdeg: None,
+        }
+    }
+}
+
+impl HesaiOptions {
+    /// The filtering nebula's decoder applies (its Hesai test configuration): the model's
+    /// range, the 0.1 m dual-return threshold, the range given.
+    pub fn nebula(min_range: f32, max_range: f32) -> Self {
+        Self {
+            range: DecodeOptions {
+                min_range,
+                max_range,
+            },
+            sensor_range: true,
+            dual_return_threshold_m: 0.1,
+            fov_cdeg: None,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, Default)]
+struct Channel {
+    cos_el: f32,
+    sin_el: f32,
+    cos_off: f32,
+    sin_off: f32,
+    /// Azimuth offset, µ°.
+    off_udeg: i64,
+    ring: u16,
+}
+
+/// cos / sin of every block azimuth (0.01° steps), built once.
+fn azimuth_table() -> &'static [(f32, f32)] {
+    static TABLE: std::sync::OnceLock<Vec<(f32, f32)>> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| {
+        (0..36_000u32)
+            .map(|a| {
+                let r = (f64::from(a) / 100.0).to_radians();
+                (r.cos() as f32, r.sin() as f32)
+            })
+            .collect()
+    })
+}
+
+/// One decoded return before it is placed in a sweep.
+#[derive(Clone, Copy, Debug)]
+pub struct Decoded {
+    /// The point (its `t` is 0: the stream sets it).
+    pub point: Point,
+    /// Channel index.
+    pub channel: usize,
+    /// Block index in the packet.
+    pub block: usize,
+}
+
+/// Decoder for one sensor.
+#[derive(Clone, Debug)]
+pub struct HesaiDecoder {
+    model: HesaiModel,
+    channels: Vec<Channel>,
+    at128: Option<At128Correction>,
+    opts: HesaiOptions,
+    min_m: f32,
+    max_m: f32,
+    fov_udeg: Option<(i64, i64)>,
+    /// Firing offsets (ns, relative to the tail time) for the current (returns, flags),
+    /// `block × channels + channel`.
+    firing: Vec<i32>,
+    firing_key: Option<(usize, TailFlags)>,
+}
+
+impl HesaiDecoder {
+    /// Builds the decoder; the correction must have the model's channel count.
+    pub fn new(
+        model: HesaiModel,
+        calib: &HesaiCalibration,
+        opts: HesaiOptions,
+    ) -> Result<Self, DecodeError> {
+        let n = model.channels();
+        if calib.channels() != n {
+            return Err(DecodeError::LaserCount {
+                model: model.name(),
+                expected: n,
+                found: calib.channels(),
+            });
+        }
+        let (mut channels, at128) = match calib {
+            HesaiCalibration::Csv(rows) => {
+                if model == HesaiModel::PandarAt128 {
+                    return Err(DecodeError::Calibration(
+                        "the PandarAT128 needs its binary .dat angle correction".into(),
+                    ));
+                }
+                let ch: Vec<Channel> = rows
+                    .iter()
+                    .map(|r| {
+                        let (se, ce) = r.elevation_deg.to_radians().sin_cos();
+                        let (so, co) = r.azimuth_deg.to_radians().sin_cos();
+                        Channel {
+                            cos_el: ce as f32,
+                            sin_el: se as f32,
+                            cos_off: co as f32,
+                            sin_off: so as f32,
+                            off_udeg: (r.azimuth_deg * 1e6).round() as i64,
+                            ring: 0,
+                        }
+                    })
+                    .collect();
+                (ch, None)
+            }
+            HesaiCalibration::At128(a) => {
+                if model != HesaiModel::PandarAt128 {
+                    return Err(DecodeError::Calibration(format!(
+                        "an AT128 .dat correction cannot serve the {}",
+                        model.name()
+                    )));
+                }
+                let ch: Vec<Channel> = a
+                    .elevation
+                    .iter()
+                    .map(|&e| {
+                        let (se, ce) = (e as f64 / UNITS_PER_DEG as f64).to_radians().sin_cos();
+                        Channel {
+                            cos_el: ce as f32,
+                            sin_el: se as f32,
+                            ..Channel::default()
+                        }
+                    })
+                    .collect();
+                (ch, Some(a.clone()))
+            }
+        };
+        // Ring = rank of the elevation (ties by channel index), 0 = lowest.
+        let mut order: Vec<usize> = (0..channels.len()).collect();
+        order.sort_by(|&a, &b| {
+            channels[a]
+                .sin_el
+                .total_cmp(&channels[b].sin_el)
+                .then(a.cmp(&b))
+        });
+        for (rank, &c) in order.iter().enumerate() {
+            channels[c].ring = rank as u16;
+        }
+        let spec = model.spec();
+        let (mut min_m, mut max_m) = (opts.range.min_range, opts.range.max_range);
+        if opts.sensor_range {
+            min_m = min_m.max(spec.min_range_m);
+            max_m = max_m.min(spec.max_range_m);
+        }
+        if min_m.is_nan() || max_m.is_nan() || min_m > max_m {
+            return Err(DecodeError::Option(format!(
+                "range {min_m}–{max_m} m is empty"
+            )));
+        }
+        if !(opts.dual_return_threshold_m >= 0.0) {
+            return Err(DecodeError::Option(
+                "dual-return threshold must be ≥ 0".into(),
+            ));
+        }
+        let fov_udeg = opts.fov_cdeg.map(|(s, e)| {
+            (
+                i64::from(s % 36_000) * 10_000,
+                i64::from(e % 36_000) * 10_000,
+            )
+        });
+        Ok(Self {
+            model,
+            channels,
+            at128,
+            opts,
+            min_m,
+            max_m,
+            fov_udeg,
+            firing: Vec::new(),
+            firing_key: None,
+        })
+    }
+
+    /// The model.
+    pub fn model(&self) -> HesaiModel {
+        self.model
+    }
+
+    /// The options.
+    pub fn options(&self) -> &HesaiOptions {
+        &self.opts
+    }
+
+    /// Channel count.
+    pub fn channels(&self) -> usize {
+        self.channels.len()
+    }
+
+    /// Ring of channel `c`.
+    pub fn ring(&self, c: usize) -> u16 {
+        self.channels.get(c).map_or(0, |ch| ch.ring)
+    }
+
+    /// Prepares the firing table for a packet's return count and tail flags (cheap when they
+    /// did not change).
+    pub fn prepare(&mut self, n_returns: usize, flags: TailFlags) {
+        if self.firing_key == Some((n_returns, flags)) {
+            return;
+        }
+        let spec = self.model.spec();
+        let (blocks, n) = (spec.layout.blocks, self.channels.len());
+        self.firing.clear();
+        for b in 0..blocks {
+            for c in 0..n {
+                self.firing
+                    .push(self.model.firing_offset_ns(b, c, n_returns, flags) as i32);
+            }
+        }
+        self.firing_key = Some((n_returns, flags));
+    }
+
+    /// Firing time of (block, channel) relative to the packet's tail time, ns ([`Self::prepare`]
+    /// first).
+    #[inline]
+    pub fn firing_ns(&self, block: usize, c: usize) -> i64 {
+        i64::from(
+            self.firing
+                .get(block * self.channels.len() + c)
+                .copied()
+                .unwrap_or(0),
+        )
+    }
+
+    /// Earliest firing of the group starting at `block` (`n` blocks), relative to the tail.
+    pub fn group_earliest_ns(&self, block: usize, n: usize) -> i64 {
+        let nc = self.channels.len();
+        self.firing
+            .get(block * nc..((block + n) * nc).min(self.firing.len()))
+            .and_then(|s| s.iter().min().copied())
+            .map_or(0, i64::from)
+    }
+
+    /// Corrected azimuth of channel `c` for a block azimuth (packet units), µ° in `[0, 360°)`;
+    /// `None` for an AT128 block outside every mirror field.
+    #[inline]
+    pub fn channel_azimuth_udeg(&self, block_az: u32, c: usize) -> Option<i64> {
+        match &self.at128 {
+            None => {
+                let off = self.channels.get(c).map_or(0, |ch| ch.off_udeg);
+                Some((i64::from(block_az) * 10_000 + off).rem_euclid(TURN_UDEG))
+            }
+            Some(a) => {
+                let (az, _) = a.angles(c, i64::from(block_az))?;
+                Some(az * 1_000_000 / UNITS_PER_DEG)
+            }
+        }
+    }
+
+    fn in_fov(&self, az_udeg: i64) -> bool {
+        match self.fov_udeg {
+            None => true,
+            Some((s, e)) if s == e => true,
+            Some((s, e)) => (az_udeg - s).rem_euclid(TURN_UDEG) <= (e - s).rem_euclid(TURN_UDEG),
+        }
+    }
+
+    /// Decodes return group `first..first + n` of a packet, calling `out` with each point in
+    /// nebula's order (channel, then block within the group). `p` must be of the decoder's
+    /// model; the caller has checked its return mode ([`returns_of_mode`]).
+    #[inline]
+    pub fn decode_group(
+        &self,
+        p: &HesaiPacket<'_>,
+        first: usize,
+        n: usize,
+        mut out: impl FnMut(Decoded),
+    ) {
+        let unit_mm = f64::from(p.dis_unit_mm());
+        let mode = p.return_mode();
+        let layout = p.layout();
+        let ul = layout.unit_len;
+        let n = n.clamp(1, 3).min(layout.blocks.saturating_sub(first));
+        let mut units: [&[u8]; 3] = [&[]; 3];
+        let mut azs = [0u32; 3];
+        for k in 0..n {
+            units[k] = p.units(first + k);
+            azs[k] = p.azimuth(first + k);
+        }
+        let block_az = azs[0];
+        let (cb, sb) = if self.at128.is_none() {
+            azimuth_table()
+                .get((block_az % 36_000) as usize)
+                .copied()
+                .unwrap_or((1.0, 0.0))
+        } else {
+            (1.0, 0.0)
+        };
+        let rets: [u8; 3] = core::array::from_fn(|k| return_index(self.model, mode, k));
+        let thr = self.opts.dual_return_threshold_m;
+        for (c, ch) in self.channels.iter().enumerate() {
+            let mut raw = [(0u16, 0u8); 3];
+            let mut dist = [0f32; 3];
+            for k in 0..n {
+                let o = c * ul;
+                let (d, r) = match units[k].get(o..o + 3) {
+                    Some(&[a, b, r]) => (u16::from_le_bytes([a, b]), r),
+                    _ => (0, 0),
+                };
+                raw[k] = (d, r);
+                dist[k] = (f64::from(d) * unit_mm / 1000.0) as f32;
+            }
+            // Angles of this channel (AT128: per point).
+            let (cos_az, sin_az, cos_el, sin_el) = match &self.at128 {
+                None => (
+                    cb * ch.cos_off - sb * ch.sin_off,
+                    sb * ch.cos_off + cb * ch.sin_off,
+                    ch.cos_el,
+                    ch.sin_el,
+                ),
+                Some(a) => match a.angles(c, i64::from(block_az)) {
+                    Some((az, el)) => {
+                        let (s, co) = (az as f64 / UNITS_PER_DEG as f64).to_radians().sin_cos();
+                        let (se, ce) = (el as f64 / UNITS_PER_DEG as f64).to_radians().sin_cos();
+                        (co as f32, s as f32, ce as f32, se as f32)
+                    }
+                    None => continue,
+                },
+            };
+            if self.fov_udeg.is_some() {
+                let az = match &self.at128 {
+                    None => (i64::from(block_az) * 10_000 + ch.off_udeg).rem_euclid(TURN_UDEG),
+                    Some(a) => match a.angles(c, i64::from(block_az)) {
+                        Some((az, _)) => az.rem_euclid(AT128_TURN) * 1_000_000 / UNITS_PER_DEG,
+                        None => continue,
+                    },
+                };
+                if !self.in_fov(az) {
+                    continue;
+                }
+            }
+            for k in 0..n {
+                let (d_raw, refl) = raw[k];
+                if d_raw == 0 {
+                    continue;
+                }
+                let d = dist[k];
+                if d < self.min_m || d > self.max_m {
+                    continue;
+                }
+                if k + 1 < n {
+                    let mut drop = false;
+                    for j in 0..n {
+                        if j == k {
+                            continue;
+                        }
+                        if raw[j] == raw[k] || (thr > 0.0 && (dist[j] - d).abs() < thr) {
+                            drop = true;
+                            break;
+                        }
+                    }
+                    if drop {
+                        continue;
+                    }
+                }
+                let xy = d * cos_el;
+                out(Decoded {
+                    point: Point {
+                        x: xy * cos_az,
+                        y: -xy * sin_az,
+                        z: d * sin_el,
+                        intensity: f32::from(refl),
+                        t: 0,
+                        ring: ch.ring,
+                        ret: rets[k],
+                        pad: 0,
+                    },
+                    channel: c,
+                    block: first + k,
+                });
+            }
+        }
+    }
+
+    /// Decodes a whole packet into `out` with `t` = firing time − `t0_ns` (ns, clamped to ≥ 0),
+    /// where firing time = `stamp_ns` + the model's firing offset. Returns the points added,
+    /// or `None` for a packet whose return mode is unknown.
+    pub fn decode_packet(
+        &mut self,
+        p: &HesaiPacket<'_>,
+        stamp_ns: i64,
+        t0_ns: i64,
+        out: &mut Vec<Point>,
+    ) -> Option<usize> {
+        let n = returns_of_mode(p.return_mode())?;
+        self.prepare(n, p.tail_flags());
+        let before = out.len();
+        let blocks = p.layout().blocks;
+        let mut g = 0;
+        while g < blocks {
+            self.decode_group(p, g, n, |d| {
+                let t = stamp_ns + self.firing_ns(d.block, d.channel) - t0_ns;
+                let mut pt = d.point;
+                pt.t = t.clamp(0, i64::from(u32::MAX)) as u32;
+                out.push(pt);
+            });
+            g += n;
+        }
+        Some(out.len() - before)
+    }
+}

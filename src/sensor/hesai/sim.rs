@@ -1,0 +1,1 @@
+//! Hesai packet encoder (points → byte-exact packets): used by tests and the simulator.
