@@ -394,6 +394,12 @@ impl HesaiStream {
                 if last != i64::MIN {
                     let span = (az - last).rem_euclid(TURN_UDEG);
                     let to_cut = (self.cut_udeg - last).rem_euclid(TURN_UDEG);
+                    // A step back (less than a quarter turn: blocks of one packet out of
+                    // azimuth order) is not a turn forward past the cut, and the channel's
+                    // progress stays where it was (so that it cannot cross the cut twice).
+                    if span >= TURN_UDEG / 4 * 3 {
+                        continue;
+                    }
                     if to_cut < span {
                         self.gen[c] += 1;
                     }
