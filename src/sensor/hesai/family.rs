@@ -120,7 +120,7 @@ impl Family for Hesai {
         };
         let s = &pool.settings;
         let mut cfg = HesaiConfig::new(calibration, &name);
-        cfg.model = Some(model);
+        cfg.model = named;
         cfg.options.range = s.decode;
         cfg.cut_cdeg = Some(u32::from(s.cut_angle));
         if let Some(on) = s.crc {
