@@ -5,9 +5,9 @@
 //! a short, repeatable fuzz pass inside the test suite (the long runs: tools/fuzz/smoke.sh).
 #![cfg(all(feature = "pcap", feature = "mcap", feature = "sim"))]
 
+mod common;
 #[path = "../tools/fuzz/harness.rs"]
 mod harness;
-mod common;
 
 use ringscan::sensor::hesai::family::parse_hesai_calibration;
 use ringscan::sensor::hesai::wire::crc32_mpeg2;
@@ -190,7 +190,8 @@ fn hesai_csv_goes_to_hesai_and_its_errors_say_what_is_wrong() {
         assert!(e.to_string().contains(word), "{e}");
     }
     // A Velodyne yaml is still Velodyne's.
-    let yaml = "lasers:\n- {laser_id: 0, rot_correction: 0.0, vert_correction: 0.1}\nnum_lasers: 1\n";
+    let yaml =
+        "lasers:\n- {laser_id: 0, rot_correction: 0.0, vert_correction: 0.1}\nnum_lasers: 1\n";
     match parse_calibration(yaml.as_bytes(), "v.yaml", None) {
         Ok(c) => assert_eq!(c.family, "velodyne"),
         Err(e) => assert!(!e.to_string().contains("Hesai"), "{e}"),
@@ -244,7 +245,11 @@ fn real_packets_and_files_mutated_through_the_fuzz_harnesses() {
             runs += 1;
         }
     }
-    println!("{runs} harness runs on {} packets and {} files", seeds.len(), files.len());
+    println!(
+        "{runs} harness runs on {} packets and {} files",
+        seeds.len(),
+        files.len()
+    );
 }
 
 fn walk(dir: &std::path::Path) -> Vec<std::path::PathBuf> {

@@ -2139,8 +2139,7 @@ use ringscan::sensor::hesai::calib::CHANNEL_COUNTS as HESAI_CHANNEL_COUNTS;
 use ringscan::sensor::hesai::family::parse_hesai_calibration;
 use ringscan::sensor::hesai::model::ALL_MODELS as HESAI_MODELS;
 use ringscan::sensor::hesai::{
-    HesaiCalibration, HesaiConfig, HesaiDecoder, HesaiModel, HesaiOptions, HesaiPacket,
-    HesaiStream,
+    HesaiCalibration, HesaiConfig, HesaiDecoder, HesaiModel, HesaiOptions, HesaiPacket, HesaiStream,
 };
 
 /// A plausible correction for `model`: a CSV spread over ±15° (the AT128: a zero-offset
@@ -2169,7 +2168,10 @@ pub fn hesai_correction(model: HesaiModel) -> HesaiCalibration {
 }
 
 fn check_hesai_point(p: &Point, model: HesaiModel, max_m: f32) {
-    assert!(p.x.is_finite() && p.y.is_finite() && p.z.is_finite(), "{p:?}");
+    assert!(
+        p.x.is_finite() && p.y.is_finite() && p.z.is_finite(),
+        "{p:?}"
+    );
     let r = (p.x * p.x + p.y * p.y + p.z * p.z).sqrt();
     assert!(r <= max_m * 1.001 + 1e-3, "{p:?} beyond {max_m} m");
     assert!(usize::from(p.ring) < model.channels(), "{p:?}");
@@ -2187,7 +2189,10 @@ pub fn hesai_packet(data: &[u8]) {
         return;
     };
     if let Some(m) = HesaiModel::detect(payload) {
-        assert!(HesaiPacket::new(payload, m).is_ok(), "detected {m:?} but the view refuses");
+        assert!(
+            HesaiPacket::new(payload, m).is_ok(),
+            "detected {m:?} but the view refuses"
+        );
     }
     let model = HESAI_MODELS[usize::from(sel) % HESAI_MODELS.len()];
     if let Ok(p) = HesaiPacket::new(payload, model) {
@@ -2199,8 +2204,18 @@ pub fn hesai_packet(data: &[u8]) {
                 let _ = p.unit(b, c);
             }
         }
-        let _ = (p.stamp_ns(), p.udp_seq(), p.functional_safety(), p.check_crc());
-        let _ = (p.protocol(), p.tail_flags(), p.motor_rpm(), p.has_signature());
+        let _ = (
+            p.stamp_ns(),
+            p.udp_seq(),
+            p.functional_safety(),
+            p.check_crc(),
+        );
+        let _ = (
+            p.protocol(),
+            p.tail_flags(),
+            p.motor_rpm(),
+            p.has_signature(),
+        );
     }
     let mut cfg = HesaiConfig::new(Some(hesai_correction(model)), "fuzz.csv");
     cfg.model = Some(model);
@@ -2227,7 +2242,10 @@ pub fn hesai_packet(data: &[u8]) {
         assert_eq!(st.packets + st.malformed, i as u64 + 1, "{st:?}");
     }
     stream.finish(&mut on_sweep);
-    assert!(points <= 2 * l.blocks * l.channels, "{points} points from two packets");
+    assert!(
+        points <= 2 * l.blocks * l.channels,
+        "{points} points from two packets"
+    );
 }
 
 /// Any bytes as a Hesai correction: recognised only by the CSV header line or the `.dat` start;
@@ -2255,7 +2273,8 @@ pub fn calib_hesai(data: &[u8]) {
             }
         }
         HesaiCalibration::At128(a) => {
-            let d = HesaiDecoder::new(HesaiModel::PandarAt128, &c, HesaiOptions::default()).unwrap();
+            let d =
+                HesaiDecoder::new(HesaiModel::PandarAt128, &c, HesaiOptions::default()).unwrap();
             for ch in [0, 1, 63, 127] {
                 for enc in [0i64, 1, 12_345_678, 9_215_999] {
                     if let Some((az, _el)) = a.angles(ch, enc) {

@@ -99,6 +99,33 @@ fn azimuth_table() -> &'static [(f32, f32)] {
     })
 }
 
+/// Raw distances `lo..=hi` whose distance (raw × unit in f64, rounded to f32: nebula's
+/// arithmetic) lies in `[min_m, max_m]`, for a unit of `unit_mm` mm; raw 0 (no return) is never
+/// inside. An empty range is `(1, 0)`.
+fn raw_bounds(unit_mm: u8, min_m: f32, max_m: f32) -> (u16, u16) {
+    let d = |raw: u32| (f64::from(raw) * f64::from(unit_mm) / 1000.0) as f32;
+    // First raw with d ≥ min, last raw with d ≤ max (d is non-decreasing in raw).
+    let first = |pred: &dyn Fn(u32) -> bool| {
+        let (mut lo, mut hi) = (1u32, 65_536u32);
+        while lo < hi {
+            let mid = (lo + hi) / 2;
+            if pred(mid) {
+                hi = mid;
+            } else {
+                lo = mid + 1;
+            }
+        }
+        lo
+    };
+    let lo = first(&|r| d(r) >= min_m);
+    let hi = first(&|r| d(r) > max_m) - 1;
+    if lo > hi || lo > 65_535 {
+        (1, 0)
+    } else {
+        (lo as u16, hi.min(65_535) as u16)
+    }
+}
+
 /// One decoded return before it is placed in a sweep.
 #[derive(Clone, Copy, Debug)]
 pub struct Decoded {
@@ -117,8 +144,10 @@ pub struct HesaiDecoder {
     channels: Vec<Channel>,
     at128: Option<At128Correction>,
     opts: HesaiOptions,
-    min_m: f32,
-    max_m: f32,
+    /// Per distance unit (mm, the header byte): the raw distances inside the range filter,
+    /// `lo..=hi`, decided with nebula's arithmetic (raw × unit in f64, then f32) so that a
+    /// bound cuts at the same raw value; the per-point distance is then an f32 product.
+    raw_bounds: Vec<(u16, u16)>,
     fov_udeg: Option<(i64, i64)>,
     /// Firing offsets (ns, relative to the tail time) for the current (returns, flags),
     /// `block × channels + channel`.
@@ -225,8 +254,7 @@ impl HesaiDecoder {
             channels,
             at128,
             opts,
-            min_m,
-            max_m,
+            raw_bounds: (0..=255u8).map(|u| raw_bounds(u, min_m, max_m)).collect(),
             fov_udeg,
             firing: Vec::new(),
             firing_key: None,
@@ -327,18 +355,23 @@ impl HesaiDecoder {
         n: usize,
         mut out: impl FnMut(Decoded),
     ) {
-        let unit_mm = f64::from(p.dis_unit_mm());
+        let unit_mm = p.dis_unit_mm();
+        let unit_m = f64::from(unit_mm) / 1000.0;
+        let unit_f32 = unit_m as f32;
+        let (raw_lo, raw_hi) = self
+            .raw_bounds
+            .get(usize::from(unit_mm))
+            .copied()
+            .unwrap_or((1, 0));
         let mode = p.return_mode();
         let layout = p.layout();
         let ul = layout.unit_len;
         let n = n.clamp(1, 3).min(layout.blocks.saturating_sub(first));
         let mut units: [&[u8]; 3] = [&[]; 3];
-        let mut azs = [0u32; 3];
-        for k in 0..n {
-            units[k] = p.units(first + k);
-            azs[k] = p.azimuth(first + k);
+        for (k, u) in units.iter_mut().enumerate().take(n) {
+            *u = p.units(first + k);
         }
-        let block_az = azs[0];
+        let block_az = p.azimuth(first);
         let (cb, sb) = if self.at128.is_none() {
             azimuth_table()
                 .get((block_az % 36_000) as usize)
@@ -349,18 +382,26 @@ impl HesaiDecoder {
         };
         let rets: [u8; 3] = core::array::from_fn(|k| return_index(self.model, mode, k));
         let thr = self.opts.dual_return_threshold_m;
-        for (c, ch) in self.channels.iter().enumerate() {
-            let mut raw = [(0u16, 0u8); 3];
-            let mut dist = [0f32; 3];
-            for k in 0..n {
-                let o = c * ul;
-                let (d, r) = match units[k].get(o..o + 3) {
-                    Some(&[a, b, r]) => (u16::from_le_bytes([a, b]), r),
-                    _ => (0, 0),
-                };
-                raw[k] = (d, r);
-                dist[k] = (f64::from(d) * unit_mm / 1000.0) as f32;
+        let n_channels = self.channels.len().min(units[0].len() / ul.max(1));
+        // Distances as nebula computes them, for the dual-return threshold.
+        let exact = |raw: u16| (f64::from(raw) * unit_m) as f32;
+        let ul = ul.max(3);
+        let (mut it0, mut it1, mut it2) = (
+            units[0].chunks_exact(ul),
+            units[1].chunks_exact(ul),
+            units[2].chunks_exact(ul),
+        );
+        let rd = |u: Option<&[u8]>| match u {
+            Some(&[a, b, r, ..]) => (u16::from_le_bytes([a, b]), r),
+            _ => (0, 0),
+        };
+        for (c, ch) in self.channels.iter().enumerate().take(n_channels) {
+            // Raw (distance, reflectivity) of each return (blocks past the group: none).
+            let raw = [rd(it0.next()), rd(it1.next()), rd(it2.next())];
+            if raw[0].0 | raw[1].0 | raw[2].0 == 0 {
+                continue;
             }
+            let dist: [f32; 3] = core::array::from_fn(|k| f32::from(raw[k].0) * unit_f32);
             // Angles of this channel (AT128: per point).
             let (cos_az, sin_az, cos_el, sin_el) = match &self.at128 {
                 None => (
@@ -371,6 +412,9 @@ impl HesaiDecoder {
                 ),
                 Some(a) => match a.angles(c, i64::from(block_az)) {
                     Some((az, el)) => {
+                        if !self.in_fov(az.rem_euclid(AT128_TURN) * 1_000_000 / UNITS_PER_DEG) {
+                            continue;
+                        }
                         let (s, co) = (az as f64 / UNITS_PER_DEG as f64).to_radians().sin_cos();
                         let (se, ce) = (el as f64 / UNITS_PER_DEG as f64).to_radians().sin_cos();
                         (co as f32, s as f32, ce as f32, se as f32)
@@ -378,49 +422,21 @@ impl HesaiDecoder {
                     None => continue,
                 },
             };
-            if self.fov_udeg.is_some() {
-                let az = match &self.at128 {
-                    None => (i64::from(block_az) * 10_000 + ch.off_udeg).rem_euclid(TURN_UDEG),
-                    Some(a) => match a.angles(c, i64::from(block_az)) {
-                        Some((az, _)) => az.rem_euclid(AT128_TURN) * 1_000_000 / UNITS_PER_DEG,
-                        None => continue,
-                    },
-                };
-                if !self.in_fov(az) {
-                    continue;
-                }
+            if self.fov_udeg.is_some()
+                && self.at128.is_none()
+                && !self.in_fov((i64::from(block_az) * 10_000 + ch.off_udeg).rem_euclid(TURN_UDEG))
+            {
+                continue;
             }
-            for k in 0..n {
-                let (d_raw, refl) = raw[k];
-                if d_raw == 0 {
-                    continue;
-                }
+            let mut emit = |k: usize| {
                 let d = dist[k];
-                if d < self.min_m || d > self.max_m {
-                    continue;
-                }
-                if k + 1 < n {
-                    let mut drop = false;
-                    for j in 0..n {
-                        if j == k {
-                            continue;
-                        }
-                        if raw[j] == raw[k] || (thr > 0.0 && (dist[j] - d).abs() < thr) {
-                            drop = true;
-                            break;
-                        }
-                    }
-                    if drop {
-                        continue;
-                    }
-                }
                 let xy = d * cos_el;
                 out(Decoded {
                     point: Point {
                         x: xy * cos_az,
                         y: -xy * sin_az,
                         z: d * sin_el,
-                        intensity: f32::from(refl),
+                        intensity: f32::from(raw[k].1),
                         t: 0,
                         ring: ch.ring,
                         ret: rets[k],
@@ -429,6 +445,45 @@ impl HesaiDecoder {
                     channel: c,
                     block: first + k,
                 });
+            };
+            let valid = |k: usize| raw[k].0 >= raw_lo && raw[k].0 <= raw_hi;
+            match n {
+                1 => {
+                    if valid(0) {
+                        emit(0);
+                    }
+                }
+                2 => {
+                    // The first return is dropped when identical to the second or (with a
+                    // threshold) within it of the second; the group's last is always kept.
+                    let merged = raw[0] == raw[1]
+                        || (thr > 0.0 && (exact(raw[0].0) - exact(raw[1].0)).abs() < thr);
+                    if valid(0) && !merged {
+                        emit(0);
+                    }
+                    if valid(1) {
+                        emit(1);
+                    }
+                }
+                _ => {
+                    for k in 0..n {
+                        if !valid(k) {
+                            continue;
+                        }
+                        if k + 1 < n {
+                            let dropped = (0..n).any(|j| {
+                                j != k
+                                    && (raw[j] == raw[k]
+                                        || (thr > 0.0
+                                            && (exact(raw[j].0) - exact(raw[k].0)).abs() < thr))
+                            });
+                            if dropped {
+                                continue;
+                            }
+                        }
+                        emit(k);
+                    }
+                }
             }
         }
     }
@@ -447,10 +502,12 @@ impl HesaiDecoder {
         self.prepare(n, p.tail_flags());
         let before = out.len();
         let blocks = p.layout().blocks;
+        let base = stamp_ns - t0_ns;
+        let this = &*self;
         let mut g = 0;
         while g < blocks {
-            self.decode_group(p, g, n, |d| {
-                let t = stamp_ns + self.firing_ns(d.block, d.channel) - t0_ns;
+            this.decode_group(p, g, n, |d| {
+                let t = base + this.firing_ns(d.block, d.channel);
                 let mut pt = d.point;
                 pt.t = t.clamp(0, i64::from(u32::MAX)) as u32;
                 out.push(pt);
