@@ -9,7 +9,8 @@
 //! nebula VLP-16 and VLS-128 captures with nebula's VLP16.yaml / VLS128.yaml, through the
 //! Velodyne decoder. Every payload is loaded before timing; throughput is in elements = points
 //! produced (`decoder/*`: the packet view and the decoder into one reused buffer, cleared every
-//! 500 packets; `stream/*`: the whole stream, sweeps cut and handed to a callback).
+//! 500 packets; `stream/*`: the whole stream — `HesaiStream` / `VelodyneStream` — sweeps cut
+//! and handed to a callback that counts their points).
 
 use std::path::{Path, PathBuf};
 
@@ -107,6 +108,26 @@ fn velodyne_decoder_pass(dec: &VelodyneDecoder, packets: &[&[u8]], out: &mut Vec
     n
 }
 
+fn velodyne_stream_pass(
+    model: VelodyneModel,
+    cal: &ringscan::sensor::velodyne::VelodyneCalibration,
+    input: &[(i64, Vec<u8>)],
+) -> u64 {
+    let cfg = ringscan::sensor::velodyne::StreamConfig {
+        model: Some(model),
+        calibrations: vec![cal.clone()],
+        ..Default::default()
+    };
+    let mut stream = ringscan::sensor::velodyne::VelodyneStream::new(cfg);
+    let mut points = 0u64;
+    let mut cb = |s: &ringscan::sweep::Sweep, _: &_| points += s.points.len() as u64;
+    for (t, p) in input {
+        stream.push(*t, p, &mut cb).expect("stream");
+    }
+    stream.finish(&mut cb).expect("stream");
+    points
+}
+
 fn bench(c: &mut Criterion) {
     let shared = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/captures");
     assert!(shared.is_dir(), "{} is needed", shared.display());
@@ -168,6 +189,13 @@ fn bench(c: &mut Criterion) {
         g.throughput(Throughput::Elements(points));
         g.bench_function(name, |b| {
             b.iter(|| black_box(velodyne_decoder_pass(&dec, black_box(&packets), &mut out)))
+        });
+        g.finish();
+        let stream_points = velodyne_stream_pass(model, &cal, &one);
+        let mut g = c.benchmark_group("stream");
+        g.throughput(Throughput::Elements(stream_points));
+        g.bench_function(name, |b| {
+            b.iter(|| black_box(velodyne_stream_pass(model, &cal, black_box(&one))))
         });
         g.finish();
     }

@@ -336,6 +336,14 @@ impl HesaiDecoder {
         }
     }
 
+    /// Per-channel azimuth offsets, µ° (`None` for the AT128, whose channel azimuths are not
+    /// the block azimuth plus a constant).
+    pub fn azimuth_offsets_udeg(&self) -> Option<Vec<i64>> {
+        self.at128
+            .is_none()
+            .then(|| self.channels.iter().map(|c| c.off_udeg).collect())
+    }
+
     fn in_fov(&self, az_udeg: i64) -> bool {
         match self.fov_udeg {
             None => true,

@@ -187,6 +187,10 @@ pub struct HesaiStream {
     next_index: u64,
     prev_seq: Option<u32>,
     prev_stamp: Option<i64>,
+    /// Angle-correction CSV: each channel's cut threshold on the block azimuth (cut − its
+    /// offset, µ°), the window they span (start, width), and the last block azimuth.
+    thresholds: Option<(Vec<i64>, i64, i64)>,
+    last_block_udeg: Option<i64>,
     packet_no: u64,
     cut_udeg: i64,
 }
@@ -211,6 +215,8 @@ impl HesaiStream {
             next_index: 0,
             prev_seq: None,
             prev_stamp: None,
+            thresholds: None,
+            last_block_udeg: None,
             packet_no: 0,
             cut_udeg: 0,
         }
@@ -265,6 +271,16 @@ impl HesaiStream {
             return Ok(());
         };
         let dec = HesaiDecoder::new(model, calib, self.cfg.options)?;
+        self.thresholds = dec.azimuth_offsets_udeg().map(|offs| {
+            let (lo, hi) = offs
+                .iter()
+                .fold((i64::MAX, i64::MIN), |(a, b), &o| (a.min(o), b.max(o)));
+            let th = offs
+                .iter()
+                .map(|o| (self.cut_udeg - o).rem_euclid(TURN_UDEG))
+                .collect();
+            (th, (self.cut_udeg - hi).rem_euclid(TURN_UDEG), hi - lo)
+        });
         self.decoder = Some(dec);
         Ok(())
     }
@@ -356,6 +372,7 @@ impl HesaiStream {
             self.stats.discontinuities += 1;
             self.emit_all(on_sweep);
             self.last_az.iter_mut().for_each(|a| *a = i64::MIN);
+            self.last_block_udeg = None;
         }
 
         self.packet_no += 1;
@@ -386,25 +403,53 @@ impl HesaiStream {
                     self.gen[c] = self.base_gen + u64::from(straddles && after);
                 }
             }
-            for c in 0..nc {
-                let Some(az) = dec.channel_azimuth_udeg(block_az, c) else {
-                    continue;
-                };
-                let last = self.last_az[c];
-                if last != i64::MIN {
-                    let span = (az - last).rem_euclid(TURN_UDEG);
-                    let to_cut = (self.cut_udeg - last).rem_euclid(TURN_UDEG);
-                    // A step back (less than a quarter turn: blocks of one packet out of
-                    // azimuth order) is not a turn forward past the cut, and the channel's
-                    // progress stays where it was (so that it cannot cross the cut twice).
-                    if span >= TURN_UDEG / 4 * 3 {
-                        continue;
-                    }
-                    if to_cut < span {
-                        self.gen[c] += 1;
+            if let Some((th, w_start, w_width)) = &self.thresholds {
+                // Angle-correction CSV: channel c's azimuth is the block azimuth + a constant,
+                // so it passes the cut exactly when the block azimuth passes cut − offset(c);
+                // the channels are looked at only when the block's step reaches that window.
+                let cur = i64::from(block_az % 36_000) * 10_000;
+                match self.last_block_udeg {
+                    None => self.last_block_udeg = Some(cur),
+                    Some(last) => {
+                        let span = (cur - last).rem_euclid(TURN_UDEG);
+                        // A step back (blocks of one packet out of azimuth order) is not a
+                        // turn forward, and progress stays where it was.
+                        if span < TURN_UDEG / 4 * 3 {
+                            let hits = (w_start - last).rem_euclid(TURN_UDEG) < span
+                                || (last - w_start).rem_euclid(TURN_UDEG) <= *w_width;
+                            if hits {
+                                for (g_c, &t) in self.gen.iter_mut().zip(th) {
+                                    if (t - last).rem_euclid(TURN_UDEG) < span {
+                                        *g_c += 1;
+                                    }
+                                }
+                            }
+                            self.last_block_udeg = Some(cur);
+                        }
                     }
                 }
-                self.last_az[c] = az;
+                self.last_az.iter_mut().for_each(|a| *a = 0);
+            } else {
+                for c in 0..nc {
+                    let Some(az) = dec.channel_azimuth_udeg(block_az, c) else {
+                        continue;
+                    };
+                    let last = self.last_az[c];
+                    if last != i64::MIN {
+                        let span = (az - last).rem_euclid(TURN_UDEG);
+                        let to_cut = (self.cut_udeg - last).rem_euclid(TURN_UDEG);
+                        // A step back (less than a quarter turn: blocks of one packet out of
+                        // azimuth order) is not a turn forward past the cut, and the
+                        // channel's progress stays where it was (no second crossing).
+                        if span >= TURN_UDEG / 4 * 3 {
+                            continue;
+                        }
+                        if to_cut < span {
+                            self.gen[c] += 1;
+                        }
+                    }
+                    self.last_az[c] = az;
+                }
             }
             let group_t0 = stamp + dec.group_earliest_ns(g, n);
             // Keep at most two sweeps open: a channel two sweeps ahead closes the oldest.
@@ -440,19 +485,41 @@ impl HesaiStream {
                 }
             }
             let (gens, base, open) = (&self.gen, self.base_gen, &mut self.open);
-            dec.decode_group(&p, g, n, |d| {
-                let idx = (gens[d.channel].saturating_sub(base)) as usize;
-                if let Some(o) = open.get_mut(idx) {
-                    let t = stamp + dec.firing_ns(d.block, d.channel) - o.t0_ns;
-                    let mut pt = d.point;
-                    pt.t = t.clamp(0, i64::from(u32::MAX)) as u32;
-                    o.sweep.points.push(pt);
-                    if o.last_packet != packet_no {
+            let (lo, hi) = gens
+                .iter()
+                .fold((u64::MAX, 0), |(a, b), &g| (a.min(g), b.max(g)));
+            if lo == hi {
+                // Every channel in one sweep (all but the groups at the cut): straight in.
+                if let Some(o) = open.get_mut(lo.saturating_sub(base) as usize) {
+                    let before = o.sweep.points.len();
+                    let t_base = stamp - o.t0_ns;
+                    let pts = &mut o.sweep.points;
+                    dec.decode_group(&p, g, n, |d| {
+                        let t = t_base + dec.firing_ns(d.block, d.channel);
+                        let mut pt = d.point;
+                        pt.t = t.clamp(0, i64::from(u32::MAX)) as u32;
+                        pts.push(pt);
+                    });
+                    if o.sweep.points.len() > before && o.last_packet != packet_no {
                         o.last_packet = packet_no;
                         o.sweep.packets += 1;
                     }
                 }
-            });
+            } else {
+                dec.decode_group(&p, g, n, |d| {
+                    let idx = (gens[d.channel].saturating_sub(base)) as usize;
+                    if let Some(o) = open.get_mut(idx) {
+                        let t = stamp + dec.firing_ns(d.block, d.channel) - o.t0_ns;
+                        let mut pt = d.point;
+                        pt.t = t.clamp(0, i64::from(u32::MAX)) as u32;
+                        o.sweep.points.push(pt);
+                        if o.last_packet != packet_no {
+                            o.last_packet = packet_no;
+                            o.sweep.packets += 1;
+                        }
+                    }
+                });
+            }
             for o in self.open.iter_mut() {
                 o.sweep.last_host_ns = host_ns;
                 o.sweep.last_azimuth = (block_az % 36_000) as u16;
