@@ -21,7 +21,17 @@ const GT: &str = "tier4__nebula/src/nebula_hesai/nebula_hesai/test_resources/dec
 const CALIB: &str = "tier4__nebula/src/nebula_hesai/nebula_hesai_decoders/calibration";
 
 /// (folder, csv, model, protocol, return mode, CRC state words, UDP-sequence missing).
-const CAPTURES: &[(&str, &str, &str, Option<&str>, &str, &str, u64)] = &[
+type Expected = (
+    &'static str,
+    &'static str,
+    &'static str,
+    Option<&'static str>,
+    &'static str,
+    &'static str,
+    u64,
+);
+
+const CAPTURES: &[Expected] = &[
     (
         "40p",
         "Pandar40P.csv",

@@ -238,7 +238,7 @@ impl HesaiDecoder {
                 "range {min_m}–{max_m} m is empty"
             )));
         }
-        if !(opts.dual_return_threshold_m >= 0.0) {
+        if opts.dual_return_threshold_m.is_nan() || opts.dual_return_threshold_m < 0.0 {
             return Err(DecodeError::Option(
                 "dual-return threshold must be ≥ 0".into(),
             ));

@@ -349,8 +349,8 @@ impl HesaiSim {
             } else {
                 ((head * 100.0).round() as u32) % 36_000
             };
-            for b in g..g + n {
-                blocks[b].azimuth = az;
+            for blk in blocks.iter_mut().skip(g).take(n) {
+                blk.azimuth = az;
             }
             for c in 0..l.channels {
                 let Some((az_deg, el_deg)) = self.beam(az, c) else {
