@@ -333,3 +333,66 @@ fn listen_decodes_hesai_and_velodyne_on_one_port() {
     );
     let _ = std::fs::remove_dir_all(&tmp);
 }
+
+#[test]
+fn hesai_calib_fetches_the_correction_from_a_fake_sensor_over_ptc() {
+    use std::io::{Read, Write};
+    let Some(c) = common::captures() else { return };
+    let csv = std::fs::read(c.join(CALIB).join("PandarXT32.csv")).unwrap();
+    // A fake sensor's PTC port: one "get angle correction" (0x05) answered with the CSV.
+    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = l.local_addr().unwrap();
+    let served = csv.clone();
+    let server = std::thread::spawn(move || {
+        let (mut s, _) = l.accept().unwrap();
+        let mut head = [0u8; 8];
+        s.read_exact(&mut head).unwrap();
+        assert_eq!(&head, &[0x47, 0x74, 0x05, 0, 0, 0, 0, 0]);
+        let mut r = vec![0x47, 0x74, 0x05, 0];
+        r.extend_from_slice(&(served.len() as u32).to_be_bytes());
+        r.extend_from_slice(&served);
+        s.write_all(&r).unwrap();
+    });
+    let tmp = std::env::temp_dir().join(format!("ringscan-hesai-ptc-{}.csv", std::process::id()));
+    let o = Command::new(BIN)
+        .args(["hesai-calib", "--sensor", &addr.to_string(), "--out"])
+        .arg(&tmp)
+        .output()
+        .unwrap();
+    server.join().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(std::fs::read(&tmp).unwrap(), csv);
+    // The fetched file decodes the capture.
+    let pcap = pcap_in(&c.join(GT).join("xt32"));
+    let o = Command::new(BIN)
+        .arg("info")
+        .arg(&pcap)
+        .arg("--calib")
+        .arg(&tmp)
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(j["points"].as_u64().unwrap() > 0);
+    let _ = std::fs::remove_file(&tmp);
+    // No sensor listening: a clear error, exit code 1.
+    let closed = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap();
+    let o = Command::new(BIN)
+        .args([
+            "hesai-calib",
+            "--timeout",
+            "1",
+            "--sensor",
+            &closed.to_string(),
+            "--out",
+        ])
+        .arg(std::env::temp_dir().join("ringscan-hesai-ptc-never.csv"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains(&closed.to_string()));
+}
