@@ -525,3 +525,101 @@ impl HesaiDecoder {
         Some(out.len() - before)
     }
 }
+
+#[cfg(all(test, feature = "sim"))]
+mod tests {
+    use super::*;
+    use crate::sensor::hesai::calib::ChannelAngles;
+    use crate::sensor::hesai::model::TailFlags;
+    use crate::sensor::hesai::sim::{encode_packet, BlockData, TailData};
+
+    fn flat(n: usize) -> HesaiCalibration {
+        HesaiCalibration::Csv(
+            (0..n)
+                .map(|i| ChannelAngles {
+                    elevation_deg: -(i as f64),
+                    azimuth_deg: 0.0,
+                })
+                .collect(),
+        )
+    }
+
+    fn packet(mode: u8, units: [(u16, u8); 3]) -> Vec<u8> {
+        let m = HesaiModel::PandarXt32m;
+        let blocks: Vec<BlockData> = (0..6)
+            .map(|b| BlockData {
+                azimuth: 9_000,
+                units: vec![units[b % 3]; 32],
+            })
+            .collect();
+        let tail = TailData {
+            return_mode: mode,
+            motor_rpm: 600,
+            stamp_ns: 1_700_000_000_000_000_000,
+            udp_seq: 1,
+            dis_unit_mm: 5,
+            flags: TailFlags::default(),
+            signature: false,
+        };
+        encode_packet(m, &blocks, &tail)
+    }
+
+    fn decode(opts: HesaiOptions, bytes: &[u8]) -> Vec<Point> {
+        let m = HesaiModel::PandarXt32m;
+        let mut dec = HesaiDecoder::new(m, &flat(32), opts).unwrap();
+        let p = HesaiPacket::new(bytes, m).unwrap();
+        let mut out = Vec::new();
+        dec.decode_packet(&p, 0, 0, &mut out).unwrap();
+        out
+    }
+
+    #[test]
+    fn triple_return_keeps_first_last_strongest_as_returns_2_1_0() {
+        // 0x3d: blocks (first, last, strongest) per firing; distances 10 m, 30 m, 20 m.
+        let b = packet(0x3d, [(2_000, 10), (6_000, 20), (4_000, 90)]);
+        let pts = decode(HesaiOptions::default(), &b);
+        // 2 groups × 32 channels × 3 returns.
+        assert_eq!(pts.len(), 2 * 32 * 3);
+        assert_eq!(
+            pts[..3].iter().map(|p| p.ret).collect::<Vec<_>>(),
+            vec![2, 1, 0]
+        );
+        // Azimuth 90°: the points lie on −y (clockwise from forward).
+        assert!(
+            (pts[0].y + 10.0).abs() < 1e-4 && pts[0].x.abs() < 1e-4,
+            "{:?}",
+            pts[0]
+        );
+        assert_eq!(pts[2].intensity, 90.0);
+    }
+
+    #[test]
+    fn identical_returns_are_one_point_and_the_threshold_drops_near_ones() {
+        // First == strongest: one point (from the group's last block, the strongest).
+        let b = packet(0x3d, [(4_000, 90), (6_000, 20), (4_000, 90)]);
+        let pts = decode(HesaiOptions::default(), &b);
+        assert_eq!(pts.len(), 2 * 32 * 2);
+        // With nebula's 0.1 m threshold, returns that are not the group's last are dropped when
+        // within 0.1 m of another: first (29.95 m) and last (30 m) both go, strongest stays.
+        let b = packet(0x3d, [(5_990, 10), (6_000, 20), (4_000, 90)]);
+        assert_eq!(decode(HesaiOptions::default(), &b).len(), 2 * 32 * 3);
+        let opts = HesaiOptions {
+            dual_return_threshold_m: 0.1,
+            ..HesaiOptions::default()
+        };
+        let pts = decode(opts, &b);
+        assert_eq!(pts.len(), 2 * 32);
+        assert!(pts.iter().all(|p| p.ret == 0));
+    }
+
+    #[test]
+    fn range_bounds_cut_at_nebulas_raw_values() {
+        // 5 mm unit: raw 100 = 0.5 m is kept by a 0.5 m minimum (a bound is inclusive), 99 not.
+        assert_eq!(raw_bounds(5, 0.5, 300.0), (100, 60_000));
+        assert_eq!(raw_bounds(4, 0.3, 200.0), (75, 50_000));
+        assert_eq!(raw_bounds(4, 0.1, 60.0), (25, 15_000));
+        assert_eq!(raw_bounds(4, 10.0, 1.0), (1, 0));
+        // A zero unit (hostile header): every distance is 0 m.
+        assert_eq!(raw_bounds(0, 0.0, f32::INFINITY), (1, 65_535));
+    }
+}
