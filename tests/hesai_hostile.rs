@@ -162,6 +162,7 @@ fn crc_failures_are_dropped_and_counted() {
     bad_tail[t + 25] ^= 0x80;
     s.push(2, &bad_tail, &mut on).unwrap();
     assert_eq!(s.stats().crc_failures, 2);
+    assert_eq!(s.stats().crc_tail_failures, 1);
     assert_eq!(s.stats().malformed, 2);
     assert_eq!(s.stats().packets, 1);
     // With the signature appended: still one packet, and counted as signed.

@@ -251,6 +251,7 @@ impl SensorStream for HesaiStream {
             "crc": f.crc.name(),
             "crc_ok": st.crc_ok,
             "crc_failures": st.crc_failures,
+            "crc_tail_failures": st.crc_tail_failures,
             "signed_packets": st.signed,
             "functional_safety": safety_json(f),
             "safety_not_normal": st.safety_not_normal,

@@ -79,6 +79,8 @@ pub struct HesaiStats {
     pub malformed: u64,
     /// Packets whose body or tail CRC failed (dropped; also in `malformed`).
     pub crc_failures: u64,
+    /// Of those, the packets whose body passed and tail failed.
+    pub crc_tail_failures: u64,
     /// Packets whose CRCs were checked and passed.
     pub crc_ok: u64,
     /// Packets missing (sequence or time gaps).
@@ -305,8 +307,10 @@ impl HesaiStream {
         if self.facts.crc == CrcState::Checked {
             match p.check_crc() {
                 Ok(()) => self.stats.crc_ok += 1,
-                Err((_part, _e)) => {
-                    let _: CrcPart = _part;
+                Err((part, _)) => {
+                    if part == CrcPart::Tail {
+                        self.stats.crc_tail_failures += 1;
+                    }
                     self.stats.crc_failures += 1;
                     self.stats.malformed += 1;
                     return Ok(());
