@@ -4,6 +4,7 @@ mod input;
 mod listen;
 mod odometry;
 mod pipeline;
+mod ptc;
 mod render;
 mod replay;
 mod run;
@@ -42,6 +43,53 @@ enum Command {
     Replay(ReplayCmd),
     /// Draw a bird's-eye picture of one sweep of an MCAP written with `--pipeline`.
     Render(render::RenderCmd),
+    /// Fetch a Hesai sensor's angle-correction file over its TCP control port (PTC, 9347), for
+    /// `--calib`.
+    HesaiCalib(HesaiCalibCmd),
+}
+
+#[derive(clap::Args, Debug)]
+struct HesaiCalibCmd {
+    /// The sensor's address, optionally with its PTC port (default 9347).
+    #[arg(long, value_name = "IP[:PORT]")]
+    sensor: String,
+    /// Where to write the file (the CSV, or the AT128's .dat).
+    #[arg(long, short)]
+    out: PathBuf,
+    /// Seconds to wait for the sensor.
+    #[arg(long, default_value_t = 5.0)]
+    timeout: f64,
+}
+
+fn hesai_calib_command(c: &HesaiCalibCmd) -> Result<ExitCode, RunError> {
+    let addr: std::net::SocketAddr = match c.sensor.parse() {
+        Ok(a) => a,
+        Err(_) => match c.sensor.parse::<std::net::IpAddr>() {
+            Ok(ip) => std::net::SocketAddr::new(ip, ptc::PTC_PORT),
+            Err(_) => {
+                return Err(RunError::Usage(format!(
+                    "--sensor {}: expected IP or IP:PORT",
+                    c.sensor
+                )))
+            }
+        },
+    };
+    if !(c.timeout.is_finite() && c.timeout > 0.0) {
+        return Err(RunError::Usage(format!(
+            "--timeout {}: expected a positive number of seconds",
+            c.timeout
+        )));
+    }
+    let bytes = ptc::fetch_angle_correction(addr, std::time::Duration::from_secs_f64(c.timeout))
+        .map_err(RunError::Live)?;
+    std::fs::write(&c.out, &bytes)
+        .map_err(|e| RunError::Live(format!("{}: {e}", c.out.display())))?;
+    println!(
+        "{}: {} bytes of angle correction from {addr}",
+        c.out.display(),
+        bytes.len()
+    );
+    Ok(ExitCode::SUCCESS)
 }
 
 /// Point cloud message layout.
@@ -437,6 +485,7 @@ pub fn main() -> ExitCode {
             bag: c.bag,
         }),
         Command::Render(c) => render::render_command(&c),
+        Command::HesaiCalib(c) => hesai_calib_command(&c),
     };
     match result {
         Ok(code) => code,

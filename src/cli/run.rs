@@ -1295,6 +1295,43 @@ fn print_text(j: &Value) {
             );
             continue;
         }
+        if s["kind"] == "hesai" {
+            println!(
+                "  sensor {} ({}), ports {}: Hesai {}, protocol {}, {}; {}",
+                st("name"),
+                st("address"),
+                s["ports"],
+                s["model"].as_str().unwrap_or("unknown model"),
+                s["protocol"].as_str().unwrap_or("none (no pre-header)"),
+                st("return_mode"),
+                st("detection")
+            );
+            println!(
+                "    {} packets, {} sweeps, {} points; missing {}, malformed {} (CRC failures {}), discontinuities {}, signed {}",
+                g(&s["data_packets"]),
+                g(&s["sweeps"]),
+                g(&s["points"]),
+                g(&s["missing"]),
+                g(&s["malformed"]),
+                g(&s["crc_failures"]),
+                g(&s["discontinuities"]),
+                g(&s["signed_packets"])
+            );
+            println!("    packets per port: {}", s["packets_per_port"]);
+            println!(
+                "    calibration: {}; clock: {} ({}); CRC: {}; functional safety: {}",
+                st("calibration"),
+                st("clock_state"),
+                st("clock"),
+                st("crc"),
+                if s["functional_safety"].is_null() {
+                    "none in these packets".to_string()
+                } else {
+                    s["functional_safety"].to_string()
+                }
+            );
+            continue;
+        }
         println!(
             "  sensor {} ({}), ports {}: {} {}, {}",
             st("name"),

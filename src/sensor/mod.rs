@@ -18,6 +18,7 @@
 
 pub mod calib;
 pub mod decode;
+pub mod hesai;
 pub mod nmea;
 pub mod ouster;
 pub mod velodyne;
@@ -38,10 +39,17 @@ use crate::sweep::Sweep;
 
 /// The families ringscan decodes, in the order a new sensor is offered to them: a family whose
 /// packets can be told only with its calibration (Ouster: size, serial and init_id from the
-/// metadata) comes before one that claims by size alone (Velodyne).
-pub static FAMILIES: &[&dyn Family] = &[&ouster::family::Ouster, &velodyne::family::Velodyne];
+/// metadata) comes before one that claims by size alone (Velodyne). Hesai, whose sensors also
+/// send to port 2368 and whose packets are told by their own marks and sizes, comes before
+/// Velodyne too — also because Velodyne's calibration parsers take any text, while Hesai's
+/// recognise their CSV by its header line.
+pub static FAMILIES: &[&dyn Family] = &[
+    &ouster::family::Ouster,
+    &hesai::family::Hesai,
+    &velodyne::family::Velodyne,
+];
 
-/// The family named `name` (`"velodyne"`, `"ouster"`).
+/// The family named `name` (`"velodyne"`, `"ouster"`, `"hesai"`).
 pub fn family(name: &str) -> Option<&'static dyn Family> {
     FAMILIES.iter().copied().find(|f| f.name() == name)
 }

@@ -2258,3 +2258,159 @@ pub fn bag_metadata(data: &[u8]) {
         assert!(m.topics.len() <= text.len());
     }
 }
+
+// ----- hesai_packet / calib_hesai --------------------------------------------------------------
+
+use ringscan::sensor::hesai::calib::CHANNEL_COUNTS as HESAI_CHANNEL_COUNTS;
+use ringscan::sensor::hesai::family::parse_hesai_calibration;
+use ringscan::sensor::hesai::model::ALL_MODELS as HESAI_MODELS;
+use ringscan::sensor::hesai::{
+    HesaiCalibration, HesaiConfig, HesaiDecoder, HesaiModel, HesaiOptions, HesaiPacket, HesaiStream,
+};
+
+/// A plausible correction for `model`: a CSV spread over ±15° (the AT128: a zero-offset
+/// `.dat` with three 120° mirror fields).
+pub fn hesai_correction(model: HesaiModel) -> HesaiCalibration {
+    let n = model.channels();
+    if model == HesaiModel::PandarAt128 {
+        let mut b = vec![0u8; 16 + 24 + 1024 + 46080 + 32];
+        b[..7].copy_from_slice(&[0xEE, 0xFF, 1, 5, 128, 3, 3]);
+        b[15] = 1;
+        for m in 0..3u32 {
+            let s = m * 120 * 25_600;
+            let e = ((m + 1) % 3) * 120 * 25_600;
+            b[16 + 4 * m as usize..20 + 4 * m as usize].copy_from_slice(&s.to_le_bytes());
+            b[28 + 4 * m as usize..32 + 4 * m as usize].copy_from_slice(&e.to_le_bytes());
+        }
+        return parse_hesai_calibration(&b).unwrap().unwrap();
+    }
+    let mut s = String::from("Laser id,Elevation,Azimuth\n");
+    for i in 0..n {
+        let el = 15.0 - 30.0 * i as f64 / n as f64;
+        let az = if i % 2 == 0 { 1.5 } else { -2.25 };
+        s.push_str(&format!("{},{el},{az}\n", i + 1));
+    }
+    parse_hesai_calibration(s.as_bytes()).unwrap().unwrap()
+}
+
+fn check_hesai_point(p: &Point, model: HesaiModel, max_m: f32) {
+    assert!(
+        p.x.is_finite() && p.y.is_finite() && p.z.is_finite(),
+        "{p:?}"
+    );
+    let r = (p.x * p.x + p.y * p.y + p.z * p.z).sqrt();
+    assert!(r <= max_m * 1.001 + 1e-3, "{p:?} beyond {max_m} m");
+    assert!(usize::from(p.ring) < model.channels(), "{p:?}");
+    assert!(p.ret <= 2, "{p:?}");
+    assert!((0.0..=255.0).contains(&p.intensity), "{p:?}");
+}
+
+/// One datagram (the first byte picks the model and the options) through the packet view and a
+/// stream. The view refuses what does not fit its layout and never panics; detection and the
+/// view agree; the stream counts the datagram (decoded or malformed), and every point is finite,
+/// within the model's range, on a ring of the model and of a return 0–2, at most
+/// blocks × channels per packet.
+pub fn hesai_packet(data: &[u8]) {
+    let Some((&sel, payload)) = data.split_first() else {
+        return;
+    };
+    if let Some(m) = HesaiModel::detect(payload) {
+        assert!(
+            HesaiPacket::new(payload, m).is_ok(),
+            "detected {m:?} but the view refuses"
+        );
+    }
+    let model = HESAI_MODELS[usize::from(sel) % HESAI_MODELS.len()];
+    if let Ok(p) = HesaiPacket::new(payload, model) {
+        let l = p.layout();
+        for b in 0..l.blocks {
+            let _ = p.azimuth(b);
+            assert_eq!(p.units(b).len(), l.channels * l.unit_len);
+            for c in 0..l.channels {
+                let _ = p.unit(b, c);
+            }
+        }
+        let _ = (
+            p.stamp_ns(),
+            p.udp_seq(),
+            p.functional_safety(),
+            p.check_crc(),
+        );
+        let _ = (
+            p.protocol(),
+            p.tail_flags(),
+            p.motor_rpm(),
+            p.has_signature(),
+        );
+    }
+    let mut cfg = HesaiConfig::new(Some(hesai_correction(model)), "fuzz.csv");
+    cfg.model = Some(model);
+    cfg.check_crc = sel & 0x10 == 0;
+    cfg.options = HesaiOptions {
+        dual_return_threshold_m: if sel & 0x20 != 0 { 0.1 } else { 0.0 },
+        fov_cdeg: (sel & 0x40 != 0).then_some((3_000, 15_000)),
+        ..HesaiOptions::default()
+    };
+    cfg.cut_cdeg = Some(u32::from(sel & 0x80) * 100);
+    let max_m = model.spec().max_range_m;
+    let l = &model.spec().layout;
+    let mut stream = HesaiStream::new(cfg);
+    let mut points = 0usize;
+    let mut on_sweep = |sw: &Sweep, _: &ringscan::sensor::hesai::HesaiFacts| {
+        for p in &sw.points {
+            check_hesai_point(p, model, max_m);
+        }
+        points += sw.points.len();
+    };
+    for (i, host) in [0i64, 1_000_000].into_iter().enumerate() {
+        stream.push(host, payload, &mut on_sweep).unwrap();
+        let st = stream.stats();
+        assert_eq!(st.packets + st.malformed, i as u64 + 1, "{st:?}");
+    }
+    stream.finish(&mut on_sweep);
+    assert!(
+        points <= 2 * l.blocks * l.channels,
+        "{points} points from two packets"
+    );
+}
+
+/// Any bytes as a Hesai correction: recognised only by the CSV header line or the `.dat` start;
+/// a CSV that parses has one of the models' channel counts and finite angles within ±90° / ±180°,
+/// and serves a decoder for every model of its channel count; an AT128 correction gives angles
+/// within one turn for every channel and encoder azimuth tried.
+pub fn calib_hesai(data: &[u8]) {
+    let Some(parsed) = parse_hesai_calibration(data) else {
+        return;
+    };
+    let Ok(c) = parsed else {
+        return;
+    };
+    match &c {
+        HesaiCalibration::Csv(rows) => {
+            assert!(HESAI_CHANNEL_COUNTS.contains(&rows.len()));
+            for r in rows {
+                assert!(r.elevation_deg.is_finite() && r.elevation_deg.abs() <= 90.0);
+                assert!(r.azimuth_deg.is_finite() && r.azimuth_deg.abs() <= 180.0);
+            }
+            for m in HESAI_MODELS {
+                if m.channels() == rows.len() && m != HesaiModel::PandarAt128 {
+                    HesaiDecoder::new(m, &c, HesaiOptions::default()).unwrap();
+                }
+            }
+        }
+        HesaiCalibration::At128(a) => {
+            let d =
+                HesaiDecoder::new(HesaiModel::PandarAt128, &c, HesaiOptions::default()).unwrap();
+            for ch in [0, 1, 63, 127] {
+                for enc in [0i64, 1, 12_345_678, 9_215_999] {
+                    if let Some((az, _el)) = a.angles(ch, enc) {
+                        assert!((0..360 * 25_600).contains(&az));
+                    }
+                    if let Some(az) = d.channel_azimuth_udeg((enc as u32) & 0xFF_FFFF, ch) {
+                        assert!((0..360_000_000).contains(&az));
+                    }
+                }
+            }
+        }
+    }
+}

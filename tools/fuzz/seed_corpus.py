@@ -331,6 +331,28 @@ def main():
         put("calib_velodyne", c.read_bytes(), c.suffix[1:])
     put("calib_velodyne", b"lasers:\n- {laser_id: 0, rot_correction: 0.0, vert_correction: 0.1}\nnum_lasers: 1\n", "tiny")
 
+    # hesai_packet: selector byte (model index in ringscan's ALL_MODELS order, option bits) +
+    # the first payloads of every Hesai capture; calib_hesai: the angle corrections as they are.
+    hesai_models = {1262: 0, 1198: 1, 1072: 2, 1127: 3, 568: 4, 1080: 5, 820: 6, 1118: 7, 893: 8, 861: 8}
+    hesai = caps / "tier4__nebula" / "src" / "nebula_hesai"
+    if hesai.is_dir():
+        for p in sorted(hesai.glob("**/*.pcap")):
+            parsed = read_classic(p.read_bytes()[: 64 * 1024])
+            if parsed is None:
+                continue
+            _e, _nanos, lt, recs = parsed
+            for _ip, _port, payload in udp_payloads(recs[:6], lt)[:3]:
+                m = hesai_models.get(len(payload))
+                if m is None:
+                    continue
+                for bits in (0x00, 0x30, 0x40, 0x80):
+                    put("hesai_packet", bytes([m | bits]) + payload, p.stem[:8])
+        for c in sorted(hesai.glob("**/calibration/*")):
+            if c.stat().st_size <= 64 * 1024:
+                put("calib_hesai", c.read_bytes(), c.name.replace(".", "_"))
+    put("calib_hesai", b"Laser id,Elevation,Azimuth\n" + b"".join(
+        b"%d,%.3f,%.3f\n" % (i + 1, 15 - i, 0.1 * i) for i in range(32)), "tiny")
+
     # reassembly: config, then pushes of one datagram of key 2 in shuffled order, then key 0.
     for total, frag in ((1300, 400), (5000, 1480), (64000, 8000)):
         cfg = struct.pack("<HBH", 1000, 8, 20000) + struct.pack("<I", 0)

@@ -1,0 +1,625 @@
+//! The Hesai decoder: one table-driven loop for every model, return mode and correction.
+//!
+//! Built once per (model, correction, options) ([`HesaiDecoder::new`]): per-channel sin / cos of
+//! the elevation and of the azimuth offset, the channel's ring (rank of its elevation, 0 =
+//! lowest), its azimuth offset in µ° for the sweep cut; a cos / sin table of the 36 000 block
+//! azimuths (0.01°). Per block group one table look-up; per point a complex multiply (block
+//! azimuth rotated by the channel's offset) and three products. The AT128's azimuth-dependent
+//! correction ([`super::at128`]) is evaluated per point instead.
+//!
+//! **Coordinates.** Hesai azimuth α grows clockwise seen from above with 0 on the sensor's
+//! forward (Hesai's and nebula's +y); ringscan's frame is REP 103, so
+//! `x = d·cos(ε)·cos(α)`, `y = −d·cos(ε)·sin(α)`, `z = d·sin(ε)` (nebula's `(x, y, z)` is ringscan's
+//! `(−y, x, z)`).
+//!
+//! **Returns** (DESIGN.md): see [`super::model::return_index`]. Within a return group (the 1, 2
+//! or 3 blocks of one firing, by the tail's return mode) a return whose raw distance and
+//! reflectivity equal another's is kept only in the group's last block (one point, as Velodyne's
+//! equal dual returns are one point); with [`HesaiOptions::dual_return_threshold_m`] > 0 a
+//! return that is not the group's last is also dropped when within that distance of another
+//! return of the group (nebula's `dual_return_distance_threshold`).
+
+use super::at128::{At128Correction, TURN as AT128_TURN, UNITS_PER_DEG};
+use super::calib::HesaiCalibration;
+use super::model::{return_index, returns_of_mode, HesaiModel, TailFlags};
+use super::wire::HesaiPacket;
+use crate::point::Point;
+use crate::sensor::{DecodeError, DecodeOptions};
+
+/// A full turn in µ°.
+pub const TURN_UDEG: i64 = 360_000_000;
+
+/// Options of the Hesai decoder beyond the range filter every family has.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HesaiOptions {
+    /// Range filter (`--min-range`, `--max-range`); a distance equal to a bound is kept.
+    pub range: DecodeOptions,
+    /// Also drop distances outside the model's own measuring range (the user manual's
+    /// specification, nebula's sensor-class limits: Pandar40P / 64 0.3–200 m, QT64 0.1–60 m,
+    /// QT128 0.05–50 m, XT16 / XT32 0.05–120 m, XT32M 0.5–300 m, AT128 1–180 m, OT128 0.1–230 m).
+    /// On by default: returns inside the blind zone are not measurements the sensor stands by
+    /// (the shared QT64 capture sends thousands below 0.1 m).
+    pub sensor_range: bool,
+    /// Drop a return that is not its group's last when it lies within this distance (m) of
+    /// another return of its group (nebula: 0.1). 0 = only identical returns are merged.
+    pub dual_return_threshold_m: f32,
+    /// Keep only points whose corrected azimuth lies in this range (0.01°, start → end
+    /// clockwise, inclusive); `None` = all.
+    pub fov_cdeg: Option<(u32, u32)>,
+}
+
+impl Default for HesaiOptions {
+    fn default() -> Self {
+        Self {
+            range: DecodeOptions::default(),
+            sensor_range: true,
+            dual_return_threshold_m: 0.0,
+            fov_cdeg: None,
+        }
+    }
+}
+
+impl HesaiOptions {
+    /// The filtering nebula's decoder applies (its Hesai test configuration): the model's
+    /// range, the 0.1 m dual-return threshold, the range given.
+    pub fn nebula(min_range: f32, max_range: f32) -> Self {
+        Self {
+            range: DecodeOptions {
+                min_range,
+                max_range,
+            },
+            sensor_range: true,
+            dual_return_threshold_m: 0.1,
+            fov_cdeg: None,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, Default)]
+struct Channel {
+    cos_el: f32,
+    sin_el: f32,
+    cos_off: f32,
+    sin_off: f32,
+    /// Azimuth offset, µ°.
+    off_udeg: i64,
+    ring: u16,
+}
+
+/// cos / sin of every block azimuth (0.01° steps), built once.
+fn azimuth_table() -> &'static [(f32, f32)] {
+    static TABLE: std::sync::OnceLock<Vec<(f32, f32)>> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| {
+        (0..36_000u32)
+            .map(|a| {
+                let r = (f64::from(a) / 100.0).to_radians();
+                (r.cos() as f32, r.sin() as f32)
+            })
+            .collect()
+    })
+}
+
+/// Raw distances `lo..=hi` whose distance (raw × unit in f64, rounded to f32: nebula's
+/// arithmetic) lies in `[min_m, max_m]`, for a unit of `unit_mm` mm; raw 0 (no return) is never
+/// inside. An empty range is `(1, 0)`.
+fn raw_bounds(unit_mm: u8, min_m: f32, max_m: f32) -> (u16, u16) {
+    let d = |raw: u32| (f64::from(raw) * f64::from(unit_mm) / 1000.0) as f32;
+    // First raw with d ≥ min, last raw with d ≤ max (d is non-decreasing in raw).
+    let first = |pred: &dyn Fn(u32) -> bool| {
+        let (mut lo, mut hi) = (1u32, 65_536u32);
+        while lo < hi {
+            let mid = (lo + hi) / 2;
+            if pred(mid) {
+                hi = mid;
+            } else {
+                lo = mid + 1;
+            }
+        }
+        lo
+    };
+    let lo = first(&|r| d(r) >= min_m);
+    let hi = first(&|r| d(r) > max_m) - 1;
+    if lo > hi || lo > 65_535 {
+        (1, 0)
+    } else {
+        (lo as u16, hi.min(65_535) as u16)
+    }
+}
+
+/// One decoded return before it is placed in a sweep.
+#[derive(Clone, Copy, Debug)]
+pub struct Decoded {
+    /// The point (its `t` is 0: the stream sets it).
+    pub point: Point,
+    /// Channel index.
+    pub channel: usize,
+    /// Block index in the packet.
+    pub block: usize,
+}
+
+/// Decoder for one sensor.
+#[derive(Clone, Debug)]
+pub struct HesaiDecoder {
+    model: HesaiModel,
+    channels: Vec<Channel>,
+    at128: Option<At128Correction>,
+    opts: HesaiOptions,
+    /// Per distance unit (mm, the header byte): the raw distances inside the range filter,
+    /// `lo..=hi`, decided with nebula's arithmetic (raw × unit in f64, then f32) so that a
+    /// bound cuts at the same raw value; the per-point distance is then an f32 product.
+    raw_bounds: Vec<(u16, u16)>,
+    fov_udeg: Option<(i64, i64)>,
+    /// Firing offsets (ns, relative to the tail time) for the current (returns, flags),
+    /// `block × channels + channel`.
+    firing: Vec<i32>,
+    firing_key: Option<(usize, TailFlags)>,
+}
+
+impl HesaiDecoder {
+    /// Builds the decoder; the correction must have the model's channel count.
+    pub fn new(
+        model: HesaiModel,
+        calib: &HesaiCalibration,
+        opts: HesaiOptions,
+    ) -> Result<Self, DecodeError> {
+        let n = model.channels();
+        if calib.channels() != n {
+            return Err(DecodeError::LaserCount {
+                model: model.name(),
+                expected: n,
+                found: calib.channels(),
+            });
+        }
+        let (mut channels, at128) = match calib {
+            HesaiCalibration::Csv(rows) => {
+                if model == HesaiModel::PandarAt128 {
+                    return Err(DecodeError::Calibration(
+                        "the PandarAT128 needs its binary .dat angle correction".into(),
+                    ));
+                }
+                let ch: Vec<Channel> = rows
+                    .iter()
+                    .map(|r| {
+                        let (se, ce) = r.elevation_deg.to_radians().sin_cos();
+                        let (so, co) = r.azimuth_deg.to_radians().sin_cos();
+                        Channel {
+                            cos_el: ce as f32,
+                            sin_el: se as f32,
+                            cos_off: co as f32,
+                            sin_off: so as f32,
+                            off_udeg: (r.azimuth_deg * 1e6).round() as i64,
+                            ring: 0,
+                        }
+                    })
+                    .collect();
+                (ch, None)
+            }
+            HesaiCalibration::At128(a) => {
+                if model != HesaiModel::PandarAt128 {
+                    return Err(DecodeError::Calibration(format!(
+                        "an AT128 .dat correction cannot serve the {}",
+                        model.name()
+                    )));
+                }
+                let ch: Vec<Channel> = a
+                    .elevation
+                    .iter()
+                    .map(|&e| {
+                        let (se, ce) = (e as f64 / UNITS_PER_DEG as f64).to_radians().sin_cos();
+                        Channel {
+                            cos_el: ce as f32,
+                            sin_el: se as f32,
+                            ..Channel::default()
+                        }
+                    })
+                    .collect();
+                (ch, Some(a.clone()))
+            }
+        };
+        // Ring = rank of the elevation (ties by channel index), 0 = lowest.
+        let mut order: Vec<usize> = (0..channels.len()).collect();
+        order.sort_by(|&a, &b| {
+            channels[a]
+                .sin_el
+                .total_cmp(&channels[b].sin_el)
+                .then(a.cmp(&b))
+        });
+        for (rank, &c) in order.iter().enumerate() {
+            channels[c].ring = rank as u16;
+        }
+        let spec = model.spec();
+        let (mut min_m, mut max_m) = (opts.range.min_range, opts.range.max_range);
+        if opts.sensor_range {
+            min_m = min_m.max(spec.min_range_m);
+            max_m = max_m.min(spec.max_range_m);
+        }
+        if min_m.is_nan() || max_m.is_nan() || min_m > max_m {
+            return Err(DecodeError::Option(format!(
+                "range {min_m}–{max_m} m is empty"
+            )));
+        }
+        if opts.dual_return_threshold_m.is_nan() || opts.dual_return_threshold_m < 0.0 {
+            return Err(DecodeError::Option(
+                "dual-return threshold must be ≥ 0".into(),
+            ));
+        }
+        let fov_udeg = opts.fov_cdeg.map(|(s, e)| {
+            (
+                i64::from(s % 36_000) * 10_000,
+                i64::from(e % 36_000) * 10_000,
+            )
+        });
+        Ok(Self {
+            model,
+            channels,
+            at128,
+            opts,
+            raw_bounds: (0..=255u8).map(|u| raw_bounds(u, min_m, max_m)).collect(),
+            fov_udeg,
+            firing: Vec::new(),
+            firing_key: None,
+        })
+    }
+
+    /// The model.
+    pub fn model(&self) -> HesaiModel {
+        self.model
+    }
+
+    /// The options.
+    pub fn options(&self) -> &HesaiOptions {
+        &self.opts
+    }
+
+    /// Channel count.
+    pub fn channels(&self) -> usize {
+        self.channels.len()
+    }
+
+    /// Ring of channel `c`.
+    pub fn ring(&self, c: usize) -> u16 {
+        self.channels.get(c).map_or(0, |ch| ch.ring)
+    }
+
+    /// Prepares the firing table for a packet's return count and tail flags (cheap when they
+    /// did not change).
+    pub fn prepare(&mut self, n_returns: usize, flags: TailFlags) {
+        if self.firing_key == Some((n_returns, flags)) {
+            return;
+        }
+        let spec = self.model.spec();
+        let (blocks, n) = (spec.layout.blocks, self.channels.len());
+        self.firing.clear();
+        for b in 0..blocks {
+            for c in 0..n {
+                self.firing
+                    .push(self.model.firing_offset_ns(b, c, n_returns, flags) as i32);
+            }
+        }
+        self.firing_key = Some((n_returns, flags));
+    }
+
+    /// Firing time of (block, channel) relative to the packet's tail time, ns ([`Self::prepare`]
+    /// first).
+    #[inline]
+    pub fn firing_ns(&self, block: usize, c: usize) -> i64 {
+        i64::from(
+            self.firing
+                .get(block * self.channels.len() + c)
+                .copied()
+                .unwrap_or(0),
+        )
+    }
+
+    /// Earliest firing of the group starting at `block` (`n` blocks), relative to the tail.
+    pub fn group_earliest_ns(&self, block: usize, n: usize) -> i64 {
+        let nc = self.channels.len();
+        self.firing
+            .get(block * nc..((block + n) * nc).min(self.firing.len()))
+            .and_then(|s| s.iter().min().copied())
+            .map_or(0, i64::from)
+    }
+
+    /// Corrected azimuth of channel `c` for a block azimuth (packet units), µ° in `[0, 360°)`;
+    /// `None` for an AT128 block outside every mirror field.
+    #[inline]
+    pub fn channel_azimuth_udeg(&self, block_az: u32, c: usize) -> Option<i64> {
+        match &self.at128 {
+            None => {
+                let off = self.channels.get(c).map_or(0, |ch| ch.off_udeg);
+                Some((i64::from(block_az) * 10_000 + off).rem_euclid(TURN_UDEG))
+            }
+            Some(a) => {
+                let (az, _) = a.angles(c, i64::from(block_az))?;
+                Some(az * 1_000_000 / UNITS_PER_DEG)
+            }
+        }
+    }
+
+    /// Per-channel azimuth offsets, µ° (`None` for the AT128, whose channel azimuths are not
+    /// the block azimuth plus a constant).
+    pub fn azimuth_offsets_udeg(&self) -> Option<Vec<i64>> {
+        self.at128
+            .is_none()
+            .then(|| self.channels.iter().map(|c| c.off_udeg).collect())
+    }
+
+    fn in_fov(&self, az_udeg: i64) -> bool {
+        match self.fov_udeg {
+            None => true,
+            Some((s, e)) if s == e => true,
+            Some((s, e)) => (az_udeg - s).rem_euclid(TURN_UDEG) <= (e - s).rem_euclid(TURN_UDEG),
+        }
+    }
+
+    /// Decodes return group `first..first + n` of a packet, calling `out` with each point in
+    /// nebula's order (channel, then block within the group). `p` must be of the decoder's
+    /// model; the caller has checked its return mode ([`returns_of_mode`]).
+    #[inline]
+    pub fn decode_group(
+        &self,
+        p: &HesaiPacket<'_>,
+        first: usize,
+        n: usize,
+        mut out: impl FnMut(Decoded),
+    ) {
+        let unit_mm = p.dis_unit_mm();
+        let unit_m = f64::from(unit_mm) / 1000.0;
+        let unit_f32 = unit_m as f32;
+        let (raw_lo, raw_hi) = self
+            .raw_bounds
+            .get(usize::from(unit_mm))
+            .copied()
+            .unwrap_or((1, 0));
+        let mode = p.return_mode();
+        let layout = p.layout();
+        let ul = layout.unit_len;
+        let n = n.clamp(1, 3).min(layout.blocks.saturating_sub(first));
+        let mut units: [&[u8]; 3] = [&[]; 3];
+        for (k, u) in units.iter_mut().enumerate().take(n) {
+            *u = p.units(first + k);
+        }
+        let block_az = p.azimuth(first);
+        let (cb, sb) = if self.at128.is_none() {
+            azimuth_table()
+                .get((block_az % 36_000) as usize)
+                .copied()
+                .unwrap_or((1.0, 0.0))
+        } else {
+            (1.0, 0.0)
+        };
+        let rets: [u8; 3] = core::array::from_fn(|k| return_index(self.model, mode, k));
+        let thr = self.opts.dual_return_threshold_m;
+        let n_channels = self.channels.len().min(units[0].len() / ul.max(1));
+        // Distances as nebula computes them, for the dual-return threshold.
+        let exact = |raw: u16| (f64::from(raw) * unit_m) as f32;
+        let ul = ul.max(3);
+        let (mut it0, mut it1, mut it2) = (
+            units[0].chunks_exact(ul),
+            units[1].chunks_exact(ul),
+            units[2].chunks_exact(ul),
+        );
+        let rd = |u: Option<&[u8]>| match u {
+            Some(&[a, b, r, ..]) => (u16::from_le_bytes([a, b]), r),
+            _ => (0, 0),
+        };
+        for (c, ch) in self.channels.iter().enumerate().take(n_channels) {
+            // Raw (distance, reflectivity) of each return (blocks past the group: none).
+            let raw = [rd(it0.next()), rd(it1.next()), rd(it2.next())];
+            if raw[0].0 | raw[1].0 | raw[2].0 == 0 {
+                continue;
+            }
+            let dist: [f32; 3] = core::array::from_fn(|k| f32::from(raw[k].0) * unit_f32);
+            // Angles of this channel (AT128: per point).
+            let (cos_az, sin_az, cos_el, sin_el) = match &self.at128 {
+                None => (
+                    cb * ch.cos_off - sb * ch.sin_off,
+                    sb * ch.cos_off + cb * ch.sin_off,
+                    ch.cos_el,
+                    ch.sin_el,
+                ),
+                Some(a) => match a.angles(c, i64::from(block_az)) {
+                    Some((az, el)) => {
+                        if !self.in_fov(az.rem_euclid(AT128_TURN) * 1_000_000 / UNITS_PER_DEG) {
+                            continue;
+                        }
+                        let (s, co) = (az as f64 / UNITS_PER_DEG as f64).to_radians().sin_cos();
+                        let (se, ce) = (el as f64 / UNITS_PER_DEG as f64).to_radians().sin_cos();
+                        (co as f32, s as f32, ce as f32, se as f32)
+                    }
+                    None => continue,
+                },
+            };
+            if self.fov_udeg.is_some()
+                && self.at128.is_none()
+                && !self.in_fov((i64::from(block_az) * 10_000 + ch.off_udeg).rem_euclid(TURN_UDEG))
+            {
+                continue;
+            }
+            let mut emit = |k: usize| {
+                let d = dist[k];
+                let xy = d * cos_el;
+                out(Decoded {
+                    point: Point {
+                        x: xy * cos_az,
+                        y: -xy * sin_az,
+                        z: d * sin_el,
+                        intensity: f32::from(raw[k].1),
+                        t: 0,
+                        ring: ch.ring,
+                        ret: rets[k],
+                        pad: 0,
+                    },
+                    channel: c,
+                    block: first + k,
+                });
+            };
+            let valid = |k: usize| raw[k].0 >= raw_lo && raw[k].0 <= raw_hi;
+            match n {
+                1 => {
+                    if valid(0) {
+                        emit(0);
+                    }
+                }
+                2 => {
+                    // The first return is dropped when identical to the second or (with a
+                    // threshold) within it of the second; the group's last is always kept.
+                    let merged = raw[0] == raw[1]
+                        || (thr > 0.0 && (exact(raw[0].0) - exact(raw[1].0)).abs() < thr);
+                    if valid(0) && !merged {
+                        emit(0);
+                    }
+                    if valid(1) {
+                        emit(1);
+                    }
+                }
+                _ => {
+                    for k in 0..n {
+                        if !valid(k) {
+                            continue;
+                        }
+                        if k + 1 < n {
+                            let dropped = (0..n).any(|j| {
+                                j != k
+                                    && (raw[j] == raw[k]
+                                        || (thr > 0.0
+                                            && (exact(raw[j].0) - exact(raw[k].0)).abs() < thr))
+                            });
+                            if dropped {
+                                continue;
+                            }
+                        }
+                        emit(k);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Decodes a whole packet into `out` with `t` = firing time − `t0_ns` (ns, clamped to ≥ 0),
+    /// where firing time = `stamp_ns` + the model's firing offset. Returns the points added,
+    /// or `None` for a packet whose return mode is unknown.
+    pub fn decode_packet(
+        &mut self,
+        p: &HesaiPacket<'_>,
+        stamp_ns: i64,
+        t0_ns: i64,
+        out: &mut Vec<Point>,
+    ) -> Option<usize> {
+        let n = returns_of_mode(p.return_mode())?;
+        self.prepare(n, p.tail_flags());
+        let before = out.len();
+        let blocks = p.layout().blocks;
+        let base = stamp_ns - t0_ns;
+        let this = &*self;
+        let mut g = 0;
+        while g < blocks {
+            this.decode_group(p, g, n, |d| {
+                let t = base + this.firing_ns(d.block, d.channel);
+                let mut pt = d.point;
+                pt.t = t.clamp(0, i64::from(u32::MAX)) as u32;
+                out.push(pt);
+            });
+            g += n;
+        }
+        Some(out.len() - before)
+    }
+}
+
+#[cfg(all(test, feature = "sim"))]
+mod tests {
+    use super::*;
+    use crate::sensor::hesai::calib::ChannelAngles;
+    use crate::sensor::hesai::model::TailFlags;
+    use crate::sensor::hesai::sim::{encode_packet, BlockData, TailData};
+
+    fn flat(n: usize) -> HesaiCalibration {
+        HesaiCalibration::Csv(
+            (0..n)
+                .map(|i| ChannelAngles {
+                    elevation_deg: -(i as f64),
+                    azimuth_deg: 0.0,
+                })
+                .collect(),
+        )
+    }
+
+    fn packet(mode: u8, units: [(u16, u8); 3]) -> Vec<u8> {
+        let m = HesaiModel::PandarXt32m;
+        let blocks: Vec<BlockData> = (0..6)
+            .map(|b| BlockData {
+                azimuth: 9_000,
+                units: vec![units[b % 3]; 32],
+            })
+            .collect();
+        let tail = TailData {
+            return_mode: mode,
+            motor_rpm: 600,
+            stamp_ns: 1_700_000_000_000_000_000,
+            udp_seq: 1,
+            dis_unit_mm: 5,
+            flags: TailFlags::default(),
+            signature: false,
+        };
+        encode_packet(m, &blocks, &tail)
+    }
+
+    fn decode(opts: HesaiOptions, bytes: &[u8]) -> Vec<Point> {
+        let m = HesaiModel::PandarXt32m;
+        let mut dec = HesaiDecoder::new(m, &flat(32), opts).unwrap();
+        let p = HesaiPacket::new(bytes, m).unwrap();
+        let mut out = Vec::new();
+        dec.decode_packet(&p, 0, 0, &mut out).unwrap();
+        out
+    }
+
+    #[test]
+    fn triple_return_keeps_first_last_strongest_as_returns_2_1_0() {
+        // 0x3d: blocks (first, last, strongest) per firing; distances 10 m, 30 m, 20 m.
+        let b = packet(0x3d, [(2_000, 10), (6_000, 20), (4_000, 90)]);
+        let pts = decode(HesaiOptions::default(), &b);
+        // 2 groups × 32 channels × 3 returns.
+        assert_eq!(pts.len(), 2 * 32 * 3);
+        assert_eq!(
+            pts[..3].iter().map(|p| p.ret).collect::<Vec<_>>(),
+            vec![2, 1, 0]
+        );
+        // Azimuth 90°: the points lie on −y (clockwise from forward).
+        assert!(
+            (pts[0].y + 10.0).abs() < 1e-4 && pts[0].x.abs() < 1e-4,
+            "{:?}",
+            pts[0]
+        );
+        assert_eq!(pts[2].intensity, 90.0);
+    }
+
+    #[test]
+    fn identical_returns_are_one_point_and_the_threshold_drops_near_ones() {
+        // First == strongest: one point (from the group's last block, the strongest).
+        let b = packet(0x3d, [(4_000, 90), (6_000, 20), (4_000, 90)]);
+        let pts = decode(HesaiOptions::default(), &b);
+        assert_eq!(pts.len(), 2 * 32 * 2);
+        // With nebula's 0.1 m threshold, returns that are not the group's last are dropped when
+        // within 0.1 m of another: first (29.95 m) and last (30 m) both go, strongest stays.
+        let b = packet(0x3d, [(5_990, 10), (6_000, 20), (4_000, 90)]);
+        assert_eq!(decode(HesaiOptions::default(), &b).len(), 2 * 32 * 3);
+        let opts = HesaiOptions {
+            dual_return_threshold_m: 0.1,
+            ..HesaiOptions::default()
+        };
+        let pts = decode(opts, &b);
+        assert_eq!(pts.len(), 2 * 32);
+        assert!(pts.iter().all(|p| p.ret == 0));
+    }
+
+    #[test]
+    fn range_bounds_cut_at_nebulas_raw_values() {
+        // 5 mm unit: raw 100 = 0.5 m is kept by a 0.5 m minimum (a bound is inclusive), 99 not.
+        assert_eq!(raw_bounds(5, 0.5, 300.0), (100, 60_000));
+        assert_eq!(raw_bounds(4, 0.3, 200.0), (75, 50_000));
+        assert_eq!(raw_bounds(4, 0.1, 60.0), (25, 15_000));
+        assert_eq!(raw_bounds(4, 10.0, 1.0), (1, 0));
+        // A zero unit (hostile header): every distance is 0 m.
+        assert_eq!(raw_bounds(0, 0.0, f32::INFINITY), (1, 65_535));
+    }
+}

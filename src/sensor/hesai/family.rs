@@ -1,0 +1,300 @@
+//! The Hesai family behind ringscan's sensor interface ([`crate::sensor`]).
+//!
+//! A Hesai sensor is told from its first datagram alone, never from a file name: the `EE FF`
+//! pre-header with a protocol version and laser / block counts that name a model, the Pandar64's
+//! 8-byte header, or the Pandar40P's ten `FF EE` blocks in 1262 (or 1266) bytes — Velodyne's
+//! data packets, which also start `FF EE` and also go to port 2368, are 1206 bytes. The family
+//! is asked before Velodyne, whose calibration parser takes any text: the Hesai CSV is
+//! recognised by its header line only.
+
+use std::any::Any;
+use std::collections::BTreeMap;
+use std::net::Ipv4Addr;
+use std::sync::Arc;
+
+use serde_json::{json, Map, Value};
+
+use super::at128::{looks_like_dat, At128Correction};
+use super::calib::{parse_csv, HesaiCalibration};
+use super::model::{HesaiModel, ALL_MODELS, SIGNATURE_LEN};
+use super::sweep::{return_mode_words, HesaiConfig, HesaiFacts, HesaiStream};
+use super::wire::HesaiPacket;
+use crate::sensor::{
+    CalibError, Calibration, CalibrationPool, Claimed, Facts, Family, FirstDatagram, OnSweep,
+    PacketCounts, SensorStream, StreamError,
+};
+
+/// The Hesai family.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Hesai;
+
+const MODEL_IDS: &[&str] = &[
+    "pandar40p",
+    "pandar64",
+    "pandarqt64",
+    "pandarqt128",
+    "pandarxt16",
+    "pandarxt32",
+    "pandarxt32m",
+    "pandarat128",
+    "pandarot128",
+];
+
+/// Reads a Hesai correction: the AT128 `.dat` by its `EE FF 01` start, the CSV by its header
+/// line; `None` for anything else.
+pub fn parse_hesai_calibration(bytes: &[u8]) -> Option<Result<HesaiCalibration, CalibError>> {
+    if looks_like_dat(bytes) {
+        return Some(At128Correction::parse(bytes).map(HesaiCalibration::At128));
+    }
+    let text = core::str::from_utf8(bytes).ok()?;
+    parse_csv(text).map(|r| r.map(HesaiCalibration::Csv))
+}
+
+impl Family for Hesai {
+    fn name(&self) -> &'static str {
+        "hesai"
+    }
+
+    fn models(&self) -> &'static [&'static str] {
+        MODEL_IDS
+    }
+
+    fn parse_calibration(
+        &self,
+        bytes: &[u8],
+        _file_name: &str,
+    ) -> Option<Result<Arc<dyn Any + Send + Sync>, CalibError>> {
+        parse_hesai_calibration(bytes).map(|r| r.map(|c| Arc::new(c) as Arc<dyn Any + Send + Sync>))
+    }
+
+    /// Point-cloud packets to 2368 (the PTC control port 9347 is TCP).
+    fn default_ports(&self) -> &'static [u16] {
+        &[2368]
+    }
+
+    fn lidar_sizes(&self, _calibs: &[Calibration]) -> Vec<usize> {
+        let mut v = Vec::new();
+        for m in ALL_MODELS {
+            let l = &m.spec().layout;
+            v.push(l.base_len());
+            if l.trailing_udp_seq {
+                v.push(l.base_len() + 4);
+            }
+            if l.signature {
+                v.push(l.base_len() + SIGNATURE_LEN);
+            }
+        }
+        v.sort_unstable();
+        v.dedup();
+        v
+    }
+
+    /// A datagram whose bytes name a Hesai model ([`HesaiModel::detect`]), or that fits the
+    /// model named with `--model`. The first Hesai correction with the model's channel count
+    /// (bound to this address, or unbound and unused) serves it; without one the stream reads
+    /// the packets but decodes no points.
+    fn claim(&self, d: &FirstDatagram<'_>, pool: &mut CalibrationPool) -> Option<Claimed> {
+        let named = match pool.settings.model.as_deref() {
+            None => None,
+            Some(m) => Some(HesaiModel::from_id(m)?),
+        };
+        let model = match named {
+            Some(m) if HesaiPacket::new(d.payload, m).is_ok() => m,
+            Some(_) => return None,
+            None => HesaiModel::detect(d.payload)?,
+        };
+        let fits = |c: &HesaiCalibration| {
+            c.channels() == model.channels()
+                && matches!(c, HesaiCalibration::At128(_)) == (model == HesaiModel::PandarAt128)
+        };
+        let found = pool
+            .candidates(self.name(), d.src, true)
+            .find(|(_, c)| c.get::<HesaiCalibration>().is_some_and(fits))
+            .map(|(i, c)| (i, c.clone()));
+        let (calibration, name) = match found {
+            Some((i, c)) => {
+                pool.mark_used(i);
+                (c.get::<HesaiCalibration>().cloned(), c.file_name.clone())
+            }
+            None => (None, String::new()),
+        };
+        let s = &pool.settings;
+        let mut cfg = HesaiConfig::new(calibration, &name);
+        cfg.model = named;
+        cfg.options.range = s.decode;
+        cfg.cut_cdeg = Some(u32::from(s.cut_angle));
+        if let Some(on) = s.crc {
+            cfg.check_crc = on;
+        }
+        Some(Ok(Box::new(HesaiStream::new(cfg))))
+    }
+}
+
+impl Facts for HesaiFacts {
+    fn family(&self) -> &'static str {
+        "hesai"
+    }
+
+    fn default_name(&self, addr: Ipv4Addr) -> String {
+        match self.model {
+            Some(m) => format!("{}-{}", m.id(), addr.octets()[3]),
+            None => format!("hesai-{}", addr.octets()[3]),
+        }
+    }
+
+    fn calibration_name(&self) -> &str {
+        &self.calibration
+    }
+
+    fn channel_metadata(&self, md: &mut BTreeMap<String, String>) {
+        let mut put = |k: &str, v: String| {
+            md.insert(k.to_string(), v);
+        };
+        put(
+            "model",
+            self.model.map(|m| m.name().to_string()).unwrap_or_default(),
+        );
+        put(
+            "protocol",
+            self.protocol
+                .map(|(a, b)| format!("{a}.{b}"))
+                .unwrap_or_default(),
+        );
+        put(
+            "return_mode",
+            self.return_mode.map(return_mode_words).unwrap_or_default(),
+        );
+        put("model_detection", self.detection.clone());
+        put("clock", self.clock.name().to_string());
+        put("clock_state", self.clock_state().to_string());
+        put("crc", self.crc.name().to_string());
+        put("calibration", self.calibration.clone());
+        put("serial", String::new());
+        put("firmware", String::new());
+        put("profile", String::new());
+    }
+
+    fn diagnostics(&self, out: &mut Map<String, Value>) {
+        out.insert("clock_state".into(), json!(self.clock_state()));
+        out.insert("motor_rpm".into(), json!(self.motor_rpm));
+        out.insert("functional_safety".into(), safety_json(self));
+        out.insert("shutdown_flag".into(), json!(self.shutdown_flag));
+    }
+
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}
+
+fn safety_json(f: &HesaiFacts) -> Value {
+    match f.safety {
+        None => Value::Null,
+        Some(s) => json!({
+            "lidar_state": s.lidar_state,
+            "fault_code_type": s.fault_code_type,
+            "fault_code": s.fault_code,
+            "total_fault_codes": s.total_fault_codes,
+            "rolling_counter": s.rolling_counter,
+        }),
+    }
+}
+
+impl SensorStream for HesaiStream {
+    fn push(
+        &mut self,
+        host_ns: i64,
+        payload: &[u8],
+        on_sweep: &mut OnSweep<'_>,
+    ) -> Result<(), StreamError> {
+        HesaiStream::push(self, host_ns, payload, &mut |sw, f| on_sweep(sw, f))
+            .map_err(StreamError::Decode)
+    }
+
+    fn finish(&mut self, on_sweep: &mut OnSweep<'_>) -> Result<(), StreamError> {
+        HesaiStream::finish(self, &mut |sw, f| on_sweep(sw, f));
+        Ok(())
+    }
+
+    fn ready(&self) -> bool {
+        self.decoder().is_some()
+    }
+
+    fn facts(&self) -> &dyn Facts {
+        HesaiStream::facts(self)
+    }
+
+    fn summary(&self) -> (Value, PacketCounts) {
+        let (st, f) = (self.stats(), HesaiStream::facts(self));
+        let counts = PacketCounts {
+            decoded: st.packets,
+            malformed: st.malformed,
+            missing: st.missing,
+            position: 0,
+            dropped: 0,
+        };
+        let v = json!({
+            "kind": "hesai",
+            "model": f.model.map(|m| m.name()),
+            "model_id": f.model.map(|m| m.id()),
+            "protocol": f.protocol.map(|(a, b)| format!("{a}.{b}")),
+            "return_mode": f.return_mode.map(return_mode_words),
+            "detection": f.detection,
+            "calibration": if f.calibration.is_empty() {
+                "none (give the angle-correction file with --calib: no points decoded)".to_string()
+            } else {
+                f.calibration.clone()
+            },
+            "dis_unit_mm": f.dis_unit_mm,
+            "motor_rpm": f.motor_rpm,
+            "clock": f.clock.name(),
+            "clock_state": f.clock_state(),
+            "crc": f.crc.name(),
+            "crc_ok": st.crc_ok,
+            "crc_failures": st.crc_failures,
+            "crc_tail_failures": st.crc_tail_failures,
+            "signed_packets": st.signed,
+            "functional_safety": safety_json(f),
+            "safety_not_normal": st.safety_not_normal,
+            "data_packets": st.packets,
+            "position_packets": 0,
+            "malformed": st.malformed,
+            "missing": st.missing,
+            "discontinuities": st.discontinuities,
+            "sweeps": st.sweeps,
+            "points": st.points,
+        });
+        (v, counts)
+    }
+
+    fn is_lidar_datagram(&self, payload: &[u8]) -> bool {
+        match HesaiStream::facts(self).model {
+            Some(m) => m.spec().layout.accepts_len(payload.len()),
+            None => HesaiModel::detect(payload).is_some(),
+        }
+    }
+
+    fn channels(&self) -> Option<usize> {
+        HesaiStream::facts(self).model.map(HesaiModel::channels)
+    }
+
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn model_names_are_the_models_ids() {
+        let ids: Vec<&str> = ALL_MODELS.iter().map(|m| m.id()).collect();
+        assert_eq!(ids, MODEL_IDS);
+    }
+
+    #[test]
+    fn velodyne_yaml_is_not_hesai() {
+        assert!(parse_hesai_calibration(b"lasers:\n - {laser_id: 0}\n").is_none());
+        assert!(parse_hesai_calibration(b"{\"beam_intrinsics\": {}}").is_none());
+    }
+}

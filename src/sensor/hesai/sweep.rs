@@ -1,0 +1,612 @@
+//! One Hesai sensor's stream: packet checks, clock, loss, health, and sweeps.
+//!
+//! Feed it every UDP payload from one sensor with its host receive time; it calls back with each
+//! finished sweep. No I/O, no clock reads; a packet that is not well-formed (length, marks,
+//! CRC, return mode) is counted and skipped.
+//!
+//! **Sweeps are cut per channel at the cut angle** (default 0°; AT128: 150°, the end of its
+//! field of view): each channel's point goes to the sweep of its own corrected azimuth, and a
+//! channel moves on to the next sweep when its corrected azimuth passes the cut angle — an
+//! azimuth exactly on the cut belongs to the sweep that ends there (nebula's `ScanCutter`). A
+//! sweep is emitted once every channel has passed the cut. So a sweep is one clean turn in
+//! space, whatever the channels' azimuth offsets (the QT64's reach ±8°): cutting on the block
+//! azimuth instead (what the Velodyne stream does) would give every channel its own seam.
+//! The sweep's timestamp is the earliest firing of the block group that opened it, so every
+//! point's `t` ≥ 0.
+//!
+//! **Clock.** A packet's time is its tail date + µs ([`super::wire::HesaiPacket::stamp_ns`]);
+//! point times add the model's firing offsets. The tail does not say how the sensor's clock is
+//! disciplined; the stream calls the clock *synchronised* when the tail time lies within 10 s of
+//! the host receive time and *free-running* otherwise (every capture of the shared set: tail
+//! clocks of 2017–2020 in 2023–2024 recordings). A synchronised sweep is stamped in the sensor
+//! clock (`sensor-ptp`: Hesai's default source), a free-running one in host time.
+//!
+//! **Loss.** With a UDP sequence number (QT, XT, AT, OT, Pandar64 with its trailer), missing =
+//! the sequence gap; without, round(Δ tail time / packet period) − 1. A tail time going
+//! backwards or jumping by more than `max_gap_ns` ends the open sweeps (a discontinuity).
+
+use std::collections::VecDeque;
+
+use super::calib::HesaiCalibration;
+use super::decode::{HesaiDecoder, HesaiOptions, TURN_UDEG};
+use super::model::{mode_name, returns_of_mode, HesaiModel};
+use super::wire::{CrcPart, FunctionalSafety, HesaiPacket};
+use crate::sweep::Sweep;
+use crate::time::ClockSource;
+
+/// Configuration of one stream.
+#[derive(Clone, Debug)]
+pub struct HesaiConfig {
+    /// The model (detected from the first packet when `None`).
+    pub model: Option<HesaiModel>,
+    /// The angle correction; without one the stream reads the packets (model, clock, loss,
+    /// health) but decodes no points.
+    pub calibration: Option<HesaiCalibration>,
+    /// Its file name.
+    pub calibration_name: String,
+    /// Decoding options.
+    pub options: HesaiOptions,
+    /// Cut angle, 0.01°; `None` (or 0 for the AT128, whose field of view 0° is outside) = the
+    /// model's default (0°, AT128 150°).
+    pub cut_cdeg: Option<u32>,
+    /// Check CRCs where packets carry them (default on).
+    pub check_crc: bool,
+    /// A tail-time gap longer than this ends the sweep, ns.
+    pub max_gap_ns: i64,
+}
+
+impl HesaiConfig {
+    /// A configuration with ringscan's defaults.
+    pub fn new(calibration: Option<HesaiCalibration>, calibration_name: &str) -> Self {
+        Self {
+            model: None,
+            calibration,
+            calibration_name: calibration_name.to_string(),
+            options: HesaiOptions::default(),
+            cut_cdeg: None,
+            check_crc: true,
+            max_gap_ns: 1_000_000_000,
+        }
+    }
+}
+
+/// Counters of one stream.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct HesaiStats {
+    /// Packets decoded.
+    pub packets: u64,
+    /// Packets not well-formed (length, marks, return mode), including CRC failures.
+    pub malformed: u64,
+    /// Packets whose body or tail CRC failed (dropped; also in `malformed`).
+    pub crc_failures: u64,
+    /// Of those, the packets whose body passed and tail failed.
+    pub crc_tail_failures: u64,
+    /// Packets whose CRCs were checked and passed.
+    pub crc_ok: u64,
+    /// Packets missing (sequence or time gaps).
+    pub missing: u64,
+    /// Discontinuities (time backwards or a gap over `max_gap_ns`).
+    pub discontinuities: u64,
+    /// Packets carrying a cyber-security signature (skipped, not verified).
+    pub signed: u64,
+    /// Packets whose functional-safety block reports a state other than normal.
+    pub safety_not_normal: u64,
+    /// Sweeps emitted.
+    pub sweeps: u64,
+    /// Points emitted.
+    pub points: u64,
+}
+
+/// What the stream learned about its sensor.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct HesaiFacts {
+    /// The model.
+    pub model: Option<HesaiModel>,
+    /// How it was chosen.
+    pub detection: String,
+    /// Protocol version of the pre-header.
+    pub protocol: Option<(u8, u8)>,
+    /// Last return-mode byte.
+    pub return_mode: Option<u8>,
+    /// Last distance unit, mm.
+    pub dis_unit_mm: Option<u8>,
+    /// Last motor speed, rpm.
+    pub motor_rpm: Option<u16>,
+    /// Correction file name.
+    pub calibration: String,
+    /// Tail time of the last packet, ns since the epoch.
+    pub last_stamp_ns: Option<i64>,
+    /// Whether the tail clock agrees with the host's (see the module docs).
+    pub clock_synchronised: Option<bool>,
+    /// Clock of the last sweep.
+    pub clock: ClockSource,
+    /// Last functional-safety block.
+    pub safety: Option<FunctionalSafety>,
+    /// Last high-temperature shutdown flag.
+    pub shutdown_flag: Option<u8>,
+    /// Whether the model's packets carry CRCs, and whether they are checked.
+    pub crc: CrcState,
+}
+
+/// CRC handling of a stream.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum CrcState {
+    /// Not known yet.
+    #[default]
+    Unknown,
+    /// The packets carry no CRC.
+    Absent,
+    /// Checked.
+    Checked,
+    /// Present but not checked (`--crc off`).
+    Unchecked,
+}
+
+impl CrcState {
+    /// Name in summaries.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Unknown => "unknown",
+            Self::Absent => "absent (no CRC in this model's packets)",
+            Self::Checked => "checked (CRC-32/MPEG-2 of body and tail)",
+            Self::Unchecked => "present, not checked",
+        }
+    }
+}
+
+impl HesaiFacts {
+    /// Clock state in words.
+    pub fn clock_state(&self) -> &'static str {
+        match self.clock_synchronised {
+            None => "unknown",
+            Some(true) => "synchronised (tail time within 10 s of host time; PTP or GPS)",
+            Some(false) => "free-running (tail time far from host time: not synchronised)",
+        }
+    }
+}
+
+/// A sweep being filled, with its time base.
+#[derive(Debug, Default)]
+struct Open {
+    sweep: Sweep,
+    t0_ns: i64,
+    last_packet: u64,
+}
+
+/// A Hesai stream for one sensor.
+#[derive(Debug)]
+pub struct HesaiStream {
+    cfg: HesaiConfig,
+    decoder: Option<HesaiDecoder>,
+    stats: HesaiStats,
+    facts: HesaiFacts,
+    /// Per channel: sweep generation and last corrected azimuth (µ°).
+    gen: Vec<u64>,
+    last_az: Vec<i64>,
+    base_gen: u64,
+    open: VecDeque<Open>,
+    spare: Vec<Sweep>,
+    next_index: u64,
+    prev_seq: Option<u32>,
+    prev_stamp: Option<i64>,
+    /// Angle-correction CSV: each channel's cut threshold on the block azimuth (cut − its
+    /// offset, µ°), the window they span (start, width), and the last block azimuth.
+    thresholds: Option<(Vec<i64>, i64, i64)>,
+    last_block_udeg: Option<i64>,
+    packet_no: u64,
+    cut_udeg: i64,
+}
+
+impl HesaiStream {
+    /// A new stream.
+    pub fn new(cfg: HesaiConfig) -> Self {
+        let facts = HesaiFacts {
+            calibration: cfg.calibration_name.clone(),
+            ..HesaiFacts::default()
+        };
+        Self {
+            cfg,
+            decoder: None,
+            stats: HesaiStats::default(),
+            facts,
+            gen: Vec::new(),
+            last_az: Vec::new(),
+            base_gen: 0,
+            open: VecDeque::new(),
+            spare: Vec::new(),
+            next_index: 0,
+            prev_seq: None,
+            prev_stamp: None,
+            thresholds: None,
+            last_block_udeg: None,
+            packet_no: 0,
+            cut_udeg: 0,
+        }
+    }
+
+    /// Counters so far.
+    pub fn stats(&self) -> &HesaiStats {
+        &self.stats
+    }
+
+    /// What is known of the sensor.
+    pub fn facts(&self) -> &HesaiFacts {
+        &self.facts
+    }
+
+    /// The decoder, once the model is known.
+    pub fn decoder(&self) -> Option<&HesaiDecoder> {
+        self.decoder.as_ref()
+    }
+
+    fn ensure_decoder(&mut self, payload: &[u8]) -> Result<(), crate::sensor::DecodeError> {
+        if self.facts.model.is_some() {
+            return Ok(());
+        }
+        let (model, how) = match self.cfg.model {
+            Some(m) => (m, format!("named by the user ({})", m.id())),
+            None => match HesaiModel::detect(payload) {
+                Some(m) => (m, detection_words(m, payload)),
+                None => return Ok(()),
+            },
+        };
+        let n = model.channels();
+        self.facts.model = Some(model);
+        self.facts.detection = how;
+        self.facts.crc = if !model.spec().layout.body_crc && model.spec().layout.tail.crc.is_none()
+        {
+            CrcState::Absent
+        } else if self.cfg.check_crc {
+            CrcState::Checked
+        } else {
+            CrcState::Unchecked
+        };
+        let cut = match self.cfg.cut_cdeg {
+            // 0° lies outside the AT128's field of view: its own cut then.
+            Some(0) | None => model.spec().default_cut_cdeg,
+            Some(c) => c,
+        };
+        self.cut_udeg = i64::from(cut % 36_000) * 10_000;
+        self.gen = vec![0; n];
+        self.last_az = vec![i64::MIN; n];
+        let Some(calib) = &self.cfg.calibration else {
+            return Ok(());
+        };
+        let dec = HesaiDecoder::new(model, calib, self.cfg.options)?;
+        self.thresholds = dec.azimuth_offsets_udeg().map(|offs| {
+            let (lo, hi) = offs
+                .iter()
+                .fold((i64::MAX, i64::MIN), |(a, b), &o| (a.min(o), b.max(o)));
+            let th = offs
+                .iter()
+                .map(|o| (self.cut_udeg - o).rem_euclid(TURN_UDEG))
+                .collect();
+            (th, (self.cut_udeg - hi).rem_euclid(TURN_UDEG), hi - lo)
+        });
+        self.decoder = Some(dec);
+        Ok(())
+    }
+
+    /// Pushes one UDP payload. Finished sweeps go to `on_sweep`. An error means the stream
+    /// cannot decode at all (the correction does not fit the model).
+    pub fn push(
+        &mut self,
+        host_ns: i64,
+        payload: &[u8],
+        on_sweep: &mut dyn FnMut(&Sweep, &HesaiFacts),
+    ) -> Result<(), crate::sensor::DecodeError> {
+        self.ensure_decoder(payload)?;
+        let Some(model) = self.facts.model else {
+            self.stats.malformed += 1;
+            return Ok(());
+        };
+        let Ok(p) = HesaiPacket::new(payload, model) else {
+            self.stats.malformed += 1;
+            return Ok(());
+        };
+        if self.facts.crc == CrcState::Checked {
+            match p.check_crc() {
+                Ok(()) => self.stats.crc_ok += 1,
+                Err((part, _)) => {
+                    if part == CrcPart::Tail {
+                        self.stats.crc_tail_failures += 1;
+                    }
+                    self.stats.crc_failures += 1;
+                    self.stats.malformed += 1;
+                    return Ok(());
+                }
+            }
+        }
+        let mode = p.return_mode();
+        let Some(n) = returns_of_mode(mode) else {
+            self.stats.malformed += 1;
+            return Ok(());
+        };
+        if p.has_signature() {
+            self.stats.signed += 1;
+        }
+        if let Some(fs) = p.functional_safety() {
+            if fs.lidar_state != 1 {
+                self.stats.safety_not_normal += 1;
+            }
+            self.facts.safety = Some(fs);
+        }
+        self.facts.shutdown_flag = p.shutdown_flag();
+        self.facts.protocol = p.protocol();
+        self.facts.return_mode = Some(mode);
+        self.facts.dis_unit_mm = Some(p.dis_unit_mm());
+        self.facts.motor_rpm = Some(p.motor_rpm());
+        let stamp = p.stamp_ns().unwrap_or(host_ns);
+        let synced = (stamp - host_ns).abs() < 10_000_000_000;
+        self.facts.clock_synchronised = Some(synced);
+        self.facts.last_stamp_ns = Some(stamp);
+
+        // Loss and discontinuities.
+        let blocks = p.layout().blocks;
+        let period_ns = (blocks / n) as i64 * i64::from(model.spec().block_period_ns);
+        let mut discontinuity = false;
+        if let Some(prev) = self.prev_stamp {
+            let d = stamp - prev;
+            if d < 0 || d > self.cfg.max_gap_ns {
+                discontinuity = true;
+            }
+        }
+        match (p.udp_seq(), self.prev_seq) {
+            (Some(s), Some(prev)) => {
+                let gap = s.wrapping_sub(prev);
+                if gap > 1 && gap < 1 << 20 {
+                    self.add_missing(u64::from(gap - 1));
+                }
+            }
+            (None, _) => {
+                if let (Some(prev), false) = (self.prev_stamp, discontinuity) {
+                    if period_ns > 0 {
+                        let m = ((stamp - prev) as f64 / period_ns as f64).round() as i64 - 1;
+                        if m > 0 {
+                            self.add_missing(m as u64);
+                        }
+                    }
+                }
+            }
+            _ => {}
+        }
+        self.prev_seq = p.udp_seq();
+        self.prev_stamp = Some(stamp);
+        if discontinuity {
+            self.stats.discontinuities += 1;
+            self.emit_all(on_sweep);
+            self.last_az.iter_mut().for_each(|a| *a = i64::MIN);
+            self.last_block_udeg = None;
+        }
+
+        self.packet_no += 1;
+        self.stats.packets += 1;
+        let Some(mut dec) = self.decoder.take() else {
+            return Ok(());
+        };
+        dec.prepare(n, p.tail_flags());
+        let nc = dec.channels();
+        let mut g = 0;
+        while g < blocks {
+            let block_az = p.azimuth(g);
+            // Per-channel cut. The first group after a start or a discontinuity may straddle
+            // the cut: its channels already past it (within a quarter turn) open the next
+            // sweep (nebula's `initialize_state`).
+            if self.last_az.first() == Some(&i64::MIN) {
+                let q = TURN_UDEG / 4;
+                let rel = |az: i64| (az - self.cut_udeg).rem_euclid(TURN_UDEG);
+                let azs: Vec<i64> = (0..nc)
+                    .filter_map(|c| dec.channel_azimuth_udeg(block_az, c))
+                    .collect();
+                let straddles =
+                    azs.iter().any(|&a| rel(a) < q) && azs.iter().any(|&a| rel(a) >= TURN_UDEG - q);
+                for c in 0..nc {
+                    let after = dec
+                        .channel_azimuth_udeg(block_az, c)
+                        .is_some_and(|a| rel(a) < TURN_UDEG / 2);
+                    self.gen[c] = self.base_gen + u64::from(straddles && after);
+                }
+            }
+            if let Some((th, w_start, w_width)) = &self.thresholds {
+                // Angle-correction CSV: channel c's azimuth is the block azimuth + a constant,
+                // so it passes the cut exactly when the block azimuth passes cut − offset(c);
+                // the channels are looked at only when the block's step reaches that window.
+                let cur = i64::from(block_az % 36_000) * 10_000;
+                match self.last_block_udeg {
+                    None => self.last_block_udeg = Some(cur),
+                    Some(last) => {
+                        let span = (cur - last).rem_euclid(TURN_UDEG);
+                        // A step back (blocks of one packet out of azimuth order) is not a
+                        // turn forward, and progress stays where it was.
+                        if span < TURN_UDEG / 4 * 3 {
+                            let hits = (w_start - last).rem_euclid(TURN_UDEG) < span
+                                || (last - w_start).rem_euclid(TURN_UDEG) <= *w_width;
+                            if hits {
+                                for (g_c, &t) in self.gen.iter_mut().zip(th) {
+                                    if (t - last).rem_euclid(TURN_UDEG) < span {
+                                        *g_c += 1;
+                                    }
+                                }
+                            }
+                            self.last_block_udeg = Some(cur);
+                        }
+                    }
+                }
+                self.last_az.iter_mut().for_each(|a| *a = 0);
+            } else {
+                for c in 0..nc {
+                    let Some(az) = dec.channel_azimuth_udeg(block_az, c) else {
+                        continue;
+                    };
+                    let last = self.last_az[c];
+                    if last != i64::MIN {
+                        let span = (az - last).rem_euclid(TURN_UDEG);
+                        let to_cut = (self.cut_udeg - last).rem_euclid(TURN_UDEG);
+                        // A step back (less than a quarter turn: blocks of one packet out of
+                        // azimuth order) is not a turn forward past the cut, and the
+                        // channel's progress stays where it was (no second crossing).
+                        if span >= TURN_UDEG / 4 * 3 {
+                            continue;
+                        }
+                        if to_cut < span {
+                            self.gen[c] += 1;
+                        }
+                    }
+                    self.last_az[c] = az;
+                }
+            }
+            let group_t0 = stamp + dec.group_earliest_ns(g, n);
+            // Keep at most two sweeps open: a channel two sweeps ahead closes the oldest.
+            let max_gen = self.gen.iter().copied().max().unwrap_or(0);
+            while max_gen >= self.base_gen + 2 {
+                self.emit_front(on_sweep);
+            }
+            let clock = if synced {
+                ClockSource::SensorPtp
+            } else {
+                ClockSource::Host
+            };
+            let host_t0 = host_ns + (group_t0 - stamp);
+            let packet_no = self.packet_no;
+            // Open the sweeps this group's channels need.
+            for c in 0..nc {
+                let idx = (self.gen[c].saturating_sub(self.base_gen)) as usize;
+                while self.open.len() <= idx {
+                    let mut sw = self.spare.pop().unwrap_or_default();
+                    sw.clear();
+                    sw.index = self.next_index;
+                    self.next_index += 1;
+                    sw.timestamp_ns = if synced { group_t0 } else { host_t0 };
+                    sw.clock = clock;
+                    sw.device_time_ns = group_t0;
+                    sw.first_host_ns = host_ns;
+                    sw.first_azimuth = (block_az % 36_000) as u16;
+                    self.open.push_back(Open {
+                        sweep: sw,
+                        t0_ns: group_t0,
+                        last_packet: 0,
+                    });
+                }
+            }
+            let (gens, base, open) = (&self.gen, self.base_gen, &mut self.open);
+            let (lo, hi) = gens
+                .iter()
+                .fold((u64::MAX, 0), |(a, b), &g| (a.min(g), b.max(g)));
+            if lo == hi {
+                // Every channel in one sweep (all but the groups at the cut): straight in.
+                if let Some(o) = open.get_mut(lo.saturating_sub(base) as usize) {
+                    let before = o.sweep.points.len();
+                    let t_base = stamp - o.t0_ns;
+                    let pts = &mut o.sweep.points;
+                    dec.decode_group(&p, g, n, |d| {
+                        let t = t_base + dec.firing_ns(d.block, d.channel);
+                        let mut pt = d.point;
+                        pt.t = t.clamp(0, i64::from(u32::MAX)) as u32;
+                        pts.push(pt);
+                    });
+                    if o.sweep.points.len() > before && o.last_packet != packet_no {
+                        o.last_packet = packet_no;
+                        o.sweep.packets += 1;
+                    }
+                }
+            } else {
+                dec.decode_group(&p, g, n, |d| {
+                    let idx = (gens[d.channel].saturating_sub(base)) as usize;
+                    if let Some(o) = open.get_mut(idx) {
+                        let t = stamp + dec.firing_ns(d.block, d.channel) - o.t0_ns;
+                        let mut pt = d.point;
+                        pt.t = t.clamp(0, i64::from(u32::MAX)) as u32;
+                        o.sweep.points.push(pt);
+                        if o.last_packet != packet_no {
+                            o.last_packet = packet_no;
+                            o.sweep.packets += 1;
+                        }
+                    }
+                });
+            }
+            for o in self.open.iter_mut() {
+                o.sweep.last_host_ns = host_ns;
+                o.sweep.last_azimuth = (block_az % 36_000) as u16;
+                o.sweep.columns_count += 1;
+            }
+            // Every channel past the cut: the oldest sweep is complete.
+            let min_gen = self.gen.iter().copied().min().unwrap_or(0);
+            while min_gen > self.base_gen && !self.open.is_empty() {
+                self.emit_front(on_sweep);
+            }
+            if min_gen > self.base_gen && self.open.is_empty() {
+                self.base_gen = min_gen;
+            }
+            g += n;
+        }
+        self.decoder = Some(dec);
+        Ok(())
+    }
+
+    fn add_missing(&mut self, m: u64) {
+        self.stats.missing += m;
+        if let Some(o) = self.open.back_mut() {
+            o.sweep.missing_packets += m;
+        }
+    }
+
+    fn emit_front(&mut self, on_sweep: &mut dyn FnMut(&Sweep, &HesaiFacts)) {
+        if let Some(o) = self.open.pop_front() {
+            if !o.sweep.points.is_empty() || o.sweep.packets > 0 {
+                self.stats.sweeps += 1;
+                self.stats.points += o.sweep.points.len() as u64;
+                self.facts.clock = o.sweep.clock;
+                on_sweep(&o.sweep, &self.facts);
+            }
+            self.spare.push(o.sweep);
+        }
+        self.base_gen += 1;
+    }
+
+    fn emit_all(&mut self, on_sweep: &mut dyn FnMut(&Sweep, &HesaiFacts)) {
+        while !self.open.is_empty() {
+            self.emit_front(on_sweep);
+        }
+        let top = self
+            .gen
+            .iter()
+            .copied()
+            .max()
+            .unwrap_or(0)
+            .max(self.base_gen);
+        self.gen.iter_mut().for_each(|g| *g = top);
+        self.base_gen = top;
+    }
+
+    /// Emits the sweeps still open, at the end of the input.
+    pub fn finish(&mut self, on_sweep: &mut dyn FnMut(&Sweep, &HesaiFacts)) {
+        self.emit_all(on_sweep);
+    }
+}
+
+fn detection_words(m: HesaiModel, payload: &[u8]) -> String {
+    match payload {
+        [0xEE, 0xFF, major, minor, ..] if m.spec().protocol_major.is_some() => format!(
+            "pre-header EE FF, protocol {major}.{minor}, {} lasers × {} blocks, {} bytes",
+            m.channels(),
+            m.spec().layout.blocks,
+            payload.len()
+        ),
+        [0xEE, 0xFF, ..] => format!(
+            "header EE FF, {} lasers × {} blocks, {} bytes",
+            m.channels(),
+            m.spec().layout.blocks,
+            payload.len()
+        ),
+        _ => format!(
+            "{} blocks starting FF EE, {} bytes (Velodyne's are 1206)",
+            m.spec().layout.blocks,
+            payload.len()
+        ),
+    }
+}
+
+/// Name of a return-mode byte, with the byte.
+pub fn return_mode_words(mode: u8) -> String {
+    format!("{} ({mode:#04x})", mode_name(mode))
+}

@@ -1,0 +1,398 @@
+//! Hesai at the process boundary:
+//!
+//! - `ringscan info` on every real Hesai capture names the model, protocol version, return
+//!   mode, clock state and CRC state (text and `--json`), with the facts NEBULA.md lists for
+//!   that capture;
+//! - `ringscan listen` decodes a Hesai sensor and a Velodyne sensor sending to the same port at
+//!   once: a capture merged in the test from the XT32 and the nebula VLP-16 captures (the
+//!   Velodyne re-addressed to 192.168.1.202 and shifted in time onto the Hesai), replayed on
+//!   loopback (one 127.0.0.k per source); the live run must receive every datagram and give
+//!   the same sweeps and points as `ringscan decode` of the merged file, one sensor per family.
+
+mod common;
+mod listen_util;
+
+use std::path::Path;
+use std::process::Command;
+
+use listen_util::*;
+
+const GT: &str = "tier4__nebula/src/nebula_hesai/nebula_hesai/test_resources/decoder_ground_truth";
+const CALIB: &str = "tier4__nebula/src/nebula_hesai/nebula_hesai_decoders/calibration";
+
+/// (folder, csv, model, protocol, return mode, CRC state words, UDP-sequence missing).
+type Expected = (
+    &'static str,
+    &'static str,
+    &'static str,
+    Option<&'static str>,
+    &'static str,
+    &'static str,
+    u64,
+);
+
+const CAPTURES: &[Expected] = &[
+    (
+        "40p",
+        "Pandar40P.csv",
+        "Pandar40P",
+        None,
+        "dual (last, strongest) (0x39)",
+        "absent",
+        0,
+    ),
+    (
+        "64",
+        "Pandar64.csv",
+        "Pandar64",
+        None,
+        "dual (last, strongest) (0x39)",
+        "absent",
+        0,
+    ),
+    (
+        "qt64",
+        "PandarQT64.csv",
+        "PandarQT64",
+        Some("3.1"),
+        "dual (first, last) (0x3b)",
+        "absent",
+        0,
+    ),
+    (
+        "qt128",
+        "PandarQT128.csv",
+        "PandarQT128",
+        Some("3.2"),
+        "dual (last, strongest) (0x39)",
+        "checked",
+        0,
+    ),
+    (
+        "xt32",
+        "PandarXT32.csv",
+        "PandarXT32",
+        Some("6.1"),
+        "dual (last, strongest) (0x39)",
+        "absent",
+        0,
+    ),
+    (
+        "xt32m",
+        "PandarXT32M.csv",
+        "PandarXT32M",
+        Some("6.1"),
+        "dual (first, strongest) (0x3c)",
+        "absent",
+        852,
+    ),
+];
+
+fn pcap_in(dir: &Path) -> std::path::PathBuf {
+    for e in std::fs::read_dir(dir).unwrap().flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            for f in std::fs::read_dir(&p).unwrap().flatten() {
+                if f.path().extension().is_some_and(|x| x == "pcap") {
+                    return f.path();
+                }
+            }
+        }
+    }
+    panic!("no pcap under {}", dir.display());
+}
+
+#[test]
+fn info_names_model_protocol_return_mode_clock_and_crc() {
+    let Some(c) = common::captures() else { return };
+    for &(dir, csv, model, protocol, mode, crc, missing) in CAPTURES {
+        let pcap = pcap_in(&c.join(GT).join(dir));
+        let calib = c.join(CALIB).join(csv);
+        let o = Command::new(BIN)
+            .arg("info")
+            .arg(&pcap)
+            .arg("--calib")
+            .arg(&calib)
+            .arg("--json")
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "{dir}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let sensors = j["sensors"].as_array().unwrap();
+        assert_eq!(sensors.len(), 1, "{dir}");
+        let s = &sensors[0];
+        assert_eq!(s["kind"], "hesai", "{dir}");
+        assert_eq!(s["model"], model, "{dir}");
+        assert_eq!(s["protocol"].as_str(), protocol, "{dir}");
+        assert_eq!(s["return_mode"], mode, "{dir}");
+        assert!(
+            s["clock_state"]
+                .as_str()
+                .unwrap()
+                .starts_with("free-running"),
+            "{dir}: {}",
+            s["clock_state"]
+        );
+        assert!(
+            s["crc"].as_str().unwrap().starts_with(crc),
+            "{dir}: {}",
+            s["crc"]
+        );
+        assert_eq!(s["crc_failures"], 0, "{dir}");
+        assert_eq!(s["missing"], missing, "{dir}");
+        assert_eq!(s["malformed"], 0, "{dir}");
+        assert!(s["sweeps"].as_u64().unwrap() >= 1, "{dir}");
+        if dir == "qt128" {
+            assert_eq!(s["signed_packets"], 1800);
+            assert!(s["functional_safety"].is_object());
+        }
+        // The text form says the same.
+        let o = Command::new(BIN).arg("info").arg(&pcap).output().unwrap();
+        assert!(o.status.success());
+        let text = String::from_utf8_lossy(&o.stdout);
+        assert!(text.contains(&format!("Hesai {model},")), "{dir}: {text}");
+        assert!(text.contains(mode), "{dir}: {text}");
+        assert!(text.contains("clock: free-running"), "{dir}: {text}");
+        assert!(text.contains(&format!("CRC: {crc}")), "{dir}: {text}");
+        match protocol {
+            Some(p) => assert!(text.contains(&format!("protocol {p}")), "{dir}: {text}"),
+            None => assert!(text.contains("protocol none"), "{dir}: {text}"),
+        }
+    }
+}
+
+/// A classic pcap (µs) of UDP datagrams: (time ns, source address, payload), all to port 2368.
+fn write_pcap(path: &Path, datagrams: &[(i64, [u8; 4], Vec<u8>)]) {
+    let mut out = Vec::new();
+    out.extend_from_slice(&0xa1b2_c3d4u32.to_le_bytes());
+    out.extend_from_slice(&2u16.to_le_bytes());
+    out.extend_from_slice(&4u16.to_le_bytes());
+    out.extend_from_slice(&[0; 8]);
+    out.extend_from_slice(&65_535u32.to_le_bytes());
+    out.extend_from_slice(&1u32.to_le_bytes());
+    for (i, (t, src, payload)) in datagrams.iter().enumerate() {
+        let mut f = Vec::new();
+        f.extend_from_slice(&[2, 0, 0, 0, 0, 0x64, 2, 0, 0, 0, 0, src[3], 0x08, 0x00]);
+        let total = 20 + 8 + payload.len();
+        let mut ip = vec![0x45, 0];
+        ip.extend_from_slice(&(total as u16).to_be_bytes());
+        ip.extend_from_slice(&(i as u16).to_be_bytes());
+        ip.extend_from_slice(&[0x40, 0, 64, 17, 0, 0]);
+        ip.extend_from_slice(src);
+        ip.extend_from_slice(&[192, 168, 1, 100]);
+        let sum: u32 = ip
+            .chunks(2)
+            .map(|w| u32::from(u16::from_be_bytes([w[0], w[1]])))
+            .sum();
+        let sum = (sum & 0xFFFF) + (sum >> 16);
+        let sum = !(((sum & 0xFFFF) + (sum >> 16)) as u16);
+        ip[10..12].copy_from_slice(&sum.to_be_bytes());
+        f.extend_from_slice(&ip);
+        f.extend_from_slice(&2368u16.to_be_bytes());
+        f.extend_from_slice(&2368u16.to_be_bytes());
+        f.extend_from_slice(&((8 + payload.len()) as u16).to_be_bytes());
+        f.extend_from_slice(&[0, 0]);
+        f.extend_from_slice(payload);
+        out.extend_from_slice(&((t / 1_000_000_000) as u32).to_le_bytes());
+        out.extend_from_slice(&((t % 1_000_000_000 / 1_000) as u32).to_le_bytes());
+        out.extend_from_slice(&(f.len() as u32).to_le_bytes());
+        out.extend_from_slice(&(f.len() as u32).to_le_bytes());
+        out.extend_from_slice(&f);
+    }
+    std::fs::write(path, out).unwrap();
+}
+
+#[test]
+fn listen_decodes_hesai_and_velodyne_on_one_port() {
+    let Some(c) = common::captures() else { return };
+    let _guard = serial();
+    let tmp = std::env::temp_dir().join(format!("ringscan-hesai-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&tmp).unwrap();
+    let hesai = common::datagrams(&pcap_in(&c.join(GT).join("xt32")));
+    let vel_dir = c.join(
+        "tier4__nebula/src/nebula_velodyne/nebula_velodyne/test_resources/decoder_ground_truth/vlp16",
+    );
+    let velodyne = common::datagrams(&pcap_in(&vel_dir));
+    let vel_calib =
+        c.join("tier4__nebula/src/nebula_velodyne/nebula_velodyne_decoders/calibration/VLP16.yaml");
+    let hesai_calib = c.join(CALIB).join("PandarXT32.csv");
+    // 0.4 s of each, interleaved on the Hesai's clock.
+    let t0 = hesai[0].0;
+    let span = hesai.last().unwrap().0 - t0;
+    let shift = t0 - velodyne[0].0;
+    let mut merged: Vec<(i64, [u8; 4], Vec<u8>)> = hesai
+        .iter()
+        .map(|(t, _, p)| (*t, [192, 168, 1, 201], p.clone()))
+        .chain(
+            velodyne
+                .iter()
+                .filter(|(t, _, _)| t + shift - t0 <= span)
+                .map(|(t, _, p)| (t + shift, [192, 168, 1, 202], p.clone())),
+        )
+        .collect();
+    merged.sort_by_key(|d| d.0);
+    let pcap = tmp.join("hesai_velodyne.pcap");
+    write_pcap(&pcap, &merged);
+
+    let calib_args: Vec<String> = vec![
+        "--calib".into(),
+        hesai_calib.display().to_string(),
+        "--calib".into(),
+        vel_calib.display().to_string(),
+    ];
+    let decoded_path = tmp.join("decode.mcap");
+    let decoded = decode(&pcap, &decoded_path, &calib_args);
+    let kinds: Vec<&str> = decoded["sensors"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["kind"].as_str().unwrap())
+        .collect();
+    assert_eq!(kinds.len(), 2, "{decoded}");
+    assert!(
+        kinds.contains(&"hesai") && kinds.contains(&"velodyne"),
+        "{kinds:?}"
+    );
+
+    let offset = free_offset(&[2368]);
+    let port = 2368 + offset;
+    let live_path = tmp.join("listen.mcap");
+    let mut args: Vec<String> = vec![
+        "--sensor".into(),
+        format!("127.0.0.1:{port}"),
+        "--sensor".into(),
+        format!("127.0.0.2:{port}"),
+    ];
+    args.extend(calib_args.iter().cloned());
+    args.push("--out".into());
+    args.push(live_path.display().to_string());
+    let l = start_listen(&args);
+    replay(&pcap, offset, "1", &["--per-source-loopback"]);
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    let (code, out, err) = l.stop("INT");
+    assert_eq!(code, Some(0), "listen failed: {err}");
+    let live: serde_json::Value =
+        serde_json::from_str(&out).unwrap_or_else(|e| panic!("{e}: {out:?} {err}"));
+    assert_eq!(live["receive"]["datagrams"], merged.len() as u64, "{err}");
+    assert_eq!(live["receive"]["queue_dropped"], 0);
+    for k in ["sweeps", "points"] {
+        assert_eq!(live[k], decoded[k], "{k}");
+    }
+    let live_kinds: Vec<&str> = live["sensors"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["kind"].as_str().unwrap())
+        .collect();
+    assert!(
+        live_kinds.contains(&"hesai") && live_kinds.contains(&"velodyne"),
+        "{live_kinds:?}"
+    );
+    for s in live["sensors"].as_array().unwrap() {
+        assert!(s["points"].as_u64().unwrap() > 0, "{s}");
+    }
+    let a = points_by_topic(&std::fs::read(&decoded_path).unwrap());
+    let b = points_by_topic(&std::fs::read(&live_path).unwrap());
+    assert_eq!(a.len(), 2, "{:?}", a.keys().collect::<Vec<_>>());
+    // Topics are named after the source address (192.168.1.20x in the file, 127.0.0.x live):
+    // the model prefixes and the order must agree.
+    let prefix = |t: &String| {
+        t.rsplit_once('-')
+            .map(|(p, _)| p.to_string())
+            .unwrap_or_default()
+    };
+    assert_eq!(
+        a.keys().map(prefix).collect::<Vec<_>>(),
+        b.keys().map(prefix).collect::<Vec<_>>(),
+        "topics"
+    );
+    for ((topic, sa), sb) in a.iter().zip(b.values()) {
+        assert_eq!(sa.len(), sb.len(), "{topic}: sweeps");
+        for (i, (x, y)) in sa.iter().zip(sb).enumerate() {
+            if x == y {
+                continue;
+            }
+            assert_eq!(x.len(), y.len(), "{topic}: sweep {i} sizes");
+            let diff: Vec<usize> = (0..x.len()).filter(|&j| x[j] != y[j]).collect();
+            let fields: std::collections::BTreeSet<usize> = diff.iter().map(|j| j % 24).collect();
+            panic!(
+                "{topic}: sweep {i} differs ({} bytes differ at record offsets {fields:?})",
+                diff.len()
+            );
+        }
+    }
+    eprintln!(
+        "{} datagrams (Hesai XT32 + Velodyne VLP-16) on one port: {} sweeps, {} points, identical to decode",
+        merged.len(),
+        decoded["sweeps"],
+        decoded["points"]
+    );
+    let _ = std::fs::remove_dir_all(&tmp);
+}
+
+#[test]
+fn hesai_calib_fetches_the_correction_from_a_fake_sensor_over_ptc() {
+    use std::io::{Read, Write};
+    let Some(c) = common::captures() else { return };
+    let csv = std::fs::read(c.join(CALIB).join("PandarXT32.csv")).unwrap();
+    // A fake sensor's PTC port: one "get angle correction" (0x05) answered with the CSV.
+    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = l.local_addr().unwrap();
+    let served = csv.clone();
+    let server = std::thread::spawn(move || {
+        let (mut s, _) = l.accept().unwrap();
+        let mut head = [0u8; 8];
+        s.read_exact(&mut head).unwrap();
+        assert_eq!(&head, &[0x47, 0x74, 0x05, 0, 0, 0, 0, 0]);
+        let mut r = vec![0x47, 0x74, 0x05, 0];
+        r.extend_from_slice(&(served.len() as u32).to_be_bytes());
+        r.extend_from_slice(&served);
+        s.write_all(&r).unwrap();
+    });
+    let tmp = std::env::temp_dir().join(format!("ringscan-hesai-ptc-{}.csv", std::process::id()));
+    let o = Command::new(BIN)
+        .args(["hesai-calib", "--sensor", &addr.to_string(), "--out"])
+        .arg(&tmp)
+        .output()
+        .unwrap();
+    server.join().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(std::fs::read(&tmp).unwrap(), csv);
+    // The fetched file decodes the capture.
+    let pcap = pcap_in(&c.join(GT).join("xt32"));
+    let o = Command::new(BIN)
+        .arg("info")
+        .arg(&pcap)
+        .arg("--calib")
+        .arg(&tmp)
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(j["points"].as_u64().unwrap() > 0);
+    let _ = std::fs::remove_file(&tmp);
+    // No sensor listening: a clear error, exit code 1.
+    let closed = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap();
+    let o = Command::new(BIN)
+        .args([
+            "hesai-calib",
+            "--timeout",
+            "1",
+            "--sensor",
+            &closed.to_string(),
+            "--out",
+        ])
+        .arg(std::env::temp_dir().join("ringscan-hesai-ptc-never.csv"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains(&closed.to_string()));
+}

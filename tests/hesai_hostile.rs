@@ -1,0 +1,271 @@
+//! Hostile Hesai packets and correction files: each gives a clear error or a counted drop, never
+//! a panic. Besides the hand-made cases, every real Hesai packet and correction file of
+//! `../shared/captures` is run, as is and after deterministic random mutations, through the
+//! very harnesses of the `hesai_packet` and `calib_hesai` fuzz targets (`tools/fuzz/harness.rs`):
+//! a short, repeatable fuzz pass inside the test suite (the long runs: tools/fuzz/smoke.sh).
+#![cfg(all(feature = "pcap", feature = "mcap", feature = "sim"))]
+
+mod common;
+#[path = "../tools/fuzz/harness.rs"]
+mod harness;
+
+use ringscan::sensor::hesai::family::parse_hesai_calibration;
+use ringscan::sensor::hesai::wire::crc32_mpeg2;
+use ringscan::sensor::hesai::{HesaiConfig, HesaiModel, HesaiStream};
+use ringscan::sensor::parse_calibration;
+
+const GT: &str = "tier4__nebula/src/nebula_hesai/nebula_hesai/test_resources/decoder_ground_truth";
+const CALIB: &str = "tier4__nebula/src/nebula_hesai/nebula_hesai_decoders/calibration";
+
+/// xorshift64*: a fixed, dependency-free random sequence.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n.max(1) as u64) as usize
+    }
+}
+
+fn mutate(rng: &mut Rng, data: &[u8]) -> Vec<u8> {
+    let mut v = data.to_vec();
+    match rng.below(4) {
+        0 => {
+            for _ in 0..1 + rng.below(8) {
+                let i = rng.below(v.len());
+                if let Some(b) = v.get_mut(i) {
+                    *b = rng.next() as u8;
+                }
+            }
+        }
+        1 => v.truncate(rng.below(v.len() + 1)),
+        2 => {
+            let extra = rng.below(40);
+            v.extend((0..extra).map(|_| rng.next() as u8));
+        }
+        _ => {
+            // Header / tail fields that steer the decoder.
+            for i in [0usize, 1, 2, 3, 6, 7, 9, 10, 11] {
+                if rng.below(3) == 0 {
+                    if let Some(b) = v.get_mut(i) {
+                        *b = rng.next() as u8;
+                    }
+                }
+            }
+            let n = v.len();
+            for back in 1..40 {
+                if rng.below(10) == 0 && back < n {
+                    v[n - back] = rng.next() as u8;
+                }
+            }
+        }
+    }
+    v
+}
+
+fn stream_for(model: HesaiModel) -> HesaiStream {
+    let mut cfg = HesaiConfig::new(Some(harness::hesai_correction(model)), "test");
+    cfg.model = Some(model);
+    HesaiStream::new(cfg)
+}
+
+fn xt32_packet() -> Vec<u8> {
+    // A well-formed XT32 packet: header, 8 blocks, tail in dual (last, strongest) mode.
+    let model = HesaiModel::PandarXt32;
+    let l = &model.spec().layout;
+    let mut b = vec![0u8; l.base_len()];
+    b[..12].copy_from_slice(&[0xEE, 0xFF, 6, 1, 0, 0, 32, 8, 0, 4, 2, 1]);
+    for blk in 0..8 {
+        let o = 12 + blk * l.block_len();
+        b[o..o + 2].copy_from_slice(&((blk as u16 / 2) * 18).to_le_bytes());
+        for c in 0..32 {
+            let u = o + 2 + 4 * c;
+            b[u..u + 2].copy_from_slice(&(1000 + c as u16).to_le_bytes());
+            b[u + 2] = 50;
+        }
+    }
+    let t = l.tail_start();
+    b[t + 10] = 0x39;
+    b[t + 13..t + 19].copy_from_slice(&[124, 1, 2, 3, 4, 5]);
+    b
+}
+
+#[test]
+fn short_long_and_marked_wrong_packets_are_counted_not_decoded() {
+    let good = xt32_packet();
+    let mut s = stream_for(HesaiModel::PandarXt32);
+    let mut points = 0;
+    let mut on = |sw: &ringscan::sweep::Sweep, _: &_| points += sw.points.len();
+    s.push(0, &good, &mut on).unwrap();
+    assert_eq!(s.stats().packets, 1);
+    let cases: Vec<Vec<u8>> = vec![
+        good[..good.len() - 1].to_vec(),
+        [good.clone(), vec![0; 3]].concat(),
+        Vec::new(),
+        {
+            let mut b = good.clone();
+            b[6] = 16; // lasers in the header: not the XT32's 32
+            b
+        },
+        {
+            let mut b = good.clone();
+            b[0] = 0xFF; // pre-header mark
+            b
+        },
+        {
+            let mut b = good.clone();
+            let t = HesaiModel::PandarXt32.spec().layout.tail_start();
+            b[t + 10] = 0x42; // return mode no Hesai sensor sends
+            b
+        },
+    ];
+    for (i, c) in cases.iter().enumerate() {
+        s.push(1_000 * (i as i64 + 1), c, &mut on).unwrap();
+        assert_eq!(s.stats().malformed, i as u64 + 1, "case {i}");
+    }
+    assert_eq!(s.stats().packets, 1);
+}
+
+#[test]
+fn crc_failures_are_dropped_and_counted() {
+    let model = HesaiModel::PandarQt128;
+    let l = &model.spec().layout;
+    let mut b = vec![0u8; l.base_len()];
+    b[..12].copy_from_slice(&[0xEE, 0xFF, 3, 2, 0, 0, 128, 2, 0, 4, 1, 0x05]);
+    for blk in 0..2 {
+        let o = 12 + blk * l.block_len();
+        for c in 0..128 {
+            let u = o + 2 + 4 * c;
+            b[u..u + 2].copy_from_slice(&500u16.to_le_bytes());
+        }
+    }
+    let t = l.tail_start();
+    b[t + 12] = 0x37;
+    b[t + 15..t + 21].copy_from_slice(&[124, 1, 2, 3, 4, 5]);
+    let body = crc32_mpeg2(&b[l.body_start()..l.body_end()]);
+    b[l.body_end()..l.body_end() + 4].copy_from_slice(&body.to_le_bytes());
+    let tail = crc32_mpeg2(&b[t..t + 30]);
+    b[t + 30..t + 34].copy_from_slice(&tail.to_le_bytes());
+
+    let mut s = stream_for(model);
+    let mut on = |_: &ringscan::sweep::Sweep, _: &_| {};
+    s.push(0, &b, &mut on).unwrap();
+    assert_eq!((s.stats().crc_ok, s.stats().crc_failures), (1, 0));
+    let mut bad_body = b.clone();
+    bad_body[20] ^= 1;
+    s.push(1, &bad_body, &mut on).unwrap();
+    let mut bad_tail = b.clone();
+    bad_tail[t + 25] ^= 0x80;
+    s.push(2, &bad_tail, &mut on).unwrap();
+    assert_eq!(s.stats().crc_failures, 2);
+    assert_eq!(s.stats().crc_tail_failures, 1);
+    assert_eq!(s.stats().malformed, 2);
+    assert_eq!(s.stats().packets, 1);
+    // With the signature appended: still one packet, and counted as signed.
+    let signed = [b.clone(), vec![0xAB; 32]].concat();
+    s.push(3, &signed, &mut on).unwrap();
+    assert_eq!(s.stats().signed, 1);
+    assert_eq!(s.stats().packets, 2);
+}
+
+#[test]
+fn hesai_csv_goes_to_hesai_and_its_errors_say_what_is_wrong() {
+    let mut csv = String::from("Laser id,Elevation,Azimuth\n");
+    for i in 1..=32 {
+        csv.push_str(&format!("{i},{},0.1\n", 15 - i));
+    }
+    let c = parse_calibration(csv.as_bytes(), "x.csv", None).unwrap();
+    assert_eq!(c.family, "hesai");
+    for (bad, word) in [
+        (csv.replace("\n7,8,0.1", "\n7,NaN,0.1"), "Elevation"),
+        (csv.replace("\n7,8,0.1", "\n7,8,1e9"), "Azimuth"),
+        (csv.replace("\n7,8,0.1", "\n9,8,0.1"), "Laser id"),
+        (csv.replace("\n32,-17,0.1\n", "\n"), "31 channels"),
+        (csv.replace("\n7,8,0.1", "\n7,8"), "row"),
+    ] {
+        let e = parse_calibration(bad.as_bytes(), "x.csv", None).unwrap_err();
+        assert!(e.to_string().contains(word), "{e}");
+    }
+    // A Velodyne yaml is still Velodyne's.
+    let yaml =
+        "lasers:\n- {laser_id: 0, rot_correction: 0.0, vert_correction: 0.1}\nnum_lasers: 1\n";
+    match parse_calibration(yaml.as_bytes(), "v.yaml", None) {
+        Ok(c) => assert_eq!(c.family, "velodyne"),
+        Err(e) => assert!(!e.to_string().contains("Hesai"), "{e}"),
+    }
+    // AT128 .dat: truncated and wrong versions are refused with the reason.
+    let e = parse_calibration(&[0xEE, 0xFF, 1, 5, 128, 3, 3, 0], "a.dat", None).unwrap_err();
+    assert!(e.to_string().contains("AT128"), "{e}");
+}
+
+#[test]
+fn real_packets_and_files_mutated_through_the_fuzz_harnesses() {
+    let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
+    let mut runs = 0usize;
+    // Always: the synthetic packets.
+    let mut seeds: Vec<Vec<u8>> = vec![xt32_packet()];
+    let mut files: Vec<Vec<u8>> = Vec::new();
+    if let Some(root) = common::captures() {
+        for entry in walk(&root.join(GT)) {
+            if entry.extension().is_some_and(|e| e == "pcap") {
+                for (_, _, p) in common::datagrams(&entry).into_iter().take(3) {
+                    seeds.push(p);
+                }
+            }
+        }
+        for entry in walk(&root.join(CALIB)) {
+            let b = std::fs::read(&entry).unwrap();
+            assert!(
+                parse_hesai_calibration(&b).is_some_and(|r| r.is_ok()),
+                "{} is not read as a Hesai correction",
+                entry.display()
+            );
+            files.push(b);
+        }
+    }
+    for seed in &seeds {
+        for sel in 0..9u8 {
+            harness::hesai_packet(&[&[sel][..], seed].concat());
+            runs += 1;
+        }
+        for _ in 0..300 {
+            let m = mutate(&mut rng, seed);
+            let sel = rng.next() as u8;
+            harness::hesai_packet(&[&[sel][..], &m].concat());
+            runs += 1;
+        }
+    }
+    for f in &files {
+        harness::calib_hesai(f);
+        for _ in 0..200 {
+            harness::calib_hesai(&mutate(&mut rng, f));
+            runs += 1;
+        }
+    }
+    println!(
+        "{runs} harness runs on {} packets and {} files",
+        seeds.len(),
+        files.len()
+    );
+}
+
+fn walk(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
+    let mut out = Vec::new();
+    let Ok(rd) = std::fs::read_dir(dir) else {
+        return out;
+    };
+    for e in rd.flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            out.extend(walk(&p));
+        } else {
+            out.push(p);
+        }
+    }
+    out.sort();
+    out
+}
