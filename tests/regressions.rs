@@ -24,6 +24,7 @@ const REGRESSIONS: &[(&str, Option<&str>)] = &[
     ("decode_to_mcap-nmea-char-boundary.bin", None),
     ("ouster_packet-duplicate-measurement-id.bin", None),
     ("http_response-chunk-size-overflow.bin", None),
+    ("velodyne_packet-vls128-fixed-distance-unit.bin", None),
 ];
 
 fn dir() -> PathBuf {
@@ -53,6 +54,8 @@ fn replay(file: &str) {
         "bag_messages" => harness::bag_messages(&data),
         "bag_metadata" => harness::bag_metadata(&data),
         "bag_mcap" => harness::bag_mcap(&data),
+        "hesai_packet" => harness::hesai_packet(&data),
+        "calib_hesai" => harness::calib_hesai(&data),
         other => panic!("{file}: no fuzz target named {other:?}"),
     }
 }

@@ -438,8 +438,9 @@ fn calibration(model: VelodyneModel, variant: u8, bytes: &[u8]) -> VelodyneCalib
 /// range (65535 units + the distance correction), grown by the HDL-64E two-point
 /// interpolation (which scales with range) and the beam-origin offsets.
 fn coordinate_bound(model: VelodyneModel, calib: &VelodyneCalibration) -> f64 {
-    let res = calib
-        .distance_resolution
+    let res = model
+        .fixed_distance_resolution()
+        .or(calib.distance_resolution)
         .unwrap_or(model.distance_resolution());
     let m = calib
         .lasers
@@ -637,8 +638,9 @@ pub fn velodyne_packet(data: &[u8]) {
     for model in ALL_MODELS {
         let calib = calibration(model, sel & 7, rest);
         let bound = coordinate_bound(model, &calib);
-        let res = calib
-            .distance_resolution
+        let res = model
+            .fixed_distance_resolution()
+            .or(calib.distance_resolution)
             .unwrap_or(model.distance_resolution());
         let rings = calib.rings();
         for mode in MODES {
