@@ -396,3 +396,50 @@ fn hesai_calib_fetches_the_correction_from_a_fake_sensor_over_ptc() {
     assert_eq!(o.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&o.stderr).contains(&closed.to_string()));
 }
+
+#[test]
+fn nebula_filters_are_command_line_options() {
+    let Some(c) = common::captures() else { return };
+    let pcap = pcap_in(&c.join(GT).join("qt128"));
+    let calib = c.join(CALIB).join("PandarQT128.csv");
+    let points = |extra: &[&str]| -> u64 {
+        let o = Command::new(BIN)
+            .arg("decode")
+            .arg(&pcap)
+            .arg("--calib")
+            .arg(&calib)
+            .arg("--json")
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        j["points"].as_u64().unwrap()
+    };
+    let all = points(&[]);
+    let ranged = points(&["--min-range", "0.3", "--max-range", "300"]);
+    let nebula = points(&[
+        "--min-range",
+        "0.3",
+        "--max-range",
+        "300",
+        "--dual-return-threshold",
+        "0.1",
+    ]);
+    let half = points(&["--fov", "0:180"]);
+    assert!(ranged < all && nebula < ranged, "{all} {ranged} {nebula}");
+    assert!(
+        half < all * 6 / 10 && half > all * 3 / 10,
+        "{half} of {all}"
+    );
+    // Bad values are usage errors (exit code 2).
+    for bad in [["--fov", "10"], ["--dual-return-threshold", "-1"]] {
+        let o = Command::new(BIN)
+            .arg("decode")
+            .arg(&pcap)
+            .args(bad)
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(2), "{bad:?}");
+    }
+}
