@@ -443,3 +443,43 @@ fn nebula_filters_are_command_line_options() {
         assert_eq!(o.status.code(), Some(2), "{bad:?}");
     }
 }
+
+#[test]
+fn listen_fetches_a_hesai_correction_over_ptc_and_decodes() {
+    use std::io::{Read, Write};
+    let Some(c) = common::captures() else { return };
+    let _guard = serial();
+    let csv = std::fs::read(c.join(CALIB).join("PandarXT32.csv")).unwrap();
+    // The fake sensor's PTC port, on the address the replay sends from (127.0.0.1).
+    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let ptc_port = l.local_addr().unwrap().port();
+    let server = std::thread::spawn(move || {
+        let (mut s, _) = l.accept().unwrap();
+        let mut head = [0u8; 8];
+        s.read_exact(&mut head).unwrap();
+        assert_eq!(head[2], 0x05);
+        let mut r = vec![0x47, 0x74, 0x05, 0];
+        r.extend_from_slice(&(csv.len() as u32).to_be_bytes());
+        r.extend_from_slice(&csv);
+        s.write_all(&r).unwrap();
+    });
+    let pcap = pcap_in(&c.join(GT).join("xt32"));
+    let offset = free_offset(&[2368]);
+    let l = start_listen(&[
+        "--sensor".into(),
+        format!("127.0.0.1:{}", 2368 + offset),
+        "--hesai-ptc".into(),
+        ptc_port.to_string(),
+    ]);
+    server.join().unwrap();
+    replay(&pcap, offset, "1", &["--per-source-loopback"]);
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    let (code, out, err) = l.stop("INT");
+    assert_eq!(code, Some(0), "{err}");
+    let live: serde_json::Value =
+        serde_json::from_str(&out).unwrap_or_else(|e| panic!("{e}: {out:?} {err}"));
+    let s = &live["sensors"][0];
+    assert_eq!(s["kind"], "hesai", "{live}");
+    assert_eq!(s["calibration"], "hesai-ptc-127.0.0.1.csv", "{live}");
+    assert!(live["points"].as_u64().unwrap() > 200_000, "{live}");
+}

@@ -243,6 +243,10 @@ struct ListenCmd {
     /// Sensor name (frame id and topic prefix); only with a single sensor.
     #[arg(long)]
     name: Option<String>,
+    /// Before listening, fetch the angle correction of every --sensor without its own --calib
+    /// over Hesai's TCP control protocol (port 9347, or PORT).
+    #[arg(long, value_name = "PORT", num_args = 0..=1, default_missing_value = "9347")]
+    hesai_ptc: Option<u16>,
     /// Join this multicast group on every port.
     #[arg(long, value_name = "GROUP")]
     multicast: Option<std::net::Ipv4Addr>,
@@ -442,6 +446,7 @@ pub fn main() -> ExitCode {
                 strict: c.strict,
                 json: c.json,
                 serve: c.serve,
+                hesai_ptc: c.hesai_ptc,
             };
             listen::listen_command(&args)
         }
