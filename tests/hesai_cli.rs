@@ -396,3 +396,90 @@ fn hesai_calib_fetches_the_correction_from_a_fake_sensor_over_ptc() {
     assert_eq!(o.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&o.stderr).contains(&closed.to_string()));
 }
+
+#[test]
+fn nebula_filters_are_command_line_options() {
+    let Some(c) = common::captures() else { return };
+    let pcap = pcap_in(&c.join(GT).join("qt128"));
+    let calib = c.join(CALIB).join("PandarQT128.csv");
+    let points = |extra: &[&str]| -> u64 {
+        let o = Command::new(BIN)
+            .arg("decode")
+            .arg(&pcap)
+            .arg("--calib")
+            .arg(&calib)
+            .arg("--json")
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        j["points"].as_u64().unwrap()
+    };
+    let all = points(&[]);
+    let ranged = points(&["--min-range", "0.3", "--max-range", "300"]);
+    let nebula = points(&[
+        "--min-range",
+        "0.3",
+        "--max-range",
+        "300",
+        "--dual-return-threshold",
+        "0.1",
+    ]);
+    let half = points(&["--fov", "0:180"]);
+    assert!(ranged < all && nebula < ranged, "{all} {ranged} {nebula}");
+    assert!(
+        half < all * 6 / 10 && half > all * 3 / 10,
+        "{half} of {all}"
+    );
+    // Bad values are usage errors (exit code 2).
+    for bad in [["--fov", "10"], ["--dual-return-threshold", "-1"]] {
+        let o = Command::new(BIN)
+            .arg("decode")
+            .arg(&pcap)
+            .args(bad)
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(2), "{bad:?}");
+    }
+}
+
+#[test]
+fn listen_fetches_a_hesai_correction_over_ptc_and_decodes() {
+    use std::io::{Read, Write};
+    let Some(c) = common::captures() else { return };
+    let _guard = serial();
+    let csv = std::fs::read(c.join(CALIB).join("PandarXT32.csv")).unwrap();
+    // The fake sensor's PTC port, on the address the replay sends from (127.0.0.1).
+    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let ptc_port = l.local_addr().unwrap().port();
+    let server = std::thread::spawn(move || {
+        let (mut s, _) = l.accept().unwrap();
+        let mut head = [0u8; 8];
+        s.read_exact(&mut head).unwrap();
+        assert_eq!(head[2], 0x05);
+        let mut r = vec![0x47, 0x74, 0x05, 0];
+        r.extend_from_slice(&(csv.len() as u32).to_be_bytes());
+        r.extend_from_slice(&csv);
+        s.write_all(&r).unwrap();
+    });
+    let pcap = pcap_in(&c.join(GT).join("xt32"));
+    let offset = free_offset(&[2368]);
+    let l = start_listen(&[
+        "--sensor".into(),
+        format!("127.0.0.1:{}", 2368 + offset),
+        "--hesai-ptc".into(),
+        ptc_port.to_string(),
+    ]);
+    server.join().unwrap();
+    replay(&pcap, offset, "1", &["--per-source-loopback"]);
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    let (code, out, err) = l.stop("INT");
+    assert_eq!(code, Some(0), "{err}");
+    let live: serde_json::Value =
+        serde_json::from_str(&out).unwrap_or_else(|e| panic!("{e}: {out:?} {err}"));
+    let s = &live["sensors"][0];
+    assert_eq!(s["kind"], "hesai", "{live}");
+    assert_eq!(s["calibration"], "hesai-ptc-127.0.0.1.csv", "{live}");
+    assert!(live["points"].as_u64().unwrap() > 200_000, "{live}");
+}

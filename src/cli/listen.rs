@@ -105,6 +105,9 @@ pub struct ListenArgs {
     pub json: bool,
     /// `--serve`: the live view.
     pub serve: super::serve::ServeArgs,
+    /// `--hesai-ptc[=PORT]`: fetch the angle correction of every `--sensor` without a bound
+    /// `--calib` over Hesai's TCP control protocol at this port before listening.
+    pub hesai_ptc: Option<u16>,
 }
 
 /// From the decode thread to the main thread.
@@ -187,6 +190,51 @@ fn listen_sink_options(args: &ListenArgs) -> SinkOptions {
             args.fields_minimal,
         )
     }
+}
+
+/// `args` with the angle correction of every `--sensor` that has no `--calib ADDR=FILE` of its
+/// own, fetched over Hesai's PTC at `port` and bound to its address (written next to the run
+/// in the temporary folder, so that the run reads and attaches it like any `--calib` file). A
+/// sensor that does not answer is left as it was (it may not be a Hesai).
+fn with_hesai_corrections(args: &ListenArgs, port: u16) -> ListenArgs {
+    let mut out = args.clone();
+    let dir = std::env::temp_dir().join(format!("ringscan-hesai-ptc-{}", std::process::id()));
+    let mut seen = BTreeSet::new();
+    for (ip, _) in &args.sensors {
+        let bound = args
+            .session
+            .calib
+            .iter()
+            .any(|c| c.split_once('=').is_some_and(|(a, _)| a == ip.to_string()));
+        if bound || !seen.insert(*ip) {
+            continue;
+        }
+        let addr = std::net::SocketAddr::new((*ip).into(), port);
+        match super::ptc::fetch_angle_correction(addr, Duration::from_secs(2)) {
+            Ok(bytes) => {
+                let ext = if bytes.starts_with(&[0xEE, 0xFF]) {
+                    "dat"
+                } else {
+                    "csv"
+                };
+                let path = dir.join(format!("hesai-ptc-{ip}.{ext}"));
+                let written =
+                    std::fs::create_dir_all(&dir).and_then(|()| std::fs::write(&path, &bytes));
+                match written {
+                    Ok(()) => {
+                        tracing::info!(
+                            "{ip}: angle correction fetched over PTC ({} bytes)",
+                            bytes.len()
+                        );
+                        out.session.calib.push(format!("{ip}={}", path.display()));
+                    }
+                    Err(e) => tracing::warn!("{}: {e}", path.display()),
+                }
+            }
+            Err(e) => tracing::warn!("--hesai-ptc: {e}"),
+        }
+    }
+    out
 }
 
 /// Parses fetched Ouster metadata into a calibration bound to `addr`.
@@ -621,6 +669,14 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
         return Err(RunError::Usage("--split-every needs --out".into()));
     }
     let started = Instant::now();
+    let fetched;
+    let args = match args.hesai_ptc {
+        None => args,
+        Some(port) => {
+            fetched = with_hesai_corrections(args, port);
+            &fetched
+        }
+    };
     // Options and calibrations are checked here, before any socket is opened.
     Session::new(&args.session)?;
     let calibs = load_calibs(&args.session.calib)?;

@@ -154,6 +154,15 @@ struct DecodeCmd {
     /// Drop points farther than this, metres.
     #[arg(long)]
     max_range: Option<f32>,
+    /// Hesai multi-return: also drop a return that is not its firing's last when within this
+    /// many metres of another (nebula's dual_return_distance_threshold, e.g. 0.1); default:
+    /// only identical returns are merged.
+    #[arg(long, value_name = "M")]
+    dual_return_threshold: Option<f32>,
+    /// Hesai: keep only points whose corrected azimuth lies between START and END degrees
+    /// (clockwise from forward), e.g. 30:150.
+    #[arg(long, value_name = "START:END", value_parser = parse_fov)]
+    fov: Option<(f64, f64)>,
     /// Point fields written.
     #[arg(long, value_enum, default_value_t = FieldsArg::Default)]
     fields: FieldsArg,
@@ -249,6 +258,10 @@ struct ListenCmd {
     /// Sensor name (frame id and topic prefix); only with a single sensor.
     #[arg(long)]
     name: Option<String>,
+    /// Before listening, fetch the angle correction of every --sensor without its own --calib
+    /// over Hesai's TCP control protocol (port 9347, or PORT).
+    #[arg(long, value_name = "PORT", num_args = 0..=1, default_missing_value = "9347")]
+    hesai_ptc: Option<u16>,
     /// Join this multicast group on every port.
     #[arg(long, value_name = "GROUP")]
     multicast: Option<std::net::Ipv4Addr>,
@@ -264,6 +277,15 @@ struct ListenCmd {
     /// Drop points farther than this, metres.
     #[arg(long)]
     max_range: Option<f32>,
+    /// Hesai multi-return: also drop a return that is not its firing's last when within this
+    /// many metres of another (nebula's dual_return_distance_threshold, e.g. 0.1); default:
+    /// only identical returns are merged.
+    #[arg(long, value_name = "M")]
+    dual_return_threshold: Option<f32>,
+    /// Hesai: keep only points whose corrected azimuth lies between START and END degrees
+    /// (clockwise from forward), e.g. 30:150.
+    #[arg(long, value_name = "START:END", value_parser = parse_fov)]
+    fov: Option<(f64, f64)>,
     /// Point fields written.
     #[arg(long, value_enum, default_value_t = FieldsArg::Default)]
     fields: FieldsArg,
@@ -376,6 +398,21 @@ fn init_logging(verbose: u8) {
         .try_init();
 }
 
+/// `--fov START:END` in degrees.
+fn parse_fov(s: &str) -> Result<(f64, f64), String> {
+    let (a, b) = s
+        .split_once(':')
+        .ok_or_else(|| format!("`{s}`: expected START:END in degrees"))?;
+    let num = |x: &str| {
+        x.trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| format!("`{s}`: `{x}` is not a number of degrees"))
+    };
+    Ok((num(a)?, num(b)?))
+}
+
 /// Entry point: parse, run, map errors to exit codes (0 ok, 1 error, 2 usage).
 pub fn main() -> ExitCode {
     let cli = Cli::parse();
@@ -392,6 +429,8 @@ pub fn main() -> ExitCode {
                 cut_angle_deg: c.cut_angle,
                 min_range: c.min_range,
                 max_range: c.max_range,
+                dual_return_threshold_m: c.dual_return_threshold,
+                fov_deg: c.fov,
                 fields_all: c.fields == FieldsArg::All,
                 fields_minimal: c.fields == FieldsArg::Minimal,
                 format: c.format,
@@ -440,6 +479,8 @@ pub fn main() -> ExitCode {
                     cut_angle_deg: c.cut_angle,
                     min_range: c.min_range,
                     max_range: c.max_range,
+                    dual_return_threshold_m: c.dual_return_threshold,
+                    fov_deg: c.fov,
                     fields_all: c.fields == FieldsArg::All,
                     raw: c.raw,
                     crc: match c.crc {
@@ -463,6 +504,7 @@ pub fn main() -> ExitCode {
                 strict: c.strict,
                 json: c.json,
                 serve: c.serve,
+                hesai_ptc: c.hesai_ptc,
             };
             listen::listen_command(&args)
         }

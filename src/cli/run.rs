@@ -45,6 +45,10 @@ pub struct DecodeArgs {
     pub cut_angle_deg: f64,
     pub min_range: Option<f32>,
     pub max_range: Option<f32>,
+    /// `--dual-return-threshold` (Hesai).
+    pub dual_return_threshold_m: Option<f32>,
+    /// `--fov START:END`, degrees (Hesai).
+    pub fov_deg: Option<(f64, f64)>,
     pub fields_all: bool,
     /// `--fields minimal`: x, y, z, intensity only.
     pub fields_minimal: bool,
@@ -396,6 +400,8 @@ pub struct SessionOptions {
     pub cut_angle_deg: f64,
     pub min_range: Option<f32>,
     pub max_range: Option<f32>,
+    pub dual_return_threshold_m: Option<f32>,
+    pub fov_deg: Option<(f64, f64)>,
     pub fields_all: bool,
     pub raw: bool,
     pub crc: Option<bool>,
@@ -417,6 +423,8 @@ impl DecodeArgs {
             cut_angle_deg: self.cut_angle_deg,
             min_range: self.min_range,
             max_range: self.max_range,
+            dual_return_threshold_m: self.dual_return_threshold_m,
+            fov_deg: self.fov_deg,
             fields_all: self.fields_all,
             raw: self.raw,
             crc: self.crc,
@@ -492,6 +500,20 @@ impl Session {
                 "--odometry: its outputs are written with --format foxglove only".into(),
             ));
         }
+        if let Some(t) = opts.dual_return_threshold_m {
+            if !(t.is_finite() && t >= 0.0) {
+                return Err(RunError::Usage(format!(
+                    "--dual-return-threshold {t}: expected metres ≥ 0"
+                )));
+            }
+        }
+        if let Some((a, b)) = opts.fov_deg {
+            if !(a.is_finite() && b.is_finite()) {
+                return Err(RunError::Usage(format!(
+                    "--fov {a}:{b}: expected START:END in degrees"
+                )));
+            }
+        }
         let calibs = load_calibs(&opts.calib)?;
         let cut = (opts.cut_angle_deg * 100.0).round() as u16 % 36_000;
         let chooser = std::rc::Rc::new(std::cell::RefCell::new(Chooser::new(
@@ -503,6 +525,13 @@ impl Session {
                 keep_extras: opts.fields_all,
                 keep_columns: false,
                 crc: opts.crc,
+                dual_return_threshold_m: opts.dual_return_threshold_m,
+                fov_cdeg: opts.fov_deg.map(|(a, b)| {
+                    (
+                        (a.rem_euclid(360.0) * 100.0).round() as u32 % 36_000,
+                        (b.rem_euclid(360.0) * 100.0).round() as u32 % 36_000,
+                    )
+                }),
             },
         )));
         let shared = chooser.clone();
@@ -1143,6 +1172,8 @@ pub fn info_command(
         cut_angle_deg: 0.0,
         min_range: None,
         max_range: None,
+        dual_return_threshold_m: None,
+        fov_deg: None,
         fields_all: false,
         fields_minimal: false,
         compression: ChunkCompression::default(),
@@ -1181,6 +1212,8 @@ pub fn demo_command(out: &Path, json_out: bool) -> Result<ExitCode, RunError> {
         cut_angle_deg: 0.0,
         min_range: None,
         max_range: None,
+        dual_return_threshold_m: None,
+        fov_deg: None,
         fields_all: false,
         fields_minimal: false,
         compression: ChunkCompression::default(),

@@ -189,6 +189,13 @@ pub struct StreamSettings {
     pub keep_columns: bool,
     /// Packet checksum checks: `None` = the family's rule, `Some(on)` forces them.
     pub crc: Option<bool>,
+    /// Multi-return sensors that send each return in a block of its own (Hesai): drop a return
+    /// that is not its firing's last when within this distance (m) of another (nebula's
+    /// `dual_return_distance_threshold`). `None`: only identical returns are merged.
+    pub dual_return_threshold_m: Option<f32>,
+    /// Keep only points whose corrected azimuth lies in (start, end), 0.01°, clockwise
+    /// (Hesai; `--fov`).
+    pub fov_cdeg: Option<(u32, u32)>,
 }
 
 /// The calibrations given for a run, and which of them already serve a sensor: a file not

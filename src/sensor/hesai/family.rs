@@ -126,6 +126,10 @@ impl Family for Hesai {
         if let Some(on) = s.crc {
             cfg.check_crc = on;
         }
+        if let Some(t) = s.dual_return_threshold_m {
+            cfg.options.dual_return_threshold_m = t;
+        }
+        cfg.options.fov_cdeg = s.fov_cdeg;
         Some(Ok(Box::new(HesaiStream::new(cfg))))
     }
 }
