@@ -25,6 +25,7 @@ const REGRESSIONS: &[(&str, Option<&str>)] = &[
     ("ouster_packet-duplicate-measurement-id.bin", None),
     ("http_response-chunk-size-overflow.bin", None),
     ("velodyne_packet-vls128-fixed-distance-unit.bin", None),
+    ("bag_mcap-mcap-crate-chunk-length-overflow.bin", None),
 ];
 
 fn dir() -> PathBuf {
