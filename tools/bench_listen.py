@@ -18,7 +18,7 @@ its peak RSS. Scenarios:
   the MCAP chunks its compression threads could not take in time are reported, written
   uncompressed by listen, never dropped);
 * ramp (count only, T = --ramp-seconds each): HDL-64E at 10, 15, 20, 30, 40x and max, to find
-  where loss begins; the same with --out (zstd MCAP) at 5, 10, 15, 20, 30x and max;
+  where loss begins; the same with --out (zstd MCAP) at 5, 10, 12, 15, 20, 30x and max;
 * garbage flood (count only, T = --ramp-seconds): random datagrams of random sizes (1 to 65507
   bytes) as fast as one Python sender can, half from the sensor's address (queued, then ignored
   by the decoder) and half from another loopback address (filtered); peak RSS shows whether
@@ -219,7 +219,7 @@ def main():
         plan.append((f"hdl64e-{r}x-count", H, r, a.ramp_seconds, False, False))
     for r in (20, 40, "max"):
         plan.append((f"os-rng19-{r}x-count", O, r, a.ramp_seconds, False, False))
-    for r in (5, 10, 15, 20, 30, "max"):
+    for r in (5, 10, 12, 15, 20, 30, "max"):
         plan.append((f"hdl64e-{r}x-out-ramp", H, r, a.ramp_seconds, True, False))
     plan.append(("garbage-flood", H, 1, a.ramp_seconds, False, True))
     only = [x for x in a.only.split(",") if x]
