@@ -1288,114 +1288,14 @@ fn print_text(j: &Value) {
         }
     }
     for s in j["sensors"].as_array().into_iter().flatten() {
-        let st = |k: &str| s[k].as_str().unwrap_or("-").to_string();
-        if s["kind"] == "ouster" {
-            println!(
-                "  sensor {} ({}), ports {}: {} sn {} {} {} {}, window [{}, {}]",
-                st("name"),
-                st("address"),
-                s["ports"],
-                st("model"),
-                s["serial"],
-                st("firmware"),
-                st("profile"),
-                st("lidar_mode"),
-                s["column_window"][0],
-                s["column_window"][1]
-            );
-            println!(
-                "    {} lidar + {} IMU packets, {} sweeps, {} points; missing columns {}, malformed {}, CRC failures {}, late {}, other sensor {}, epochs {}",
-                g(&s["lidar_packets"]),
-                g(&s["imu_packets"]),
-                g(&s["sweeps"]),
-                g(&s["points"]),
-                g(&s["missing_columns"]),
-                g(&s["malformed"]),
-                g(&s["crc_failures"]),
-                g(&s["late"]),
-                g(&s["wrong_sensor"]),
-                g(&s["epochs"])
-            );
-            println!("    packets per port: {}", s["packets_per_port"]);
-            println!(
-                "    metadata: {}; timestamps: {}; clock: {}; CRC checked: {}; shot limiting: {}; thermal: {}",
-                st("calibration"),
-                st("timestamp_mode"),
-                st("clock"),
-                s["crc_checked"],
-                st("shot_limiting"),
-                st("thermal_shutdown")
-            );
+        let kind = s["kind"].as_str().unwrap_or("");
+        let Some(family) = ringscan::sensor::family(kind) else {
+            println!("  sensor of an unknown kind {kind:?}: {s}");
             continue;
+        };
+        for line in family.describe(s) {
+            println!("{line}");
         }
-        if s["kind"] == "hesai" {
-            println!(
-                "  sensor {} ({}), ports {}: Hesai {}, protocol {}, {}; {}",
-                st("name"),
-                st("address"),
-                s["ports"],
-                s["model"].as_str().unwrap_or("unknown model"),
-                s["protocol"].as_str().unwrap_or("none (no pre-header)"),
-                st("return_mode"),
-                st("detection")
-            );
-            println!(
-                "    {} packets, {} sweeps, {} points; missing {}, malformed {} (CRC failures {}), discontinuities {}, signed {}",
-                g(&s["data_packets"]),
-                g(&s["sweeps"]),
-                g(&s["points"]),
-                g(&s["missing"]),
-                g(&s["malformed"]),
-                g(&s["crc_failures"]),
-                g(&s["discontinuities"]),
-                g(&s["signed_packets"])
-            );
-            println!("    packets per port: {}", s["packets_per_port"]);
-            println!(
-                "    calibration: {}; clock: {} ({}); CRC: {}; functional safety: {}",
-                st("calibration"),
-                st("clock_state"),
-                st("clock"),
-                st("crc"),
-                if s["functional_safety"].is_null() {
-                    "none in these packets".to_string()
-                } else {
-                    s["functional_safety"].to_string()
-                }
-            );
-            continue;
-        }
-        println!(
-            "  sensor {} ({}), ports {}: {} {}, {}",
-            st("name"),
-            st("address"),
-            s["ports"],
-            s["model"].as_str().unwrap_or("unknown model"),
-            st("return_mode"),
-            st("detection")
-        );
-        println!(
-            "    {} data + {} position packets, {} sweeps, {} points; missing {}, malformed {}, discontinuities {}",
-            g(&s["data_packets"]),
-            g(&s["position_packets"]),
-            g(&s["sweeps"]),
-            g(&s["points"]),
-            g(&s["missing"]),
-            g(&s["malformed"]),
-            g(&s["discontinuities"])
-        );
-        println!("    packets per port: {}", s["packets_per_port"]);
-        println!(
-            "    calibration: {}; clock: {}; PPS: {}; GPS: {}",
-            st("calibration"),
-            st("clock"),
-            s["pps"].as_str().unwrap_or("no position packets"),
-            if s["gps"].is_null() {
-                "no NMEA time".to_string()
-            } else {
-                format!("RMC valid={}", s["gps"]["valid"])
-            }
-        );
     }
     if j["sensors"].as_array().is_none_or(|a| a.is_empty()) {
         println!("  no sensor found (Ouster captures need their metadata: --calib META.json)");

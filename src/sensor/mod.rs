@@ -126,6 +126,43 @@ pub trait Family: Sync {
     /// datagram to the next family. An error is a sensor the family recognised but cannot
     /// decode with what it was given.
     fn claim(&self, datagram: &FirstDatagram<'_>, pool: &mut CalibrationPool) -> Option<Claimed>;
+
+    /// The lines `ringscan info` prints for one of its sensors, from the sensor's entry in the
+    /// summary ([`SensorStream::summary`]). The family words them because only it knows which
+    /// of its facts matter; this default prints what every summary has.
+    fn describe(&self, sensor: &serde_json::Value) -> Vec<String> {
+        let s = |k: &str| summary_str(&sensor[k]);
+        let n = |k: &str| sensor[k].as_u64().unwrap_or(0);
+        vec![
+            format!(
+                "  sensor {} ({}), ports {}: {} {}, {}",
+                s("name"),
+                s("address"),
+                sensor["ports"],
+                s("kind"),
+                s("model"),
+                s("return_mode")
+            ),
+            format!(
+                "    {} sweeps, {} points; missing {}, malformed {}",
+                n("sweeps"),
+                n("points"),
+                n("missing"),
+                n("malformed")
+            ),
+            format!("    packets per port: {}", sensor["packets_per_port"]),
+            format!(
+                "    calibration: {}; clock: {}",
+                s("calibration"),
+                s("clock")
+            ),
+        ]
+    }
+}
+
+/// A summary field as `info` prints it: its text, or `-` when it has none.
+pub fn summary_str(v: &serde_json::Value) -> &str {
+    v.as_str().unwrap_or("-")
 }
 
 /// What [`Family::claim`] returns: a stream, or why the family's sensor cannot be decoded.

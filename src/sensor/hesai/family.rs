@@ -20,8 +20,8 @@ use super::model::{HesaiModel, ALL_MODELS, SIGNATURE_LEN};
 use super::sweep::{return_mode_words, HesaiConfig, HesaiFacts, HesaiStream};
 use super::wire::HesaiPacket;
 use crate::sensor::{
-    CalibError, Calibration, CalibrationPool, Claimed, Facts, Family, FirstDatagram, OnSweep,
-    PacketCounts, SensorStream, StreamError,
+    summary_str, CalibError, Calibration, CalibrationPool, Claimed, Facts, Family, FirstDatagram,
+    OnSweep, PacketCounts, SensorStream, StreamError,
 };
 
 /// The Hesai family.
@@ -131,6 +131,47 @@ impl Family for Hesai {
         }
         cfg.options.fov_cdeg = s.fov_cdeg;
         Some(Ok(Box::new(HesaiStream::new(cfg))))
+    }
+
+    fn describe(&self, s: &Value) -> Vec<String> {
+        let st = |k: &str| summary_str(&s[k]);
+        let g = |v: &Value| v.as_u64().unwrap_or(0);
+        let mut out = Vec::with_capacity(4);
+        out.push(format!(
+            "  sensor {} ({}), ports {}: Hesai {}, protocol {}, {}; {}",
+            st("name"),
+            st("address"),
+            s["ports"],
+            s["model"].as_str().unwrap_or("unknown model"),
+            s["protocol"].as_str().unwrap_or("none (no pre-header)"),
+            st("return_mode"),
+            st("detection")
+        ));
+        out.push(format!(
+            "    {} packets, {} sweeps, {} points; missing {}, malformed {} (CRC failures {}), discontinuities {}, signed {}",
+            g(&s["data_packets"]),
+            g(&s["sweeps"]),
+            g(&s["points"]),
+            g(&s["missing"]),
+            g(&s["malformed"]),
+            g(&s["crc_failures"]),
+            g(&s["discontinuities"]),
+            g(&s["signed_packets"])
+        ));
+        out.push(format!("    packets per port: {}", s["packets_per_port"]));
+        out.push(format!(
+            "    calibration: {}; clock: {} ({}); CRC: {}; functional safety: {}",
+            st("calibration"),
+            st("clock_state"),
+            st("clock"),
+            st("crc"),
+            if s["functional_safety"].is_null() {
+                "none in these packets".to_string()
+            } else {
+                s["functional_safety"].to_string()
+            }
+        ));
+        out
     }
 }
 

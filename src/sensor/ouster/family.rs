@@ -13,8 +13,8 @@ use super::model::HeaderKind;
 use super::sweep::{OusterFacts, OusterStream, OusterStreamConfig};
 use super::wire::{shot_limiting_name, thermal_shutdown_name, LidarPacket};
 use crate::sensor::{
-    CalibError, Calibration, CalibrationPool, Claimed, Facts, Family, FirstDatagram, ImuSample,
-    OnSweep, PacketCounts, SensorStream, StreamError,
+    summary_str, CalibError, Calibration, CalibrationPool, Claimed, Facts, Family, FirstDatagram,
+    ImuSample, OnSweep, PacketCounts, SensorStream, StreamError,
 };
 
 /// The Ouster family.
@@ -145,6 +145,49 @@ impl Family for Ouster {
                 .map(|s| Box::new(s) as Box<dyn SensorStream>)
                 .map_err(StreamError::Decode),
         )
+    }
+
+    fn describe(&self, s: &Value) -> Vec<String> {
+        let st = |k: &str| summary_str(&s[k]);
+        let g = |v: &Value| v.as_u64().unwrap_or(0);
+        let mut out = Vec::with_capacity(4);
+        out.push(format!(
+            "  sensor {} ({}), ports {}: {} sn {} {} {} {}, window [{}, {}]",
+            st("name"),
+            st("address"),
+            s["ports"],
+            st("model"),
+            s["serial"],
+            st("firmware"),
+            st("profile"),
+            st("lidar_mode"),
+            s["column_window"][0],
+            s["column_window"][1]
+        ));
+        out.push(format!(
+            "    {} lidar + {} IMU packets, {} sweeps, {} points; missing columns {}, malformed {}, CRC failures {}, late {}, other sensor {}, epochs {}",
+            g(&s["lidar_packets"]),
+            g(&s["imu_packets"]),
+            g(&s["sweeps"]),
+            g(&s["points"]),
+            g(&s["missing_columns"]),
+            g(&s["malformed"]),
+            g(&s["crc_failures"]),
+            g(&s["late"]),
+            g(&s["wrong_sensor"]),
+            g(&s["epochs"])
+        ));
+        out.push(format!("    packets per port: {}", s["packets_per_port"]));
+        out.push(format!(
+            "    metadata: {}; timestamps: {}; clock: {}; CRC checked: {}; shot limiting: {}; thermal: {}",
+            st("calibration"),
+            st("timestamp_mode"),
+            st("clock"),
+            s["crc_checked"],
+            st("shot_limiting"),
+            st("thermal_shutdown")
+        ));
+        out
     }
 }
 

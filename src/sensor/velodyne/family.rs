@@ -11,8 +11,8 @@ use super::calib::{parse_velodyne_bytes, VelodyneCalibration};
 use super::model::{VelodyneModel, ALL_MODELS, DATA_PACKET_LEN, POSITION_PACKET_LEN};
 use super::sweep::{SensorFacts, StreamConfig, VelodyneStream};
 use crate::sensor::{
-    CalibError, Calibration, CalibrationPool, Claimed, Facts, Family, FirstDatagram, OnSweep,
-    PacketCounts, SensorStream, StreamError,
+    summary_str, CalibError, Calibration, CalibrationPool, Claimed, Facts, Family, FirstDatagram,
+    OnSweep, PacketCounts, SensorStream, StreamError,
 };
 
 /// The Velodyne family.
@@ -96,6 +96,44 @@ impl Family for Velodyne {
             ..StreamConfig::default()
         };
         Some(Ok(Box::new(VelodyneStream::new(cfg))))
+    }
+
+    fn describe(&self, s: &Value) -> Vec<String> {
+        let st = |k: &str| summary_str(&s[k]);
+        let g = |v: &Value| v.as_u64().unwrap_or(0);
+        let mut out = Vec::with_capacity(4);
+        out.push(format!(
+            "  sensor {} ({}), ports {}: {} {}, {}",
+            st("name"),
+            st("address"),
+            s["ports"],
+            s["model"].as_str().unwrap_or("unknown model"),
+            st("return_mode"),
+            st("detection")
+        ));
+        out.push(format!(
+            "    {} data + {} position packets, {} sweeps, {} points; missing {}, malformed {}, discontinuities {}",
+            g(&s["data_packets"]),
+            g(&s["position_packets"]),
+            g(&s["sweeps"]),
+            g(&s["points"]),
+            g(&s["missing"]),
+            g(&s["malformed"]),
+            g(&s["discontinuities"])
+        ));
+        out.push(format!("    packets per port: {}", s["packets_per_port"]));
+        out.push(format!(
+            "    calibration: {}; clock: {}; PPS: {}; GPS: {}",
+            st("calibration"),
+            st("clock"),
+            s["pps"].as_str().unwrap_or("no position packets"),
+            if s["gps"].is_null() {
+                "no NMEA time".to_string()
+            } else {
+                format!("RMC valid={}", s["gps"]["valid"])
+            }
+        ));
+        out
     }
 }
 
