@@ -350,6 +350,18 @@ def main():
         for c in sorted(hesai.glob("**/calibration/*")):
             if c.stat().st_size <= 64 * 1024:
                 put("calib_hesai", c.read_bytes(), c.name.replace(".", "_"))
+    # An AT128 .dat of layout 1.3 (no shared file has it): fields 30/150/270°, channel offsets,
+    # a few grid entries.
+    v13 = bytearray(72572)
+    v13[0:7] = bytes([0xEE, 0xFF, 1, 3, 128, 3, 3])
+    v13[15] = 1
+    struct.pack_into("<3H3H", v13, 16, 3000, 15000, 27000, 15000, 27000, 3000)
+    struct.pack_into("<128h", v13, 28, *[(k % 7 - 3) * 50 for k in range(128)])
+    struct.pack_into("<128h", v13, 284, *[1270 - 20 * k for k in range(128)])
+    for i in range(0, 36000, 997):
+        v13[540 + i] = (i * 7) % 256
+        v13[36540 + i] = (i * 3) % 256
+    put("calib_hesai", bytes(v13), "at128_v13")
     put("calib_hesai", b"Laser id,Elevation,Azimuth\n" + b"".join(
         b"%d,%.3f,%.3f\n" % (i + 1, 15 - i, 0.1 * i) for i in range(32)), "tiny")
 

@@ -47,7 +47,7 @@ max_len() {
     bag_messages) echo 16384 ;;
     bag_metadata) echo 8192 ;;
     hesai_packet) echo 1400 ;;
-    calib_hesai) echo 65536 ;;
+    calib_hesai) echo 73728 ;;
     *) echo 4096 ;;
   esac
 }

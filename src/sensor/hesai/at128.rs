@@ -1,7 +1,9 @@
-//! The PandarAT128's binary angle correction (`.dat`, version 1.5) and its angle formulas.
+//! The PandarAT128's binary angle correction (`.dat`) and its angle formulas, in its two
+//! published layouts, told apart by the version bytes (2, 3).
 //!
-//! Layout (little-endian; Hesai AT128 user manual, "Angle correction file"; the same fields as
-//! tier4/nebula's `HesaiCorrection` and HesaiLidar_SDK_2.0):
+//! **1.5** (little-endian; Hesai AT128 user manual, "Angle correction file"; read the same way
+//! by tier4/nebula's `HesaiCorrection` and every HesaiLidar_SDK_2.0 release; all four shared
+//! `PandarAT128.dat*` files are 1.5, resolution 1 or 2):
 //!
 //! | offset | field |
 //! |---|---|
@@ -26,6 +28,30 @@
 //! `elevation = elevation[ch] + 256·adj_el(ch, a)`, where `adj(ch, a)` interpolates linearly
 //! between the entries `i = ⌊a / 2°⌋` and `i + 1` of the channel's row (× R, in 0.01°) and rounds
 //! to an integer number of 0.01°. The mirror doubles the encoder angle, hence the factor 2.
+//!
+//! **1.3**, the first AT128 layout (HesaiLidar_SDK_2.0 up to 2.0.7 and the AT128 ROS driver
+//! read it; nebula reads it too but marks it "not worked"): the same 16-byte header, then
+//!
+//! | offset | field |
+//! |---|---|
+//! | 16 | start frame, u16 × M, 0.01° × R |
+//! | 16 + 2M | end frame, u16 × M |
+//! | 16 + 4M | azimuth, i16 × N, 0.01° × R |
+//! | 16 + 4M + 2N | elevation, i16 × N |
+//! | 16 + 4M + 4N | azimuth adjustment, i8 × 36 000, 0.01° × R |
+//! | 16 + 4M + 4N + 36 000 | elevation adjustment, i8 × 36 000 |
+//! | end − 32 | SHA-256 |
+//!
+//! The adjustment grids are not per channel: entry `⌊a / 0.01°⌋` (one per 0.01° of encoder
+//! azimuth, a whole turn) applies to every channel, without interpolation (the ROS driver's
+//! `azimuth_offset[u16Azimuth]`): `azimuth = 2·(a − start_m) − azimuth[ch] + adj_az[⌊a⌋]`,
+//! `elevation = elevation[ch] + adj_el[⌊a⌋]`, every file value × R. (The ROS driver scales
+//! the encoder azimuth by R too, which only agrees with the file's units for R = 1; here R
+//! scales the file's values, as in 1.5.)
+//!
+//! **1.6–1.9** (HesaiLidar_SDK_2.0 2.0.10 and later declare their fields: a file length, a
+//! 16-bit channel count, a channel-to-laser map, an angle division and an adjustment interval)
+//! are not read by any public decoder, so their byte order is not known: refused by name.
 
 use crate::sensor::CalibError;
 
@@ -36,11 +62,25 @@ pub const TURN: i64 = 360 * UNITS_PER_DEG;
 /// Encoder step between two adjustment entries: 2°.
 const ADJ_STEP: i64 = 2 * UNITS_PER_DEG;
 
+/// Entries of a 1.3 adjustment grid: one per 0.01° of encoder azimuth.
+const V13_GRID: usize = 36_000;
+
+/// How a correction's adjustment grids are indexed (the file layout they came from).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AdjustGrid {
+    /// 1.5: 180 entries per channel, every 2° of encoder azimuth, interpolated and rounded.
+    PerChannel2Deg,
+    /// 1.3: 36 000 entries shared by every channel, one per 0.01° of encoder azimuth.
+    Shared001Deg,
+}
+
 /// A checked AT128 correction, in 1/25600°.
 #[derive(Clone, Debug, PartialEq)]
 pub struct At128Correction {
     /// File version (major, minor).
     pub version: (u8, u8),
+    /// How [`Self::azimuth_adjust`] and [`Self::elevation_adjust`] are indexed.
+    pub grid: AdjustGrid,
     /// Start of each mirror's field (encoder azimuth).
     pub start_frame: Vec<i64>,
     /// End of each mirror's field.
@@ -49,9 +89,10 @@ pub struct At128Correction {
     pub azimuth: Vec<i64>,
     /// Per-channel elevation.
     pub elevation: Vec<i64>,
-    /// Per-channel azimuth adjustment, 180 per channel, 0.01° (already × resolution).
+    /// Azimuth adjustment, 0.01° (already × resolution): 180 per channel (1.5) or 36 000
+    /// shared (1.3).
     pub azimuth_adjust: Vec<i32>,
-    /// Per-channel elevation adjustment, 0.01°.
+    /// Elevation adjustment, 0.01°, indexed as [`Self::azimuth_adjust`].
     pub elevation_adjust: Vec<i32>,
 }
 
@@ -64,8 +105,56 @@ fn err(msg: String) -> CalibError {
     CalibError::Invalid(format!("AT128 angle correction: {msg}"))
 }
 
+/// Little-endian reader over a buffer whose length was checked against the layout first.
+struct Le<'a> {
+    bytes: &'a [u8],
+    at: usize,
+}
+
+impl Le<'_> {
+    fn take<const N: usize>(&mut self) -> [u8; N] {
+        let mut v = [0u8; N];
+        if let Some(s) = self.bytes.get(self.at..self.at + N) {
+            v.copy_from_slice(s);
+        }
+        self.at += N;
+        v
+    }
+    fn u16s(&mut self, n: usize, scale: i64) -> Vec<i64> {
+        (0..n)
+            .map(|_| i64::from(u16::from_le_bytes(self.take())) * scale)
+            .collect()
+    }
+    fn i16s(&mut self, n: usize, scale: i64) -> Vec<i64> {
+        (0..n)
+            .map(|_| i64::from(i16::from_le_bytes(self.take())) * scale)
+            .collect()
+    }
+    fn u32s(&mut self, n: usize, scale: i64) -> Vec<i64> {
+        (0..n)
+            .map(|_| i64::from(u32::from_le_bytes(self.take())) * scale)
+            .collect()
+    }
+    fn i32s(&mut self, n: usize, scale: i64) -> Vec<i64> {
+        (0..n)
+            .map(|_| i64::from(i32::from_le_bytes(self.take())) * scale)
+            .collect()
+    }
+    fn i8s(&mut self, n: usize, scale: i32) -> Vec<i32> {
+        let v = self
+            .bytes
+            .get(self.at..self.at + n)
+            .unwrap_or(&[])
+            .iter()
+            .map(|&b| i32::from(b as i8) * scale)
+            .collect();
+        self.at += n;
+        v
+    }
+}
+
 impl At128Correction {
-    /// Parses a `.dat` correction (version 1.5).
+    /// Parses a `.dat` correction, version 1.5 or 1.3 (by its version bytes).
     pub fn parse(bytes: &[u8]) -> Result<Self, CalibError> {
         if !looks_like_dat(bytes) || bytes.len() < 16 {
             return Err(err(format!(
@@ -74,11 +163,22 @@ impl At128Correction {
             )));
         }
         let (major, minor) = (bytes[2], bytes[3]);
-        if minor != 5 {
-            return Err(err(format!(
-                "version {major}.{minor} is not supported (1.5 is)"
-            )));
-        }
+        let grid = match minor {
+            5 => AdjustGrid::PerChannel2Deg,
+            3 => AdjustGrid::Shared001Deg,
+            6..=9 => {
+                return Err(err(format!(
+                    "version {major}.{minor}: HesaiLidar_SDK_2.0 declares this layout's fields \
+                     but no public decoder reads it, so its byte order is unknown (1.3 and 1.5 \
+                     are supported)"
+                )))
+            }
+            _ => {
+                return Err(err(format!(
+                    "version {major}.{minor} is not supported (1.3 and 1.5 are)"
+                )))
+            }
+        };
         let n = usize::from(bytes[4]);
         let m = usize::from(bytes[5]);
         let frames = usize::from(bytes[6]);
@@ -86,51 +186,45 @@ impl At128Correction {
         if n != 128 {
             return Err(err(format!("{n} channels; the AT128 has 128")));
         }
+        // nebula counts the field arrays by mirrors, the SDK by frames: a file where they
+        // differ would be read two ways.
         if frames != m || res == 0 {
             return Err(err(format!(
                 "{frames} frames for {m} mirrors, resolution {res}"
             )));
         }
-        let need = 16 + 8 * m + 8 * n + 2 * 180 * n + 32;
+        let need = match grid {
+            AdjustGrid::PerChannel2Deg => 16 + 8 * m + 8 * n + 2 * 180 * n + 32,
+            AdjustGrid::Shared001Deg => 16 + 4 * m + 4 * n + 2 * V13_GRID + 32,
+        };
         if bytes.len() != need {
             return Err(err(format!(
-                "expected {need} bytes for {n} channels and {m} mirrors, found {}",
+                "version {major}.{minor} with {n} channels and {m} mirrors is {need} bytes, \
+                 found {}",
                 bytes.len()
             )));
         }
-        let u32_at = |o: usize| {
-            i64::from(u32::from_le_bytes([
-                bytes[o],
-                bytes[o + 1],
-                bytes[o + 2],
-                bytes[o + 3],
-            ]))
-        };
-        let i32_at = |o: usize| {
-            i64::from(i32::from_le_bytes([
-                bytes[o],
-                bytes[o + 1],
-                bytes[o + 2],
-                bytes[o + 3],
-            ]))
-        };
-        let mut o = 16;
-        let start_frame: Vec<i64> = (0..m).map(|i| u32_at(o + 4 * i) * res).collect();
-        o += 4 * m;
-        let end_frame: Vec<i64> = (0..m).map(|i| u32_at(o + 4 * i) * res).collect();
-        o += 4 * m;
-        let azimuth: Vec<i64> = (0..n).map(|i| i32_at(o + 4 * i) * res).collect();
-        o += 4 * n;
-        let elevation: Vec<i64> = (0..n).map(|i| i32_at(o + 4 * i) * res).collect();
-        o += 4 * n;
-        let adj = |o: usize| -> Vec<i32> {
-            bytes[o..o + 180 * n]
-                .iter()
-                .map(|&b| i32::from(b as i8) * res as i32)
-                .collect()
-        };
-        let azimuth_adjust = adj(o);
-        let elevation_adjust = adj(o + 180 * n);
+        let mut r = Le { bytes, at: 16 };
+        let (start_frame, end_frame, azimuth, elevation, azimuth_adjust, elevation_adjust) =
+            match grid {
+                AdjustGrid::PerChannel2Deg => (
+                    r.u32s(m, res),
+                    r.u32s(m, res),
+                    r.i32s(n, res),
+                    r.i32s(n, res),
+                    r.i8s(180 * n, res as i32),
+                    r.i8s(180 * n, res as i32),
+                ),
+                // 0.01° × R, to 1/25600°.
+                AdjustGrid::Shared001Deg => (
+                    r.u16s(m, 256 * res),
+                    r.u16s(m, 256 * res),
+                    r.i16s(n, 256 * res),
+                    r.i16s(n, 256 * res),
+                    r.i8s(V13_GRID, res as i32),
+                    r.i8s(V13_GRID, res as i32),
+                ),
+            };
         for (i, (&s, &e)) in start_frame.iter().zip(&end_frame).enumerate() {
             if s >= TURN || e >= TURN {
                 return Err(err(format!(
@@ -147,6 +241,7 @@ impl At128Correction {
         }
         Ok(Self {
             version: (major, minor),
+            grid,
             start_frame,
             end_frame,
             azimuth,
@@ -183,16 +278,30 @@ impl At128Correction {
         ((1.0 - frac) * v0 + frac * v1).round() as i64
     }
 
+    /// Azimuth and elevation adjustments of channel `ch` at encoder azimuth `a`, 0.01°.
+    fn adjustments(&self, ch: usize, a: i64) -> (i64, i64) {
+        match self.grid {
+            AdjustGrid::PerChannel2Deg => {
+                let rows = ch * 180..ch * 180 + 180;
+                let az_row = self.azimuth_adjust.get(rows.clone()).unwrap_or(&[]);
+                let el_row = self.elevation_adjust.get(rows).unwrap_or(&[]);
+                (Self::adjust(az_row, a), Self::adjust(el_row, a))
+            }
+            AdjustGrid::Shared001Deg => {
+                let i = (a.rem_euclid(TURN) / 256) as usize;
+                let at = |g: &[i32]| i64::from(g.get(i).copied().unwrap_or(0));
+                (at(&self.azimuth_adjust), at(&self.elevation_adjust))
+            }
+        }
+    }
+
     /// Corrected (azimuth, elevation) of channel `ch` at encoder azimuth `a`, 1/25600°:
     /// azimuth in `[0, TURN)`, elevation signed. `None` outside every mirror's field.
     pub fn angles(&self, ch: usize, a: i64) -> Option<(i64, i64)> {
         let f = self.field(a)?;
-        let rows = ch * 180..ch * 180 + 180;
-        let az_row = self.azimuth_adjust.get(rows.clone()).unwrap_or(&[]);
-        let el_row = self.elevation_adjust.get(rows).unwrap_or(&[]);
-        let az =
-            2 * (a - self.start_frame[f]) - self.azimuth.get(ch)? + 256 * Self::adjust(az_row, a);
-        let el = self.elevation.get(ch)? + 256 * Self::adjust(el_row, a);
+        let (adj_az, adj_el) = self.adjustments(ch, a);
+        let az = 2 * (a - self.start_frame[f]) - self.azimuth.get(ch)? + 256 * adj_az;
+        let el = self.elevation.get(ch)? + 256 * adj_el;
         Some((az.rem_euclid(TURN), el))
     }
 }

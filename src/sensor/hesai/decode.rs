@@ -135,6 +135,9 @@ pub struct Decoded {
     pub channel: usize,
     /// Block index in the packet.
     pub block: usize,
+    /// Firing time relative to the packet's tail time, ns: [`HesaiDecoder::firing_ns`] of
+    /// (block, channel), looked up here where the block's row is at hand.
+    pub firing_ns: i32,
 }
 
 /// Decoder for one sensor.
@@ -361,6 +364,27 @@ impl HesaiDecoder {
         p: &HesaiPacket<'_>,
         first: usize,
         n: usize,
+        out: impl FnMut(Decoded),
+    ) {
+        // One loop per (returns, correction kind): the per-channel work then has no dispatch
+        // and fixed-size arrays.
+        let n = n.clamp(1, 3).min(p.layout().blocks.saturating_sub(first));
+        match (n, self.at128.is_some()) {
+            (0, _) => {}
+            (1, false) => self.group::<1, false>(p, first, out),
+            (2, false) => self.group::<2, false>(p, first, out),
+            (_, false) => self.group::<3, false>(p, first, out),
+            (1, true) => self.group::<1, true>(p, first, out),
+            (2, true) => self.group::<2, true>(p, first, out),
+            (_, true) => self.group::<3, true>(p, first, out),
+        }
+    }
+
+    #[inline(always)]
+    fn group<const N: usize, const AT128: bool>(
+        &self,
+        p: &HesaiPacket<'_>,
+        first: usize,
         mut out: impl FnMut(Decoded),
     ) {
         let unit_mm = p.dis_unit_mm();
@@ -372,53 +396,47 @@ impl HesaiDecoder {
             .copied()
             .unwrap_or((1, 0));
         let mode = p.return_mode();
-        let layout = p.layout();
-        let ul = layout.unit_len;
-        let n = n.clamp(1, 3).min(layout.blocks.saturating_sub(first));
-        let mut units: [&[u8]; 3] = [&[]; 3];
-        for (k, u) in units.iter_mut().enumerate().take(n) {
-            *u = p.units(first + k);
-        }
+        let ul = p.layout().unit_len.max(3);
+        let units: [&[u8]; N] = core::array::from_fn(|k| p.units(first + k));
+        // Every block of a checked packet has the same length.
+        let n_channels = units
+            .iter()
+            .fold(self.channels.len(), |n, u| n.min(u.len() / ul));
+        let units: [&[u8]; N] = core::array::from_fn(|k| &units[k][..n_channels * ul]);
         let block_az = p.azimuth(first);
-        let (cb, sb) = if self.at128.is_none() {
+        let (cb, sb) = if AT128 {
+            (1.0, 0.0)
+        } else {
             azimuth_table()
                 .get((block_az % 36_000) as usize)
                 .copied()
                 .unwrap_or((1.0, 0.0))
-        } else {
-            (1.0, 0.0)
         };
-        let rets: [u8; 3] = core::array::from_fn(|k| return_index(self.model, mode, k));
+        let rets: [u8; N] = core::array::from_fn(|k| return_index(self.model, mode, k));
         let thr = self.opts.dual_return_threshold_m;
-        let n_channels = self.channels.len().min(units[0].len() / ul.max(1));
         // Distances as nebula computes them, for the dual-return threshold.
         let exact = |raw: u16| (f64::from(raw) * unit_m) as f32;
-        let ul = ul.max(3);
-        let (mut it0, mut it1, mut it2) = (
-            units[0].chunks_exact(ul),
-            units[1].chunks_exact(ul),
-            units[2].chunks_exact(ul),
-        );
-        let rd = |u: Option<&[u8]>| match u {
-            Some(&[a, b, r, ..]) => (u16::from_le_bytes([a, b]), r),
-            _ => (0, 0),
-        };
-        for (c, ch) in self.channels.iter().enumerate().take(n_channels) {
-            // Raw (distance, reflectivity) of each return (blocks past the group: none).
-            let raw = [rd(it0.next()), rd(it1.next()), rd(it2.next())];
-            if raw[0].0 | raw[1].0 | raw[2].0 == 0 {
+        let fov = self.fov_udeg.is_some();
+        let nc = self.channels.len();
+        let fire: [&[i32]; N] = core::array::from_fn(|k| {
+            self.firing
+                .get((first + k) * nc..(first + k + 1) * nc)
+                .unwrap_or(&[])
+        });
+        for (c, ch) in self.channels[..n_channels].iter().enumerate() {
+            let o = c * ul;
+            // Raw (distance, reflectivity) of each return.
+            let raw: [(u16, u8); N] = core::array::from_fn(|k| {
+                let u = &units[k][o..o + 3];
+                (u16::from_le_bytes([u[0], u[1]]), u[2])
+            });
+            if raw.iter().all(|r| r.0 == 0) {
                 continue;
             }
-            let dist: [f32; 3] = core::array::from_fn(|k| f32::from(raw[k].0) * unit_f32);
             // Angles of this channel (AT128: per point).
-            let (cos_az, sin_az, cos_el, sin_el) = match &self.at128 {
-                None => (
-                    cb * ch.cos_off - sb * ch.sin_off,
-                    sb * ch.cos_off + cb * ch.sin_off,
-                    ch.cos_el,
-                    ch.sin_el,
-                ),
-                Some(a) => match a.angles(c, i64::from(block_az)) {
+            let (cos_az, sin_az, cos_el, sin_el) = if AT128 {
+                let Some(a) = &self.at128 else { return };
+                match a.angles(c, i64::from(block_az)) {
                     Some((az, el)) => {
                         if !self.in_fov(az.rem_euclid(AT128_TURN) * 1_000_000 / UNITS_PER_DEG) {
                             continue;
@@ -428,16 +446,23 @@ impl HesaiDecoder {
                         (co as f32, s as f32, ce as f32, se as f32)
                     }
                     None => continue,
-                },
+                }
+            } else {
+                if fov
+                    && !self
+                        .in_fov((i64::from(block_az) * 10_000 + ch.off_udeg).rem_euclid(TURN_UDEG))
+                {
+                    continue;
+                }
+                (
+                    cb * ch.cos_off - sb * ch.sin_off,
+                    sb * ch.cos_off + cb * ch.sin_off,
+                    ch.cos_el,
+                    ch.sin_el,
+                )
             };
-            if self.fov_udeg.is_some()
-                && self.at128.is_none()
-                && !self.in_fov((i64::from(block_az) * 10_000 + ch.off_udeg).rem_euclid(TURN_UDEG))
-            {
-                continue;
-            }
             let mut emit = |k: usize| {
-                let d = dist[k];
+                let d = f32::from(raw[k].0) * unit_f32;
                 let xy = d * cos_el;
                 out(Decoded {
                     point: Point {
@@ -452,10 +477,11 @@ impl HesaiDecoder {
                     },
                     channel: c,
                     block: first + k,
+                    firing_ns: fire[k].get(c).copied().unwrap_or(0),
                 });
             };
             let valid = |k: usize| raw[k].0 >= raw_lo && raw[k].0 <= raw_hi;
-            match n {
+            match N {
                 1 => {
                     if valid(0) {
                         emit(0);
@@ -464,22 +490,22 @@ impl HesaiDecoder {
                 2 => {
                     // The first return is dropped when identical to the second or (with a
                     // threshold) within it of the second; the group's last is always kept.
-                    let merged = raw[0] == raw[1]
-                        || (thr > 0.0 && (exact(raw[0].0) - exact(raw[1].0)).abs() < thr);
+                    let (a, b) = (raw[0], raw[N - 1]);
+                    let merged = a == b || (thr > 0.0 && (exact(a.0) - exact(b.0)).abs() < thr);
                     if valid(0) && !merged {
                         emit(0);
                     }
-                    if valid(1) {
-                        emit(1);
+                    if valid(N - 1) {
+                        emit(N - 1);
                     }
                 }
                 _ => {
-                    for k in 0..n {
+                    for k in 0..N {
                         if !valid(k) {
                             continue;
                         }
-                        if k + 1 < n {
-                            let dropped = (0..n).any(|j| {
+                        if k + 1 < N {
+                            let dropped = (0..N).any(|j| {
                                 j != k
                                     && (raw[j] == raw[k]
                                         || (thr > 0.0
@@ -510,12 +536,13 @@ impl HesaiDecoder {
         self.prepare(n, p.tail_flags());
         let before = out.len();
         let blocks = p.layout().blocks;
+        out.reserve(blocks * self.channels.len());
         let base = stamp_ns - t0_ns;
         let this = &*self;
         let mut g = 0;
         while g < blocks {
             this.decode_group(p, g, n, |d| {
-                let t = base + this.firing_ns(d.block, d.channel);
+                let t = base + i64::from(d.firing_ns);
                 let mut pt = d.point;
                 pt.t = t.clamp(0, i64::from(u32::MAX)) as u32;
                 out.push(pt);

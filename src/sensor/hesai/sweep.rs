@@ -499,7 +499,7 @@ impl HesaiStream {
                     let t_base = stamp - o.t0_ns;
                     let pts = &mut o.sweep.points;
                     dec.decode_group(&p, g, n, |d| {
-                        let t = t_base + dec.firing_ns(d.block, d.channel);
+                        let t = t_base + i64::from(d.firing_ns);
                         let mut pt = d.point;
                         pt.t = t.clamp(0, i64::from(u32::MAX)) as u32;
                         pts.push(pt);
@@ -513,7 +513,7 @@ impl HesaiStream {
                 dec.decode_group(&p, g, n, |d| {
                     let idx = (gens[d.channel].saturating_sub(base)) as usize;
                     if let Some(o) = open.get_mut(idx) {
-                        let t = stamp + dec.firing_ns(d.block, d.channel) - o.t0_ns;
+                        let t = stamp + i64::from(d.firing_ns) - o.t0_ns;
                         let mut pt = d.point;
                         pt.t = t.clamp(0, i64::from(u32::MAX)) as u32;
                         o.sweep.points.push(pt);
