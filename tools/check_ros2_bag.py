@@ -59,11 +59,13 @@ def dump_foxglove(path):
     from mcap_protobuf.decoder import DecoderFactory
 
     out = {}
+    factory = DecoderFactory()
     with open(path, "rb") as f:
-        reader = make_reader(f, decoder_factories=[DecoderFactory()])
-        for schema, channel, _, msg in reader.iter_decoded_messages():
-            if schema.name != "foxglove.PointCloud":
+        reader = make_reader(f)
+        for schema, channel, message in reader.iter_messages():
+            if schema is None or schema.name != "foxglove.PointCloud":
                 continue
+            msg = factory.decoder_for(channel.message_encoding, schema)(message.data)
             t = out.setdefault(channel.topic, {"fields": None, "stride": None, "data": []})
             t["fields"] = [[x.name, x.offset, FOXGLOVE_TO_ROS.get(x.type, -1)] for x in msg.fields]
             t["stride"] = msg.point_stride

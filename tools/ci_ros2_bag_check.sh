@@ -19,6 +19,7 @@ out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
 fail=0
 C=../shared/captures
+topics() { "$py_bags" -c 'import json,sys; t=json.load(open(sys.argv[1]))["topics"]; print(", ".join("%s %d" % (k, v["messages"]) for k, v in sorted(t.items())))' "$1"; }
 
 python3 tools/make_test_bags.py --help > /dev/null
 py_bags=tools/.venv-bags/bin/python
@@ -37,7 +38,7 @@ check() { # name, required topic suffixes (comma list or -), decode args...
   "$bin" decode "$@" --format ros2 --out "$out/$name" --json > "$out/$name.ros2.json"
   if "$py_bags" tools/check_ros2_bag.py "$out/$name" --expect "$out/$name.ros2.json" \
       --points "$out/$name.points.json" "${req[@]}" > "$out/$name.check.json"; then
-    echo "ok   $name: $("$py_bags" -c 'import json,sys; t=json.load(open(sys.argv[1]))["topics"]; print(", ".join(f"{k} {v["messages"]}" for k,v in sorted(t.items())))' "$out/$name.check.json")"
+    echo "ok   $name: $(topics "$out/$name.check.json")"
   else
     echo "FAIL $name"; fail=1
   fi
@@ -49,11 +50,11 @@ check demo-pipeline /ground,/obstacles,/clusters fixtures/demo-vlp16.pcap --pipe
 check demo-odometry /tf,/map fixtures/demo-vlp16.pcap --odometry
 
 # The check must be able to fail: clouds decoded with other settings are caught.
-"$bin" decode fixtures/demo-vlp16.pcap --format ros2 --min-range 2 --out "$out/demo-range" --json > /dev/null
+"$bin" decode fixtures/demo-vlp16.pcap --format ros2 --max-range 5 --out "$out/demo-range" --json > /dev/null
 if "$py_bags" tools/check_ros2_bag.py "$out/demo-range" --points "$out/demo.points.json" --quiet 2> /dev/null; then
-  echo "FAIL the point comparison did not catch clouds decoded with --min-range 2"; fail=1
+  echo "FAIL the point comparison did not catch clouds decoded with --max-range 5"; fail=1
 else
-  echo "ok   a bag with other points (--min-range 2) is caught"
+  echo "ok   a bag with other points (--max-range 5) is caught"
 fi
 
 if [ -d "$C" ]; then
@@ -63,24 +64,25 @@ if [ -d "$C" ]; then
   # Two sensors in one capture: the demo VLP-16 and an Ouster, interleaved by time.
   "$py_bags" - fixtures/demo-vlp16.pcap "$P/OS-0-32-U1_v2.2.0_1024x10.pcap" "$out/two.pcap" <<'PY'
 import struct, sys
+MAGICS = {0xA1B2C3D4: 1000, 0xA1B23C4D: 1}  # microsecond / nanosecond pcap, little-endian
 def records(p):
     b = open(p, "rb").read()
-    assert struct.unpack_from("<I", b, 0)[0] == 0xA1B2C3D4, p  # microsecond pcap, little-endian
+    scale = MAGICS[struct.unpack_from("<I", b, 0)[0]]
     at, out = 24, []
     while at + 16 <= len(b):
-        s, us, incl, _ = struct.unpack_from("<IIII", b, at)
-        out.append([s * 1_000_000 + us, b[at + 16: at + 16 + incl]])
+        s, frac, incl, _ = struct.unpack_from("<IIII", b, at)
+        out.append([s * 1_000_000_000 + frac * scale, b[at + 16: at + 16 + incl]])
         at += 16 + incl
-    return b[:24], out
-head, a = records(sys.argv[1])
-_, o = records(sys.argv[2])
+    return b[:24], scale, out
+head, scale, a = records(sys.argv[1])
+_, _, o = records(sys.argv[2])
 shift = a[0][0] - o[0][0]
 for r in o:
     r[0] += shift
 with open(sys.argv[3], "wb") as f:
     f.write(head)
     for t, d in sorted(a + o, key=lambda r: r[0]):
-        f.write(struct.pack("<IIII", t // 1_000_000, t % 1_000_000, len(d), len(d)) + d)
+        f.write(struct.pack("<IIII", t // 1_000_000_000, (t % 1_000_000_000) // scale, len(d), len(d)) + d)
 PY
   check two-sensors /points,/imu "$out/two.pcap" --calib "$P/OS-0-32-U1_v2.2.0_1024x10.json" --raw
 else
@@ -100,7 +102,7 @@ wait "$pid" 2>/dev/null || true
 kill "$rpid" 2>/dev/null || true
 wait "$rpid" 2>/dev/null || true
 if "$py_bags" tools/check_ros2_bag.py "$out/killed" --require /points --require /velodyne_packets > "$out/killed.check.json"; then
-  echo "ok   listen killed with SIGKILL after 13 s: $("$py_bags" -c 'import json,sys; t=json.load(open(sys.argv[1]))["topics"]; print(", ".join(f"{k} {v["messages"]}" for k,v in sorted(t.items())))' "$out/killed.check.json") ($(ls "$out/killed" | tr '\n' ' '))"
+  echo "ok   listen killed with SIGKILL after 13 s: $(topics "$out/killed.check.json") ($(ls "$out/killed" | tr '\n' ' '))"
 else
   echo "FAIL listen killed with SIGKILL: the bag does not open"; cat "$out/listen.err" | tail -5; fail=1
 fi

@@ -169,13 +169,6 @@ impl Files {
     /// Creates the file at its path (not a temporary one: a recording killed outright keeps
     /// the chunks written so far).
     fn create(&self, path: &Path) -> Result<Sink, SinkError> {
-        if self.bag_dir && self.index == 0 && self.closed.is_empty() && !path.exists() {
-            // The directory and its first (empty) metadata.yaml, before the first file.
-            ringscan::sink::rosbag2::create_dir(&self.base).map_err(|source| SinkError::Io {
-                context: format!("creating the rosbag2 directory {}", self.base.display()),
-                source,
-            })?;
-        }
         let f = std::fs::File::create(path).map_err(|source| SinkError::Io {
             context: format!("creating {}", path.display()),
             source,
@@ -822,6 +815,20 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
                             };
                             let current = files.path(0);
                             files.current = current.clone();
+                            if bag_dir {
+                                // The directory and its first (empty) metadata.yaml.
+                                ringscan::sink::rosbag2::create_dir(&files.base).map_err(
+                                    |source| {
+                                        file_error(
+                                            &files.base,
+                                            &SinkError::Io {
+                                                context: "creating the rosbag2 directory".into(),
+                                                source,
+                                            },
+                                        )
+                                    },
+                                )?;
+                            }
                             let sink = files
                                 .create(&current)
                                 .map_err(|e| file_error(&current, &e))?;
