@@ -64,7 +64,6 @@ fn write(opts: SinkOptions) -> (Vec<u8>, SinkSummary) {
             // A Velodyne: with --format ros2 its raw packets are one VelodyneScan per sweep.
             metadata: [("family".to_string(), "velodyne".to_string())].into(),
             calibration: Some(("a.yaml".into(), b"lasers: []".to_vec())),
-            ..SensorInfo::default()
         })
         .unwrap(),
         sink.add_sensor(&SensorInfo {
@@ -73,7 +72,6 @@ fn write(opts: SinkOptions) -> (Vec<u8>, SinkSummary) {
             // A Velodyne: with --format ros2 its raw packets are one VelodyneScan per sweep.
             metadata: [("family".to_string(), "velodyne".to_string())].into(),
             calibration: Some(("b.json".into(), b"{}".to_vec())),
-            ..SensorInfo::default()
         })
         .unwrap(),
     ];
