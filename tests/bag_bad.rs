@@ -264,3 +264,45 @@ fn damaged_sqlite_and_mcap_files_give_errors_or_truncations() {
     flipped[mid] ^= 0xff;
     let _ = read_all(&tmp("flipped.mcap", &flipped));
 }
+
+/// An MCAP record, written out from the specification: opcode, u64 length, body.
+fn mcap_record(op: u8, body: &[u8]) -> Vec<u8> {
+    let mut r = vec![op];
+    r.extend_from_slice(&(body.len() as u64).to_le_bytes());
+    r.extend_from_slice(body);
+    r
+}
+
+/// An uncompressed MCAP chunk whose one record claims 1000 bytes where 4 follow (the input that
+/// made the mcap crate's chunk reader underflow its count): a clear error naming the chunk,
+/// never a panic, and nothing read past the chunk.
+#[test]
+fn a_record_longer_than_its_mcap_chunk_is_an_error() {
+    let mut f = b"\x89MCAP0\r\n".to_vec();
+    // Header: profile "", library "t".
+    f.extend(mcap_record(0x01, &[0, 0, 0, 0, 1, 0, 0, 0, b't']));
+    let mut inner = vec![0x05];
+    inner.extend_from_slice(&1000u64.to_le_bytes());
+    inner.extend_from_slice(&[1, 2, 3, 4]);
+    let mut chunk = Vec::new();
+    chunk.extend_from_slice(&0u64.to_le_bytes()); // message_start_time
+    chunk.extend_from_slice(&0u64.to_le_bytes()); // message_end_time
+    chunk.extend_from_slice(&(inner.len() as u64).to_le_bytes()); // uncompressed_size
+    chunk.extend_from_slice(&0u32.to_le_bytes()); // uncompressed_crc: none
+    chunk.extend_from_slice(&0u32.to_le_bytes()); // compression: ""
+    chunk.extend_from_slice(&(inner.len() as u64).to_le_bytes()); // compressed_size
+    chunk.extend_from_slice(&inner);
+    f.extend(mcap_record(0x06, &chunk));
+    // A message record after the chunk that must not be taken for the chunk's.
+    f.extend(mcap_record(0x0f, &[0; 8]));
+    f.extend(mcap_record(0x02, &[0; 20])); // footer
+    f.extend_from_slice(b"\x89MCAP0\r\n");
+    match read_all(&tmp("record-past-chunk.mcap", &f)) {
+        Err(e) => {
+            let msg = e.to_string();
+            assert!(msg.contains("past the chunk's end"), "{msg}");
+            assert!(msg.contains("record-past-chunk.mcap"), "{msg}");
+        }
+        other => panic!("expected an MCAP error, got {other:?}"),
+    }
+}

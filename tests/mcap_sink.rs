@@ -73,6 +73,7 @@ fn sensor_info(name: &str, prefix: &str, calib: Option<(&str, &[u8])>) -> Sensor
     metadata.insert("model".to_string(), "VLP-16".to_string());
     metadata.insert("source".to_string(), format!("{name}:2368"));
     metadata.insert("clock".to_string(), "host".to_string());
+    metadata.insert("family".to_string(), "velodyne".to_string());
     SensorInfo {
         name: name.into(),
         topic_prefix: prefix.into(),
@@ -309,15 +310,20 @@ impl<'a> CdrReader<'a> {
 
 // ---------------------------------------------------------------------------------------------
 
-fn expected_counts() -> BTreeMap<String, u64> {
+fn expected_counts(ros2: bool) -> BTreeMap<String, u64> {
     let mut m = BTreeMap::new();
     for (s, name) in SENSORS.iter().enumerate() {
         m.insert(format!("/{name}/points"), SWEEPS as u64 + u64::from(s == 0));
         m.insert(format!("/{name}/diagnostics"), SWEEPS as u64);
-        m.insert(
-            format!("/{name}/raw"),
-            SWEEPS as u64 * u64::from(PACKETS_PER_SWEEP),
-        );
+        if ros2 {
+            // One VelodyneScan per sweep: the packets written before it.
+            m.insert(format!("/{name}/velodyne_packets"), SWEEPS as u64);
+        } else {
+            m.insert(
+                format!("/{name}/raw"),
+                SWEEPS as u64 * u64::from(PACKETS_PER_SWEEP),
+            );
+        }
     }
     m
 }
@@ -355,10 +361,30 @@ fn check_common(
             Some(format!("{sensor}:2368").as_str())
         );
         assert_eq!(ch.metadata.get("model").map(String::as_str), Some("VLP-16"));
+        let ros2 = message_encoding == "cdr";
+        if ros2 {
+            assert!(
+                ch.metadata
+                    .get("offered_qos_profiles")
+                    .is_some_and(|q| q.contains("reliability: 1")),
+                "{}: QoS in the channel metadata",
+                ch.topic
+            );
+        }
         if ch.topic.ends_with("/points") {
             assert_eq!(schema.name, points_schema);
             assert_eq!(schema.encoding, schema_encoding);
             assert_eq!(ch.message_encoding, message_encoding);
+        } else if ros2 && ch.topic.ends_with("/diagnostics") {
+            assert_eq!(schema.name, "diagnostic_msgs/msg/DiagnosticArray");
+            assert_eq!(schema.encoding, "ros2msg");
+            assert_eq!(ch.message_encoding, "cdr");
+        } else if ros2 && ch.topic.ends_with("/velodyne_packets") {
+            assert_eq!(schema.name, "velodyne_msgs/msg/VelodyneScan");
+            assert_eq!(schema.encoding, "ros2msg");
+            assert_eq!(ch.message_encoding, "cdr");
+            let text = std::str::from_utf8(&schema.data).unwrap();
+            assert!(text.contains("\nMSG: velodyne_msgs/VelodynePacket\nbuiltin_interfaces/Time stamp\nuint8[1206] data\n"), "{text}");
         } else if ch.topic.ends_with("/diagnostics") {
             assert_eq!(schema.name, "ringscan.Diagnostics");
             assert_eq!(schema.encoding, "jsonschema");
@@ -396,7 +422,7 @@ fn check_common(
     }
 
     // Counts: statistics, the sink's own summary, and the messages actually in the file agree.
-    let expected = expected_counts();
+    let expected = expected_counts(message_encoding == "cdr");
     let mut stat_counts = BTreeMap::new();
     for (id, n) in &stats.channel_message_counts {
         stat_counts.insert(topic_of[id].clone(), *n);
@@ -466,7 +492,44 @@ fn check_common(
             .iter()
             .position(|s| topic.starts_with(&format!("/{s}/")))
             .unwrap();
-        if topic.ends_with("/raw") {
+        if topic.ends_with("/velodyne_packets") {
+            // VelodyneScan: Header {stamp, frame_id}, VelodynePacket[] {stamp, uint8[1206]}.
+            let mut r = CdrReader::new(&m.data);
+            let (sec, ns) = (u64::from(r.u32()), u64::from(r.u32()));
+            assert_eq!(r.string(), SENSORS[s]);
+            assert_eq!(r.u32(), u32::from(PACKETS_PER_SWEEP));
+            let k = raw_seen[s];
+            raw_seen[s] += 1;
+            for p in 0..PACKETS_PER_SWEEP {
+                let t = u64::from(r.u32()) * SECOND + u64::from(r.u32());
+                let log = T0 + k as u64 * 100_000_000 + s as u64 * 1_000;
+                assert_eq!(t, log - 1000 + u64::from(p));
+                if p == 0 {
+                    assert_eq!(sec * SECOND + ns, t, "header stamp = first packet's");
+                }
+                assert_eq!(r.bytes(1206), payload(s, k, p));
+                if p + 1 == PACKETS_PER_SWEEP {
+                    assert_eq!(m.log_time, t, "log time = last packet's");
+                }
+            }
+            assert!(r.done());
+        } else if topic.ends_with("/diagnostics") && message_encoding == "cdr" {
+            // DiagnosticArray: Header, DiagnosticStatus[] {level, name, message, hardware_id,
+            // KeyValue[] values}.
+            let mut r = CdrReader::new(&m.data);
+            assert_eq!(u64::from(r.u32()) * SECOND + u64::from(r.u32()), m.log_time);
+            assert_eq!(r.string(), "");
+            assert_eq!(r.u32(), 1);
+            assert_eq!(r.u8(), 0, "level OK");
+            assert_eq!(r.string(), SENSORS[s]);
+            assert_eq!(r.string(), "");
+            assert_eq!(r.string(), SENSORS[s]);
+            let n = r.u32();
+            let kv: BTreeMap<String, String> = (0..n).map(|_| (r.string(), r.string())).collect();
+            assert!(r.done());
+            assert_eq!(kv["packets"], PACKETS_PER_SWEEP.to_string());
+            assert_eq!(kv["missing"], "0");
+        } else if topic.ends_with("/raw") {
             let f = pb_fields(&m.data);
             let (k, p) = (
                 raw_seen[s] / PACKETS_PER_SWEEP as usize,
@@ -744,7 +807,7 @@ fn create_file_commits_only_on_finish() {
     let read = mcap::Summary::read(&bytes).unwrap().unwrap();
     assert_eq!(
         read.stats.unwrap().message_count,
-        expected_counts().values().sum::<u64>()
+        expected_counts(true).values().sum::<u64>()
     );
 
     // A later run dropped half-way leaves the earlier, complete file untouched.

@@ -61,15 +61,17 @@ fn write(opts: SinkOptions) -> (Vec<u8>, SinkSummary) {
         sink.add_sensor(&SensorInfo {
             name: "a".into(),
             topic_prefix: "/a".into(),
+            // A Velodyne: with --format ros2 its raw packets are one VelodyneScan per sweep.
+            metadata: [("family".to_string(), "velodyne".to_string())].into(),
             calibration: Some(("a.yaml".into(), b"lasers: []".to_vec())),
-            ..SensorInfo::default()
         })
         .unwrap(),
         sink.add_sensor(&SensorInfo {
             name: "b".into(),
             topic_prefix: "/b".into(),
+            // A Velodyne: with --format ros2 its raw packets are one VelodyneScan per sweep.
+            metadata: [("family".to_string(), "velodyne".to_string())].into(),
             calibration: Some(("b.json".into(), b"{}".to_vec())),
-            ..SensorInfo::default()
         })
         .unwrap(),
     ];

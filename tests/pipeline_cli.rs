@@ -299,7 +299,6 @@ fn bad_pipeline_settings_are_refused_with_the_key() {
             ],
             "--map-every 0",
         ),
-        (vec!["--odometry", "--format", "ros2"], "--format foxglove"),
         (
             vec!["--pipeline", "default", "--deskew", "gps"],
             "--deskew gps",
@@ -307,10 +306,6 @@ fn bad_pipeline_settings_are_refused_with_the_key() {
         (
             vec!["--pipeline", "default", "--extrinsics", "a=1,2,3"],
             "found 3",
-        ),
-        (
-            vec!["--pipeline", "default", "--format", "ros2"],
-            "--format foxglove",
         ),
     ] {
         let mut all = vec!["decode", pcap.to_str().unwrap()];

@@ -140,7 +140,15 @@ struct Files {
     current: PathBuf,
     opened: Instant,
     closed: Vec<(PathBuf, SinkSummary)>,
+    /// `--format ros2` into a rosbag2 directory: `base` is the directory.
+    bag_dir: bool,
 }
+
+/// In a rosbag2 directory without `--split-every`, the file is closed and a new one started
+/// this often, and `metadata.yaml` rewritten: it lists only complete files (an MCAP file is
+/// readable by every reader only once its footer is written), so a recording killed outright
+/// keeps all but its last seconds in a bag that opens.
+const BAG_CHECKPOINT: Split = Split::Seconds(10.0);
 
 impl Files {
     fn path_for(base: &Path, split: Option<Split>, index: usize) -> PathBuf {
@@ -168,8 +176,47 @@ impl Files {
         McapSink::new(std::io::BufWriter::new(f), self.opts.clone())
     }
 
+    /// The file `index` of the run.
+    fn path(&self, index: usize) -> PathBuf {
+        if self.bag_dir {
+            ringscan::sink::rosbag2::file_path(&self.base, index)
+        } else {
+            Self::path_for(&self.base, self.split, index)
+        }
+    }
+
+    /// Rewrites the rosbag2 `metadata.yaml` for the files closed so far (and `last`).
+    fn write_bag_metadata(&self, last: Option<(&Path, &SinkSummary)>) -> Result<(), SinkError> {
+        if !self.bag_dir {
+            return Ok(());
+        }
+        let files: Vec<ringscan::sink::rosbag2::BagFile> = self
+            .closed
+            .iter()
+            .map(|(p, s)| (p.as_path(), s))
+            .chain(last)
+            .map(|(p, s)| ringscan::sink::rosbag2::BagFile {
+                name: p
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_default(),
+                summary: s.clone(),
+            })
+            .collect();
+        ringscan::sink::rosbag2::write_metadata(&self.base, &files).map_err(|source| {
+            SinkError::Io {
+                context: format!("writing {}/metadata.yaml", self.base.display()),
+                source,
+            }
+        })
+    }
+
     fn due(&self) -> bool {
-        match self.split {
+        let split = match (self.split, self.bag_dir) {
+            (None, true) => Some(BAG_CHECKPOINT),
+            (s, _) => s,
+        };
+        match split {
             None => false,
             Some(Split::Seconds(s)) => self.opened.elapsed().as_secs_f64() >= s,
             Some(Split::Bytes(b)) => std::fs::metadata(&self.current).is_ok_and(|m| m.len() >= b),
@@ -550,7 +597,7 @@ impl DecodeThread {
         let Some(files) = self.files.as_mut() else {
             return Ok(());
         };
-        let next_path = Files::path_for(&files.base, files.split, files.index + 1);
+        let next_path = files.path(files.index + 1);
         let next = files.create(&next_path)?;
         let closed = self.session.rotate(next)?;
         let prev = std::mem::replace(&mut files.current, next_path);
@@ -559,6 +606,7 @@ impl DecodeThread {
         if let Some(s) = closed {
             tracing::info!("closed {}", prev.display());
             files.closed.push((prev, s));
+            files.write_bag_metadata(None)?;
         }
         Ok(())
     }
@@ -577,9 +625,13 @@ impl DecodeThread {
         let last = self
             .session
             .close_sink()
-            .map_err(|e| (RunError::Sink(e), path))?;
+            .map_err(|e| (RunError::Sink(e), path.clone()))?;
         let mut files = Vec::new();
         if let Some(f) = self.files.take() {
+            if let Some(s) = &last {
+                f.write_bag_metadata(Some((&f.current, s)))
+                    .map_err(|e| (RunError::Sink(e), path))?;
+            }
             files = f.closed;
             if let Some(s) = last {
                 files.push((f.current, s));
@@ -749,16 +801,34 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
                     session.set_live(live_view);
                     let files = match out {
                         Some(base) => {
-                            let current = Files::path_for(&base, split, 0);
-                            let files = Files {
+                            let bag_dir = opts.format == FormatArg::Ros2
+                                && ringscan::sink::rosbag2::is_bag_dir(&base);
+                            let mut files = Files {
                                 base,
                                 split,
                                 opts: sink_opts,
                                 index: 0,
-                                current: current.clone(),
+                                current: PathBuf::new(),
                                 opened: Instant::now(),
                                 closed: Vec::new(),
+                                bag_dir,
                             };
+                            let current = files.path(0);
+                            files.current = current.clone();
+                            if bag_dir {
+                                // The directory and its first (empty) metadata.yaml.
+                                ringscan::sink::rosbag2::create_dir(&files.base).map_err(
+                                    |source| {
+                                        file_error(
+                                            &files.base,
+                                            &SinkError::Io {
+                                                context: "creating the rosbag2 directory".into(),
+                                                source,
+                                            },
+                                        )
+                                    },
+                                )?;
+                            }
                             let sink = files
                                 .create(&current)
                                 .map_err(|e| file_error(&current, &e))?;

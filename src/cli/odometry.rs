@@ -53,9 +53,8 @@ use ringscan::registration::odometry::OdometryStep;
 use ringscan::registration::odometry::SweepMotion;
 use ringscan::registration::odometry::TrackStatus;
 use ringscan::sensor::ImuSample;
-use ringscan::sink::foxglove::{self, PointCloudPrefix};
-use ringscan::sink::mcap::TopicSchema;
-use ringscan::sink::scene::{self, FRAME_TRANSFORM_SCHEMA};
+use ringscan::sink::foxglove::PointCloudPrefix;
+use ringscan::sink::scene;
 use ringscan::sink::{McapSink, SensorId, SinkError, TopicId};
 use ringscan::sweep::Sweep;
 use serde_json::{json, Value};
@@ -612,19 +611,15 @@ impl OdometryRunner {
         let Some((sink, id)) = sink else {
             return Ok(Some(diag));
         };
+        let format = sink.format();
+        if format != ringscan::sink::Format::Foxglove {
+            scene::encode_transform(format, &mut self.buf, stamp, &odom_frame, &frame, &pose)?;
+        }
         let tf = match self.tf {
             Some(t) => t,
             None => {
-                let t = sink.add_topic(
-                    TF_TOPIC,
-                    TopicSchema {
-                        name: FRAME_TRANSFORM_SCHEMA,
-                        encoding: "protobuf",
-                        data: &scene::frame_transform_descriptor_set,
-                        message_encoding: "protobuf",
-                    },
-                    &BTreeMap::new(),
-                )?;
+                let t =
+                    sink.add_topic(TF_TOPIC, scene::transform_schema(format), &BTreeMap::new())?;
                 self.tf = Some(t);
                 t
             }
@@ -644,12 +639,7 @@ impl OdometryRunner {
                 metadata.insert("frame_id".to_string(), so.odom_frame.clone());
                 let map = sink.add_topic(
                     &format!("{prefix}/map"),
-                    TopicSchema {
-                        name: foxglove::POINT_CLOUD_SCHEMA,
-                        encoding: "protobuf",
-                        data: &foxglove::point_cloud_descriptor_set,
-                        message_encoding: "protobuf",
-                    },
+                    scene::points_schema(format),
                     &metadata,
                 )?;
                 so.topics = Some(Topics {
@@ -673,13 +663,17 @@ impl OdometryRunner {
                         ..Point::default()
                     }
                 }));
-                foxglove::encode_point_cloud(&mut self.buf, stamp, &t.map_prefix, &so.map_points)
-                    .ok_or_else(|| SinkError::TooLarge {
-                    topic: "map".to_string(),
-                    what: "point data",
-                    found: so.map_points.len() * ringscan::point::POINT_STRIDE,
-                    max: foxglove::MAX_MESSAGE_LEN - 1024,
-                })?;
+                scene::encode_points(
+                    format,
+                    &mut self.buf,
+                    stamp,
+                    &t.map_prefix,
+                    &so.odom_frame,
+                    ringscan::point::POINT_STRIDE,
+                    &ringscan::point::POINT_FIELDS,
+                    ringscan::point::as_bytes(&so.map_points),
+                    "map",
+                )?;
                 sink.write_message(t.map, log_time, &self.buf)?;
             }
         }

@@ -248,11 +248,6 @@ impl PipelineRunner {
         self.live = live;
     }
 
-    /// Whether pipeline outputs are written (not only deskew).
-    pub fn outputs(&self) -> bool {
-        self.setup.outputs
-    }
-
     /// Sensor `name`'s placement on the vehicle (`--extrinsics`), if given and written to
     /// `/tf_static` (with pipeline outputs).
     pub fn base_from_sensor(&self, name: &str) -> Option<Isometry3<f64>> {
@@ -486,7 +481,14 @@ impl PipelineRunner {
                             }
                         };
                         let mut buf = Vec::new();
-                        scene::encode_frame_transform(&mut buf, stamp, "base_link", name, &base);
+                        scene::encode_transform(
+                            sink.format(),
+                            &mut buf,
+                            stamp,
+                            "base_link",
+                            name,
+                            &base,
+                        )?;
                         sink.write_message(topic, log_time, &buf)?;
                     }
                 }

@@ -480,12 +480,6 @@ impl Session {
             .setup()
             .map_err(RunError::Usage)?
             .map(PipelineRunner::new);
-        if pipeline.as_ref().is_some_and(PipelineRunner::outputs) && opts.format == FormatArg::Ros2
-        {
-            return Err(RunError::Usage(
-                "--pipeline: its outputs are written with --format foxglove only".into(),
-            ));
-        }
         let odometry_deskew = pipeline
             .as_ref()
             .is_some_and(PipelineRunner::deskews_with_odometry);
@@ -495,11 +489,6 @@ impl Session {
             .setup(odometry_deskew, pipeline_deskews)
             .map_err(RunError::Usage)?
             .map(OdometryRunner::new);
-        if odometry.is_some() && opts.format == FormatArg::Ros2 {
-            return Err(RunError::Usage(
-                "--odometry: its outputs are written with --format foxglove only".into(),
-            ));
-        }
         if let Some(t) = opts.dual_return_threshold_m {
             if !(t.is_finite() && t >= 0.0) {
                 return Err(RunError::Usage(format!(
@@ -1024,11 +1013,42 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
         args.chunk_size,
         args.fields_minimal,
     );
-    let sink = match &args.out {
-        Some(p) => Some(create_file(p, sink_opts.clone())?),
-        None => None,
+    // `--format ros2 --out NAME` (not `.mcap`): a rosbag2 directory around one MCAP file.
+    let bag_dir = args
+        .out
+        .as_deref()
+        .filter(|p| args.format == FormatArg::Ros2 && ringscan::sink::rosbag2::is_bag_dir(p));
+    let sink = match (&args.out, bag_dir) {
+        (_, Some(dir)) => {
+            ringscan::sink::rosbag2::create_dir(dir).map_err(|source| SinkError::Io {
+                context: format!("creating the rosbag2 directory {}", dir.display()),
+                source,
+            })?;
+            Some(create_file(
+                &ringscan::sink::rosbag2::file_path(dir, 0),
+                sink_opts.clone(),
+            )?)
+        }
+        (Some(p), None) => Some(create_file(p, sink_opts.clone())?),
+        (None, None) => None,
     };
     session.set_sink(sink);
+    let commit_bag = |summary: &Option<SinkSummary>| -> Result<(), SinkError> {
+        let (Some(dir), Some(s)) = (bag_dir, summary) else {
+            return Ok(());
+        };
+        let file = ringscan::sink::rosbag2::BagFile {
+            name: ringscan::sink::rosbag2::file_path(dir, 0)
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            summary: s.clone(),
+        };
+        ringscan::sink::rosbag2::write_metadata(dir, &[file]).map_err(|source| SinkError::Io {
+            context: format!("writing {}/metadata.yaml", dir.display()),
+            source,
+        })
+    };
     session.set_live(super::serve::LivePublisher::start(
         &args.serve,
         Some(args.serve_rate),
@@ -1043,10 +1063,13 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
     let mut src = open()?;
     // Finalise the output on success and on error alike: the file is always a valid MCAP.
     if let Err(e) = pump(&mut src, &mut session, total) {
-        let _ = session.close_sink();
+        if let Ok(s) = session.close_sink() {
+            let _ = commit_bag(&s);
+        }
         return Err(session.run_error(e, &path_s));
     }
     let sink_summary = session.close_sink()?;
+    commit_bag(&sink_summary)?;
     session.finish_odometry()?;
     let elapsed = started.elapsed().as_secs_f64();
 

@@ -113,6 +113,7 @@ pub fn channel_metadata(
         "driver".into(),
         format!("ringscan {}", env!("CARGO_PKG_VERSION")),
     );
+    md.insert("family".into(), facts.family().into());
     facts.channel_metadata(&mut md);
     md
 }

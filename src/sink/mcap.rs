@@ -12,6 +12,7 @@ use super::foxglove::{self, PointCloudPrefix};
 pub use super::mcap_write::{in_flight_limit, Behind, WriterStats};
 use super::mcap_write::{ChunkedWriter, Codec, MessageHeader, WriterOptions};
 use super::ros2::{self, Ros2EncodeError};
+use super::ros2_msgs;
 use crate::point::{Point, MINIMAL_FIELDS, MINIMAL_STRIDE, POINT_STRIDE};
 
 /// Default target size of an uncompressed chunk (4 MiB: a few sweeps of a 64-beam sensor).
@@ -175,7 +176,37 @@ pub struct SensorChannels {
     extended_prefix: Option<PointCloudPrefix>,
     /// The same for the minimal record (`--fields minimal`).
     minimal_prefix: Option<PointCloudPrefix>,
+    /// `--format ros2`: the packet messages of `--raw` (see [`RawRos2`]).
+    ros2_raw: RawRos2,
 }
+
+/// `--format ros2 --raw`: each packet as the ROS driver of the sensor's family records it.
+/// Velodyne and Hesai packets are gathered into one `VelodyneScan` / `PandarScan` per sweep
+/// (written just before the sweep's points, or when [`MAX_SCAN_PACKETS`] are held); Ouster
+/// packets are one `PacketMsg` each, lidar or IMU by their size, and the sensor metadata is one
+/// `std_msgs/String` on `<prefix>/metadata` before the first packet.
+#[derive(Debug, Default)]
+struct RawRos2 {
+    /// The family's name from the sensor's channel metadata (`family`).
+    family: String,
+    /// Ouster: bytes of a lidar packet (`lidar_packet_bytes`).
+    lidar_packet_bytes: Option<usize>,
+    /// Ouster: the metadata JSON, written with the first packet.
+    metadata: Option<String>,
+    scan: Vec<(u64, Vec<u8>)>,
+    /// Velodyne / Hesai: the scan topic; Ouster: lidar packets.
+    packets: Option<Channel>,
+    /// Ouster: IMU packets.
+    imu_packets: Option<Channel>,
+    /// Ouster: the metadata topic.
+    metadata_channel: Option<Channel>,
+    /// Packets that no message of the family can hold (a Velodyne position packet, a
+    /// Hesai packet over 1500 bytes, a family without a ROS packet message).
+    dropped: u64,
+}
+
+/// Packets gathered into one scan message at most (a sweep of the densest Velodyne is 1.8k).
+pub const MAX_SCAN_PACKETS: usize = 8192;
 
 #[derive(Debug)]
 struct Channel {
@@ -223,6 +254,11 @@ impl SensorChannels {
         format!("{}/raw", self.prefix)
     }
 
+    /// Raw packets that `--format ros2` could not put in the family's packet message.
+    pub fn raw_dropped(&self) -> u64 {
+        self.ros2_raw.dropped
+    }
+
     /// Topic of the IMU samples, `<prefix>/imu`.
     pub fn imu_topic(&self) -> String {
         format!("{}/imu", self.prefix)
@@ -267,6 +303,10 @@ pub struct AttachmentSummary {
 pub struct SinkSummary {
     /// Messages per topic, every channel listed (0 when it got none).
     pub messages: BTreeMap<String, u64>,
+    /// Schema name (message type) per topic.
+    pub types: BTreeMap<String, String>,
+    /// Earliest and latest message log time (ns), if any message was written.
+    pub bounds: Option<(u64, u64)>,
     /// Attachments in file order.
     pub attachments: Vec<AttachmentSummary>,
     /// Number of chunks.
@@ -428,6 +468,10 @@ impl<W: Write + Seek> McapSink<W> {
                 chunk_size: usize::try_from(chunk_size).unwrap_or(usize::MAX),
                 threads: opts.threads,
                 behind: opts.behind,
+                profile: match opts.format {
+                    Format::Foxglove => String::new(),
+                    Format::Ros2 => "ros2".into(),
+                },
             },
         )?;
         let points_schema = match opts.format {
@@ -442,11 +486,18 @@ impl<W: Write + Seek> McapSink<W> {
                 ros2::point_cloud2_schema_text().as_bytes(),
             ),
         }?;
-        let diagnostics_schema = writer.add_schema(
-            DIAGNOSTICS_SCHEMA,
-            "jsonschema",
-            DIAGNOSTICS_JSON_SCHEMA.as_bytes(),
-        )?;
+        let diagnostics_schema = match opts.format {
+            Format::Foxglove => writer.add_schema(
+                DIAGNOSTICS_SCHEMA,
+                "jsonschema",
+                DIAGNOSTICS_JSON_SCHEMA.as_bytes(),
+            ),
+            Format::Ros2 => writer.add_schema(
+                ros2_msgs::DIAGNOSTIC_ARRAY_SCHEMA,
+                "ros2msg",
+                ros2_schema(ros2_msgs::DIAGNOSTIC_ARRAY_SCHEMA).as_bytes(),
+            ),
+        }?;
         Ok(Self {
             writer: Some(writer),
             format: opts.format,
@@ -466,6 +517,11 @@ impl<W: Write + Seek> McapSink<W> {
             extra_schemas: Vec::new(),
             extra_channels: Vec::new(),
         })
+    }
+
+    /// The message layout of the file.
+    pub fn format(&self) -> Format {
+        self.format
     }
 
     /// Chunks written so far, and how many of them uncompressed because the compression threads
@@ -498,20 +554,25 @@ impl<W: Write + Seek> McapSink<W> {
                 ),
             });
         }
+        let format = self.format;
         let writer = self.writer.as_mut().ok_or_else(finished_error)?;
         let points_topic = format!("{}/points", info.topic_prefix);
-        let encoding = match self.format {
-            Format::Foxglove => "protobuf",
-            Format::Ros2 => "cdr",
+        let (encoding, diagnostics_encoding) = match format {
+            Format::Foxglove => ("protobuf", "json"),
+            Format::Ros2 => ("cdr", "cdr"),
         };
-        let points =
-            writer.add_channel(self.points_schema, &points_topic, encoding, &info.metadata)?;
+        let points = writer.add_channel(
+            self.points_schema,
+            &points_topic,
+            encoding,
+            &channel_metadata(format, &points_topic, &info.metadata),
+        )?;
         let diagnostics_topic = format!("{}/diagnostics", info.topic_prefix);
         let diagnostics = writer.add_channel(
             self.diagnostics_schema,
             &diagnostics_topic,
-            "json",
-            &info.metadata,
+            diagnostics_encoding,
+            &channel_metadata(format, &diagnostics_topic, &info.metadata),
         )?;
         if let Some((file_name, data)) = &info.calibration {
             let already = self
@@ -546,6 +607,19 @@ impl<W: Write + Seek> McapSink<W> {
             minimal_prefix: (self.fields == PointFields::Minimal).then(|| {
                 PointCloudPrefix::with_fields(&info.name, MINIMAL_STRIDE, &MINIMAL_FIELDS)
             }),
+            ros2_raw: RawRos2 {
+                family: info.metadata.get("family").cloned().unwrap_or_default(),
+                lidar_packet_bytes: info
+                    .metadata
+                    .get("lidar_packet_bytes")
+                    .and_then(|n| n.parse().ok()),
+                metadata: info
+                    .calibration
+                    .as_ref()
+                    .filter(|_| info.metadata.get("family").is_some_and(|f| f == "ouster"))
+                    .and_then(|(_, b)| String::from_utf8(b.clone()).ok()),
+                ..RawRos2::default()
+            },
         });
         Ok(SensorId(self.sensors.len() - 1))
     }
@@ -555,6 +629,7 @@ impl<W: Write + Seek> McapSink<W> {
     /// [`SinkOptions::fields`]; they are encoded straight into the chunk.
     pub fn write_sweep(&mut self, s: SensorId, sweep: &SweepMsg) -> Result<(), SinkError> {
         self.before_message(sweep.log_time_ns)?;
+        self.flush_scan(s)?;
         let sensor = sensor_at(&mut self.sensors, s)?;
         let writer = self.writer.as_mut().ok_or_else(finished_error)?;
         let header = sensor.points.header(sweep.log_time_ns);
@@ -624,6 +699,7 @@ impl<W: Write + Seek> McapSink<W> {
     ) -> Result<(), SinkError> {
         use crate::point::{interleave_extended, EXTENDED_FIELDS, EXTENDED_STRIDE};
         self.before_message(sweep.log_time_ns)?;
+        self.flush_scan(s)?;
         let sensor = sensor_at(&mut self.sensors, s)?;
         let mut records = std::mem::take(&mut self.records);
         interleave_extended(sweep.points, extras, &mut records);
@@ -692,6 +768,9 @@ impl<W: Write + Seek> McapSink<W> {
         payload: &[u8],
     ) -> Result<(), SinkError> {
         self.before_message(log_time_ns)?;
+        if self.format == Format::Ros2 {
+            return self.write_raw_ros2(s, log_time_ns, payload);
+        }
         let sensor = sensor_at(&mut self.sensors, s)?;
         let writer = self.writer.as_mut().ok_or_else(finished_error)?;
         if sensor.raw.is_none() {
@@ -736,27 +815,75 @@ impl<W: Write + Seek> McapSink<W> {
         json: &serde_json::Value,
     ) -> Result<(), SinkError> {
         self.before_message(log_time_ns)?;
+        let format = self.format;
         let sensor = sensor_at(&mut self.sensors, s)?;
         let writer = self.writer.as_mut().ok_or_else(finished_error)?;
         if sensor.imu.is_none() {
             let topic = sensor.imu_topic();
-            lazy_channel(
-                writer,
-                &mut self.imu_schema,
-                (IMU_SCHEMA, "jsonschema", &|| {
-                    IMU_JSON_SCHEMA.as_bytes().to_vec()
-                }),
-                &mut sensor.imu,
-                &topic,
-                "json",
-                &sensor.metadata,
-            )?;
+            let md = channel_metadata(format, &topic, &sensor.metadata);
+            match format {
+                Format::Foxglove => lazy_channel(
+                    writer,
+                    &mut self.imu_schema,
+                    (IMU_SCHEMA, "jsonschema", &|| {
+                        IMU_JSON_SCHEMA.as_bytes().to_vec()
+                    }),
+                    &mut sensor.imu,
+                    &topic,
+                    "json",
+                    &md,
+                )?,
+                Format::Ros2 => lazy_channel(
+                    writer,
+                    &mut self.imu_schema,
+                    (ros2_msgs::IMU_SCHEMA, "ros2msg", &|| {
+                        ros2_schema(ros2_msgs::IMU_SCHEMA).into_bytes()
+                    }),
+                    &mut sensor.imu,
+                    &topic,
+                    "cdr",
+                    &md,
+                )?,
+            }
         }
-        self.buf.clear();
-        serde_json::to_writer(&mut self.buf, json).map_err(|source| SinkError::Json {
-            topic: sensor.imu_topic(),
-            source,
-        })?;
+        match format {
+            Format::Foxglove => {
+                self.buf.clear();
+                serde_json::to_writer(&mut self.buf, json).map_err(|source| SinkError::Json {
+                    topic: sensor.imu_topic(),
+                    source,
+                })?;
+            }
+            Format::Ros2 => {
+                let v3 = |k: &str| {
+                    let a = json.get(k).and_then(serde_json::Value::as_array);
+                    let f = |i: usize| {
+                        a.and_then(|a| a.get(i))
+                            .and_then(serde_json::Value::as_f64)
+                            .unwrap_or(f64::NAN)
+                    };
+                    [f(0), f(1), f(2)]
+                };
+                // The sensor's clock where it is absolute (PTP / GPS: after 2001), else host.
+                let stamp = json
+                    .get("timestamp_ns")
+                    .and_then(serde_json::Value::as_u64)
+                    .filter(|&t| t >= 1_000_000_000_000_000_000)
+                    .unwrap_or(log_time_ns);
+                ros2_msgs::encode_imu(
+                    &mut self.buf,
+                    stamp,
+                    &sensor.name,
+                    v3("angular_velocity"),
+                    v3("linear_acceleration"),
+                )
+                .map_err(|_| SinkError::TimestampOutOfRange {
+                    topic: sensor.imu_topic(),
+                    timestamp_ns: stamp,
+                    format: ros2_msgs::IMU_SCHEMA,
+                })?;
+            }
+        }
         let Some(channel) = sensor.imu.as_mut() else {
             return Err(finished_error());
         };
@@ -775,11 +902,46 @@ impl<W: Write + Seek> McapSink<W> {
     ) -> Result<(), SinkError> {
         self.before_message(log_time_ns)?;
         let sensor = sensor_at(&mut self.sensors, s)?;
-        self.buf.clear();
-        serde_json::to_writer(&mut self.buf, json).map_err(|source| SinkError::Json {
-            topic: sensor.diagnostics_topic(),
-            source,
-        })?;
+        match self.format {
+            Format::Foxglove => {
+                self.buf.clear();
+                serde_json::to_writer(&mut self.buf, json).map_err(|source| SinkError::Json {
+                    topic: sensor.diagnostics_topic(),
+                    source,
+                })?;
+            }
+            Format::Ros2 => {
+                let mut kv = Vec::new();
+                ros2_msgs::json_key_values(json, &mut kv);
+                let missing = json
+                    .get("missing_packets")
+                    .and_then(serde_json::Value::as_u64)
+                    .unwrap_or(0);
+                let level = if missing > 0 {
+                    ros2_msgs::level::WARN
+                } else {
+                    ros2_msgs::level::OK
+                };
+                let hardware_id = sensor
+                    .metadata
+                    .get("serial")
+                    .filter(|s| !s.is_empty() && *s != "0")
+                    .unwrap_or(&sensor.name);
+                ros2_msgs::encode_diagnostic_array(
+                    &mut self.buf,
+                    log_time_ns,
+                    &sensor.name,
+                    hardware_id,
+                    level,
+                    &kv,
+                )
+                .map_err(|_| SinkError::TimestampOutOfRange {
+                    topic: sensor.diagnostics_topic(),
+                    timestamp_ns: log_time_ns,
+                    format: ros2_msgs::DIAGNOSTIC_ARRAY_SCHEMA,
+                })?;
+            }
+        }
         let header = sensor.diagnostics.next_header(log_time_ns);
         let writer = self.writer.as_mut().ok_or_else(finished_error)?;
         write_known(writer, &header, &self.buf, || {
@@ -804,7 +966,8 @@ impl<W: Write + Seek> McapSink<W> {
                 id
             }
         };
-        let id = writer.add_channel(schema_id, topic, schema.message_encoding, metadata)?;
+        let md = channel_metadata(self.format, topic, metadata);
+        let id = writer.add_channel(schema_id, topic, schema.message_encoding, &md)?;
         self.extra_channels
             .push((topic.to_string(), Channel { id, sequence: 0 }));
         Ok(TopicId(self.extra_channels.len() - 1))
@@ -844,6 +1007,9 @@ impl<W: Write + Seek> McapSink<W> {
     }
 
     fn finish_inner(&mut self) -> Result<SinkSummary, SinkError> {
+        for i in 0..self.sensors.len() {
+            self.flush_scan(SensorId(i))?;
+        }
         let log_time = self.first_log_time.unwrap_or(0);
         self.write_pending_attachments(log_time)?;
         let writer = self.writer.take().ok_or_else(finished_error)?;
@@ -853,8 +1019,11 @@ impl<W: Write + Seek> McapSink<W> {
         for (topic, n) in summary.channel_messages {
             *messages.entry(topic).or_insert(0) += n;
         }
+        let types = summary.channel_schemas.into_iter().collect();
         let mut out = SinkSummary {
             messages,
+            types,
+            bounds: summary.bounds,
             attachments: std::mem::take(&mut self.attachments),
             chunks: summary.stats.chunks as usize,
             chunks_uncompressed: summary.stats.chunks_uncompressed,
@@ -903,6 +1072,146 @@ impl<W: Write + Seek> McapSink<W> {
         if let Some(commit) = self.commit.take() {
             let _ = std::fs::remove_file(&commit.temp);
         }
+    }
+
+    /// `--format ros2`: one packet into the family's ROS packet message (see [`RawRos2`]).
+    fn write_raw_ros2(
+        &mut self,
+        s: SensorId,
+        log_time_ns: u64,
+        payload: &[u8],
+    ) -> Result<(), SinkError> {
+        let sensor = sensor_at(&mut self.sensors, s)?;
+        let writer = self.writer.as_mut().ok_or_else(finished_error)?;
+        let raw = &mut sensor.ros2_raw;
+        let prefix = sensor.prefix.clone();
+        let too_long = |found: usize, max: usize| SinkError::TooLarge {
+            topic: format!("{prefix}/raw"),
+            what: "packet",
+            found,
+            max,
+        };
+        match raw.family.as_str() {
+            "velodyne" | "hesai" => {
+                let pandar = raw.family == "hesai";
+                let fits = if pandar {
+                    payload.len() <= ros2_msgs::PANDAR_PACKET_BYTES
+                } else {
+                    payload.len() == ros2_msgs::VELODYNE_PACKET_BYTES
+                };
+                if !fits {
+                    raw.dropped += 1;
+                    return Ok(());
+                }
+                raw.scan.push((log_time_ns, payload.to_vec()));
+                if raw.scan.len() >= MAX_SCAN_PACKETS {
+                    self.flush_scan(s)?;
+                }
+                Ok(())
+            }
+            "ouster" => {
+                if let Some(text) = raw.metadata.take() {
+                    let topic = format!("{prefix}/metadata");
+                    let md = channel_metadata(Format::Ros2, &topic, &sensor.metadata);
+                    lazy_ros2_channel(
+                        writer,
+                        &mut self.extra_schemas,
+                        ros2_msgs::STRING_SCHEMA,
+                        &mut raw.metadata_channel,
+                        &topic,
+                        &md,
+                    )?;
+                    ros2_msgs::encode_string(&mut self.buf, &text);
+                    if let Some(c) = raw.metadata_channel.as_mut() {
+                        let header = c.next_header(log_time_ns);
+                        write_known(writer, &header, &self.buf, || {
+                            format!("writing the sensor metadata to {topic}")
+                        })?;
+                    }
+                }
+                if u32::try_from(payload.len()).is_err() {
+                    return Err(too_long(payload.len(), u32::MAX as usize));
+                }
+                let lidar = raw.lidar_packet_bytes.is_none_or(|n| n == payload.len());
+                let (channel, topic) = if lidar {
+                    (&mut raw.packets, format!("{prefix}/lidar_packets"))
+                } else {
+                    (&mut raw.imu_packets, format!("{prefix}/imu_packets"))
+                };
+                let md = channel_metadata(Format::Ros2, &topic, &sensor.metadata);
+                lazy_ros2_channel(
+                    writer,
+                    &mut self.extra_schemas,
+                    ros2_msgs::OUSTER_PACKET_SCHEMA,
+                    channel,
+                    &topic,
+                    &md,
+                )?;
+                let Some(c) = channel.as_mut() else {
+                    return Err(finished_error());
+                };
+                let header = c.next_header(log_time_ns);
+                writer.write_message_with(&header, |b| {
+                    // PacketMsg { uint8[] buf }: the encapsulation header, the length, the bytes.
+                    b.extend_from_slice(&[0, 1, 0, 0]);
+                    b.extend_from_slice(&(payload.len() as u32).to_le_bytes());
+                    b.extend_from_slice(payload);
+                    Ok(())
+                })
+            }
+            _ => {
+                raw.dropped += 1;
+                Ok(())
+            }
+        }
+    }
+
+    /// Writes the Velodyne / Hesai packets gathered for sensor `s` as one scan message.
+    fn flush_scan(&mut self, s: SensorId) -> Result<(), SinkError> {
+        let sensor = sensor_at(&mut self.sensors, s)?;
+        if sensor.ros2_raw.scan.is_empty() {
+            return Ok(());
+        }
+        let writer = self.writer.as_mut().ok_or_else(finished_error)?;
+        let raw = &mut sensor.ros2_raw;
+        let pandar = raw.family == "hesai";
+        let (schema, topic) = if pandar {
+            (
+                ros2_msgs::PANDAR_SCAN_SCHEMA,
+                format!("{}/pandar_packets", sensor.prefix),
+            )
+        } else {
+            (
+                ros2_msgs::VELODYNE_SCAN_SCHEMA,
+                format!("{}/velodyne_packets", sensor.prefix),
+            )
+        };
+        let md = channel_metadata(Format::Ros2, &topic, &sensor.metadata);
+        lazy_ros2_channel(
+            writer,
+            &mut self.extra_schemas,
+            schema,
+            &mut raw.packets,
+            &topic,
+            &md,
+        )?;
+        let scan = std::mem::take(&mut raw.scan);
+        let log_time = scan.last().map_or(0, |p| p.0);
+        let encoded = ros2_msgs::encode_packet_scan(&mut self.buf, pandar, &sensor.name, &scan);
+        raw.scan = scan;
+        raw.scan.clear();
+        encoded.map_err(|_| SinkError::TimestampOutOfRange {
+            topic: topic.clone(),
+            timestamp_ns: log_time,
+            format: schema,
+        })?;
+        let Some(c) = raw.packets.as_mut() else {
+            return Err(finished_error());
+        };
+        let header = c.next_header(log_time);
+        write_known(writer, &header, &self.buf, || {
+            format!("writing packets to {topic}")
+        })
     }
 
     /// Bookkeeping before every message: remember the first log time and write pending
@@ -961,6 +1270,54 @@ fn lazy_channel<W: Write>(
         }
     };
     let id = writer.add_channel(id, topic, message_encoding, metadata)?;
+    *channel = Some(Channel { id, sequence: 0 });
+    Ok(())
+}
+
+/// The `ros2msg` schema text of one of [`ros2_msgs`]'s types.
+fn ros2_schema(name: &str) -> String {
+    ros2_msgs::schema_text(name).unwrap_or_default()
+}
+
+/// Channel metadata: with `--format ros2`, the topic's QoS profile too (rosbag2's MCAP storage
+/// keeps it there as `offered_qos_profiles`, and `ros2 bag play` offers it).
+fn channel_metadata(
+    format: Format,
+    topic: &str,
+    md: &BTreeMap<String, String>,
+) -> BTreeMap<String, String> {
+    let mut md = md.clone();
+    if format == Format::Ros2 {
+        md.insert(
+            "offered_qos_profiles".into(),
+            super::rosbag2::qos_of(topic).into(),
+        );
+    }
+    md
+}
+
+/// Creates a `--format ros2` channel of one of [`ros2_msgs`]'s types on first use (its schema
+/// once per file, shared with [`McapSink::add_topic`]'s).
+fn lazy_ros2_channel<W: Write>(
+    writer: &mut ChunkedWriter<W>,
+    schemas: &mut Vec<(String, u16)>,
+    schema: &str,
+    channel: &mut Option<Channel>,
+    topic: &str,
+    metadata: &BTreeMap<String, String>,
+) -> Result<(), SinkError> {
+    if channel.is_some() {
+        return Ok(());
+    }
+    let schema_id = match schemas.iter().find(|(n, _)| n == schema) {
+        Some(&(_, id)) => id,
+        None => {
+            let id = writer.add_schema(schema, "ros2msg", ros2_schema(schema).as_bytes())?;
+            schemas.push((schema.to_string(), id));
+            id
+        }
+    };
+    let id = writer.add_channel(schema_id, topic, "cdr", metadata)?;
     *channel = Some(Channel { id, sequence: 0 });
     Ok(())
 }

@@ -113,6 +113,8 @@ pub struct WriterOptions {
     pub threads: usize,
     /// What to do when the workers fall behind.
     pub behind: Behind,
+    /// The Header record's `profile` (`ros2` for a rosbag2's storage, else empty).
+    pub profile: String,
 }
 
 /// Sealed chunks allowed in flight with `threads` workers (the memory bound).
@@ -151,6 +153,10 @@ pub struct WriterStats {
 pub struct WriterSummary {
     /// (topic, messages) per channel, in channel order.
     pub channel_messages: Vec<(String, u64)>,
+    /// (topic, schema name) per channel, in channel order.
+    pub channel_schemas: Vec<(String, String)>,
+    /// Earliest and latest message log time, if any message was written.
+    pub bounds: Option<(u64, u64)>,
     /// Counters.
     pub stats: WriterStats,
 }
@@ -590,8 +596,9 @@ impl<W: Write> ChunkedWriter<W> {
         let mut b = Vec::with_capacity(64);
         b.extend_from_slice(MAGIC);
         let library = me.opts.library.clone();
+        let profile = me.opts.profile.clone();
         record(&mut b, op::HEADER, |b| {
-            put_str(b, ""); // profile
+            put_str(b, &profile);
             put_str(b, &library);
         });
         me.out
@@ -1128,11 +1135,26 @@ impl<W: Write> ChunkedWriter<W> {
             .iter()
             .map(|c| (c.topic.clone(), c.messages))
             .collect();
+        let channel_schemas = self
+            .channels
+            .iter()
+            .map(|c| {
+                let schema = self
+                    .schemas
+                    .iter()
+                    .find(|s| s.id == c.schema_id)
+                    .map(|s| s.name.clone())
+                    .unwrap_or_default();
+                (c.topic.clone(), schema)
+            })
+            .collect();
         let stats = self.stats;
         Ok((
             self.out.w,
             WriterSummary {
                 channel_messages,
+                channel_schemas,
+                bounds: self.bounds,
                 stats,
             },
         ))

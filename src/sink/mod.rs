@@ -32,6 +32,8 @@ pub mod mcap;
 pub mod mcap_write;
 pub mod read;
 pub mod ros2;
+pub mod ros2_msgs;
+pub mod rosbag2;
 pub mod scene;
 
 pub use self::mcap::{

@@ -24,7 +24,7 @@ pub const MAX_DATA_LEN: usize = i32::MAX as usize - 4096 - MAX_FRAME_ID_LEN;
 /// Longest `frame_id` written.
 pub const MAX_FRAME_ID_LEN: usize = 4096;
 
-const SEPARATOR: &str =
+pub(crate) const SEPARATOR: &str =
     "================================================================================\n";
 
 const POINT_CLOUD2_MSG: &str = "\
@@ -62,7 +62,7 @@ uint8  datatype  # Datatype enumeration, see above
 uint32 count     # How many elements in the field
 ";
 
-const HEADER_MSG: &str = "\
+pub(crate) const HEADER_MSG: &str = "\
 # Standard metadata for higher-level stamped data types.
 builtin_interfaces/Time stamp
 
@@ -70,7 +70,7 @@ builtin_interfaces/Time stamp
 string frame_id
 ";
 
-const TIME_MSG: &str = "\
+pub(crate) const TIME_MSG: &str = "\
 # Time since the epoch: seconds and nanoseconds in [0, 1e9).
 int32 sec
 uint32 nanosec
@@ -135,38 +135,58 @@ pub enum Ros2EncodeError {
 }
 
 /// CDR little-endian writer over a caller's buffer.
-struct Cdr<'a> {
-    buf: &'a mut Vec<u8>,
+pub(crate) struct Cdr<'a> {
+    pub(crate) buf: &'a mut Vec<u8>,
     /// Index in `buf` where alignment is counted from (just after the encapsulation header).
     origin: usize,
 }
 
 impl<'a> Cdr<'a> {
-    fn new(buf: &'a mut Vec<u8>) -> Self {
+    pub(crate) fn new(buf: &'a mut Vec<u8>) -> Self {
         // Encapsulation: representation identifier CDR_LE (0x0001), options 0.
         buf.extend_from_slice(&[0x00, 0x01, 0x00, 0x00]);
         let origin = buf.len();
         Self { buf, origin }
     }
-    fn align(&mut self, n: usize) {
+    pub(crate) fn align(&mut self, n: usize) {
         let rem = (self.buf.len() - self.origin) % n;
         if rem != 0 {
             self.buf.resize(self.buf.len() + n - rem, 0);
         }
     }
-    fn u8(&mut self, v: u8) {
+    pub(crate) fn u8(&mut self, v: u8) {
         self.buf.push(v);
     }
-    fn u32(&mut self, v: u32) {
+    pub(crate) fn u32(&mut self, v: u32) {
         self.align(4);
         self.buf.extend_from_slice(&v.to_le_bytes());
     }
-    fn i32(&mut self, v: i32) {
+    pub(crate) fn i32(&mut self, v: i32) {
         self.align(4);
         self.buf.extend_from_slice(&v.to_le_bytes());
+    }
+    pub(crate) fn f32(&mut self, v: f32) {
+        self.align(4);
+        self.buf.extend_from_slice(&v.to_le_bytes());
+    }
+    pub(crate) fn f64(&mut self, v: f64) {
+        self.align(8);
+        self.buf.extend_from_slice(&v.to_le_bytes());
+    }
+    /// `builtin_interfaces/Time` (or `Duration`) of `ns` nanoseconds; `None` past `int32` seconds.
+    pub(crate) fn time(&mut self, ns: u64) -> Option<()> {
+        let sec = i32::try_from(ns / 1_000_000_000).ok()?;
+        self.i32(sec);
+        self.u32((ns % 1_000_000_000) as u32);
+        Some(())
+    }
+    /// A `uint8[]` sequence; callers keep it under 4 GiB.
+    pub(crate) fn bytes(&mut self, b: &[u8]) {
+        self.u32(b.len() as u32);
+        self.buf.extend_from_slice(b);
     }
     /// Callers keep strings short (see [`MAX_FRAME_ID_LEN`]), so the length fits `u32`.
-    fn string(&mut self, s: &str) {
+    pub(crate) fn string(&mut self, s: &str) {
         self.u32(s.len() as u32 + 1);
         self.buf.extend_from_slice(s.as_bytes());
         self.buf.push(0);

@@ -32,7 +32,8 @@ use super::foxglove::{
     self, file, message, point_cloud_files, put_double_field, put_len_field, put_string_field,
     put_timestamp_field, put_varint_field, repeated, timestamp_file, PointCloudPrefix,
 };
-use super::mcap::{McapSink, SensorId, SinkError, TopicId, TopicSchema};
+use super::mcap::{Format, McapSink, SensorId, SinkError, TopicId, TopicSchema};
+use super::{ros2, ros2_msgs};
 use crate::pipeline::cluster::Cluster;
 use crate::point::{FieldType, Point, POINT_FIELDS, POINT_STRIDE};
 
@@ -572,6 +573,120 @@ pub struct PipelineTopics {
     scene: SceneEncoder,
     buf: Vec<u8>,
     records: Vec<u8>,
+    format: Format,
+}
+
+/// The schema of point cloud channels in `format`.
+pub fn points_schema(format: Format) -> TopicSchema<'static> {
+    match format {
+        Format::Foxglove => TopicSchema {
+            name: foxglove::POINT_CLOUD_SCHEMA,
+            encoding: "protobuf",
+            data: &foxglove::point_cloud_descriptor_set,
+            message_encoding: "protobuf",
+        },
+        Format::Ros2 => TopicSchema {
+            name: ros2::POINT_CLOUD2_SCHEMA,
+            encoding: "ros2msg",
+            data: &|| ros2::point_cloud2_schema_text().into_bytes(),
+            message_encoding: "cdr",
+        },
+    }
+}
+
+/// The schema of transform channels (`/tf`, `/tf_static`) in `format`.
+pub fn transform_schema(format: Format) -> TopicSchema<'static> {
+    match format {
+        Format::Foxglove => TopicSchema {
+            name: FRAME_TRANSFORM_SCHEMA,
+            encoding: "protobuf",
+            data: &frame_transform_descriptor_set,
+            message_encoding: "protobuf",
+        },
+        Format::Ros2 => TopicSchema {
+            name: ros2_msgs::TF_MESSAGE_SCHEMA,
+            encoding: "ros2msg",
+            data: &|| {
+                ros2_msgs::schema_text(ros2_msgs::TF_MESSAGE_SCHEMA)
+                    .unwrap_or_default()
+                    .into_bytes()
+            },
+            message_encoding: "cdr",
+        },
+    }
+}
+
+/// Encodes one transform (`parent_from_child`) into `buf` (cleared first) as `format` writes
+/// it: a `foxglove.FrameTransform`, or a `tf2_msgs/msg/TFMessage` holding it.
+pub fn encode_transform(
+    format: Format,
+    buf: &mut Vec<u8>,
+    timestamp_ns: u64,
+    parent: &str,
+    child: &str,
+    parent_from_child: &Isometry3<f64>,
+) -> Result<(), SinkError> {
+    match format {
+        Format::Foxglove => {
+            encode_frame_transform(buf, timestamp_ns, parent, child, parent_from_child);
+            Ok(())
+        }
+        Format::Ros2 => ros2_msgs::encode_tf_message(
+            buf,
+            &[ros2_msgs::Transform {
+                stamp_ns: timestamp_ns,
+                parent,
+                child,
+                parent_from_child,
+            }],
+        )
+        .map_err(|_| SinkError::TimestampOutOfRange {
+            topic: "/tf".into(),
+            timestamp_ns,
+            format: ros2_msgs::TF_MESSAGE_SCHEMA,
+        }),
+    }
+}
+
+/// Encodes a point cloud of `stride`-byte records laid out as `fields` into `buf` as `format`
+/// writes it (`foxglove.PointCloud` with `prefix`, or `sensor_msgs/msg/PointCloud2`).
+#[allow(clippy::too_many_arguments)]
+pub fn encode_points(
+    format: Format,
+    buf: &mut Vec<u8>,
+    timestamp_ns: u64,
+    prefix: &PointCloudPrefix,
+    frame_id: &str,
+    stride: usize,
+    fields: &[(&str, usize, FieldType)],
+    records: &[u8],
+    topic: &str,
+) -> Result<(), SinkError> {
+    match format {
+        Format::Foxglove => foxglove::encode_point_cloud_bytes(buf, timestamp_ns, prefix, records)
+            .ok_or_else(|| SinkError::TooLarge {
+                topic: topic.to_string(),
+                what: "point data",
+                found: records.len(),
+                max: foxglove::MAX_MESSAGE_LEN - 1024,
+            }),
+        Format::Ros2 => {
+            ros2::encode_point_cloud2_fields(buf, timestamp_ns, frame_id, stride, fields, records)
+                .map_err(|e| match e {
+                    ros2::Ros2EncodeError::TimestampOutOfRange => SinkError::TimestampOutOfRange {
+                        topic: topic.to_string(),
+                        timestamp_ns,
+                        format: ros2::POINT_CLOUD2_SCHEMA,
+                    },
+                    ros2::Ros2EncodeError::TooLarge => SinkError::TooLarge {
+                        topic: topic.to_string(),
+                        what: "point data",
+                        found: records.len(),
+                        max: ros2::MAX_DATA_LEN,
+                    },
+                })
+        }
+    }
 }
 
 impl PipelineTopics {
@@ -591,24 +706,29 @@ impl PipelineTopics {
             })?;
         let mut metadata = BTreeMap::new();
         metadata.insert("frame_id".to_string(), frame_id.to_string());
-        let points = TopicSchema {
-            name: foxglove::POINT_CLOUD_SCHEMA,
-            encoding: "protobuf",
-            data: &foxglove::point_cloud_descriptor_set,
-            message_encoding: "protobuf",
-        };
+        let format = sink.format();
+        let points = points_schema(format);
         let ground = sink.add_topic(&format!("{prefix}/ground"), points, &metadata)?;
         let obstacles = sink.add_topic(&format!("{prefix}/obstacles"), points, &metadata)?;
-        let clusters = sink.add_topic(
-            &format!("{prefix}/clusters"),
-            TopicSchema {
+        let clusters_schema = match format {
+            Format::Foxglove => TopicSchema {
                 name: SCENE_UPDATE_SCHEMA,
                 encoding: "protobuf",
                 data: &scene_update_descriptor_set,
                 message_encoding: "protobuf",
             },
-            &metadata,
-        )?;
+            Format::Ros2 => TopicSchema {
+                name: ros2_msgs::MARKER_ARRAY_SCHEMA,
+                encoding: "ros2msg",
+                data: &|| {
+                    ros2_msgs::schema_text(ros2_msgs::MARKER_ARRAY_SCHEMA)
+                        .unwrap_or_default()
+                        .into_bytes()
+                },
+                message_encoding: "cdr",
+            },
+        };
+        let clusters = sink.add_topic(&format!("{prefix}/clusters"), clusters_schema, &metadata)?;
         Ok(Self {
             ground,
             obstacles,
@@ -623,6 +743,7 @@ impl PipelineTopics {
             scene: SceneEncoder::default(),
             buf: Vec::new(),
             records: Vec::new(),
+            format,
         })
     }
 
@@ -638,42 +759,57 @@ impl PipelineTopics {
         obstacle_clusters: &[u32],
         clusters: &[Cluster],
     ) -> Result<(), SinkError> {
-        let too_large = |what: &'static str, found: usize| SinkError::TooLarge {
-            topic: what.to_string(),
-            what: "point data",
-            found,
-            max: foxglove::MAX_MESSAGE_LEN - 1024,
-        };
-        foxglove::encode_point_cloud(&mut self.buf, timestamp_ns, &self.ground_prefix, ground)
-            .ok_or_else(|| too_large("ground", ground.len() * POINT_STRIDE))?;
+        encode_points(
+            self.format,
+            &mut self.buf,
+            timestamp_ns,
+            &self.ground_prefix,
+            &self.frame_id,
+            POINT_STRIDE,
+            &POINT_FIELDS,
+            crate::point::as_bytes(ground),
+            "ground",
+        )?;
         sink.write_message(self.ground, log_time_ns, &self.buf)?;
         obstacle_records(obstacles, obstacle_clusters, &mut self.records);
-        foxglove::encode_point_cloud_bytes(
+        encode_points(
+            self.format,
             &mut self.buf,
             timestamp_ns,
             &self.obstacles_prefix,
+            &self.frame_id,
+            OBSTACLE_STRIDE,
+            &OBSTACLE_FIELDS,
             &self.records,
-        )
-        .ok_or_else(|| too_large("obstacles", self.records.len()))?;
+            "obstacles",
+        )?;
         sink.write_message(self.obstacles, log_time_ns, &self.buf)?;
-        self.scene
-            .encode_clusters(&mut self.buf, timestamp_ns, &self.frame_id, clusters);
+        match self.format {
+            Format::Foxglove => {
+                self.scene
+                    .encode_clusters(&mut self.buf, timestamp_ns, &self.frame_id, clusters);
+            }
+            Format::Ros2 => ros2_msgs::encode_cluster_markers(
+                &mut self.buf,
+                timestamp_ns,
+                &self.frame_id,
+                "clusters",
+                clusters,
+            )
+            .map_err(|_| SinkError::TimestampOutOfRange {
+                topic: "clusters".into(),
+                timestamp_ns,
+                format: ros2_msgs::MARKER_ARRAY_SCHEMA,
+            })?,
+        }
         sink.write_message(self.clusters, log_time_ns, &self.buf)
     }
 }
 
 /// Adds the `/tf_static` channel.
 pub fn add_tf_static<W: Write + Seek>(sink: &mut McapSink<W>) -> Result<TopicId, SinkError> {
-    sink.add_topic(
-        TF_STATIC_TOPIC,
-        TopicSchema {
-            name: FRAME_TRANSFORM_SCHEMA,
-            encoding: "protobuf",
-            data: &frame_transform_descriptor_set,
-            message_encoding: "protobuf",
-        },
-        &BTreeMap::new(),
-    )
+    let schema = transform_schema(sink.format());
+    sink.add_topic(TF_STATIC_TOPIC, schema, &BTreeMap::new())
 }
 
 #[cfg(test)]

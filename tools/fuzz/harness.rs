@@ -1180,6 +1180,11 @@ impl Out {
                 md.insert("profile".to_string(), f.profile.clone());
                 md.insert("mode".to_string(), f.mode.clone());
                 md.insert("clock".to_string(), f.clock.name().to_string());
+                md.insert("family".to_string(), "ouster".to_string());
+                md.insert(
+                    "lidar_packet_bytes".to_string(),
+                    f.lidar_packet_bytes.to_string(),
+                );
                 let base = format!("os-{}", addr.octets()[3]);
                 self.register_named(idx, addr, base, md);
             }
@@ -1212,6 +1217,7 @@ impl Out {
         md.insert("model_detection".to_string(), facts.detection.clone());
         md.insert("clock".to_string(), facts.clock.name().to_string());
         md.insert("calibration".to_string(), facts.calibration.clone());
+        md.insert("family".to_string(), "velodyne".to_string());
         self.register_named(idx, addr, name, md);
     }
 
@@ -1448,6 +1454,9 @@ pub fn decode_to_mcap(data: &[u8]) {
         if out.raw {
             if let Some(id) = out.sensors.get(idx).and_then(|s| s.id) {
                 let topic = out.sink.channels(id).map(|c| c.raw_topic());
+                // `--format ros2` gathers packets into the family's ROS messages (checked
+                // against the sink's summary below); the Foxglove output has one per packet.
+                let foxglove = out.sink.format() == Format::Foxglove;
                 match out.sink.write_raw(
                     id,
                     time.max(0) as u64,
@@ -1455,7 +1464,8 @@ pub fn decode_to_mcap(data: &[u8]) {
                     port,
                     d.payload,
                 ) {
-                    Ok(()) => out.count(topic.unwrap_or_default()),
+                    Ok(()) if foxglove => out.count(topic.unwrap_or_default()),
+                    Ok(()) => {}
                     Err(e) => out.error = Some(e),
                 }
             }
@@ -1496,7 +1506,21 @@ pub fn decode_to_mcap(data: &[u8]) {
         assert!(m.sequence >= *seq, "sequence numbers go backwards");
         *seq = m.sequence;
     }
-    let written: BTreeMap<String, u64> = out.written.into_iter().filter(|(_, n)| *n > 0).collect();
+    let mut written: BTreeMap<String, u64> =
+        out.written.into_iter().filter(|(_, n)| *n > 0).collect();
+    // The ROS packet topics of `--format ros2 --raw`: as many read back as the sink says.
+    for (topic, n) in &summary.messages {
+        let packets = [
+            "/velodyne_packets",
+            "/lidar_packets",
+            "/imu_packets",
+            "/metadata",
+        ];
+        if *n > 0 && packets.iter().any(|p| topic.ends_with(p)) {
+            assert_eq!(per_topic.get(topic), Some(n), "{topic} read back");
+            written.insert(topic.clone(), *n);
+        }
+    }
     assert_eq!(per_topic, written, "messages read back = messages written");
     let stats = read.stats.expect("statistics record");
     assert_eq!(stats.message_count, written.values().sum::<u64>());

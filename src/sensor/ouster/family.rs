@@ -225,6 +225,7 @@ impl Facts for OusterFacts {
         put("init_id", self.init_id.to_string());
         put("clock", self.clock.name().to_string());
         put("calibration", self.metadata.clone());
+        put("lidar_packet_bytes", self.lidar_packet_bytes.to_string());
         put("crc_checked", self.crc_checked.to_string());
     }
 

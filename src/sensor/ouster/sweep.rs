@@ -120,6 +120,8 @@ pub struct OusterFacts {
     pub mode: String,
     /// Metadata file name.
     pub metadata: String,
+    /// Bytes of a lidar packet (the sensor's other packets are IMU packets).
+    pub lidar_packet_bytes: usize,
     /// Clock of the sweep timestamps.
     pub clock: ClockSource,
     /// Whether lidar footers are CRC-checked.
@@ -177,6 +179,7 @@ impl OusterStream {
             profile: info.format.profile.name().to_string(),
             mode: format!("{}x{}", info.columns_per_frame, info.fps),
             metadata: cfg.metadata_name.clone(),
+            lidar_packet_bytes: info.lidar_packet_bytes(),
             clock,
             crc_checked: decoder.crc_check(),
             init_id: info.init_id,
