@@ -38,7 +38,8 @@ use ringscan::sensor::DecodeOptions;
 use ringscan::sweep::Sweep;
 
 const DIR: &str = "tier4__nebula__pr79/nebula_tests/data/robosense/helios16P";
-const CSV: &str = "tier4__nebula__pr79/nebula_decoders/calibration/robosense/RobosenseHelios16P.csv";
+const CSV: &str =
+    "tier4__nebula__pr79/nebula_decoders/calibration/robosense/RobosenseHelios16P.csv";
 const PCDS: [(&str, usize); 4] = [
     ("1691031766781547066.pcd", 15_258),
     ("1691031766880833506.pcd", 15_795),
@@ -112,7 +113,10 @@ fn pcap_path(r: &Path) -> PathBuf {
 }
 
 /// Streams datagrams; returns the sweeps (owned) and the stream.
-fn stream(dgrams: &[(i64, u16, Vec<u8>)], with_csv: Option<&Path>) -> (Vec<Sweep>, RobosenseStream) {
+fn stream(
+    dgrams: &[(i64, u16, Vec<u8>)],
+    with_csv: Option<&Path>,
+) -> (Vec<Sweep>, RobosenseStream) {
     let angles = with_csv.map(|p| {
         let mut a = parse_robosense_calibration(&std::fs::read(p).unwrap())
             .expect("recognised")
@@ -162,7 +166,9 @@ fn helios16p_matches_nebula_pr79() {
             assert_eq!(g.intensity, f32::from(e.intensity), "{file} point {i}");
             assert_eq!(g.ring, e.channel, "{file} point {i}");
             assert_eq!(g.ret, 0);
-            let err = ((g.x - e.xyz[0]).powi(2) + (g.y - e.xyz[1]).powi(2) + (g.z - e.xyz[2]).powi(2)).sqrt();
+            let err =
+                ((g.x - e.xyz[0]).powi(2) + (g.y - e.xyz[1]).powi(2) + (g.z - e.xyz[2]).powi(2))
+                    .sqrt();
             let tol = if e.elevation == 889.0 {
                 deviating += 1;
                 1e-3 + e.distance * 0.01f32.to_radians().sin()
@@ -170,9 +176,18 @@ fn helios16p_matches_nebula_pr79() {
                 max_err = max_err.max(err);
                 1e-3
             };
-            assert!(err <= tol, "{file} point {i}: {:?} vs {:?} ({err} m)", (g.x, g.y, g.z), e.xyz);
+            assert!(
+                err <= tol,
+                "{file} point {i}: {:?} vs {:?} ({err} m)",
+                (g.x, g.y, g.z),
+                e.xyz
+            );
         }
-        println!("{file}: {} points, max xyz error {:.3} mm (off the 8.90° laser)", got.len(), max_err * 1e3);
+        println!(
+            "{file}: {} points, max xyz error {:.3} mm (off the 8.90° laser)",
+            got.len(),
+            max_err * 1e3
+        );
     }
     println!("points on the 8.90° laser (nebula: 8.89°): {deviating}");
     assert!(deviating > 0);
@@ -208,7 +223,11 @@ fn helios16p_fields_and_times_follow_the_headers() {
     for sw in &sweeps {
         for p in &sw.points {
             let t = sw.device_time_ns + i64::from(p.t);
-            assert!((t - expect_t[i]).abs() <= 1, "point {i}: {t} vs {}", expect_t[i]);
+            assert!(
+                (t - expect_t[i]).abs() <= 1,
+                "point {i}: {t} vs {}",
+                expect_t[i]
+            );
             i += 1;
         }
     }
@@ -219,12 +238,23 @@ fn helios16p_fields_and_times_follow_the_headers() {
         let exp = read_pcd(&r.join(DIR).join(file));
         for e in &exp {
             let (az, dist) = fields[j];
-            assert_eq!(az.rem_euclid(36_000) as f32, e.azimuth.rem_euclid(36_000.0), "{file}");
+            assert_eq!(
+                az.rem_euclid(36_000) as f32,
+                e.azimuth.rem_euclid(36_000.0),
+                "{file}"
+            );
             // The PCD is ASCII with 8 significant digits: equal to that precision.
-            assert!((dist - e.distance).abs() <= 1e-7 * dist.max(1.0), "{file}: {dist} vs {}", e.distance);
+            assert!(
+                (dist - e.distance).abs() <= 1e-7 * dist.max(1.0),
+                "{file}: {dist} vs {}",
+                e.distance
+            );
             j += 1;
         }
-        assert_eq!(j, sweeps[..=k].iter().map(|s| s.points.len()).sum::<usize>());
+        assert_eq!(
+            j,
+            sweeps[..=k].iter().map(|s| s.points.len()).sum::<usize>()
+        );
     }
 }
 
@@ -234,7 +264,12 @@ fn helios16p_from_difop_alone_and_from_the_bag() {
     let dgrams = common::datagrams(&pcap_path(&r));
     let (with_csv, _) = stream(&dgrams, Some(&r.join(CSV)));
     let (difop_only, s) = stream(&dgrams, None);
-    assert_eq!(s.facts().model, Some(RobosenseModel::Helios16P), "{}", s.facts().detection);
+    assert_eq!(
+        s.facts().model,
+        Some(RobosenseModel::Helios16P),
+        "{}",
+        s.facts().detection
+    );
     assert_eq!(s.facts().calibration, "DIFOP");
     assert_eq!(s.stats().dropped, 0);
     assert_eq!(with_csv.len(), difop_only.len());

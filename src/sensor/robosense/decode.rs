@@ -114,7 +114,8 @@ impl RobosenseDecoder {
             .collect();
         let slots = spec.shape.slots();
         let frac = [false, true].map(|d| (0..slots).map(|s| spec.slot_fraction(s, d)).collect());
-        let slot_ns = [false, true].map(|d| (0..slots).map(|s| us_to_ns(spec.slot_us(s, d))).collect());
+        let slot_ns =
+            [false, true].map(|d| (0..slots).map(|s| us_to_ns(spec.slot_us(s, d))).collect());
         let mut dec = Self {
             model,
             spec,

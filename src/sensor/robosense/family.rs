@@ -26,7 +26,14 @@ use crate::sensor::{
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Robosense;
 
-const MODEL_IDS: &[&str] = &["rs16", "rs32", "rsbpearl", "rshelios", "rshelios16p", "rsruby128"];
+const MODEL_IDS: &[&str] = &[
+    "rs16",
+    "rs32",
+    "rsbpearl",
+    "rshelios",
+    "rshelios16p",
+    "rsruby128",
+];
 
 /// Reads a Robosense angle CSV; `None` for any other text.
 pub fn parse_robosense_calibration(bytes: &[u8]) -> Option<Result<RobosenseAngles, CalibError>> {
@@ -227,7 +234,9 @@ impl SensorStream for RobosenseStream {
     }
 
     fn channels(&self) -> Option<usize> {
-        RobosenseStream::facts(self).model.map(RobosenseModel::lasers)
+        RobosenseStream::facts(self)
+            .model
+            .map(RobosenseModel::lasers)
     }
 
     fn as_any(&self) -> &dyn Any {

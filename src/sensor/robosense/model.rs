@@ -459,7 +459,10 @@ mod tests {
         for m in ALL_MODELS {
             let s = m.spec().shape;
             let tail = if s == Shape::Ruby { 4 } else { 6 };
-            assert_eq!(s.header_len() + s.blocks() * s.block_len() + tail, PACKET_LEN);
+            assert_eq!(
+                s.header_len() + s.blocks() * s.block_len() + tail,
+                PACKET_LEN
+            );
             assert_eq!(m.spec().firing_us.len(), s.slots());
         }
     }

@@ -4,8 +4,8 @@
 //! [`RobosenseSim`] fires every slot of every block at the model's firing time relative to the
 //! packet's header time; the block azimuth is the head's azimuth at the firing, rounded to
 //! 0.01°; each slot's beam points at the block azimuth plus the model's interpolation of the
-//! step to the next firing (untruncated) plus the laser's horizontal angle — the angle model
-//! of RoboSense's SDK and of the decoder, so the simulator checks layouts, units, timing and
+//! step to the next firing (in whole 0.01° steps) plus the laser's horizontal angle — the angle
+//! model of RoboSense's SDK and of the decoder, so the simulator checks layouts, units, timing and
 //! geometry while the real capture checks the angle model. Beams leave from the lens centre.
 //! Distances are rounded to the distance unit. Dual mode: every 5th beam also sees a surface
 //! 1.5 m behind (the second return); the others send the same return twice, which the decoder
@@ -14,7 +14,9 @@
 use nalgebra::{Point3, Vector3};
 
 use super::calib::RobosenseAngles;
-use super::model::{us_to_ns, ClockForm, DualForm, RobosenseModel, Shape, PACKET_LEN, RS16_PITCH_OFFSET};
+use super::model::{
+    us_to_ns, ClockForm, DualForm, RobosenseModel, Shape, PACKET_LEN, RS16_PITCH_OFFSET,
+};
 use super::wire::{DIFOP_ID, MSOP_ID_V1, MSOP_ID_V2};
 use crate::sim::motion::Trajectory;
 use crate::sim::scene::{Hit, Scene};
@@ -214,7 +216,11 @@ impl RobosenseSim {
 
     /// The next packet: (host receive time, payload), appending the truth of every return the
     /// decoder must emit.
-    pub fn next_packet(&mut self, scene: &dyn Scene, truth: &mut Vec<RobosenseTruth>) -> (i64, Vec<u8>) {
+    pub fn next_packet(
+        &mut self,
+        scene: &dyn Scene,
+        truth: &mut Vec<RobosenseTruth>,
+    ) -> (i64, Vec<u8>) {
         let spec = self.model.spec();
         let shape = spec.shape;
         let dual = self.dual;
@@ -226,7 +232,8 @@ impl RobosenseSim {
             .map(|f| ((head(stamp + f as i64 * period_ns) * 100.0).round() as u32 % 36_000) as u16)
             .collect();
         let rps = ((self.deg_per_s / 6.0).round() as u16 / 60).max(1);
-        let nominal = (36_000.0 * f64::from(rps) * f64::from(spec.firing_period_us(dual)) * 1e-6).round();
+        let nominal =
+            (36_000.0 * f64::from(rps) * f64::from(spec.firing_period_us(dual)) * 1e-6).round();
         // Block → (firing, return) in packet order.
         let ab = self.packet_index % 2 == 0;
         let roles: Vec<(usize, u8)> = (0..shape.blocks())
@@ -256,7 +263,11 @@ impl RobosenseSim {
         for f in 0..firings {
             let step = if f + 1 < firings {
                 let d = (i32::from(az[f + 1]) - i32::from(az[f])).rem_euclid(36_000);
-                if d > 100 { nominal } else { f64::from(d) }
+                if d > 100 {
+                    nominal
+                } else {
+                    f64::from(d)
+                }
             } else {
                 nominal
             };
@@ -267,12 +278,17 @@ impl RobosenseSim {
                 .filter(|(_, r)| r.0 == f)
                 .map(|(b, r)| (b, r.1))
                 .collect();
-            let beams = if dual && spec.dual == DualForm::SlotHalves { 16 } else { shape.slots() };
+            let beams = if dual && spec.dual == DualForm::SlotHalves {
+                16
+            } else {
+                shape.slots()
+            };
             for s in 0..beams {
                 let l = s % lasers;
                 let (v, h) = self.angles.lasers[l];
-                let frac = f64::from(spec.slot_fraction(s, dual));
-                let h0 = f64::from(az[f]) / 100.0 + step * frac / 100.0;
+                // The slot's azimuth in whole 0.01° steps, as the protocol's angle model has it.
+                let frac = spec.slot_fraction(s, dual);
+                let h0 = (f64::from(az[f]) + f64::from((step as f32 * frac) as i32)) / 100.0;
                 let hh = h0 + h;
                 let t_ns = stamp + f as i64 * period_ns + us_to_ns(spec.slot_us(s, dual));
                 let (sh, ch) = hh.to_radians().sin_cos();
@@ -283,7 +299,12 @@ impl RobosenseSim {
                 let pose = self.trajectory.pose(t_ns);
                 let o = pose * Point3::from(lens);
                 let dw = pose.rotation * Vector3::from(dir);
-                let Some(Hit { range, reflectivity, .. }) = scene.cast(o.coords.into(), dw.into()) else {
+                let Some(Hit {
+                    range,
+                    reflectivity,
+                    ..
+                }) = scene.cast(o.coords.into(), dw.into())
+                else {
                     continue;
                 };
                 let second = dual && (self.packet_index as usize * 7 + f * 3 + s) % 5 == 0;
@@ -309,14 +330,21 @@ impl RobosenseSim {
                     };
                     blocks[blk].slots[slot] = (raw as u16, i);
                     let rr = raw * unit;
-                    if !emitted || rr < f64::from(spec.min_range_m) || rr > f64::from(spec.max_range_m) {
+                    if !emitted
+                        || rr < f64::from(spec.min_range_m)
+                        || rr > f64::from(spec.max_range_m)
+                    {
                         continue;
                     }
                     truth.push(RobosenseTruth {
                         packet: self.packet_index,
                         block: blk,
                         slot,
-                        xyz: [lens[0] + rr * dir[0], lens[1] + rr * dir[1], lens[2] + rr * dir[2]],
+                        xyz: [
+                            lens[0] + rr * dir[0],
+                            lens[1] + rr * dir[1],
+                            lens[2] + rr * dir[2],
+                        ],
                         time_ns: t_ns,
                         intensity: i,
                         ret,

@@ -332,7 +332,9 @@ impl RobosenseStream {
                     let a = probe.map(|m| d.angles(m));
                     let a16 = d.angles(RobosenseModel::Rs16).ok();
                     match (shape, a) {
-                        (Shape::V1, Some(Ok(a))) if a.iter().all(|&(v, h)| v == 0.0 && h == 0.0) => {
+                        (Shape::V1, Some(Ok(a)))
+                            if a.iter().all(|&(v, h)| v == 0.0 && h == 0.0) =>
+                        {
                             self.tell_model(shape, a16.as_deref())
                         }
                         (_, Some(Ok(a))) => self.tell_model(shape, Some(&a)),
@@ -446,9 +448,23 @@ impl RobosenseStream {
         dec.decode(&p, dual, |d| {
             if d.block != cur_block {
                 // Blocks without points still open sweeps: walk every block up to this one.
-                let from = if cur_block == usize::MAX { 0 } else { cur_block + 1 };
+                let from = if cur_block == usize::MAX {
+                    0
+                } else {
+                    cur_block + 1
+                };
                 for b in from..=d.block {
-                    self.block_begins(b, p.azimuth(b), &roles, &starts, stamp, host_ns, period_ns, clock, on_sweep);
+                    self.block_begins(
+                        b,
+                        p.azimuth(b),
+                        &roles,
+                        &starts,
+                        stamp,
+                        host_ns,
+                        period_ns,
+                        clock,
+                        on_sweep,
+                    );
                     if starts[b] {
                         counted = false;
                     }
@@ -469,9 +485,23 @@ impl RobosenseStream {
                 }
             }
         });
-        let from = if cur_block == usize::MAX { 0 } else { cur_block + 1 };
+        let from = if cur_block == usize::MAX {
+            0
+        } else {
+            cur_block + 1
+        };
         for b in from..blocks {
-            self.block_begins(b, p.azimuth(b), &roles, &starts, stamp, host_ns, period_ns, clock, on_sweep);
+            self.block_begins(
+                b,
+                p.azimuth(b),
+                &roles,
+                &starts,
+                stamp,
+                host_ns,
+                period_ns,
+                clock,
+                on_sweep,
+            );
         }
         if let Some((sw, _)) = &mut self.open {
             sw.last_host_ns = host_ns;

@@ -180,14 +180,21 @@ pub fn calendar_ns(t: &[u8]) -> Option<i64> {
     let [y, mo, d, h, mi, s, ms0, ms1, us0, us1] = *t else {
         return None;
     };
-    let (ms, us) = (u16::from_be_bytes([ms0, ms1]), u16::from_be_bytes([us0, us1]));
+    let (ms, us) = (
+        u16::from_be_bytes([ms0, ms1]),
+        u16::from_be_bytes([us0, us1]),
+    );
     if !(1..=12).contains(&mo) || !(1..=31).contains(&d) || h > 23 || mi > 59 || s > 60 {
         return None;
     }
     if ms > 999 || us > 999 {
         return None;
     }
-    let days = crate::sensor::hesai::wire::days_from_civil(2000 + i32::from(y), u32::from(mo), u32::from(d));
+    let days = crate::sensor::hesai::wire::days_from_civil(
+        2000 + i32::from(y),
+        u32::from(mo),
+        u32::from(d),
+    );
     let secs = days * 86_400 + i64::from(h) * 3600 + i64::from(mi) * 60 + i64::from(s);
     Some(secs * 1_000_000_000 + i64::from(ms) * 1_000_000 + i64::from(us) * 1_000)
 }
@@ -248,7 +255,10 @@ impl<'a> Difop<'a> {
 
     /// Serial number (6 bytes at 292), as hex.
     pub fn serial(&self) -> String {
-        self.bytes[292..298].iter().map(|x| format!("{x:02x}")).collect()
+        self.bytes[292..298]
+            .iter()
+            .map(|x| format!("{x:02x}"))
+            .collect()
     }
 
     /// Return-mode byte (300).
@@ -265,7 +275,8 @@ impl<'a> Difop<'a> {
             let mut v = Vec::with_capacity(16);
             for i in 0..16 {
                 let o = RS16_PITCH_OFFSET + 3 * i;
-                let raw = u32::from_be_bytes([0, self.bytes[o], self.bytes[o + 1], self.bytes[o + 2]]);
+                let raw =
+                    u32::from_be_bytes([0, self.bytes[o], self.bytes[o + 1], self.bytes[o + 2]]);
                 let deg = f64::from(raw) / 10_000.0;
                 if deg > 90.0 {
                     return Err(format!("RS-16 pitch {i}: {deg}° is out of range"));
