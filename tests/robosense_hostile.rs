@@ -145,8 +145,8 @@ fn random_bytes_behind_valid_ids_never_panic() {
                 p = helios_packet((rnd() % 36_000) as u16);
                 for b in 0..12 {
                     let o = 42 + 100 * b;
-                    for k in o + 4..o + 100 {
-                        p[k] = rnd() as u8;
+                    for x in &mut p[o + 4..o + 100] {
+                        *x = rnd() as u8;
                     }
                 }
                 // Any second of the u32 range, any µs of the second: times jump at random.

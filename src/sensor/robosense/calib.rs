@@ -70,15 +70,12 @@ pub fn parse_csv(text: &str) -> Option<Result<RobosenseAngles, CalibError>> {
     let text = text.trim_start_matches('\u{feff}');
     let mut lasers = Vec::new();
     for line in text.lines() {
-        match row(line)? {
-            Some(r) => {
-                // Larger than any model: not this format (and bounded).
-                if lasers.len() >= 128 {
-                    return None;
-                }
-                lasers.push(r);
+        if let Some(r) = row(line)? {
+            // Larger than any model: not this format (and bounded).
+            if lasers.len() >= 128 {
+                return None;
             }
-            None => {}
+            lasers.push(r);
         }
     }
     if !LASER_COUNTS.contains(&lasers.len()) {
