@@ -287,3 +287,63 @@ fn helios16p_from_difop_alone_and_from_the_bag() {
         assert_eq!(a.points, b.points);
     }
 }
+
+#[test]
+fn helios16p_through_the_family_interface() {
+    use ringscan::sensor::{
+        claim, parse_calibration, CalibrationPool, FirstDatagram, StreamSettings,
+    };
+    let Some(r) = root() else { return };
+    let dgrams = common::datagrams(&pcap_path(&r));
+    let csv = std::fs::read(r.join(CSV)).unwrap();
+    let cal = parse_calibration(&csv, "RobosenseHelios16P.csv", None).unwrap();
+    assert_eq!(cal.family, "robosense");
+    let f = ringscan::sensor::family("robosense").unwrap();
+    assert_eq!(f.default_ports(), &[6699, 7788]);
+    assert_eq!(f.calibration_ports(&cal), vec![6699, 7788]);
+    let settings = StreamSettings {
+        decode: NEBULA_RANGE,
+        ..StreamSettings::default()
+    };
+    let mut pool = CalibrationPool::new(vec![cal], settings);
+    let first = FirstDatagram {
+        src: std::net::Ipv4Addr::new(192, 168, 1, 200),
+        port: dgrams[0].1,
+        payload: &dgrams[0].2,
+    };
+    assert_eq!(dgrams[0].1, 6699);
+    let mut s = claim(&first, &mut pool).expect("claimed").expect("stream");
+    let mut sizes = Vec::new();
+    for (t, _, p) in &dgrams {
+        s.push(*t, p, &mut |sw, _| sizes.push(sw.points.len()))
+            .unwrap();
+    }
+    s.finish(&mut |sw, _| sizes.push(sw.points.len())).unwrap();
+    assert_eq!(&sizes[..4], &[15_258, 15_795, 15_786, 15_708]);
+    let (v, counts) = s.summary();
+    assert_eq!(v["kind"], "robosense");
+    assert_eq!(v["model"], "RS-Helios-16P");
+    assert_eq!(v["return_mode"], "strongest (0x04)");
+    assert_eq!(v["motor_rpm"], 600);
+    assert_eq!(v["serial"], "2410bac9d50b");
+    assert!(
+        v["clock_state"]
+            .as_str()
+            .unwrap()
+            .starts_with("header Unix time"),
+        "{v}"
+    );
+    assert!(
+        v["clock_state"].as_str().unwrap().contains("free-running"),
+        "{v}"
+    );
+    assert_eq!(
+        (counts.decoded, counts.missing, counts.malformed),
+        (750, 0, 0)
+    );
+    assert_eq!(
+        s.facts().default_name(first.src),
+        "rshelios16p-2410bac9d50b"
+    );
+    assert_eq!(s.channels(), Some(16));
+}
