@@ -21,6 +21,7 @@ pub mod decode;
 pub mod hesai;
 pub mod nmea;
 pub mod ouster;
+pub mod robosense;
 pub mod velodyne;
 pub mod wire;
 
@@ -42,14 +43,16 @@ use crate::sweep::Sweep;
 /// metadata) comes before one that claims by size alone (Velodyne). Hesai, whose sensors also
 /// send to port 2368 and whose packets are told by their own marks and sizes, comes before
 /// Velodyne too — also because Velodyne's calibration parsers take any text, while Hesai's
-/// recognise their CSV by its header line.
+/// recognise their CSV by its header line. Robosense (1248-byte packets with their own ids; an
+/// angle CSV recognised by its rows of numbers) comes before Velodyne for the same reason.
 pub static FAMILIES: &[&dyn Family] = &[
     &ouster::family::Ouster,
     &hesai::family::Hesai,
+    &robosense::family::Robosense,
     &velodyne::family::Velodyne,
 ];
 
-/// The family named `name` (`"velodyne"`, `"ouster"`, `"hesai"`).
+/// The family named `name` (`"velodyne"`, `"ouster"`, `"hesai"`, `"robosense"`).
 pub fn family(name: &str) -> Option<&'static dyn Family> {
     FAMILIES.iter().copied().find(|f| f.name() == name)
 }

@@ -2440,3 +2440,132 @@ pub fn calib_hesai(data: &[u8]) {
         }
     }
 }
+
+// ----- robosense_packet / calib_robosense --------------------------------------------------------
+
+use ringscan::sensor::robosense::family::parse_robosense_calibration;
+use ringscan::sensor::robosense::model::ALL_MODELS as ROBOSENSE_MODELS;
+use ringscan::sensor::robosense::{
+    Difop, Msop, RobosenseAngles, RobosenseConfig, RobosenseDecoder, RobosenseModel,
+    RobosenseStream,
+};
+
+/// Plausible angles for `model`: a fan over ±15°, horizontal offsets ±4°.
+pub fn robosense_angles(model: RobosenseModel) -> RobosenseAngles {
+    let n = model.lasers();
+    let s: String = (0..n)
+        .map(|i| {
+            format!(
+                "{:.2},{}\n",
+                15.0 - 30.0 * i as f64 / n as f64,
+                if i % 2 == 0 { -4.0 } else { 3.6 }
+            )
+        })
+        .collect();
+    parse_robosense_calibration(s.as_bytes()).unwrap().unwrap()
+}
+
+/// One datagram (the first byte picks the model and options) through the packet views and a
+/// stream, pushed twice. The views refuse what does not fit and never panic; every push is
+/// counted once (decoded, DIFOP, malformed or held); held packets stay within the bound; every
+/// point is finite, within the model's range (plus the lens offset), on a ring of the model,
+/// return 0 or 1, at most blocks × slots per packet.
+pub fn robosense_packet(data: &[u8]) {
+    let Some((&sel, payload)) = data.split_first() else {
+        return;
+    };
+    let model = ROBOSENSE_MODELS[usize::from(sel) % ROBOSENSE_MODELS.len()];
+    let dual = sel & 0x10 != 0;
+    if let Ok(p) = Msop::new(payload, model) {
+        let shape = model.spec().shape;
+        for b in 0..shape.blocks() {
+            assert!(p.azimuth(b) < 36_000);
+            assert_eq!(p.block_units(b).len(), 3 * shape.slots());
+        }
+        let _ = (
+            p.stamp_ns(model.spec().clock),
+            p.protocol_version(),
+            p.return_id(0),
+        );
+        let dec =
+            RobosenseDecoder::new(model, &robosense_angles(model), Default::default()).unwrap();
+        let mut n = 0;
+        dec.decode(&p, dual, |d| {
+            n += 1;
+            assert!(d.offset_ns >= 0 && d.offset_ns < 2_000_000);
+        });
+        assert!(n <= shape.blocks() * shape.slots());
+    }
+    if let Ok(d) = Difop::new(payload) {
+        let _ = (
+            d.rpm(),
+            d.fov(),
+            d.network(),
+            d.firmware(),
+            d.serial(),
+            d.return_mode(),
+        );
+        if let Ok(a) = d.angles(model) {
+            assert_eq!(a.len(), model.lasers());
+            for (v, h) in a {
+                assert!((-90.0..180.0).contains(&v) && (-90.0..180.0).contains(&h));
+            }
+        }
+    }
+    let angles = (sel & 0x40 == 0).then(|| robosense_angles(model));
+    let mut cfg = RobosenseConfig::new(angles);
+    if sel & 0x20 == 0 {
+        cfg.model = Some(model);
+    }
+    cfg.cut_cdeg = u16::from(sel & 0x80) * 100;
+    let mut stream = RobosenseStream::new(cfg);
+    let max_m = model.spec().max_range_m + 0.2;
+    let mut points = 0usize;
+    let mut on_sweep = |sw: &Sweep, _: &ringscan::sensor::robosense::RobosenseFacts| {
+        for p in &sw.points {
+            assert!(
+                p.x.is_finite() && p.y.is_finite() && p.z.is_finite(),
+                "{p:?}"
+            );
+            let r = (p.x * p.x + p.y * p.y + p.z * p.z).sqrt();
+            assert!(r <= max_m, "{p:?}");
+            assert!(usize::from(p.ring) < 128 && p.ret <= 1, "{p:?}");
+        }
+        points += sw.points.len();
+    };
+    for (i, host) in [0i64, 1_000_000].into_iter().enumerate() {
+        let _ = stream.push(host, payload, &mut on_sweep);
+        let st = stream.stats();
+        let held = stream.held() as u64;
+        assert_eq!(
+            st.packets + st.malformed + st.difop + held + st.dropped,
+            i as u64 + 1,
+            "{st:?}"
+        );
+        assert!(stream.held() <= ringscan::sensor::robosense::sweep::MAX_HELD);
+    }
+    stream.finish(&mut on_sweep);
+    assert!(points <= 2 * 12 * 128, "{points} points from two packets");
+}
+
+/// Any bytes as a Robosense angle CSV: recognised only when every line is one or two numbers
+/// and the row count is a model's laser count; a table that parses has finite angles within
+/// −90°..180° and serves a decoder for every model of its laser count.
+pub fn calib_robosense(data: &[u8]) {
+    let Some(parsed) = parse_robosense_calibration(data) else {
+        return;
+    };
+    let Ok(a) = parsed else {
+        return;
+    };
+    assert!(ringscan::sensor::robosense::calib::LASER_COUNTS.contains(&a.lasers()));
+    for &(v, h) in &a.lasers {
+        assert!(v.is_finite() && (-90.0..180.0).contains(&v));
+        assert!(h.is_finite() && (-90.0..180.0).contains(&h));
+    }
+    for m in ROBOSENSE_MODELS {
+        if m.lasers() == a.lasers() {
+            RobosenseDecoder::new(m, &a, Default::default()).unwrap();
+        }
+    }
+}

@@ -365,6 +365,24 @@ def main():
     put("calib_hesai", b"Laser id,Elevation,Azimuth\n" + b"".join(
         b"%d,%.3f,%.3f\n" % (i + 1, 15 - i, 0.1 * i) for i in range(32)), "tiny")
 
+    # robosense_packet: selector (model index in ringscan's ALL_MODELS order, option bits) + the
+    # Helios-16P capture's first MSOP and its DIFOP; calib_robosense: its angle CSV.
+    rs = caps / "tier4__nebula__pr79"
+    if rs.is_dir():
+        for p in sorted(rs.glob("**/*.pcap")):
+            parsed = read_classic(p.read_bytes())
+            if parsed is None:
+                continue
+            _e, _nanos, lt, recs = parsed
+            payloads = [pl for _ip, _port, pl in udp_payloads(recs, lt)]
+            picks = payloads[:2] + [pl for pl in payloads if pl[:2] == b"\xa5\xff"][:1]
+            for i, payload in enumerate(picks):
+                for bits in (0x00, 0x10, 0x40, 0x60, 0x80):
+                    put("robosense_packet", bytes([4 | bits]) + payload, f"helios16p-{i}")
+        for c in sorted(rs.glob("**/calibration/robosense/*.csv")):
+            put("calib_robosense", c.read_bytes(), c.stem)
+    put("calib_robosense", b"".join(b"%.2f,%.2f\n" % (15 - i, 0.1 * i) for i in range(32)), "tiny")
+
     # reassembly: config, then pushes of one datagram of key 2 in shuffled order, then key 0.
     for total, frag in ((1300, 400), (5000, 1480), (64000, 8000)):
         cfg = struct.pack("<HBH", 1000, 8, 20000) + struct.pack("<I", 0)

@@ -1,0 +1,579 @@
+//! One Robosense sensor's stream: model, DIFOP, held packets, clock, loss and sweeps.
+//!
+//! Feed it every UDP payload from one sensor (MSOP and DIFOP alike) with its host receive
+//! time; it calls back with each finished sweep. No I/O, no clock reads; a packet that is not
+//! well-formed is counted and skipped.
+//!
+//! **Angles.** A calibration given by the caller (the angle CSV) wins; otherwise the first
+//! DIFOP packet whose angle table is valid supplies them. MSOP packets that arrive before the
+//! angles are known are held — at most [`MAX_HELD`] of them (a DIFOP comes about once a
+//! second; that is over two seconds of the densest model), the oldest dropped and counted
+//! beyond — and decoded, in order, once they are. The return mode is the DIFOP's (single until
+//! one says dual), the motor speed too (600 rpm until one says).
+//!
+//! **Sweeps** are cut on the block azimuth: a block whose azimuth passes the cut angle (default
+//! 0°) opens a new sweep (RoboSense's SDK and nebula cut the same way). The sweep's timestamp is
+//! its first firing, so every `t` ≥ 0.
+//!
+//! **Clock.** The header time (Unix or calendar form, [`super::model::ClockForm`]) is the
+//! packet's first firing. The stream calls the clock *synchronised* when it lies within 10 s of
+//! the host receive time (the sensor follows PTP or GPS) and stamps sweeps in it; otherwise in
+//! host time, the sensor's own time kept as `device_time_ns`.
+//!
+//! **Loss.** Missing packets = round(Δ header time / packet period) − 1; a header time going
+//! backwards or jumping by more than `max_gap_ns` ends the open sweep (a discontinuity).
+
+use std::collections::VecDeque;
+
+use super::calib::RobosenseAngles;
+use super::decode::RobosenseDecoder;
+use super::model::{RobosenseModel, Shape};
+use super::wire::{is_difop, msop_shape, Difop, Msop};
+use crate::sensor::{DecodeError, DecodeOptions};
+use crate::sweep::Sweep;
+use crate::time::ClockSource;
+
+/// MSOP packets held while waiting for the angles.
+pub const MAX_HELD: usize = 4096;
+
+/// Configuration of one stream.
+#[derive(Clone, Debug)]
+pub struct RobosenseConfig {
+    /// The model (else told from the packets).
+    pub model: Option<RobosenseModel>,
+    /// Angles from a file (win over the DIFOP's).
+    pub angles: Option<RobosenseAngles>,
+    /// Range filter.
+    pub options: DecodeOptions,
+    /// Cut angle, 0.01°.
+    pub cut_cdeg: u16,
+    /// A header-time gap longer than this ends the sweep, ns.
+    pub max_gap_ns: i64,
+    /// Keep each point's firing column.
+    pub keep_columns: bool,
+}
+
+impl RobosenseConfig {
+    /// Defaults: model and angles from the packets, cut at 0°.
+    pub fn new(angles: Option<RobosenseAngles>) -> Self {
+        Self {
+            model: None,
+            angles,
+            options: DecodeOptions::default(),
+            cut_cdeg: 0,
+            max_gap_ns: 1_000_000_000,
+            keep_columns: false,
+        }
+    }
+}
+
+/// Counters of one stream.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct RobosenseStats {
+    /// MSOP packets decoded.
+    pub packets: u64,
+    /// DIFOP packets read.
+    pub difop: u64,
+    /// Packets not well-formed (or of no known shape).
+    pub malformed: u64,
+    /// DIFOP packets whose angle table could not be used.
+    pub difop_bad_angles: u64,
+    /// Packets missing (header-time gaps).
+    pub missing: u64,
+    /// Held packets dropped (the hold was full).
+    pub dropped: u64,
+    /// Discontinuities.
+    pub discontinuities: u64,
+    /// Sweeps emitted.
+    pub sweeps: u64,
+    /// Points emitted.
+    pub points: u64,
+}
+
+/// What the stream learned about its sensor.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RobosenseFacts {
+    /// The model.
+    pub model: Option<RobosenseModel>,
+    /// How it was chosen.
+    pub detection: String,
+    /// Where the angles came from (file name, `DIFOP`), empty while unknown.
+    pub calibration: String,
+    /// DIFOP: motor speed, rpm.
+    pub rpm: Option<u16>,
+    /// DIFOP: return-mode byte.
+    pub return_mode: Option<u8>,
+    /// DIFOP: field of view (start, end), 0.01°.
+    pub fov: Option<(u16, u16)>,
+    /// DIFOP: serial number.
+    pub serial: String,
+    /// DIFOP: firmware versions.
+    pub firmware: String,
+    /// Helios / Ruby header: protocol version.
+    pub protocol: Option<u16>,
+    /// Whether the header clock agrees with the host's.
+    pub clock_synchronised: Option<bool>,
+    /// Clock of the last sweep.
+    pub clock: ClockSource,
+}
+
+impl RobosenseFacts {
+    /// Return mode in words.
+    pub fn return_mode_words(&self) -> String {
+        match (self.model, self.return_mode) {
+            (Some(m), Some(r)) => format!("{} ({r:#04x})", m.mode_name(r)),
+            _ => "single (no DIFOP seen)".to_string(),
+        }
+    }
+
+    /// Clock form and state in words.
+    pub fn clock_words(&self) -> String {
+        let form = match self.model.map(|m| m.spec().clock) {
+            Some(super::model::ClockForm::Unix) => "header Unix time (s + µs)",
+            Some(super::model::ClockForm::Calendar) => "header calendar time (Y-M-D h:m:s ms µs)",
+            None => "unknown",
+        };
+        let state = match self.clock_synchronised {
+            None => "unknown",
+            Some(true) => "synchronised (within 10 s of host time)",
+            Some(false) => "free-running (far from host time)",
+        };
+        format!("{form}, {state}")
+    }
+}
+
+/// A Robosense stream.
+#[derive(Debug)]
+pub struct RobosenseStream {
+    cfg: RobosenseConfig,
+    decoder: Option<RobosenseDecoder>,
+    stats: RobosenseStats,
+    facts: RobosenseFacts,
+    held: VecDeque<(i64, Vec<u8>)>,
+    open: Option<(Sweep, i64)>,
+    spare: Option<Sweep>,
+    next_index: u64,
+    last_block_az: Option<u16>,
+    prev_stamp: Option<i64>,
+    dual: bool,
+    /// The last DIFOP, while the model is unknown (a DIFOP that came before any MSOP).
+    last_difop: Option<Vec<u8>>,
+}
+
+impl RobosenseStream {
+    /// A new stream.
+    pub fn new(cfg: RobosenseConfig) -> Self {
+        let mut facts = RobosenseFacts::default();
+        if let Some(a) = &cfg.angles {
+            facts.calibration = a.source.clone();
+        }
+        Self {
+            cfg,
+            decoder: None,
+            stats: RobosenseStats::default(),
+            facts,
+            held: VecDeque::new(),
+            open: None,
+            spare: None,
+            next_index: 0,
+            last_block_az: None,
+            prev_stamp: None,
+            dual: false,
+            last_difop: None,
+        }
+    }
+
+    /// Counters.
+    pub fn stats(&self) -> &RobosenseStats {
+        &self.stats
+    }
+
+    /// Facts.
+    pub fn facts(&self) -> &RobosenseFacts {
+        &self.facts
+    }
+
+    /// The decoder, once model and angles are known.
+    pub fn decoder(&self) -> Option<&RobosenseDecoder> {
+        self.decoder.as_ref()
+    }
+
+    /// Packets held, waiting for the angles.
+    pub fn held(&self) -> usize {
+        self.held.len()
+    }
+
+    /// Tells the model from an MSOP packet's shape and, where the shape is shared, from the
+    /// angles: the Helios header serves the Helios (32 lasers) and the Helios-16P (16), the
+    /// V1 header the RS-16 (16), RS-32 and Bpearl (32; the Bpearl's lasers look up to 90°).
+    fn tell_model(&mut self, shape: Shape, difop_angles: Option<&[(f64, f64)]>) {
+        if self.facts.model.is_some() {
+            return;
+        }
+        if let Some(m) = self.cfg.model {
+            if m.spec().shape == shape {
+                self.facts.model = Some(m);
+                self.facts.detection = format!("named by the user ({})", m.id());
+            }
+            return;
+        }
+        let file_lasers = self.cfg.angles.as_ref().map(RobosenseAngles::lasers);
+        let (m, how) = match shape {
+            Shape::Ruby => (RobosenseModel::Ruby128, "80-byte header, FE blocks".to_string()),
+            Shape::Helios => match (file_lasers, difop_angles) {
+                (Some(16), _) => (RobosenseModel::Helios16P, "Helios header; 16-laser angle file".into()),
+                (Some(_), _) => (RobosenseModel::Helios, "Helios header; 32-laser angle file".into()),
+                (None, Some(a)) if helios16p_difop(a) => (
+                    RobosenseModel::Helios16P,
+                    "Helios header; DIFOP lists 16 lasers (its entries 16–31 are not a 32-laser fan)".into(),
+                ),
+                (None, Some(_)) => (RobosenseModel::Helios, "Helios header; DIFOP lists 32 lasers".into()),
+                (None, None) => return,
+            },
+            Shape::V1 => match (file_lasers, difop_angles) {
+                (Some(16), _) => (RobosenseModel::Rs16, "V1 header; 16-laser angle file".into()),
+                (Some(_), _) => (RobosenseModel::Rs32, "V1 header; 32-laser angle file".into()),
+                (None, Some(a)) if a.len() == 16 => (RobosenseModel::Rs16, "V1 header; RS-16 DIFOP pitch table".into()),
+                (None, Some(a)) if a.iter().any(|&(v, _)| v > 30.0) => {
+                    (RobosenseModel::Bpearl, "V1 header; DIFOP angles up to 90° (Bpearl)".into())
+                }
+                (None, Some(_)) => (RobosenseModel::Rs32, "V1 header; DIFOP angles within ±25° (RS-32)".into()),
+                (None, None) => return,
+            },
+        };
+        self.facts.model = Some(m);
+        self.facts.detection = how;
+    }
+
+    fn build_decoder(&mut self, angles: &RobosenseAngles) -> Result<(), DecodeError> {
+        let Some(m) = self.facts.model else {
+            return Ok(());
+        };
+        let mut dec = RobosenseDecoder::new(m, angles, self.cfg.options)?;
+        if let Some(r) = self.facts.rpm {
+            dec.set_rpm(r);
+        }
+        // A DIFOP seen before the model was known set the return mode.
+        if let Some(mode) = self.facts.return_mode {
+            self.dual = m.is_dual(mode);
+        }
+        self.facts.calibration = angles.source.clone();
+        self.decoder = Some(dec);
+        Ok(())
+    }
+
+    /// Pushes one UDP payload; finished sweeps go to `on_sweep`. An error means the angles do
+    /// not fit the model.
+    pub fn push(
+        &mut self,
+        host_ns: i64,
+        payload: &[u8],
+        on_sweep: &mut dyn FnMut(&Sweep, &RobosenseFacts),
+    ) -> Result<(), DecodeError> {
+        if is_difop(payload) {
+            return self.push_difop(payload, on_sweep);
+        }
+        let Some(shape) = msop_shape(payload) else {
+            self.stats.malformed += 1;
+            return Ok(());
+        };
+        self.tell_model(shape, None);
+        if self.facts.model.is_some() && self.decoder.is_none() {
+            if let Some(a) = self.cfg.angles.clone() {
+                self.build_decoder(&a)?;
+            }
+        }
+        if self.decoder.is_none() {
+            if self.facts.model.is_some_and(|m| m.spec().shape != shape) {
+                self.stats.malformed += 1;
+                return Ok(());
+            }
+            if self.held.len() >= MAX_HELD {
+                self.held.pop_front();
+                self.stats.dropped += 1;
+            }
+            self.held.push_back((host_ns, payload.to_vec()));
+            if let Some(d) = self.last_difop.take() {
+                return self.push_difop(&d, on_sweep);
+            }
+            return Ok(());
+        }
+        self.decode_msop(host_ns, payload, on_sweep);
+        Ok(())
+    }
+
+    fn push_difop(
+        &mut self,
+        payload: &[u8],
+        on_sweep: &mut dyn FnMut(&Sweep, &RobosenseFacts),
+    ) -> Result<(), DecodeError> {
+        let Ok(d) = Difop::new(payload) else {
+            self.stats.malformed += 1;
+            return Ok(());
+        };
+        self.stats.difop += 1;
+        self.facts.rpm = Some(d.rpm());
+        self.facts.fov = Some(d.fov());
+        self.facts.serial = d.serial();
+        self.facts.firmware = d.firmware();
+        self.facts.return_mode = Some(d.return_mode());
+        if let Some(dec) = &mut self.decoder {
+            dec.set_rpm(d.rpm());
+        }
+        // The model of a shared header is told from the DIFOP's angles.
+        if self.facts.model.is_none() {
+            if let Some((_, p)) = self.held.front() {
+                if let Some(shape) = msop_shape(p) {
+                    let probe = match shape {
+                        Shape::Helios => Some(RobosenseModel::Helios),
+                        Shape::V1 => Some(RobosenseModel::Rs32),
+                        Shape::Ruby => None,
+                    };
+                    let a = probe.map(|m| d.angles(m));
+                    let a16 = d.angles(RobosenseModel::Rs16).ok();
+                    match (shape, a) {
+                        (Shape::V1, Some(Ok(a)))
+                            if a.iter().all(|&(v, h)| v == 0.0 && h == 0.0) =>
+                        {
+                            self.tell_model(shape, a16.as_deref())
+                        }
+                        (_, Some(Ok(a))) => self.tell_model(shape, Some(&a)),
+                        _ => self.tell_model(shape, None),
+                    }
+                }
+            }
+        }
+        match self.facts.model {
+            Some(m) => self.dual = m.is_dual(d.return_mode()),
+            None => self.last_difop = Some(payload.to_vec()),
+        }
+        if self.decoder.is_none() {
+            if let Some(m) = self.facts.model {
+                match d.angles(m) {
+                    Ok(lasers) => {
+                        let a = RobosenseAngles {
+                            source: "DIFOP".into(),
+                            lasers,
+                        };
+                        self.build_decoder(&a)?;
+                    }
+                    Err(_) => self.stats.difop_bad_angles += 1,
+                }
+            }
+            if self.decoder.is_some() {
+                let held: Vec<_> = self.held.drain(..).collect();
+                for (h, p) in held {
+                    self.decode_msop(h, &p, on_sweep);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn decode_msop(
+        &mut self,
+        host_ns: i64,
+        payload: &[u8],
+        on_sweep: &mut dyn FnMut(&Sweep, &RobosenseFacts),
+    ) {
+        let (Some(model), Some(dec)) = (self.facts.model, self.decoder.take()) else {
+            return;
+        };
+        let Ok(p) = Msop::new(payload, model) else {
+            self.stats.malformed += 1;
+            self.decoder = Some(dec);
+            return;
+        };
+        let spec = model.spec();
+        let Some(stamp) = p.stamp_ns(spec.clock) else {
+            self.stats.malformed += 1;
+            self.decoder = Some(dec);
+            return;
+        };
+        self.facts.protocol = p.protocol_version();
+        let synced = (stamp - host_ns).abs() < 10_000_000_000;
+        self.facts.clock_synchronised = Some(synced);
+        let dual = self.dual;
+        let period = spec.packet_period_ns(dual);
+        let mut discontinuity = false;
+        if let Some(prev) = self.prev_stamp {
+            let d = stamp - prev;
+            if d < 0 || d > self.cfg.max_gap_ns {
+                discontinuity = true;
+            } else if period > 0.0 {
+                let m = (d as f64 / period).round() as i64 - 1;
+                if m > 0 {
+                    self.stats.missing += m as u64;
+                    if let Some((sw, _)) = &mut self.open {
+                        sw.missing_packets += m as u64;
+                    }
+                }
+            }
+        }
+        self.prev_stamp = Some(stamp);
+        if discontinuity {
+            self.stats.discontinuities += 1;
+            self.emit(on_sweep);
+            self.last_block_az = None;
+        }
+        self.stats.packets += 1;
+        let clock = if synced {
+            ClockSource::SensorPtp
+        } else {
+            ClockSource::Host
+        };
+        let mut roles = [(0usize, None); 12];
+        dec.roles(&p, dual, &mut roles);
+        let blocks = spec.shape.blocks();
+        let period_ns = super::model::us_to_ns(spec.firing_period_us(dual));
+        // The blocks at which a new sweep starts.
+        let cut = i32::from(self.cfg.cut_cdeg % 36_000);
+        let mut starts = [false; 12];
+        let mut last = self.last_block_az;
+        for (b, s) in starts.iter_mut().enumerate().take(blocks) {
+            let az = p.azimuth(b);
+            if let Some(l) = last {
+                let span = (i32::from(az) - i32::from(l)).rem_euclid(36_000);
+                let to_cut = (cut - i32::from(l)).rem_euclid(36_000);
+                // Crossing forward (a step back within a quarter turn is not a turn).
+                *s = span > 0 && span < 27_000 && to_cut > 0 && to_cut <= span;
+            }
+            last = Some(az);
+        }
+        self.last_block_az = last;
+        let keep_columns = self.cfg.keep_columns;
+        let mut cur_block = usize::MAX;
+        let mut counted = false;
+        let mut col_base = 0u32;
+        dec.decode(&p, dual, |d| {
+            if d.block != cur_block {
+                // Blocks without points still open sweeps: walk every block up to this one.
+                let from = if cur_block == usize::MAX {
+                    0
+                } else {
+                    cur_block + 1
+                };
+                for b in from..=d.block {
+                    self.block_begins(
+                        b,
+                        p.azimuth(b),
+                        &roles,
+                        &starts,
+                        stamp,
+                        host_ns,
+                        period_ns,
+                        clock,
+                        on_sweep,
+                    );
+                    if starts[b] {
+                        counted = false;
+                    }
+                }
+                cur_block = d.block;
+            }
+            if let Some((sw, t0)) = &mut self.open {
+                if !counted {
+                    sw.packets += 1;
+                    counted = true;
+                    col_base = sw.columns_count;
+                }
+                let mut pt = d.point;
+                pt.t = (stamp + d.offset_ns - *t0).clamp(0, i64::from(u32::MAX)) as u32;
+                sw.points.push(pt);
+                if keep_columns {
+                    sw.columns.push(col_base + d.firing as u32);
+                }
+            }
+        });
+        let from = if cur_block == usize::MAX {
+            0
+        } else {
+            cur_block + 1
+        };
+        for b in from..blocks {
+            self.block_begins(
+                b,
+                p.azimuth(b),
+                &roles,
+                &starts,
+                stamp,
+                host_ns,
+                period_ns,
+                clock,
+                on_sweep,
+            );
+        }
+        if let Some((sw, _)) = &mut self.open {
+            sw.last_host_ns = host_ns;
+            sw.last_azimuth = p.azimuth(blocks - 1);
+            sw.columns_count += spec.firings(dual) as u32;
+        }
+        self.decoder = Some(dec);
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn block_begins(
+        &mut self,
+        b: usize,
+        az: u16,
+        roles: &[(usize, Option<u8>); 12],
+        starts: &[bool; 12],
+        stamp: i64,
+        host_ns: i64,
+        period_ns: i64,
+        clock: ClockSource,
+        on_sweep: &mut dyn FnMut(&Sweep, &RobosenseFacts),
+    ) {
+        if starts[b] {
+            self.emit(on_sweep);
+        }
+        if self.open.is_none() {
+            let t0 = stamp + roles[b].0 as i64 * period_ns;
+            let mut sw = self.spare.take().unwrap_or_default();
+            sw.clear();
+            sw.index = self.next_index;
+            self.next_index += 1;
+            sw.device_time_ns = t0;
+            sw.timestamp_ns = if clock == ClockSource::Host {
+                host_ns + (t0 - stamp)
+            } else {
+                t0
+            };
+            sw.clock = clock;
+            sw.first_host_ns = host_ns;
+            sw.last_host_ns = host_ns;
+            sw.first_azimuth = az;
+            self.open = Some((sw, t0));
+        }
+    }
+
+    fn emit(&mut self, on_sweep: &mut dyn FnMut(&Sweep, &RobosenseFacts)) {
+        if let Some((sw, _)) = self.open.take() {
+            if !sw.points.is_empty() || sw.packets > 0 {
+                self.stats.sweeps += 1;
+                self.stats.points += sw.points.len() as u64;
+                self.facts.clock = sw.clock;
+                on_sweep(&sw, &self.facts);
+            }
+            self.spare = Some(sw);
+        }
+    }
+
+    /// Emits the open sweep and decodes nothing more of the held packets (they never got
+    /// their angles: counted as dropped).
+    pub fn finish(&mut self, on_sweep: &mut dyn FnMut(&Sweep, &RobosenseFacts)) {
+        self.stats.dropped += self.held.len() as u64;
+        self.held.clear();
+        self.emit(on_sweep);
+    }
+}
+
+/// Whether a Helios DIFOP's 32 angle entries describe a Helios-16P: its 16 lasers are entries
+/// 0–15, a fan falling monotonically, and the unused entries 16–31 all lie more than 1° below
+/// that fan (the shared capture's: −9.94° … −53.7° under a fan down to −8.01°). A heuristic:
+/// an angle file or `--model` settles it where it fails.
+fn helios16p_difop(a: &[(f64, f64)]) -> bool {
+    a.len() >= 32
+        && a[..16].windows(2).all(|w| w[0].0 > w[1].0)
+        && a[16..32].iter().all(|&(v, _)| v < a[15].0 - 1.0)
+}

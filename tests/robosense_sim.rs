@@ -1,0 +1,179 @@
+//! The Robosense simulator (`sensor::robosense::sim`) against the decoder, for every model in
+//! single and dual return: a moving sensor (15 m/s, 60 °/s yaw) in the urban scene. Each
+//! decoded point must lie within 1 cm of the scene point the simulator's ray hit (sensor frame
+//! at its firing time, from the lens centre), carry that firing's time within 1 µs, its
+//! intensity, return and ring (elevation rank); the stream — angles from the simulated DIFOP,
+//! the packets before it held — must hand over every point once, with `t` ≥ 0 from its
+//! sweep's first firing.
+#![cfg(feature = "sim")]
+
+use std::collections::HashMap;
+
+use nalgebra::{Isometry3, Vector3};
+use ringscan::sensor::robosense::family::parse_robosense_calibration;
+use ringscan::sensor::robosense::model::ALL_MODELS;
+use ringscan::sensor::robosense::sim::{RobosenseSim, RobosenseTruth};
+use ringscan::sensor::robosense::{
+    Msop, RobosenseAngles, RobosenseConfig, RobosenseDecoder, RobosenseModel, RobosenseStream,
+};
+use ringscan::sensor::DecodeOptions;
+use ringscan::sim::motion::Trajectory;
+use ringscan::sim::scenes;
+
+const T0: i64 = 1_714_564_800_000_000_000;
+
+/// Synthetic angles in 0.01° steps (what a DIFOP can carry): interleaved elevations over the
+/// model's field, horizontal offsets ±4°.
+fn synthetic(model: RobosenseModel) -> RobosenseAngles {
+    let n = model.lasers();
+    if model == RobosenseModel::Rs16 {
+        // The RS-16's DIFOP keeps lasers 0–7 below the horizon, 8–15 above.
+        let s: String = (0..16)
+            .map(|i| format!("{:.2},0\n", -15.0 + 2.0 * i as f64))
+            .collect();
+        return parse_robosense_calibration(s.as_bytes()).unwrap().unwrap();
+    }
+    let (top, span) = match model {
+        RobosenseModel::Bpearl => (89.5, 89.0),
+        RobosenseModel::Ruby128 => (15.0, 40.0),
+        _ => (15.0, 30.0),
+    };
+    let s: String = (0..n)
+        .map(|i| {
+            // Alternate halves so that laser order is not elevation order.
+            let k = if i % 2 == 0 { i / 2 } else { n / 2 + i / 2 };
+            let v = ((top - span * k as f64 / (n - 1) as f64) * 100.0).round() / 100.0;
+            let h = [-4.05, 3.61, -1.2, 0.0][i % 4];
+            format!("{v:.2},{h}\n")
+        })
+        .collect();
+    parse_robosense_calibration(s.as_bytes()).unwrap().unwrap()
+}
+
+fn helios16p() -> RobosenseAngles {
+    let s: String = (0..16)
+        .map(|i| {
+            format!(
+                "{:.2},{}\n",
+                15.0 - 1.5 * i as f64,
+                if i % 2 == 0 { -4.0 } else { 3.6 }
+            )
+        })
+        .collect();
+    parse_robosense_calibration(s.as_bytes()).unwrap().unwrap()
+}
+
+fn run(model: RobosenseModel, dual: bool) -> (usize, f64, i64) {
+    let angles = if model == RobosenseModel::Helios16P {
+        helios16p()
+    } else {
+        synthetic(model)
+    };
+    let scene = scenes::named("urban").unwrap();
+    let mut sim = RobosenseSim::new(model, angles.clone(), T0);
+    sim.dual = dual;
+    sim.trajectory = Trajectory::twist(
+        T0,
+        Isometry3::translation(40.0, 0.0, scenes::SENSOR_HEIGHT_M),
+        Vector3::new(15.0, 0.0, 0.0),
+        Vector3::new(0.0, 0.0, 60f64.to_radians()),
+    );
+    let dec = RobosenseDecoder::new(model, &angles, DecodeOptions::default()).unwrap();
+    let mut cfg = RobosenseConfig::new(None);
+    cfg.model = Some(model);
+    let mut stream = RobosenseStream::new(cfg);
+    let ring_of = |l: usize| {
+        angles
+            .lasers
+            .iter()
+            .filter(|&&(v, _)| v < angles.lasers[l].0)
+            .count() as u16
+    };
+    let (mut n, mut max_xyz, mut max_t) = (0usize, 0f64, 0i64);
+    let mut expected_times = Vec::new();
+    let mut streamed = Vec::new();
+    let mut on_sweep = |sw: &ringscan::sweep::Sweep, _: &_| {
+        for p in &sw.points {
+            streamed.push(sw.device_time_ns + i64::from(p.t));
+        }
+    };
+    let packets = (150_000_000.0 / model.spec().packet_period_ns(dual)) as usize;
+    for k in 0..packets {
+        // The DIFOP after a few packets: those before it are held.
+        if k == 5 {
+            stream.push(0, &sim.difop(), &mut on_sweep).unwrap();
+        }
+        let mut truth: Vec<RobosenseTruth> = Vec::new();
+        let stamp = sim.stamp_of(sim.packet_index);
+        let (host, bytes) = sim.next_packet(&scene, &mut truth);
+        let by_key: HashMap<(usize, usize), RobosenseTruth> =
+            truth.iter().map(|t| ((t.block, t.slot), *t)).collect();
+        assert_eq!(by_key.len(), truth.len());
+        let m = Msop::new(&bytes, model).unwrap();
+        let mut seen = 0;
+        dec.decode(&m, dual, |d| {
+            let t = by_key.get(&(d.block, d.slot)).unwrap_or_else(|| {
+                panic!(
+                    "{model:?} packet {k}: no truth for block {} slot {}",
+                    d.block, d.slot
+                )
+            });
+            seen += 1;
+            let p = d.point;
+            let e = ((f64::from(p.x) - t.xyz[0]).powi(2)
+                + (f64::from(p.y) - t.xyz[1]).powi(2)
+                + (f64::from(p.z) - t.xyz[2]).powi(2))
+            .sqrt();
+            assert!(
+                e < 0.01,
+                "{model:?} dual {dual} packet {k} block {} slot {}: {e} m",
+                d.block,
+                d.slot
+            );
+            let dt = (stamp + d.offset_ns - t.time_ns).abs();
+            assert!(dt < 1_000, "{model:?}: time off by {dt} ns");
+            assert_eq!(p.intensity, f32::from(t.intensity));
+            assert_eq!(p.ret, t.ret, "{model:?} block {} slot {}", d.block, d.slot);
+            assert_eq!(p.ring, ring_of(model.laser_of_slot(d.slot)));
+            max_xyz = max_xyz.max(e);
+            max_t = max_t.max(dt);
+            expected_times.push(t.time_ns);
+        });
+        assert_eq!(
+            seen,
+            truth.len(),
+            "{model:?} packet {k}: every return decoded once"
+        );
+        n += seen;
+        stream.push(host, &bytes, &mut on_sweep).unwrap();
+    }
+    stream.finish(&mut on_sweep);
+    assert_eq!(stream.stats().dropped, 0);
+    assert_eq!(stream.facts().calibration, "DIFOP");
+    assert_eq!(
+        streamed.len(),
+        expected_times.len(),
+        "{model:?}: the stream hands every point once"
+    );
+    for (a, b) in streamed.iter().zip(&expected_times) {
+        assert!((a - b).abs() < 1_000, "{model:?}: stream time {a} vs {b}");
+    }
+    assert!(stream.stats().sweeps >= 1);
+    assert_eq!(stream.stats().missing, 0);
+    (n, max_xyz, max_t)
+}
+
+#[test]
+fn every_model_single_and_dual_within_1cm_and_1us() {
+    for m in ALL_MODELS {
+        for dual in [false, true] {
+            let (n, e, t) = run(m, dual);
+            println!(
+                "{:>14} dual {dual:5}: {n:7} points, max xyz {:.2} mm, max time {t} ns",
+                m.name(),
+                e * 1e3
+            );
+            assert!(n > 1000, "{m:?}: only {n} points");
+        }
+    }
+}
