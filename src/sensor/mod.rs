@@ -19,6 +19,7 @@
 pub mod calib;
 pub mod decode;
 pub mod hesai;
+pub mod livox;
 pub mod nmea;
 pub mod ouster;
 pub mod velodyne;
@@ -46,6 +47,7 @@ use crate::sweep::Sweep;
 pub static FAMILIES: &[&dyn Family] = &[
     &ouster::family::Ouster,
     &hesai::family::Hesai,
+    &livox::family::Livox,
     &velodyne::family::Velodyne,
 ];
 
@@ -196,6 +198,12 @@ pub struct StreamSettings {
     /// Keep only points whose corrected azimuth lies in (start, end), 0.01°, clockwise
     /// (Hesai; `--fov`).
     pub fov_cdeg: Option<(u32, u32)>,
+    /// Integration period of sensors that do not spin (Livox), ns: a sweep per period.
+    /// `None`: the family's default (100 ms).
+    pub integration_ns: Option<u64>,
+    /// IMU-to-sensor transform (row-major 4 × 4, mm) overriding the one the family
+    /// publishes per model (Livox).
+    pub imu_to_sensor: Option<[f64; 16]>,
 }
 
 /// The calibrations given for a run, and which of them already serve a sensor: a file not
