@@ -18,7 +18,7 @@ shift || true
 # bag_mcap is left out of the default list for now: built with debug assertions (as here) the
 # mcap crate's reader panics on a chunk record longer than its chunk (FUZZING.md, 2026-11-26);
 # run it by name (`smoke.sh 20 bag_mcap`) to see it, until ringscan checks that itself.
-ALL_TARGETS=(pcap reassembly velodyne_packet velodyne_stream calib_velodyne decode_to_mcap calib_ouster ouster_packet ouster_stream pipeline_config tum_poses http_response live_view_requests bag_ros1 bag_messages bag_metadata hesai_packet calib_hesai)
+ALL_TARGETS=(pcap reassembly velodyne_packet velodyne_stream calib_velodyne decode_to_mcap calib_ouster ouster_packet ouster_stream pipeline_config tum_poses http_response live_view_requests bag_ros1 bag_messages bag_metadata hesai_packet calib_hesai livox_packet)
 if [ $# -gt 0 ]; then TARGETS=("$@"); else TARGETS=("${ALL_TARGETS[@]}"); fi
 SANITIZER=${FUZZ_SANITIZER:-none}
 
@@ -48,6 +48,7 @@ max_len() {
     bag_metadata) echo 8192 ;;
     hesai_packet) echo 1400 ;;
     calib_hesai) echo 65536 ;;
+    livox_packet) echo 4096 ;;
     *) echo 4096 ;;
   esac
 }

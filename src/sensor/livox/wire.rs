@@ -121,7 +121,7 @@ pub enum Record {
 
 impl Record {
     /// Bytes per record.
-    pub const fn len(self) -> usize {
+    pub const fn size(self) -> usize {
         match self {
             Self::Imu => IMU_RECORD_LEN,
             Self::CartesianMm => 13,
@@ -346,13 +346,13 @@ impl<'a> Sdk2Packet<'a> {
         } else {
             usize::from(u16_at(bytes, 5))
         };
-        if count * record.len() != data {
+        if count * record.size() != data {
             return Err(LivoxWireError::DotCount {
                 what: WHAT,
                 data_type: dt,
                 count,
-                record: record.len(),
-                expected: count * record.len(),
+                record: record.size(),
+                expected: count * record.size(),
                 found: data,
             });
         }
@@ -409,12 +409,12 @@ impl<'a> Sdk2Packet<'a> {
     }
     /// Number of records.
     pub fn records(&self) -> usize {
-        (self.bytes.len() - SDK2_HEADER_LEN) / self.record.len()
+        (self.bytes.len() - SDK2_HEADER_LEN) / self.record.size()
     }
     /// Record `i` (empty past the end).
     #[inline]
     pub fn record_bytes(&self, i: usize) -> &'a [u8] {
-        let l = self.record.len();
+        let l = self.record.size();
         let o = SDK2_HEADER_LEN + i * l;
         self.bytes.get(o..o + l).unwrap_or(&[])
     }
@@ -452,13 +452,13 @@ impl<'a> Sdk1Packet<'a> {
             found: dt,
         })?;
         let data = bytes.len() - SDK1_HEADER_LEN;
-        if count * record.len() != data {
+        if count * record.size() != data {
             return Err(LivoxWireError::DotCount {
                 what: WHAT,
                 data_type: dt,
                 count,
-                record: record.len(),
-                expected: count * record.len(),
+                record: record.size(),
+                expected: count * record.size(),
                 found: data,
             });
         }
@@ -526,7 +526,7 @@ impl<'a> Sdk1Packet<'a> {
     /// Record `i` (empty past the end).
     #[inline]
     pub fn record_bytes(&self, i: usize) -> &'a [u8] {
-        let l = self.record.len();
+        let l = self.record.size();
         let o = SDK1_HEADER_LEN + i * l;
         self.bytes.get(o..o + l).unwrap_or(&[])
     }
@@ -596,7 +596,7 @@ mod tests {
         let lens = [1318, 918, 1362, 978, 1362, 786, 42, 1278, 678];
         for (dt, &l) in lens.iter().enumerate() {
             let (r, n) = Record::sdk1(dt as u8).unwrap();
-            assert_eq!(SDK1_HEADER_LEN + n * r.len(), l, "type {dt}");
+            assert_eq!(SDK1_HEADER_LEN + n * r.size(), l, "type {dt}");
         }
     }
 }
