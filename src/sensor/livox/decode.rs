@@ -65,7 +65,8 @@ impl LivoxDecoder {
     }
 
     /// Appends the points of `records` records read by `rec(i)` of layout `kind`; record `i`
-    /// is at `first_ns + time(i)` (device ns), and `t` is measured from `sweep_start_ns`.
+    /// is at `first_ns + clock.offset_ns(i)` (device ns), and `t` is measured from
+    /// `sweep_start_ns`.
     #[allow(clippy::too_many_arguments)]
     pub fn decode<'a>(
         &self,
@@ -73,7 +74,7 @@ impl LivoxDecoder {
         records: usize,
         rec: impl Fn(usize) -> &'a [u8],
         first_ns: i64,
-        time: impl Fn(usize) -> i64,
+        clock: RecordClock,
         sweep_start_ns: i64,
         out: &mut Vec<Point>,
     ) -> PacketPoints {
@@ -90,12 +91,28 @@ impl LivoxDecoder {
             self.range.max_range * self.range.max_range,
         );
         let mut last = first_ns;
+        // floor(i · num / den) kept as quotient and remainder: no division per record.
+        let den = clock.den.max(1);
+        let (step_q, step_r) = ((clock.num / den) as i64, clock.num % den);
+        let (mut q, mut rem) = (0i64, 0u64);
+        let mut ring = 0u16;
         for i in 0..records {
             let r = rec(i);
-            let at = first_ns.saturating_add(time(i));
+            let at = first_ns.saturating_add(q);
             last = at;
             let t = u32::try_from(at.saturating_sub(sweep_start_ns).max(0)).unwrap_or(u32::MAX);
-            let ring = (i % usize::from(self.lines)) as u16;
+            let this_ring = ring;
+            ring += 1;
+            if ring == self.lines {
+                ring = 0;
+            }
+            q = q.saturating_add(step_q);
+            rem += step_r;
+            if rem >= den {
+                q = q.saturating_add(1);
+                rem -= den;
+            }
+            let ring = this_ring;
             let (st, ct, sp, cp) = if spherical {
                 let (theta, phi) = read_angles(r, kind);
                 let (st, ct) = self.sc(theta.min(18_000));
@@ -145,6 +162,38 @@ impl LivoxDecoder {
     }
 }
 
+/// Times of a packet's records: record `i` at `floor(i · num / den)` ns after the first.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RecordClock {
+    /// Numerator, ns.
+    pub num: u64,
+    /// Denominator (0 is taken as 1).
+    pub den: u64,
+}
+
+impl RecordClock {
+    /// SDK2: `n` records spanning `interval_ns` from the first to the last.
+    pub fn sdk2(n: usize, interval_ns: u64) -> Self {
+        if n < 2 {
+            return Self { num: 0, den: 1 };
+        }
+        Self {
+            num: interval_ns,
+            den: n as u64 - 1,
+        }
+    }
+
+    /// A fixed step, ns.
+    pub fn step(ns: u64) -> Self {
+        Self { num: ns, den: 1 }
+    }
+
+    /// Offset of record `i`, ns.
+    pub fn offset_ns(&self, i: usize) -> i64 {
+        ((i as u64).saturating_mul(self.num) / self.den.max(1)) as i64
+    }
+}
+
 /// SDK2 time of record `i` of `n` after the first, ns.
 #[inline]
 pub fn sdk2_offset_ns(i: usize, n: usize, interval_ns: u64) -> i64 {
@@ -164,5 +213,9 @@ mod tests {
         assert_eq!(sdk2_offset_ns(95, 96, 47_500), 47_500);
         assert_eq!(sdk2_offset_ns(1, 96, 47_500), 500);
         assert_eq!(sdk2_offset_ns(0, 1, 47_500), 0);
+        let c = RecordClock::sdk2(96, 47_501);
+        for i in 0..96 {
+            assert_eq!(c.offset_ns(i), sdk2_offset_ns(i, 96, 47_501));
+        }
     }
 }

@@ -11,7 +11,7 @@
 
 use std::collections::VecDeque;
 
-use super::decode::{sdk2_offset_ns, LivoxDecoder};
+use super::decode::{LivoxDecoder, RecordClock};
 use super::model::{LivoxModel, Protocol, STANDARD_GRAVITY};
 use super::wire::{read_imu, LivoxWireError, Record, Sdk1Packet, Sdk2Packet};
 use crate::sensor::{DecodeOptions, ImuSample};
@@ -347,7 +347,7 @@ impl LivoxStream {
             n,
             |i| p.record_bytes(i),
             ts,
-            |i| sdk2_offset_ns(i, n, interval),
+            RecordClock::sdk2(n, interval),
             start,
             &mut self.sweep.points,
         );
@@ -414,7 +414,7 @@ impl LivoxStream {
             n,
             |i| p.record_bytes(i),
             ts,
-            |i| step * i as i64,
+            RecordClock::step(step as u64),
             start,
             &mut self.sweep.points,
         );
