@@ -11,7 +11,7 @@
 //! | 16     | `t`         | u32  | ns since the sweep's timestamp (its first firing); never negative |
 //! | 20     | `ring`      | u16  | rank of the channel's elevation angle, 0 = lowest |
 //! | 22     | `ret`       | u8   | return index: 0 = strongest / only / first, 1 = last / second |
-//! | 23     | padding     | u8   | always 0 |
+//! | 23     | padding     | u8   | 0; Livox points: the point's tag byte (confidence / noise flags) |
 //!
 //! The MCAP sink writes a `&[Point]` as bytes without per-point conversion, so the field
 //! order here is the order of the `foxglove.PointCloud` fields.
@@ -36,7 +36,8 @@ pub struct Point {
     pub ring: u16,
     /// Return index: 0 = strongest / only / first, 1 = last / second.
     pub ret: u8,
-    /// Padding, always 0.
+    /// Padding: 0, except for Livox points, where it keeps the record's tag byte
+    /// (confidence / noise flags; `sensor::livox`).
     pub pad: u8,
 }
 

@@ -57,6 +57,7 @@ fn replay(file: &str) {
         "bag_mcap" => harness::bag_mcap(&data),
         "hesai_packet" => harness::hesai_packet(&data),
         "calib_hesai" => harness::calib_hesai(&data),
+        "livox_packet" => harness::livox_packet(&data),
         other => panic!("{file}: no fuzz target named {other:?}"),
     }
 }

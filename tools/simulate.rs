@@ -18,7 +18,9 @@
 //! ```
 //!
 //! Sensor and output:
-//! - `--model M`: vlp16, puck-hires, hdl32e, vlp32c, hdl64e-s2, hdl64e-s3, vls128, or `ouster`
+//! - `--model M`: vlp16, puck-hires, hdl32e, vlp32c, hdl64e-s2, hdl64e-s3, vls128, `mid360` /
+//!   `avia` (Livox; `--data-type 1|2|3` for the MID-360, `--imu` adds its 200 Hz IMU packets;
+//!   with `--udp ADDR:PORT` the MID-360's IMU goes to PORT + 100), or `ouster`
 //!   (needs `--metadata FILE.json`; `--profile NAME` overrides its lidar profile, e.g.
 //!   `RNG15_RFL8_NIR8`; `--columns W --fps F` its mode). Velodyne: `--mode
 //!   strongest|last|dual`, `--hz F` (rotation rate), `--calib FILE` (required for HDL-64E /
@@ -58,6 +60,8 @@ use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4, UdpSocket};
 use std::time::{Duration, Instant};
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use ringscan::sensor::livox::model::LivoxModel;
+use ringscan::sensor::livox::sim::LivoxSim;
 use ringscan::sensor::ouster::calib::OusterInfo;
 use ringscan::sensor::ouster::model::Profile;
 use ringscan::sensor::ouster::sim::OusterSim;
@@ -274,7 +278,59 @@ fn main() -> Res<()> {
     let model_name = arg(&args, "--model").unwrap_or_else(|| "vlp16".into());
     let mut records = 0u64;
 
-    if model_name == "ouster" {
+    if let Some(model) = ringscan::sensor::livox::LivoxModel::from_id(&model_name)
+        .filter(|m| matches!(m, LivoxModel::Mid360 | LivoxModel::Avia))
+    {
+        // Livox: MID-360 (SDK2; points from 56300 to 56301, IMU from 56400 to 56401) or Avia
+        // (SDK1; points and IMU to 56001), IMU packets at 200 Hz with `--imu`.
+        let mut sim = LivoxSim::new(model, t0_ns);
+        sim.trajectory = trajectory.clone();
+        if let Some(dt) = num::<u8>(&args, "--data-type")? {
+            sim.data_type = dt;
+        }
+        let imu = args.iter().any(|a| a == "--imu");
+        let ip = Ipv4Addr::new(192, 168, 1, 12);
+        let (psrc, isrc) = match model {
+            LivoxModel::Mid360 => (SocketAddrV4::new(ip, 56_300), SocketAddrV4::new(ip, 56_400)),
+            _ => (SocketAddrV4::new(ip, 65_000), SocketAddrV4::new(ip, 65_000)),
+        };
+        let mut truth = Vec::new();
+        let mut imu_truth = Vec::new();
+        let packets = sim.run_until(scene.as_ref(), end_ns, &mut truth, &mut imu_truth);
+        let mut n = 0u64;
+        for (host, port, bytes) in &packets {
+            let is_imu = *port == model.imu_port().unwrap_or(0)
+                && (model == LivoxModel::Mid360 || bytes.len() == 42);
+            if is_imu && !imu {
+                continue;
+            }
+            let (src, dst) = if is_imu && model == LivoxModel::Mid360 {
+                (isrc, udp_port.map_or(*port, |p| p + 100))
+            } else {
+                (psrc, udp_port.unwrap_or(*port))
+            };
+            sink.send(*host, src, dst, n as u16, bytes)?;
+            n += 1;
+        }
+        if let Some(w) = truth_out.as_mut() {
+            for t in &truth {
+                w.write(&TruthRecord {
+                    sensor: t.xyz.map(|v| v as f32),
+                    world: t.world.map(|v| v as f32),
+                    time_ns: t.time_ns,
+                    label: t.label,
+                    channel: t.line,
+                    ring: t.line as u8,
+                    ret: 0,
+                })?;
+            }
+        }
+        records += truth.len() as u64;
+        eprintln!(
+            "{n} {} packets, {seconds} s, scene {scene_name}, {records} returns",
+            model.name()
+        );
+    } else if model_name == "ouster" {
         let meta = arg(&args, "--metadata").ok_or("--model ouster needs --metadata FILE.json")?;
         let mut info: OusterInfo =
             ringscan::sensor::ouster::calib::parse(&std::fs::read_to_string(&meta)?, &meta)?;

@@ -163,6 +163,10 @@ struct DecodeCmd {
     /// (clockwise from forward), e.g. 30:150.
     #[arg(long, value_name = "START:END", value_parser = parse_fov)]
     fov: Option<(f64, f64)>,
+    /// Sensors that do not spin (Livox): a sweep per integration period of this many ms
+    /// (default 100).
+    #[arg(long, value_name = "MS")]
+    integration_ms: Option<f64>,
     /// Point fields written.
     #[arg(long, value_enum, default_value_t = FieldsArg::Default)]
     fields: FieldsArg,
@@ -286,6 +290,10 @@ struct ListenCmd {
     /// (clockwise from forward), e.g. 30:150.
     #[arg(long, value_name = "START:END", value_parser = parse_fov)]
     fov: Option<(f64, f64)>,
+    /// Sensors that do not spin (Livox): a sweep per integration period of this many ms
+    /// (default 100).
+    #[arg(long, value_name = "MS")]
+    integration_ms: Option<f64>,
     /// Point fields written.
     #[arg(long, value_enum, default_value_t = FieldsArg::Default)]
     fields: FieldsArg,
@@ -431,6 +439,7 @@ pub fn main() -> ExitCode {
                 max_range: c.max_range,
                 dual_return_threshold_m: c.dual_return_threshold,
                 fov_deg: c.fov,
+                integration_ms: c.integration_ms,
                 fields_all: c.fields == FieldsArg::All,
                 fields_minimal: c.fields == FieldsArg::Minimal,
                 format: c.format,
@@ -481,6 +490,7 @@ pub fn main() -> ExitCode {
                     max_range: c.max_range,
                     dual_return_threshold_m: c.dual_return_threshold,
                     fov_deg: c.fov,
+                    integration_ms: c.integration_ms,
                     fields_all: c.fields == FieldsArg::All,
                     raw: c.raw,
                     crc: match c.crc {

@@ -49,6 +49,8 @@ pub struct DecodeArgs {
     pub dual_return_threshold_m: Option<f32>,
     /// `--fov START:END`, degrees (Hesai).
     pub fov_deg: Option<(f64, f64)>,
+    /// `--integration-ms` (Livox).
+    pub integration_ms: Option<f64>,
     pub fields_all: bool,
     /// `--fields minimal`: x, y, z, intensity only.
     pub fields_minimal: bool,
@@ -402,6 +404,8 @@ pub struct SessionOptions {
     pub max_range: Option<f32>,
     pub dual_return_threshold_m: Option<f32>,
     pub fov_deg: Option<(f64, f64)>,
+    /// `--integration-ms` (Livox).
+    pub integration_ms: Option<f64>,
     pub fields_all: bool,
     pub raw: bool,
     pub crc: Option<bool>,
@@ -425,6 +429,7 @@ impl DecodeArgs {
             max_range: self.max_range,
             dual_return_threshold_m: self.dual_return_threshold_m,
             fov_deg: self.fov_deg,
+            integration_ms: self.integration_ms,
             fields_all: self.fields_all,
             raw: self.raw,
             crc: self.crc,
@@ -521,6 +526,11 @@ impl Session {
                         (b.rem_euclid(360.0) * 100.0).round() as u32 % 36_000,
                     )
                 }),
+                integration_ns: opts
+                    .integration_ms
+                    .filter(|ms| ms.is_finite() && *ms > 0.0)
+                    .map(|ms| (ms * 1e6).round() as u64),
+                imu_to_sensor: None,
             },
         )));
         let shared = chooser.clone();
@@ -1197,6 +1207,7 @@ pub fn info_command(
         max_range: None,
         dual_return_threshold_m: None,
         fov_deg: None,
+        integration_ms: None,
         fields_all: false,
         fields_minimal: false,
         compression: ChunkCompression::default(),
@@ -1237,6 +1248,7 @@ pub fn demo_command(out: &Path, json_out: bool) -> Result<ExitCode, RunError> {
         max_range: None,
         dual_return_threshold_m: None,
         fov_deg: None,
+        integration_ms: None,
         fields_all: false,
         fields_minimal: false,
         compression: ChunkCompression::default(),

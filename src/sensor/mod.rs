@@ -19,6 +19,7 @@
 pub mod calib;
 pub mod decode;
 pub mod hesai;
+pub mod livox;
 pub mod nmea;
 pub mod ouster;
 pub mod robosense;
@@ -44,15 +45,17 @@ use crate::sweep::Sweep;
 /// send to port 2368 and whose packets are told by their own marks and sizes, comes before
 /// Velodyne too — also because Velodyne's calibration parsers take any text, while Hesai's
 /// recognise their CSV by its header line. Robosense (1248-byte packets with their own ids; an
-/// angle CSV recognised by its rows of numbers) comes before Velodyne for the same reason.
+/// angle CSV recognised by its rows of numbers) comes before Velodyne for the same reason, and
+/// Livox (its own header: version byte, length field matching the datagram, data type) too.
 pub static FAMILIES: &[&dyn Family] = &[
     &ouster::family::Ouster,
     &hesai::family::Hesai,
     &robosense::family::Robosense,
+    &livox::family::Livox,
     &velodyne::family::Velodyne,
 ];
 
-/// The family named `name` (`"velodyne"`, `"ouster"`, `"hesai"`, `"robosense"`).
+/// The family named `name` (`"velodyne"`, `"ouster"`, `"hesai"`, `"robosense"`, `"livox"`).
 pub fn family(name: &str) -> Option<&'static dyn Family> {
     FAMILIES.iter().copied().find(|f| f.name() == name)
 }
@@ -236,6 +239,12 @@ pub struct StreamSettings {
     /// Keep only points whose corrected azimuth lies in (start, end), 0.01°, clockwise
     /// (Hesai; `--fov`).
     pub fov_cdeg: Option<(u32, u32)>,
+    /// Integration period of sensors that do not spin (Livox), ns: a sweep per period.
+    /// `None`: the family's default (100 ms).
+    pub integration_ns: Option<u64>,
+    /// IMU-to-sensor transform (row-major 4 × 4, mm) overriding the one the family
+    /// publishes per model (Livox).
+    pub imu_to_sensor: Option<[f64; 16]>,
 }
 
 /// The calibrations given for a run, and which of them already serve a sensor: a file not

@@ -2522,6 +2522,33 @@ pub fn robosense_packet(data: &[u8]) {
     let max_m = model.spec().max_range_m + 0.2;
     let mut points = 0usize;
     let mut on_sweep = |sw: &Sweep, _: &ringscan::sensor::robosense::RobosenseFacts| {
+
+// ----- livox_packet ----------------------------------------------------------------------------
+
+use ringscan::sensor::livox::family::detect_protocol;
+use ringscan::sensor::livox::model::ALL_MODELS as LIVOX_MODELS;
+use ringscan::sensor::livox::sweep::MAX_IMU_QUEUE as LIVOX_MAX_IMU_QUEUE;
+use ringscan::sensor::livox::{
+    LivoxConfig, LivoxStream, Protocol as LivoxProtocol, Sdk1Packet, Sdk2Packet,
+};
+
+/// One or more datagrams (byte 0 picks the model, the CRC check and a 100 ms or 1 µs
+/// integration period; the rest is split at each 0xFE byte into datagrams) through both packet views and a `LivoxStream`, each pushed twice.
+/// No panic; the views and `detect_protocol` agree; every datagram is counted once (point
+/// packet, IMU packet or malformed); points are finite, ring < lines, return ≤ 2, intensity
+/// 0–255, at most 3 returns × records per packet; the IMU queue stays bounded.
+pub fn livox_packet(data: &[u8]) {
+    let Some((&sel, rest)) = data.split_first() else {
+        return;
+    };
+    let model = LIVOX_MODELS[usize::from(sel) % LIVOX_MODELS.len()];
+    let mut cfg = LivoxConfig::new(Some(model), model.protocol());
+    cfg.check_crc = sel & 0x80 == 0;
+    cfg.period_ns = if sel & 0x40 == 0 { 100_000_000 } else { 1_000 };
+    let lines = model.lines();
+    let mut s = LivoxStream::new(cfg);
+    let mut pushed = 0u64;
+    let check = |sw: &ringscan::sweep::Sweep| {
         for p in &sw.points {
             assert!(
                 p.x.is_finite() && p.y.is_finite() && p.z.is_finite(),
@@ -2568,4 +2595,46 @@ pub fn calib_robosense(data: &[u8]) {
             RobosenseDecoder::new(m, &a, Default::default()).unwrap();
         }
     }
+
+            assert!(p.ring < lines, "{p:?}");
+            assert!(p.ret <= 2, "{p:?}");
+            assert!((0.0..=255.0).contains(&p.intensity), "{p:?}");
+        }
+        // At most one return per 8 bytes of a 64 KiB datagram.
+        assert!(sw.points.len() <= 8192 * sw.packets as usize);
+    };
+    for d in rest.split(|&b| b == 0xFE) {
+        let v2 = Sdk2Packet::new(d);
+        let v1 = Sdk1Packet::new(d);
+        match detect_protocol(d) {
+            Some(LivoxProtocol::Sdk2) => assert!(v2.is_ok()),
+            Some(LivoxProtocol::Sdk1) => assert!(v1.is_ok() && v2.is_err()),
+            None => assert!(v1.is_err() && v2.is_err()),
+        }
+        if let Ok(p) = v2 {
+            let _ = (
+                p.crc_ok(),
+                p.timestamp_ns(),
+                p.time_interval_ns(),
+                p.frame_cnt(),
+            );
+            for i in 0..p.records() {
+                assert_eq!(p.record_bytes(i).len(), p.record().size());
+            }
+        }
+        if let Ok(p) = v1 {
+            let _ = (p.timestamp_ns(), p.status_code());
+            for i in 0..p.records() {
+                assert_eq!(p.record_bytes(i).len(), p.record().size());
+            }
+        }
+        for _ in 0..2 {
+            s.push(pushed as i64, d, &mut |sw, _| check(sw));
+            pushed += 1;
+        }
+    }
+    s.finish(&mut |sw, _| check(sw));
+    let st = s.stats();
+    assert_eq!(st.packets + st.imu_packets + st.malformed, pushed);
+    assert!(s.drain_imu().count() <= LIVOX_MAX_IMU_QUEUE);
 }

@@ -1,0 +1,489 @@
+//! One Livox sensor's stream: datagrams in (points and IMU, both protocols), sweeps out.
+//!
+//! A Livox scanner does not spin, so a sweep is an integration period of its point stream:
+//! a sweep is cut when a packet's first point is at least the period (default 100 ms,
+//! [`LivoxConfig::period_ns`]) after the sweep's first point, or when the device time goes
+//! backwards. Where the sensor counts frames — `frame_cnt` steps by one exactly where
+//! `udp_cnt` restarts at 0, seen twice — sweeps follow its frames instead (the MID-360
+//! protocol says `frame_cnt` means nothing for non-repetitive scanning, so that sensor stays on
+//! the period). Loss: SDK2 from `udp_cnt` (+1 per packet, 0 at a frame's start), SDK1 from the
+//! device-time gap between consecutive packets.
+
+use std::collections::VecDeque;
+
+use super::decode::{sdk2_offset_ns, LivoxDecoder};
+use super::model::{LivoxModel, Protocol, STANDARD_GRAVITY};
+use super::wire::{read_imu, LivoxWireError, Record, Sdk1Packet, Sdk2Packet};
+use crate::sensor::{DecodeOptions, ImuSample};
+use crate::sweep::Sweep;
+use crate::time::ClockSource;
+
+/// Default integration period, ns.
+pub const DEFAULT_PERIOD_NS: u64 = 100_000_000;
+/// IMU samples held until drained.
+pub const MAX_IMU_QUEUE: usize = 4096;
+/// A `udp_cnt` jump larger than this is a restart, not loss.
+const MAX_COUNTER_GAP: u64 = 4096;
+
+/// How a stream is set up.
+#[derive(Clone, Debug)]
+pub struct LivoxConfig {
+    /// The model (named, or told from the port); `None`: an SDK2 / SDK1 sensor of unknown
+    /// model (one line).
+    pub model: Option<LivoxModel>,
+    /// Protocol when the model is unknown.
+    pub protocol: Protocol,
+    /// How the model was told.
+    pub detection: String,
+    /// Range filter.
+    pub range: DecodeOptions,
+    /// Integration period, ns.
+    pub period_ns: u64,
+    /// Check the SDK2 CRC-32.
+    pub check_crc: bool,
+    /// IMU-to-sensor transform overriding the model's published one.
+    pub imu_to_sensor: Option<[f64; 16]>,
+}
+
+impl LivoxConfig {
+    /// Defaults for `model`.
+    pub fn new(model: Option<LivoxModel>, protocol: Protocol) -> Self {
+        Self {
+            model,
+            protocol: model.map_or(protocol, LivoxModel::protocol),
+            detection: String::new(),
+            range: DecodeOptions::default(),
+            period_ns: DEFAULT_PERIOD_NS,
+            check_crc: true,
+            imu_to_sensor: None,
+        }
+    }
+}
+
+/// Counters.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct LivoxStats {
+    /// Point packets decoded.
+    pub packets: u64,
+    /// IMU packets decoded.
+    pub imu_packets: u64,
+    /// Datagrams that are not well-formed (including CRC failures).
+    pub malformed: u64,
+    /// Of those, CRC failures.
+    pub crc_failures: u64,
+    /// SDK2 packets whose CRC field is 0 (not filled by the sensor): accepted unchecked.
+    pub crc_absent: u64,
+    /// Packets whose CRC matched.
+    pub crc_ok: u64,
+    /// Point packets missing (counter or time gaps).
+    pub missing: u64,
+    /// IMU packets missing (their counter's gaps).
+    pub imu_missing: u64,
+    /// Restarts of the counter or device time (too large or backwards).
+    pub discontinuities: u64,
+    /// IMU samples dropped because nobody drained them.
+    pub imu_dropped: u64,
+    /// Sweeps emitted.
+    pub sweeps: u64,
+    /// Points emitted.
+    pub points: u64,
+    /// Points with a non-zero tag.
+    pub tagged_points: u64,
+    /// Fewest / most points in a sweep.
+    pub min_sweep_points: u64,
+    /// Most points in a sweep.
+    pub max_sweep_points: u64,
+}
+
+/// What the stream knows of its sensor.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LivoxFacts {
+    /// Model, when known.
+    pub model: Option<LivoxModel>,
+    /// Protocol.
+    pub protocol: Protocol,
+    /// How the model was told.
+    pub detection: String,
+    /// Clock of the sweep timestamps.
+    pub clock: ClockSource,
+    /// Last time type byte (SDK2: 0 none, 1 PTP, 2 GPS; SDK1: 0 none, 1 PTP, 3 PPS+GPS, 4 PPS).
+    pub time_type: Option<u8>,
+    /// Last point data type.
+    pub data_type: Option<u8>,
+    /// Integration period, ns.
+    pub period_ns: u64,
+    /// Whether sweeps follow the sensor's frame counter.
+    pub frame_cut: bool,
+    /// Laser lines.
+    pub lines: u16,
+    /// IMU-to-sensor transform in use.
+    pub imu_to_sensor: [f64; 16],
+    /// SDK1 status code of the last packet.
+    pub status_code: Option<u32>,
+    /// Points in the last sweep.
+    pub last_sweep_points: u64,
+}
+
+impl LivoxFacts {
+    /// Name of the time type, as the protocol's table words it.
+    pub fn time_type_name(&self) -> &'static str {
+        match (self.protocol, self.time_type) {
+            (_, None) => "",
+            (_, Some(0)) => "none (since power-on)",
+            (_, Some(1)) => "ptp",
+            (Protocol::Sdk2, Some(2)) => "gps",
+            (Protocol::Sdk1, Some(3)) => "pps+gps",
+            (Protocol::Sdk1, Some(4)) => "pps",
+            _ => "unknown",
+        }
+    }
+}
+
+/// One sensor's stream.
+#[derive(Debug)]
+pub struct LivoxStream {
+    cfg: LivoxConfig,
+    decoder: LivoxDecoder,
+    facts: LivoxFacts,
+    stats: LivoxStats,
+    sweep: Sweep,
+    next_index: u64,
+    open: bool,
+    /// First-record time of the last point packet: a later packet earlier than it is a
+    /// restart of the device clock (a packet's records may overlap the next one's by a
+    /// spacing, depending on how the sensor fills `time_interval`).
+    last_packet_ns: Option<i64>,
+    last_udp: Option<u16>,
+    last_imu_udp: Option<u16>,
+    last_frame: Option<u8>,
+    frame_starts: u32,
+    sdk1_next_ns: Option<i64>,
+    imu: VecDeque<ImuSample>,
+}
+
+impl LivoxStream {
+    /// A stream.
+    pub fn new(cfg: LivoxConfig) -> Self {
+        let lines = cfg.model.map_or(1, LivoxModel::lines);
+        let imu_to_sensor = cfg
+            .imu_to_sensor
+            .or_else(|| cfg.model.map(LivoxModel::imu_to_sensor))
+            .unwrap_or_else(|| LivoxModel::Hap.imu_to_sensor());
+        let facts = LivoxFacts {
+            model: cfg.model,
+            protocol: cfg.protocol,
+            detection: cfg.detection.clone(),
+            clock: ClockSource::Host,
+            time_type: None,
+            data_type: None,
+            period_ns: cfg.period_ns,
+            frame_cut: false,
+            lines,
+            imu_to_sensor,
+            status_code: None,
+            last_sweep_points: 0,
+        };
+        Self {
+            decoder: LivoxDecoder::new(lines, cfg.range),
+            cfg,
+            facts,
+            stats: LivoxStats::default(),
+            sweep: Sweep::default(),
+            next_index: 0,
+            open: false,
+            last_packet_ns: None,
+            last_udp: None,
+            last_imu_udp: None,
+            last_frame: None,
+            frame_starts: 0,
+            sdk1_next_ns: None,
+            imu: VecDeque::new(),
+        }
+    }
+
+    /// Facts.
+    pub fn facts(&self) -> &LivoxFacts {
+        &self.facts
+    }
+
+    /// Counters.
+    pub fn stats(&self) -> &LivoxStats {
+        &self.stats
+    }
+
+    /// Configuration.
+    pub fn config(&self) -> &LivoxConfig {
+        &self.cfg
+    }
+
+    /// IMU samples decoded since the last call.
+    pub fn drain_imu(&mut self) -> impl Iterator<Item = ImuSample> + '_ {
+        self.imu.drain(..)
+    }
+
+    /// Pushes one datagram; finished sweeps go to `on_sweep`. Malformed datagrams are counted.
+    pub fn push(
+        &mut self,
+        host_ns: i64,
+        payload: &[u8],
+        on_sweep: &mut dyn FnMut(&Sweep, &LivoxFacts),
+    ) {
+        let r = match self.cfg.protocol {
+            Protocol::Sdk2 => self.push_sdk2(host_ns, payload, on_sweep),
+            Protocol::Sdk1 => self.push_sdk1(host_ns, payload, on_sweep),
+        };
+        if let Err(e) = r {
+            self.stats.malformed += 1;
+            if matches!(e, LivoxWireError::Crc { .. }) {
+                self.stats.crc_failures += 1;
+            }
+        }
+    }
+
+    /// Emits the open sweep.
+    pub fn finish(&mut self, on_sweep: &mut dyn FnMut(&Sweep, &LivoxFacts)) {
+        self.emit(on_sweep);
+    }
+
+    fn queue_imu(&mut self, s: ImuSample) {
+        if self.imu.len() < MAX_IMU_QUEUE {
+            self.imu.push_back(s);
+        } else {
+            self.stats.imu_dropped += 1;
+        }
+    }
+
+    fn clock_of(protocol: Protocol, time_type: u8) -> ClockSource {
+        match (protocol, time_type) {
+            (_, 1) => ClockSource::SensorPtp,
+            (Protocol::Sdk2, 2) | (Protocol::Sdk1, 3) => ClockSource::SensorGps,
+            _ => ClockSource::Host,
+        }
+    }
+
+    fn push_sdk2(
+        &mut self,
+        host_ns: i64,
+        payload: &[u8],
+        on_sweep: &mut dyn FnMut(&Sweep, &LivoxFacts),
+    ) -> Result<(), LivoxWireError> {
+        let p = Sdk2Packet::new(payload)?;
+        if self.cfg.check_crc {
+            let stored = p.stored_crc();
+            if stored == 0 {
+                self.stats.crc_absent += 1;
+            } else {
+                let computed = p.computed_crc();
+                if stored != computed {
+                    return Err(LivoxWireError::Crc { stored, computed });
+                }
+                self.stats.crc_ok += 1;
+            }
+        }
+        let ts = i64::try_from(p.timestamp_ns()).unwrap_or(i64::MAX);
+        self.facts.time_type = Some(p.time_type());
+        self.facts.clock = Self::clock_of(Protocol::Sdk2, p.time_type());
+        if p.record() == Record::Imu {
+            self.stats.imu_packets += 1;
+            let udp = p.udp_cnt();
+            if let Some(prev) = self.last_imu_udp {
+                let gap = u64::from(udp.wrapping_sub(prev.wrapping_add(1)));
+                if gap > 0 && gap < MAX_COUNTER_GAP && udp != 0 {
+                    self.stats.imu_missing += gap;
+                }
+            }
+            self.last_imu_udp = Some(udp);
+            for i in 0..p.records() {
+                self.push_imu_record(p.record_bytes(i), ts, host_ns);
+            }
+            return Ok(());
+        }
+        self.facts.data_type = Some(p.data_type());
+        // Loss and frame starts from the counters.
+        let (udp, frame) = (p.udp_cnt(), p.frame_cnt());
+        let mut frame_start = false;
+        let mut lost = 0;
+        if let Some(prev) = self.last_udp {
+            let expected = prev.wrapping_add(1);
+            if udp == 0 && udp != expected {
+                if self.last_frame.is_some_and(|f| frame == f.wrapping_add(1)) {
+                    self.frame_starts = self.frame_starts.saturating_add(1);
+                    frame_start = true;
+                }
+            } else if udp != expected {
+                let gap = u64::from(udp.wrapping_sub(expected));
+                if gap < MAX_COUNTER_GAP {
+                    self.stats.missing += gap;
+                    lost = gap;
+                } else {
+                    self.stats.discontinuities += 1;
+                }
+            }
+        }
+        self.last_udp = Some(udp);
+        self.last_frame = Some(frame);
+        if self.frame_starts >= 2 {
+            self.facts.frame_cut = true;
+        }
+        let n = p.records();
+        let interval = p.time_interval_ns();
+        let cut = if self.facts.frame_cut {
+            frame_start || (self.open && self.sweep.frame_id != u32::from(frame))
+        } else {
+            self.time_cut(ts)
+        };
+        let backwards = self.last_packet_ns.is_some_and(|l| ts < l);
+        if backwards {
+            self.stats.discontinuities += 1;
+        }
+        if cut || backwards {
+            self.emit(on_sweep);
+        }
+        self.begin(host_ns, ts, u32::from(frame));
+        self.sweep.missing_packets += lost;
+        let start = self.sweep.device_time_ns;
+        self.decoder.decode(
+            p.record(),
+            n,
+            |i| p.record_bytes(i),
+            ts,
+            |i| sdk2_offset_ns(i, n, interval),
+            start,
+            &mut self.sweep.points,
+        );
+        self.after_packet(host_ns, ts);
+        Ok(())
+    }
+
+    fn push_sdk1(
+        &mut self,
+        host_ns: i64,
+        payload: &[u8],
+        on_sweep: &mut dyn FnMut(&Sweep, &LivoxFacts),
+    ) -> Result<(), LivoxWireError> {
+        let p = Sdk1Packet::new(payload)?;
+        let Some(ts) = p.timestamp_ns() else {
+            return Err(LivoxWireError::DataType {
+                what: "Livox SDK1 UTC timestamp",
+                found: p.timestamp_type(),
+            });
+        };
+        let ts = i64::try_from(ts).unwrap_or(i64::MAX);
+        self.facts.time_type = Some(p.timestamp_type());
+        self.facts.clock = Self::clock_of(Protocol::Sdk1, p.timestamp_type());
+        self.facts.status_code = Some(p.status_code());
+        if p.record() == Record::Imu {
+            self.stats.imu_packets += 1;
+            self.push_imu_record(p.record_bytes(0), ts, host_ns);
+            return Ok(());
+        }
+        self.facts.data_type = Some(p.data_type());
+        let step = self
+            .cfg
+            .model
+            .map_or(4_167, LivoxModel::sdk1_point_interval_ns) as i64;
+        let n = p.records();
+        let mut lost = 0;
+        if let Some(next) = self.sdk1_next_ns {
+            let period = step * n as i64;
+            let gap = ts - next;
+            if gap < 0 {
+                if ts < next - period {
+                    self.stats.discontinuities += 1;
+                }
+            } else if period > 0 {
+                let l = ((gap as f64) / (period as f64)).round() as u64;
+                if l < MAX_COUNTER_GAP {
+                    self.stats.missing += l;
+                    lost = l;
+                } else {
+                    self.stats.discontinuities += 1;
+                }
+            }
+        }
+        self.sdk1_next_ns = Some(ts.saturating_add(step * n as i64));
+        let backwards = self.last_packet_ns.is_some_and(|l| ts < l);
+        if self.time_cut(ts) || backwards {
+            self.emit(on_sweep);
+        }
+        self.begin(host_ns, ts, 0);
+        self.sweep.missing_packets += lost;
+        let start = self.sweep.device_time_ns;
+        self.decoder.decode(
+            p.record(),
+            n,
+            |i| p.record_bytes(i),
+            ts,
+            |i| step * i as i64,
+            start,
+            &mut self.sweep.points,
+        );
+        self.after_packet(host_ns, ts);
+        Ok(())
+    }
+
+    fn push_imu_record(&mut self, rec: &[u8], ts: i64, host_ns: i64) {
+        let raw = read_imu(rec);
+        let g = raw.gyro.map(f64::from);
+        let a = raw.acc.map(|v| f64::from(v) * STANDARD_GRAVITY);
+        if g.iter().chain(a.iter()).all(|v| v.is_finite()) {
+            self.queue_imu(ImuSample {
+                sensor_ns: ts.max(0) as u64,
+                host_ns,
+                accel: a,
+                gyro: g,
+            });
+        }
+    }
+
+    fn time_cut(&self, ts: i64) -> bool {
+        self.open
+            && ts.saturating_sub(self.sweep.device_time_ns)
+                >= i64::try_from(self.cfg.period_ns).unwrap_or(i64::MAX)
+    }
+
+    fn begin(&mut self, host_ns: i64, ts: i64, frame: u32) {
+        if self.open {
+            return;
+        }
+        self.open = true;
+        self.sweep.clear();
+        self.sweep.index = self.next_index;
+        self.sweep.device_time_ns = ts;
+        self.sweep.clock = self.facts.clock;
+        self.sweep.timestamp_ns = match self.facts.clock {
+            ClockSource::Host => host_ns,
+            _ => ts,
+        };
+        self.sweep.first_host_ns = host_ns;
+        self.sweep.frame_id = frame;
+    }
+
+    fn after_packet(&mut self, host_ns: i64, first_ns: i64) {
+        self.stats.packets += 1;
+        self.sweep.packets += 1;
+        self.sweep.columns_count = self.sweep.columns_count.saturating_add(1);
+        self.sweep.last_host_ns = host_ns;
+        self.last_packet_ns = Some(first_ns);
+    }
+
+    fn emit(&mut self, on_sweep: &mut dyn FnMut(&Sweep, &LivoxFacts)) {
+        if !self.open {
+            return;
+        }
+        self.open = false;
+        let n = self.sweep.points.len() as u64;
+        self.stats.sweeps += 1;
+        self.stats.points += n;
+        self.stats.tagged_points += self.sweep.points.iter().filter(|p| p.pad != 0).count() as u64;
+        self.stats.min_sweep_points = if self.stats.sweeps == 1 {
+            n
+        } else {
+            self.stats.min_sweep_points.min(n)
+        };
+        self.stats.max_sweep_points = self.stats.max_sweep_points.max(n);
+        self.facts.last_sweep_points = n;
+        self.next_index += 1;
+        on_sweep(&self.sweep, &self.facts);
+    }
+}
