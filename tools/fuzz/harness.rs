@@ -2522,33 +2522,6 @@ pub fn robosense_packet(data: &[u8]) {
     let max_m = model.spec().max_range_m + 0.2;
     let mut points = 0usize;
     let mut on_sweep = |sw: &Sweep, _: &ringscan::sensor::robosense::RobosenseFacts| {
-
-// ----- livox_packet ----------------------------------------------------------------------------
-
-use ringscan::sensor::livox::family::detect_protocol;
-use ringscan::sensor::livox::model::ALL_MODELS as LIVOX_MODELS;
-use ringscan::sensor::livox::sweep::MAX_IMU_QUEUE as LIVOX_MAX_IMU_QUEUE;
-use ringscan::sensor::livox::{
-    LivoxConfig, LivoxStream, Protocol as LivoxProtocol, Sdk1Packet, Sdk2Packet,
-};
-
-/// One or more datagrams (byte 0 picks the model, the CRC check and a 100 ms or 1 µs
-/// integration period; the rest is split at each 0xFE byte into datagrams) through both packet views and a `LivoxStream`, each pushed twice.
-/// No panic; the views and `detect_protocol` agree; every datagram is counted once (point
-/// packet, IMU packet or malformed); points are finite, ring < lines, return ≤ 2, intensity
-/// 0–255, at most 3 returns × records per packet; the IMU queue stays bounded.
-pub fn livox_packet(data: &[u8]) {
-    let Some((&sel, rest)) = data.split_first() else {
-        return;
-    };
-    let model = LIVOX_MODELS[usize::from(sel) % LIVOX_MODELS.len()];
-    let mut cfg = LivoxConfig::new(Some(model), model.protocol());
-    cfg.check_crc = sel & 0x80 == 0;
-    cfg.period_ns = if sel & 0x40 == 0 { 100_000_000 } else { 1_000 };
-    let lines = model.lines();
-    let mut s = LivoxStream::new(cfg);
-    let mut pushed = 0u64;
-    let check = |sw: &ringscan::sweep::Sweep| {
         for p in &sw.points {
             assert!(
                 p.x.is_finite() && p.y.is_finite() && p.z.is_finite(),
@@ -2595,7 +2568,39 @@ pub fn calib_robosense(data: &[u8]) {
             RobosenseDecoder::new(m, &a, Default::default()).unwrap();
         }
     }
+}
 
+// ----- livox_packet ----------------------------------------------------------------------------
+
+use ringscan::sensor::livox::family::detect_protocol;
+use ringscan::sensor::livox::model::ALL_MODELS as LIVOX_MODELS;
+use ringscan::sensor::livox::sweep::MAX_IMU_QUEUE as LIVOX_MAX_IMU_QUEUE;
+use ringscan::sensor::livox::{
+    LivoxConfig, LivoxStream, Protocol as LivoxProtocol, Sdk1Packet, Sdk2Packet,
+};
+
+/// One or more datagrams (byte 0 picks the model, the CRC check and a 100 ms or 1 µs
+/// integration period; the rest is split at each 0xFE byte into datagrams) through both packet views and a `LivoxStream`, each pushed twice.
+/// No panic; the views and `detect_protocol` agree; every datagram is counted once (point
+/// packet, IMU packet or malformed); points are finite, ring < lines, return ≤ 2, intensity
+/// 0–255, at most 3 returns × records per packet; the IMU queue stays bounded.
+pub fn livox_packet(data: &[u8]) {
+    let Some((&sel, rest)) = data.split_first() else {
+        return;
+    };
+    let model = LIVOX_MODELS[usize::from(sel) % LIVOX_MODELS.len()];
+    let mut cfg = LivoxConfig::new(Some(model), model.protocol());
+    cfg.check_crc = sel & 0x80 == 0;
+    cfg.period_ns = if sel & 0x40 == 0 { 100_000_000 } else { 1_000 };
+    let lines = model.lines();
+    let mut s = LivoxStream::new(cfg);
+    let mut pushed = 0u64;
+    let check = |sw: &ringscan::sweep::Sweep| {
+        for p in &sw.points {
+            assert!(
+                p.x.is_finite() && p.y.is_finite() && p.z.is_finite(),
+                "{p:?}"
+            );
             assert!(p.ring < lines, "{p:?}");
             assert!(p.ret <= 2, "{p:?}");
             assert!((0.0..=255.0).contains(&p.intensity), "{p:?}");
