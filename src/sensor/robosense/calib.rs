@@ -31,13 +31,21 @@ impl RobosenseAngles {
 
     /// Checks the range of every angle.
     pub fn check(&self) -> Result<(), CalibError> {
+        // An elevation beyond ±90° points behind the sensor's own axis: a misread file.
         for (i, &(v, h)) in self.lasers.iter().enumerate() {
-            for (what, a) in [("vertical", v), ("horizontal", h)] {
-                if !a.is_finite() || !(-90.0..180.0).contains(&a) {
+            for (what, a, ok) in [
+                ("vertical", v, (-90.0..=90.0).contains(&v)),
+                ("horizontal", h, (-90.0..180.0).contains(&h)),
+            ] {
+                if !a.is_finite() || !ok {
                     return Err(CalibError::BadValue {
                         key: what.into(),
                         context: format!(" in laser {i}"),
-                        expected: "an angle in −90°..180°".into(),
+                        expected: if what == "vertical" {
+                            "an angle in −90°..90°".into()
+                        } else {
+                            "an angle in −90°..180°".into()
+                        },
                         found: a.to_string(),
                     });
                 }
