@@ -196,3 +196,28 @@ fn hostile_angle_csvs() {
     let c = parse_calibration(good.as_bytes(), "angle.csv", None).unwrap();
     assert_eq!(c.family, "robosense");
 }
+
+/// A Unix time stamp whose seconds (bytes 20–25) are beyond what nanoseconds in an i64 hold
+/// (found by the fuzz pass: the check allowed up to 2^34 s, whose ns overflow) is no time,
+/// not a panic; the largest accepted second still converts.
+#[test]
+fn unix_seconds_beyond_the_i64_range_are_no_time() {
+    use ringscan::sensor::robosense::model::ClockForm;
+    let mut p = helios_packet(100);
+    // 2^34 − 1 s: 0x03_FFFF_FFFF.
+    p[20..26].copy_from_slice(&[0x00, 0x03, 0xFF, 0xFF, 0xFF, 0xFF]);
+    let m = Msop::new(&p, RobosenseModel::Helios16P).unwrap();
+    assert_eq!(m.stamp_ns(ClockForm::Unix), None);
+    // 2^33 − 1 s, 999,999 µs.
+    p[20..26].copy_from_slice(&[0x00, 0x01, 0xFF, 0xFF, 0xFF, 0xFF]);
+    p[26..30].copy_from_slice(&999_999u32.to_be_bytes());
+    let m = Msop::new(&p, RobosenseModel::Helios16P).unwrap();
+    assert_eq!(
+        m.stamp_ns(ClockForm::Unix),
+        Some(((1i64 << 33) - 1) * 1_000_000_000 + 999_999_000)
+    );
+    let mut s = stream(true);
+    let mut p = helios_packet(100);
+    p[20..26].copy_from_slice(&[0xFF; 6]);
+    push(&mut s, &p);
+}

@@ -2518,8 +2518,15 @@ pub fn robosense_packet(data: &[u8]) {
         cfg.model = Some(model);
     }
     cfg.cut_cdeg = u16::from(sel & 0x80) * 100;
+    // Without a named model the stream tells it from the packet: any model's range may apply.
+    let max_m = match cfg.model {
+        Some(m) => m.spec().max_range_m,
+        None => ROBOSENSE_MODELS
+            .iter()
+            .map(|m| m.spec().max_range_m)
+            .fold(0.0, f32::max),
+    } + 0.2;
     let mut stream = RobosenseStream::new(cfg);
-    let max_m = model.spec().max_range_m + 0.2;
     let mut points = 0usize;
     let mut on_sweep = |sw: &Sweep, _: &ringscan::sensor::robosense::RobosenseFacts| {
         for p in &sw.points {

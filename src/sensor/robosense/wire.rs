@@ -163,8 +163,9 @@ impl<'a> Msop<'a> {
             ClockForm::Unix => {
                 let secs = t[..6].iter().fold(0i64, |a, &b| (a << 8) | i64::from(b));
                 let us = t[6..].iter().fold(0i64, |a, &b| (a << 8) | i64::from(b));
-                // Beyond 2^34 s (year 2514) or a µs field of a second or more: corrupt.
-                if secs >= 1 << 34 || us >= 1_000_000 {
+                // Beyond 2^33 s (year 2242; 2^34 s in ns would not fit an i64) or a µs field
+                // of a second or more: corrupt.
+                if secs >= 1 << 33 || us >= 1_000_000 {
                     return None;
                 }
                 Some(secs * 1_000_000_000 + us * 1_000)
