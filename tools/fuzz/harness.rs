@@ -2236,8 +2236,10 @@ pub fn bag_ros1(data: &[u8]) {
         return;
     };
     let mut errors = 0;
-    bag_drain(|buf| match r.next_message(buf) {
+    bag_drain(|buf| match r.next_message() {
         Ok(Some(m)) => {
+            buf.clear();
+            buf.extend_from_slice(r.message());
             let c = r.connection(m.conn);
             Some((
                 c.map(|c| c.type_name.clone()).unwrap_or_default(),
@@ -2252,16 +2254,17 @@ pub fn bag_ros1(data: &[u8]) {
     });
     assert!(r.offset() <= data.len() as u64);
     // Fused after the end or an error.
-    let mut buf = Vec::new();
-    assert!(matches!(r.next_message(&mut buf), Ok(None)));
+    assert!(matches!(r.next_message(), Ok(None)));
 }
 
 /// `bag_mcap`: any bytes as an MCAP file of ROS messages (`McapReader` over a slice).
 pub fn bag_mcap(data: &[u8]) {
     use ringscan::source::bag::mcap_in::McapReader;
     let mut r = McapReader::new(data);
-    bag_drain(|buf| match r.next_message(buf) {
+    bag_drain(|buf| match r.next_message() {
         Ok(Some(m)) => {
+            buf.clear();
+            buf.extend_from_slice(r.message());
             let c = r.connection(m.conn);
             Some((
                 c.map(|c| c.type_name.clone()).unwrap_or_default(),

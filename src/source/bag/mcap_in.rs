@@ -5,40 +5,44 @@
 //! Out: one message at a time in file order, with its channel (topic, schema name = type,
 //! message encoding `ros1` or `cdr`) and `log_time`.
 //!
-//! Built on the `mcap` crate's sans-IO [`LinearReader`] for the file's top-level records, which
-//! refuses any record larger than [`MAX_CHUNK_BYTES`](super::MAX_CHUNK_BYTES) before buffering
-//! it. Chunks are handed over whole and opened here, not by the crate: its reader trusts the
-//! record lengths inside an uncompressed chunk (a record longer than what is left of the chunk
-//! underflows its count of remaining bytes: a panic with overflow checks, and reading past the
-//! chunk without), so every size is checked against its container first: the compressed size
-//! within the chunk record, the uncompressed size within [`MAX_CHUNK_BYTES`], the decompressed
-//! length equal to it, the CRC, and each record's length within what is left of the chunk.
+//! The file's top-level records are framed here (opcode, u64 length, body), each body read once
+//! into a reused buffer: a message of an uncompressed chunk is handed on where it lies in that
+//! buffer, not copied (the `mcap` crate's linear reader copied every byte into buffers of its
+//! own, zeroed first, which made an MCAP bag 40 % slower to decode than its pcap). A record
+//! longer than [`MAX_CHUNK_BYTES`](super::MAX_CHUNK_BYTES) is refused before anything is read
+//! into memory, and a buffer grows only as the bytes arrive. Schema and channel records are
+//! parsed by the `mcap` crate (it checks their fields); message records and chunks are opened
+//! here, every size checked against its container first: the compressed size within the chunk
+//! record, the uncompressed size within [`MAX_CHUNK_BYTES`], the decompressed length equal to
+//! it, the CRC, and each record's length within what is left of the chunk (the crate's own
+//! chunk reader trusted those lengths: a record longer than what is left of its chunk
+//! underflowed its count of remaining bytes).
 //! A file that ends early (no footer, a record cut short) ends the stream with `truncated_at` =
-//! the bytes read; any other inconsistency (bad CRC, a chunk that does not decompress, an
-//! unknown compression, a record past its chunk's end) is [`BagError::Mcap`] with the offset
-//! reached.
+//! the bytes read; any other inconsistency (bad magic, bad CRC, a chunk that does not
+//! decompress, an unknown compression, a record past its chunk's end) is [`BagError::Mcap`]
+//! with the offset reached.
 
 use std::collections::HashMap;
 use std::io::Read;
 
+use std::ops::Range;
+
 use mcap::records::Record;
-use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
-use mcap::McapError;
 
 use super::messages::Encoding;
-use super::{BagError, Connection, RawMessage, MAX_CHUNK_BYTES, MAX_MESSAGE_BYTES};
+use super::{
+    fill, inflate_exact, read_up_to, BagError, Connection, RawMessage, MAX_CHUNK_BYTES,
+    MAX_MESSAGE_BYTES,
+};
 
 /// The MCAP magic.
 pub const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
 
-/// Bytes asked of the input at most per read.
-const READ_SIZE: usize = 1 << 20;
-
 /// Messages of an MCAP file. See the [module documentation](self).
 pub struct McapReader<R: Read> {
     reader: R,
-    linear: LinearReader,
     offset: u64,
+    magic_checked: bool,
     /// Schema id → (name, encoding).
     schemas: HashMap<u16, (String, String)>,
     channels: HashMap<u16, Connection>,
@@ -47,11 +51,20 @@ pub struct McapReader<R: Read> {
     pub(crate) oversized: u64,
     pub(crate) truncated_at: Option<u64>,
     done: bool,
-    /// The records of the chunk being read (decompressed), and where the next one starts.
-    chunk: Vec<u8>,
+    /// The body of the last top-level record read (a chunk as stored, a schema, ...). Buffers
+    /// are never shrunk: only their first bytes, up to the record's length, are its.
+    body: Vec<u8>,
+    /// A compressed chunk's records, decompressed.
+    inflated: Vec<u8>,
+    /// The chunk records being walked: in `inflated` (else in `body`), the first one's offset,
+    /// the next one's, and their end.
+    records_inflated: bool,
+    records_start: usize,
     chunk_at: usize,
-    /// The chunk record as read (compressed), reused.
-    chunk_raw: Vec<u8>,
+    chunk_end: usize,
+    /// The data of the message last returned: in `inflated` (else in `body`).
+    msg_inflated: bool,
+    msg: Range<usize>,
 }
 
 fn encoding_of(message_encoding: &str) -> Option<Encoding> {
@@ -65,22 +78,24 @@ fn encoding_of(message_encoding: &str) -> Option<Encoding> {
 impl<R: Read> McapReader<R> {
     /// A reader at the start of an MCAP file (the magic is checked on the first read).
     pub fn new(reader: R) -> Self {
-        let options = LinearReaderOptions::default()
-            .with_emit_chunks(true)
-            .with_record_length_limit(MAX_CHUNK_BYTES);
         Self {
             reader,
-            linear: LinearReader::new_with_options(options),
             offset: 0,
+            magic_checked: false,
             schemas: HashMap::new(),
             channels: HashMap::new(),
             order: Vec::new(),
             oversized: 0,
             truncated_at: None,
             done: false,
-            chunk: Vec::new(),
+            body: Vec::new(),
+            inflated: Vec::new(),
+            records_inflated: false,
+            records_start: 0,
             chunk_at: 0,
-            chunk_raw: Vec::new(),
+            chunk_end: 0,
+            msg_inflated: false,
+            msg: 0..0,
         }
     }
 
@@ -102,25 +117,52 @@ impl<R: Read> McapReader<R> {
             .collect()
     }
 
-    /// The next message: its bytes go to `out`.
-    pub fn next_message(&mut self, out: &mut Vec<u8>) -> Result<Option<RawMessage>, BagError> {
+    /// The bytes of the message last returned by [`Self::next_message`].
+    pub fn message(&self) -> &[u8] {
+        let buf = if self.msg_inflated {
+            &self.inflated
+        } else {
+            &self.body
+        };
+        buf.get(self.msg.clone()).unwrap_or(&[])
+    }
+
+    fn io_error(&mut self, source: std::io::Error) -> BagError {
+        self.done = true;
+        BagError::Io {
+            offset: self.offset,
+            source,
+        }
+    }
+
+    /// The file ends here, early.
+    fn cut(&mut self) -> Result<Option<RawMessage>, BagError> {
+        self.done = true;
+        self.truncated_at = Some(self.offset);
+        Ok(None)
+    }
+
+    /// The next message ([`Self::message`]); `Ok(None)` at the end (or where the file is cut).
+    pub fn next_message(&mut self) -> Result<Option<RawMessage>, BagError> {
         loop {
             // Records of the current chunk first.
-            if self.chunk_at < self.chunk.len() {
+            if self.chunk_at < self.chunk_end {
                 let at = self.chunk_at;
-                let Some((opcode, range)) = chunk_record(&self.chunk, at) else {
-                    self.chunk_at = self.chunk.len();
+                let records = if self.records_inflated {
+                    &self.inflated[..self.chunk_end]
+                } else {
+                    &self.body[..self.chunk_end]
+                };
+                let Some((opcode, range)) = chunk_record(records, at) else {
+                    let (at, len) = (at - self.records_start, self.chunk_end - self.records_start);
+                    self.chunk_at = self.chunk_end;
                     self.done = true;
                     return Err(self.mcap_error(format!(
-                        "a record at byte {at} of a chunk runs past the chunk's end ({} bytes)",
-                        self.chunk.len()
+                        "a record at byte {at} of a chunk runs past the chunk's end ({len} bytes)"
                     )));
                 };
                 self.chunk_at = range.end;
-                let chunk = std::mem::take(&mut self.chunk);
-                let got = self.on_record(opcode, &chunk[range], out);
-                self.chunk = chunk;
-                match got? {
+                match self.on_record(opcode, self.records_inflated, range)? {
                     Some(m) => return Ok(Some(m)),
                     None => continue,
                 }
@@ -128,64 +170,97 @@ impl<R: Read> McapReader<R> {
             if self.done {
                 return Ok(None);
             }
-            let event = match self.linear.next_event() {
-                None => {
+            if !self.magic_checked {
+                let mut magic = [0u8; 8];
+                let n = read_up_to(&mut self.reader, &mut magic).map_err(|e| self.io_error(e))?;
+                self.offset += n as u64;
+                if magic[..n] != MAGIC[..n] {
                     self.done = true;
-                    return Ok(None);
+                    return Err(self.mcap_error("not an MCAP file (its magic differs)".into()));
                 }
-                Some(Ok(e)) => e,
-                Some(Err(McapError::UnexpectedEof)) => {
-                    self.done = true;
-                    self.truncated_at = Some(self.offset);
-                    return Ok(None);
+                if n < MAGIC.len() {
+                    return self.cut();
                 }
-                Some(Err(e)) => {
-                    self.done = true;
-                    return Err(self.mcap_error(e.to_string()));
-                }
+                self.magic_checked = true;
+            }
+            let mut head = [0u8; 9];
+            let n = read_up_to(&mut self.reader, &mut head).map_err(|e| self.io_error(e))?;
+            self.offset += n as u64;
+            if n < head.len() {
+                // No footer: the file was cut (a recorder killed), between records or in one.
+                return self.cut();
+            }
+            let opcode = head[0];
+            let len = u64::from_le_bytes(head[1..9].try_into().unwrap_or([0xff; 8]));
+            let Some(len) = usize::try_from(len).ok().filter(|&l| l <= MAX_CHUNK_BYTES) else {
+                self.done = true;
+                return Err(self.mcap_error(format!(
+                    "record (opcode 0x{opcode:02x}) of {len} bytes, more than the {MAX_CHUNK_BYTES} accepted"
+                )));
             };
-            match event {
-                LinearReadEvent::ReadRequest(need) => {
-                    let need = need.clamp(1, READ_SIZE);
-                    let buf = self.linear.insert(need);
-                    let got = loop {
-                        match self.reader.read(buf) {
-                            Ok(n) => break n.min(need),
-                            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                            Err(source) => {
-                                self.done = true;
-                                return Err(BagError::Io {
-                                    offset: self.offset,
-                                    source,
-                                });
-                            }
-                        }
-                    };
-                    self.offset += got as u64;
-                    self.linear.notify_read(got);
+            match opcode {
+                OP_FOOTER => {
+                    // The footer and the closing magic, read so that a file cut inside them
+                    // is reported as cut like any other.
+                    let got = std::io::copy(
+                        &mut (&mut self.reader).take(len as u64),
+                        &mut std::io::sink(),
+                    )
+                    .map_err(|e| self.io_error(e))?;
+                    self.offset += got;
+                    let mut magic = [0u8; 8];
+                    let n =
+                        read_up_to(&mut self.reader, &mut magic).map_err(|e| self.io_error(e))?;
+                    self.offset += n as u64;
+                    if got < len as u64 || n < MAGIC.len() {
+                        return self.cut();
+                    }
+                    self.done = true;
+                    if &magic != MAGIC {
+                        return Err(
+                            self.mcap_error("the file does not end with the MCAP magic".into())
+                        );
+                    }
+                    return Ok(None);
                 }
-                LinearReadEvent::Record { opcode, data } if opcode == OP_CHUNK => {
-                    self.chunk_raw.clear();
-                    self.chunk_raw.extend_from_slice(data);
-                    let mut chunk = std::mem::take(&mut self.chunk);
-                    let opened = open_chunk(&self.chunk_raw, &mut chunk);
-                    self.chunk = chunk;
-                    self.chunk_at = 0;
-                    if let Err(reason) = opened {
-                        self.chunk.clear();
-                        self.done = true;
-                        return Err(self.mcap_error(reason));
+                OP_CHUNK | OP_SCHEMA | OP_CHANNEL | OP_MESSAGE => {
+                    let got = fill(&mut self.reader, &mut self.body, len)
+                        .map_err(|e| self.io_error(e))?;
+                    self.offset += got as u64;
+                    if got < len {
+                        return self.cut();
+                    }
+                    if opcode != OP_CHUNK {
+                        match self.on_record(opcode, false, 0..len)? {
+                            Some(m) => return Ok(Some(m)),
+                            None => continue,
+                        }
+                    }
+                    match open_chunk(&self.body[..len], &mut self.inflated) {
+                        Ok(Records::Stored(r)) => {
+                            self.records_inflated = false;
+                            (self.records_start, self.chunk_at, self.chunk_end) =
+                                (r.start, r.start, r.end);
+                        }
+                        Ok(Records::Inflated(size)) => {
+                            self.records_inflated = true;
+                            (self.records_start, self.chunk_at, self.chunk_end) = (0, 0, size);
+                        }
+                        Err(reason) => {
+                            self.done = true;
+                            return Err(self.mcap_error(reason));
+                        }
                     }
                 }
-                LinearReadEvent::Record { opcode, data } => {
-                    // Copied out of the reader's buffer: `on_record` needs `self` whole.
-                    self.chunk_raw.clear();
-                    self.chunk_raw.extend_from_slice(data);
-                    let raw = std::mem::take(&mut self.chunk_raw);
-                    let got = self.on_record(opcode, &raw, out);
-                    self.chunk_raw = raw;
-                    if let Some(m) = got? {
-                        return Ok(Some(m));
+                _ => {
+                    let got = std::io::copy(
+                        &mut (&mut self.reader).take(len as u64),
+                        &mut std::io::sink(),
+                    )
+                    .map_err(|e| self.io_error(e))?;
+                    self.offset += got;
+                    if got < len as u64 {
+                        return self.cut();
                     }
                 }
             }
@@ -199,67 +274,96 @@ impl<R: Read> McapReader<R> {
         }
     }
 
-    /// One record (top level or inside a chunk): schemas and channels are remembered, a message
-    /// is returned (its bytes in `out`).
+    /// One record (top level or inside a chunk) whose body is `range` of `inflated` (else of
+    /// `body`): schemas and channels are remembered, a message is returned.
     fn on_record(
         &mut self,
         opcode: u8,
-        data: &[u8],
-        out: &mut Vec<u8>,
+        in_inflated: bool,
+        range: Range<usize>,
     ) -> Result<Option<RawMessage>, BagError> {
-        // Only the records that matter here are parsed (the crate's parser checks their fields).
-        if !matches!(opcode, OP_SCHEMA | OP_CHANNEL | OP_MESSAGE) {
-            return Ok(None);
-        }
-        let record = match mcap::parse_record(opcode, data) {
-            Ok(r) => r,
-            Err(e) => {
-                self.done = true;
-                self.chunk_at = self.chunk.len();
-                return Err(self.mcap_error(e.to_string()));
-            }
+        let data = if in_inflated {
+            &self.inflated[range.clone()]
+        } else {
+            &self.body[range.clone()]
         };
-        match record {
-            Record::Schema { header, .. } => {
-                self.schemas
-                    .insert(header.id, (header.name, header.encoding));
-            }
-            Record::Channel(c) => {
-                let type_name = self
-                    .schemas
-                    .get(&c.schema_id)
-                    .map(|(n, _)| n.clone())
-                    .unwrap_or_default();
-                if !self.channels.contains_key(&c.id) {
-                    self.order.push(c.id);
-                }
-                self.channels.insert(
-                    c.id,
-                    Connection {
-                        topic: c.topic,
-                        type_name,
-                        encoding: encoding_of(&c.message_encoding),
-                    },
-                );
-            }
-            Record::Message { header, data } => {
-                if data.len() > MAX_MESSAGE_BYTES {
+        match opcode {
+            OP_MESSAGE => {
+                // channel_id u16, sequence u32, log_time u64, publish_time u64, then the data.
+                let (Some(channel), Some(log_time), Some(len)) = (
+                    data.get(..2)
+                        .and_then(|b| b.try_into().ok())
+                        .map(u16::from_le_bytes),
+                    u64_at(data, 6),
+                    data.len().checked_sub(MESSAGE_HEADER),
+                ) else {
+                    let reason = format!(
+                        "message record of {} bytes is shorter than its header",
+                        data.len()
+                    );
+                    self.done = true;
+                    self.chunk_at = self.chunk_end;
+                    return Err(self.mcap_error(reason));
+                };
+                if len > MAX_MESSAGE_BYTES {
                     self.oversized += 1;
                     return Ok(None);
                 }
-                out.clear();
-                out.extend_from_slice(&data);
-                return Ok(Some(RawMessage {
-                    conn: u64::from(header.channel_id),
-                    time_ns: i64::try_from(header.log_time).unwrap_or(i64::MAX),
-                }));
+                self.msg_inflated = in_inflated;
+                self.msg = range.start + MESSAGE_HEADER..range.end;
+                Ok(Some(RawMessage {
+                    conn: u64::from(channel),
+                    time_ns: i64::try_from(log_time).unwrap_or(i64::MAX),
+                }))
             }
-            _ => {}
+            // Only the records that matter here are parsed (the crate's parser checks their
+            // fields).
+            OP_SCHEMA | OP_CHANNEL => {
+                let record = match mcap::parse_record(opcode, data) {
+                    Ok(r) => r,
+                    Err(e) => {
+                        let reason = e.to_string();
+                        self.done = true;
+                        self.chunk_at = self.chunk_end;
+                        return Err(self.mcap_error(reason));
+                    }
+                };
+                match record {
+                    Record::Schema { header, .. } => {
+                        self.schemas
+                            .insert(header.id, (header.name, header.encoding));
+                    }
+                    Record::Channel(c) => {
+                        let type_name = self
+                            .schemas
+                            .get(&c.schema_id)
+                            .map(|(n, _)| n.clone())
+                            .unwrap_or_default();
+                        if !self.channels.contains_key(&c.id) {
+                            self.order.push(c.id);
+                        }
+                        self.channels.insert(
+                            c.id,
+                            Connection {
+                                topic: c.topic,
+                                type_name,
+                                encoding: encoding_of(&c.message_encoding),
+                            },
+                        );
+                    }
+                    _ => {}
+                }
+                Ok(None)
+            }
+            _ => Ok(None),
         }
-        Ok(None)
     }
 }
 
+/// Bytes of a message record before its data.
+const MESSAGE_HEADER: usize = 2 + 4 + 8 + 8;
+
+const OP_FOOTER: u8 = 0x02;
 const OP_SCHEMA: u8 = 0x03;
 const OP_CHANNEL: u8 = 0x04;
 const OP_MESSAGE: u8 = 0x05;
@@ -288,12 +392,21 @@ fn chunk_record(records: &[u8], at: usize) -> Option<(u8, std::ops::Range<usize>
     (end <= records.len()).then_some((opcode, start..end))
 }
 
+/// Where a chunk's records are, once it is opened.
+#[derive(Debug, PartialEq, Eq)]
+enum Records {
+    /// Stored uncompressed: this range of the chunk record's body.
+    Stored(Range<usize>),
+    /// Decompressed: the first this many bytes of the buffer given to [`open_chunk`].
+    Inflated(usize),
+}
+
 /// Opens a Chunk record's body (MCAP specification, "Chunk (op=0x06)": `message_start_time`
 /// u64, `message_end_time` u64, `uncompressed_size` u64, `uncompressed_crc` u32, `compression`
-/// string (u32 length + bytes), `compressed_size` u64, then the records) into `out`: every size
-/// checked against its container before anything is allocated or decompressed.
-fn open_chunk(body: &[u8], out: &mut Vec<u8>) -> Result<(), String> {
-    out.clear();
+/// string (u32 length + bytes), `compressed_size` u64, then the records), decompressing into
+/// `inflated` (its first bytes; the buffer is not shrunk): every size checked against its
+/// container before anything is allocated or decompressed.
+fn open_chunk(body: &[u8], inflated: &mut Vec<u8>) -> Result<Records, String> {
     let short = || {
         format!(
             "chunk record of {} bytes is shorter than its header",
@@ -308,12 +421,14 @@ fn open_chunk(body: &[u8], out: &mut Vec<u8>) -> Result<(), String> {
     let compressed_size = u64_at(body, name_end).ok_or_else(short)?;
     let records_at = name_end + 8;
     let left = body.len() - records_at;
-    let records = usize::try_from(compressed_size)
+    let stored = usize::try_from(compressed_size)
         .ok()
-        .and_then(|n| body.get(records_at..records_at.checked_add(n)?))
+        .and_then(|n| Some(records_at..records_at.checked_add(n)?))
+        .filter(|r| r.end <= body.len())
         .ok_or_else(|| {
             format!("chunk claims {compressed_size} compressed bytes; its record holds {left}")
         })?;
+    let records = &body[stored.clone()];
     let size = usize::try_from(uncompressed_size)
         .ok()
         .filter(|&n| n <= MAX_CHUNK_BYTES)
@@ -322,19 +437,14 @@ fn open_chunk(body: &[u8], out: &mut Vec<u8>) -> Result<(), String> {
                 "chunk claims {uncompressed_size} uncompressed bytes, more than the {MAX_CHUNK_BYTES} accepted"
             )
         })?;
-    let inflated = match compression {
-        b"" => {
-            out.extend_from_slice(records);
-            true
-        }
-        b"zstd" => match zstd::stream::read::Decoder::with_buffer(records) {
-            Ok(d) => inflate(d, size, out),
-            Err(_) => false,
-        },
-        b"lz4" => match lz4::Decoder::new(records) {
-            Ok(d) => inflate(d, size, out),
-            Err(_) => false,
-        },
+    let opened = match compression {
+        b"" => (records.len() == size).then_some(Records::Stored(stored)),
+        b"zstd" => zstd::stream::read::Decoder::with_buffer(records)
+            .is_ok_and(|d| inflate_exact(d, size, inflated))
+            .then_some(Records::Inflated(size)),
+        b"lz4" => lz4::Decoder::new(records)
+            .is_ok_and(|d| inflate_exact(d, size, inflated))
+            .then_some(Records::Inflated(size)),
         other => {
             return Err(format!(
                 "chunk compression {:?} is not supported (zstd, lz4 or none)",
@@ -342,29 +452,24 @@ fn open_chunk(body: &[u8], out: &mut Vec<u8>) -> Result<(), String> {
             ))
         }
     };
-    if !inflated || out.len() != size {
+    let Some(opened) = opened else {
         return Err(format!(
             "chunk ({}) does not decompress to the {size} bytes it claims",
             String::from_utf8_lossy(compression)
         ));
-    }
+    };
     if crc != 0 {
-        let found = crc32fast::hash(out);
+        let found = crc32fast::hash(match &opened {
+            Records::Stored(r) => &body[r.clone()],
+            Records::Inflated(n) => &inflated[..*n],
+        });
         if found != crc {
             return Err(format!(
                 "chunk CRC mismatch: recorded {crc:08x}, computed {found:08x}"
             ));
         }
     }
-    Ok(())
-}
-
-/// Decompresses into `out`; false when it fails or gives more than `size` bytes.
-fn inflate(d: impl Read, size: usize, out: &mut Vec<u8>) -> bool {
-    match d.take(size as u64 + 1).read_to_end(out) {
-        Ok(n) => n <= size,
-        Err(_) => false,
-    }
+    Ok(opened)
 }
 
 #[cfg(test)]
@@ -385,48 +490,53 @@ mod tests {
         b
     }
 
+    /// The records of a chunk, opened.
+    fn open(body: &[u8]) -> Result<Vec<u8>, String> {
+        let mut inflated = Vec::new();
+        Ok(match open_chunk(body, &mut inflated)? {
+            Records::Stored(r) => body[r].to_vec(),
+            Records::Inflated(n) => inflated[..n].to_vec(),
+        })
+    }
+
     #[test]
     fn a_record_longer_than_its_chunk_is_refused() {
         // One record: opcode 0x05, length 1000, but only 4 body bytes follow.
         let mut records = vec![0x05];
         records.extend_from_slice(&1000u64.to_le_bytes());
         records.extend_from_slice(&[1, 2, 3, 4]);
-        let mut out = Vec::new();
-        open_chunk(&chunk_body("", 13, 0, &records), &mut out).unwrap();
+        let out = open(&chunk_body("", 13, 0, &records)).unwrap();
         assert_eq!(chunk_record(&out, 0), None);
         // Length 4 fits exactly.
         records[1..9].copy_from_slice(&4u64.to_le_bytes());
-        open_chunk(&chunk_body("", 13, 0, &records), &mut out).unwrap();
+        let out = open(&chunk_body("", 13, 0, &records)).unwrap();
         assert_eq!(chunk_record(&out, 0), Some((0x05, 9..13)));
         assert_eq!(chunk_record(&out, 13), None);
         // A length whose end overflows usize.
         records[1..9].copy_from_slice(&u64::MAX.to_le_bytes());
-        open_chunk(&chunk_body("", 13, 0, &records), &mut out).unwrap();
+        let out = open(&chunk_body("", 13, 0, &records)).unwrap();
         assert_eq!(chunk_record(&out, 0), None);
     }
 
     #[test]
     fn chunk_sizes_are_checked_against_their_container() {
-        let mut out = Vec::new();
         // compressed_size past the record's end.
         let mut b = chunk_body("", 4, 0, &[0; 4]);
         let at = b.len() - 12;
         b[at..at + 8].copy_from_slice(&5u64.to_le_bytes());
-        assert!(open_chunk(&b, &mut out)
-            .unwrap_err()
-            .contains("compressed bytes"));
+        assert!(open(&b).unwrap_err().contains("compressed bytes"));
         // A 1 TB uncompressed claim.
-        let e = open_chunk(&chunk_body("zstd", 1 << 40, 0, &[0; 4]), &mut out).unwrap_err();
+        let e = open(&chunk_body("zstd", 1 << 40, 0, &[0; 4])).unwrap_err();
         assert!(e.contains("uncompressed bytes"), "{e}");
         // Uncompressed: the size must match the records.
-        assert!(open_chunk(&chunk_body("", 3, 0, &[0; 4]), &mut out).is_err());
+        assert!(open(&chunk_body("", 3, 0, &[0; 4])).is_err());
         // Garbage that is not zstd / lz4; an unknown compression; a header cut short.
-        assert!(open_chunk(&chunk_body("zstd", 4, 0, &[1, 2, 3, 4]), &mut out).is_err());
-        assert!(open_chunk(&chunk_body("lz4", 4, 0, &[1, 2, 3, 4]), &mut out).is_err());
-        assert!(open_chunk(&chunk_body("bz2", 4, 0, &[0; 4]), &mut out).is_err());
-        assert!(open_chunk(&[0; 20], &mut out).is_err());
+        assert!(open(&chunk_body("zstd", 4, 0, &[1, 2, 3, 4])).is_err());
+        assert!(open(&chunk_body("lz4", 4, 0, &[1, 2, 3, 4])).is_err());
+        assert!(open(&chunk_body("bz2", 4, 0, &[0; 4])).is_err());
+        assert!(open(&[0; 20]).is_err());
         // CRC-32 (IEEE) of "123456789" is 0xcbf43926 (the check value of the CRC catalogue).
-        assert!(open_chunk(&chunk_body("", 9, 0xcbf4_3926, b"123456789"), &mut out).is_ok());
-        assert!(open_chunk(&chunk_body("", 9, 0xcbf4_3927, b"123456789"), &mut out).is_err());
+        assert!(open(&chunk_body("", 9, 0xcbf4_3926, b"123456789")).is_ok());
+        assert!(open(&chunk_body("", 9, 0xcbf4_3927, b"123456789")).is_err());
     }
 }

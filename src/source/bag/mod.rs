@@ -215,6 +215,39 @@ pub(crate) fn read_up_to<R: Read + ?Sized>(reader: &mut R, out: &mut [u8]) -> io
     Ok(filled)
 }
 
+/// Reads up to `len` bytes into `buf[..len]`; returns how many arrived (fewer at the end of the
+/// input). `buf` grows as the bytes arrive (a length claimed by a damaged file allocates only
+/// what the file holds) and is never shrunk: the readers keep a buffer's valid length beside
+/// it, so a reused buffer is written once per record instead of being zeroed first, as
+/// `read_to_end` into a cleared `Vec` would.
+pub(crate) fn fill<R: Read + ?Sized>(
+    reader: &mut R,
+    buf: &mut Vec<u8>,
+    len: usize,
+) -> io::Result<usize> {
+    let mut got = 0;
+    while got < len {
+        if buf.len() <= got {
+            buf.resize(len.min(got.saturating_mul(2).max(1 << 16)), 0);
+        }
+        let end = len.min(buf.len());
+        match reader.read(&mut buf[got..end]) {
+            Ok(0) => break,
+            Ok(n) => got += n.min(end - got),
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(got)
+}
+
+/// Decompresses into `buf[..size]` (as [`fill`]); true when exactly `size` bytes come out.
+pub(crate) fn inflate_exact(mut d: impl Read, size: usize, buf: &mut Vec<u8>) -> bool {
+    let mut more = [0u8; 1];
+    matches!(fill(&mut d, buf, size), Ok(n) if n == size)
+        && matches!(read_up_to(&mut d, &mut more), Ok(0))
+}
+
 // ----- kinds -----------------------------------------------------------------------------------
 
 /// The kind of one storage file, from its first bytes.
@@ -391,11 +424,19 @@ impl Inner {
         })
     }
 
-    fn next_message(&mut self, out: &mut Vec<u8>) -> Result<Option<RawMessage>, BagError> {
+    fn next_message(&mut self) -> Result<Option<RawMessage>, BagError> {
         match self {
-            Self::Ros1(r) => r.next_message(out),
-            Self::Sqlite(r, _) => r.next_message(out),
-            Self::Mcap(r) => r.next_message(out),
+            Self::Ros1(r) => r.next_message(),
+            Self::Sqlite(r, _) => r.next_message(),
+            Self::Mcap(r) => r.next_message(),
+        }
+    }
+
+    fn message(&self) -> &[u8] {
+        match self {
+            Self::Ros1(r) => r.message(),
+            Self::Sqlite(r, _) => r.message(),
+            Self::Mcap(r) => r.message(),
         }
     }
 
@@ -458,7 +499,10 @@ struct Messages {
     formats: HashMap<String, Option<Encoding>>,
     done_bytes: u64,
     damage: Damage,
+    /// A zstd-compressed message (rosbag2 MESSAGE compression), decompressed.
     raw: Vec<u8>,
+    /// The message last returned is `raw`.
+    inflated: bool,
 }
 
 impl Messages {
@@ -474,6 +518,7 @@ impl Messages {
             done_bytes: 0,
             damage: Damage::default(),
             raw: Vec::new(),
+            inflated: false,
         };
         match kind {
             BagKind::File(k) => m.files.push_back((path.to_path_buf(), *k)),
@@ -613,13 +658,23 @@ impl Messages {
         self.conns.get(usize::try_from(g).ok()?)
     }
 
-    /// The next message (global connection id); its bytes go to `out`.
-    fn next_message(&mut self, out: &mut Vec<u8>) -> Result<Option<RawMessage>, BagError> {
+    /// The bytes of the message last returned by [`Self::next_message`].
+    fn message(&self) -> &[u8] {
+        match &self.current {
+            _ if self.inflated => &self.raw,
+            Some((_, inner)) => inner.message(),
+            None => &[],
+        }
+    }
+
+    /// The next message (global connection id; its bytes are [`Self::message`]).
+    fn next_message(&mut self) -> Result<Option<RawMessage>, BagError> {
         loop {
+            self.inflated = false;
             let Some((path, inner)) = self.current.as_mut() else {
                 return Ok(None);
             };
-            let m = match inner.next_message(out) {
+            let m = match inner.next_message() {
                 Ok(Some(m)) => m,
                 Ok(None) => {
                     if self.next_file()? {
@@ -656,16 +711,20 @@ impl Messages {
             // rosbag2 MESSAGE compression; also recognised without its yaml (a bare .db3 or
             // .mcap) by the zstd magic where CDR's encapsulation header belongs.
             let cdr = self.conns.get(g as usize).and_then(|c| c.encoding) == Some(Encoding::Cdr);
+            let out = self.current.as_ref().map_or(&[][..], |(_, i)| i.message());
             if self.message_zstd || (cdr && out.starts_with(&ZSTD_MAGIC)) {
-                std::mem::swap(&mut self.raw, out);
-                out.clear();
-                let ok = zstd::stream::read::Decoder::with_buffer(&self.raw[..])
-                    .and_then(|d| d.take(MAX_MESSAGE_BYTES as u64 + 1).read_to_end(out))
+                self.raw.clear();
+                let ok = zstd::stream::read::Decoder::with_buffer(out)
+                    .and_then(|d| {
+                        d.take(MAX_MESSAGE_BYTES as u64 + 1)
+                            .read_to_end(&mut self.raw)
+                    })
                     .is_ok_and(|n| n <= MAX_MESSAGE_BYTES);
                 if !ok {
                     self.damage.bad_compressed += 1;
                     continue;
                 }
+                self.inflated = true;
             }
             return Ok(Some(RawMessage {
                 conn: g,
@@ -858,7 +917,6 @@ pub struct BagSource {
     sensors: Vec<BagSensor>,
     /// Ouster metadata by namespace (from the pre-scan and the stream).
     metadata: HashMap<String, String>,
-    msg: Vec<u8>,
     packets: Vec<PacketRef>,
     cursor: usize,
     current: (usize, i64, bool),
@@ -917,7 +975,6 @@ impl BagSource {
             routes: HashMap::new(),
             sensors: Vec::new(),
             metadata,
-            msg: Vec::new(),
             packets: Vec::new(),
             cursor: 0,
             current: (0, 0, false),
@@ -1078,7 +1135,9 @@ impl BagSource {
         self.cursor += 1;
         let (sensor, msg_time, imu) = self.current;
         if self.sensors[sensor].family == Family::Unknown {
-            let payload = self.msg.get(p.start..p.start + p.len).unwrap_or(&[]);
+            let payload = (self.messages.message())
+                .get(p.start..p.start + p.len)
+                .unwrap_or(&[]);
             if let Some((family, data, aux)) = sniff(payload) {
                 let s = &mut self.sensors[sensor];
                 (s.family, s.data_port, s.aux_port) = (family, data, aux);
@@ -1098,7 +1157,9 @@ impl BagSource {
             time_ns,
             src: SocketAddrV4::new(s.address, port),
             dst: SocketAddrV4::new(Ipv4Addr::LOCALHOST, port),
-            payload: self.msg.get(p.start..p.start + p.len).unwrap_or(&[]),
+            payload: (self.messages.message())
+                .get(p.start..p.start + p.len)
+                .unwrap_or(&[]),
         }))
     }
 
@@ -1107,7 +1168,7 @@ impl BagSource {
         self.packets.clear();
         self.cursor = 0;
         loop {
-            let Some(m) = self.messages.next_message(&mut self.msg)? else {
+            let Some(m) = self.messages.next_message()? else {
                 return Ok(false);
             };
             self.stats.messages += 1;
@@ -1124,8 +1185,9 @@ impl BagSource {
                 Role::Unselected => self.stats.unselected += 1,
                 Role::Metadata => {
                     self.stats.metadata_messages += 1;
-                    if let Ok((a, n)) = messages::string(route.encoding, &self.msg) {
-                        let text = String::from_utf8_lossy(&self.msg[a..a + n]).into_owned();
+                    let msg = self.messages.message();
+                    if let Ok((a, n)) = messages::string(route.encoding, msg) {
+                        let text = String::from_utf8_lossy(&msg[a..a + n]).into_owned();
                         let topic = self
                             .messages
                             .connection(m.conn)
@@ -1140,7 +1202,8 @@ impl BagSource {
                 }
                 Role::Packets { sensor, imu } => {
                     let kind = route.kind.unwrap_or(MsgKind::StdString);
-                    match messages::packets(kind, route.encoding, &self.msg, &mut self.packets) {
+                    let msg = self.messages.message();
+                    match messages::packets(kind, route.encoding, msg, &mut self.packets) {
                         Ok(()) => {
                             self.stats.packet_messages += 1;
                             self.current = (sensor, m.time_ns, imu);
@@ -1191,10 +1254,10 @@ fn prescan_metadata(path: &Path, kind: &BagKind) -> Result<HashMap<String, Strin
     if upfront_complete && wanted(&m).is_empty() {
         return Ok(found);
     }
-    let mut buf = Vec::new();
     let mut read = 0u64;
     // A damaged bag is reported by the main pass; the pre-scan keeps what it found.
-    while let Ok(Some(msg)) = m.next_message(&mut buf) {
+    while let Ok(Some(msg)) = m.next_message() {
+        let buf = m.message();
         read += buf.len() as u64;
         if let Some(c) = m.connection(msg.conn).filter(|c| is_meta(c)) {
             let text = c.encoding.and_then(|enc| messages::string(enc, &buf).ok());

@@ -29,7 +29,9 @@ use std::collections::HashMap;
 use std::io::{self, Read, Seek, SeekFrom};
 
 use super::messages::Encoding;
-use super::{read_up_to, BagError, Connection, RawMessage, MAX_CHUNK_BYTES, MAX_MESSAGE_BYTES};
+use super::{
+    inflate_exact, read_up_to, BagError, Connection, RawMessage, MAX_CHUNK_BYTES, MAX_MESSAGE_BYTES,
+};
 
 /// The first bytes of every ROS 1 bag of format 2.0.
 pub const MAGIC: &[u8; 13] = b"#ROSBAG V2.0\n";
@@ -120,9 +122,16 @@ pub struct Ros1Reader<R: Read> {
     offset: u64,
     index_pos: u64,
     head: Vec<u8>,
+    /// A record's data as read (a compressed chunk, a connection), valid up to `compressed_end`.
     compressed: Vec<u8>,
+    compressed_end: usize,
+    /// The records of the chunk being read (decompressed), valid up to `chunk_end`.
     chunk: Vec<u8>,
+    chunk_end: usize,
     chunk_at: usize,
+    /// Where the message last returned lies: in `chunk` (else in `compressed`), and its bytes.
+    msg_in_chunk: bool,
+    msg: std::ops::Range<usize>,
     /// File offset of the chunk being read (for error messages).
     chunk_offset: u64,
     connections: HashMap<u32, Connection>,
@@ -154,7 +163,11 @@ impl<R: Read> Ros1Reader<R> {
             index_pos: 0,
             head: Vec::new(),
             compressed: Vec::new(),
+            compressed_end: 0,
             chunk: Vec::new(),
+            chunk_end: 0,
+            msg_in_chunk: false,
+            msg: 0..0,
             chunk_at: 0,
             chunk_offset: 0,
             connections: HashMap::new(),
@@ -299,18 +312,15 @@ impl<R: Read> Ros1Reader<R> {
 
     /// Reads `len` bytes into `buf` (grown only as bytes arrive); false if the input ends first.
     fn read_data(&mut self, len: usize, which: Buf) -> Result<bool, BagError> {
-        let buf = match which {
-            Buf::Compressed => &mut self.compressed,
-            Buf::Chunk => &mut self.chunk,
+        let (buf, end) = match which {
+            Buf::Compressed => (&mut self.compressed, &mut self.compressed_end),
+            Buf::Chunk => (&mut self.chunk, &mut self.chunk_end),
         };
-        buf.clear();
-        let got = (&mut self.reader)
-            .take(len as u64)
-            .read_to_end(buf)
-            .map_err(|source| BagError::Io {
-                offset: self.offset,
-                source,
-            })?;
+        let got = super::fill(&mut self.reader, buf, len).map_err(|source| BagError::Io {
+            offset: self.offset,
+            source,
+        })?;
+        *end = got;
         self.offset += got as u64;
         Ok(got == len)
     }
@@ -325,18 +335,28 @@ impl<R: Read> Ros1Reader<R> {
     fn bad_chunk(&mut self) {
         self.bad_chunks += 1;
         self.first_bad_chunk.get_or_insert(self.chunk_offset);
-        self.chunk.clear();
+        self.chunk_end = 0;
         self.chunk_at = 0;
     }
 
-    /// The next message: its bytes go to `out`. `Ok(None)` at the end (or where the file is cut).
-    pub fn next_message(&mut self, out: &mut Vec<u8>) -> Result<Option<RawMessage>, BagError> {
+    /// The bytes of the message last returned by [`Self::next_message`].
+    pub fn message(&self) -> &[u8] {
+        let buf = if self.msg_in_chunk {
+            &self.chunk
+        } else {
+            &self.compressed
+        };
+        buf.get(self.msg.clone()).unwrap_or(&[])
+    }
+
+    /// The next message ([`Self::message`]). `Ok(None)` at the end (or where the file is cut).
+    pub fn next_message(&mut self) -> Result<Option<RawMessage>, BagError> {
         loop {
             if self.done {
                 return Ok(None);
             }
-            if self.chunk_at < self.chunk.len() {
-                if let Some(m) = self.next_in_chunk(out) {
+            if self.chunk_at < self.chunk_end {
+                if let Some(m) = self.next_in_chunk() {
                     return Ok(Some(m));
                 }
                 continue;
@@ -383,25 +403,29 @@ impl<R: Read> Ros1Reader<R> {
                         self.read_data(rec.data_len, Buf::Compressed)?
                     };
                     if !complete {
-                        self.chunk.clear();
+                        self.chunk_end = 0;
                         self.truncated_at = Some(start);
                         self.done = true;
                         return Ok(None);
                     }
                     self.chunk_at = 0;
+                    let packed = &self.compressed[..self.compressed_end];
                     let ok = match compression.as_str() {
-                        "none" => self.chunk.len() == size,
-                        "bz2" => inflate(
-                            bzip2::read::BzDecoder::new(&self.compressed[..]),
+                        "none" => self.chunk_end == size,
+                        "bz2" => inflate_exact(
+                            bzip2::read::BzDecoder::new(packed),
                             size,
                             &mut self.chunk,
                         ),
-                        "lz4" => match lz4::Decoder::new(&self.compressed[..]) {
-                            Ok(d) => inflate(d, size, &mut self.chunk),
+                        "lz4" => match lz4::Decoder::new(packed) {
+                            Ok(d) => inflate_exact(d, size, &mut self.chunk),
                             Err(_) => false,
                         },
                         _ => false,
                     };
+                    if ok && compression != "none" {
+                        self.chunk_end = size;
+                    }
                     if !ok {
                         self.bad_chunk();
                     }
@@ -412,7 +436,7 @@ impl<R: Read> Ros1Reader<R> {
                         self.done = true;
                         return Ok(None);
                     }
-                    if let Some((id, c)) = connection(&h, &self.compressed) {
+                    if let Some((id, c)) = connection(&h, &self.compressed[..self.compressed_end]) {
                         self.add_connection(id, c);
                     }
                 }
@@ -424,8 +448,7 @@ impl<R: Read> Ros1Reader<R> {
                         return Ok(None);
                     }
                     if let (Some(conn), Some(time_ns)) = (h.conn, h.time_ns) {
-                        out.clear();
-                        out.extend_from_slice(&self.compressed);
+                        (self.msg_in_chunk, self.msg) = (false, 0..self.compressed_end);
                         return Ok(Some(RawMessage {
                             conn: u64::from(conn),
                             time_ns,
@@ -445,9 +468,10 @@ impl<R: Read> Ros1Reader<R> {
 
     /// The next message record inside the current chunk (connections are registered on the
     /// way); `None` when the chunk is used up or found inconsistent (then counted).
-    fn next_in_chunk(&mut self, out: &mut Vec<u8>) -> Option<RawMessage> {
-        while self.chunk_at < self.chunk.len() {
-            let Some((header, data)) = inner_record(&self.chunk, self.chunk_at) else {
+    fn next_in_chunk(&mut self) -> Option<RawMessage> {
+        while self.chunk_at < self.chunk_end {
+            let Some((header, data)) = inner_record(&self.chunk[..self.chunk_end], self.chunk_at)
+            else {
                 self.bad_chunk();
                 return None;
             };
@@ -466,8 +490,7 @@ impl<R: Read> Ros1Reader<R> {
                 }
                 Some(OP_MESSAGE) => {
                     if let (Some(conn), Some(time_ns)) = (h.conn, h.time_ns) {
-                        out.clear();
-                        out.extend_from_slice(&self.chunk[ds..de]);
+                        (self.msg_in_chunk, self.msg) = (true, ds..de);
                         return Some(RawMessage {
                             conn: u64::from(conn),
                             time_ns,
@@ -485,15 +508,6 @@ impl<R: Read> Ros1Reader<R> {
 enum Buf {
     Compressed,
     Chunk,
-}
-
-/// Decompresses into `out`; true when exactly `size` bytes come out.
-fn inflate(mut d: impl Read, size: usize, out: &mut Vec<u8>) -> bool {
-    out.clear();
-    match (&mut d).take(size as u64 + 1).read_to_end(out) {
-        Ok(n) => n == size,
-        Err(_) => false,
-    }
 }
 
 /// Header and data ranges of the record at `at` inside a chunk.
@@ -648,24 +662,22 @@ mod tests {
     fn reads_messages_of_an_uncompressed_chunk() {
         let b = bag();
         let mut r = Ros1Reader::new(&b[..]).unwrap();
-        let mut out = Vec::new();
-        let m = r.next_message(&mut out).unwrap().unwrap();
+        let m = r.next_message().unwrap().unwrap();
         assert_eq!((m.conn, m.time_ns), (0, 10_000_000_007));
-        assert_eq!(out, [1, 0, 0, 0, 0]);
+        assert_eq!(r.message(), [1, 0, 0, 0, 0]);
         assert_eq!(r.connection(0).unwrap().type_name, "ouster_ros/PacketMsg");
-        let m = r.next_message(&mut out).unwrap().unwrap();
+        let m = r.next_message().unwrap().unwrap();
         assert_eq!(m.time_ns, 11_000_000_007);
-        assert!(r.next_message(&mut out).unwrap().is_none());
+        assert!(r.next_message().unwrap().is_none());
         assert_eq!(r.truncated_at, None);
     }
 
     #[test]
     fn every_cut_ends_cleanly_or_with_an_error() {
         let b = bag();
-        let mut out = Vec::new();
         for cut in 0..b.len() {
             if let Ok(mut r) = Ros1Reader::new(&b[..cut]) {
-                while let Ok(Some(_)) = r.next_message(&mut out) {}
+                while let Ok(Some(_)) = r.next_message() {}
                 // A cut right after the bag header record is a clean (empty) bag.
                 let header_end = 13 + 4 + (4 + 4) + (4 + 10 + 8) + 4 + 16;
                 assert!(r.truncated_at.is_some() || cut == header_end, "cut {cut}");
@@ -682,10 +694,9 @@ mod tests {
         let at = b.len() - 4;
         b[at..].copy_from_slice(&(1u32 << 30).to_le_bytes());
         let mut r = Ros1Reader::new(&b[..]).unwrap();
-        let mut out = Vec::new();
-        r.next_message(&mut out).unwrap();
-        r.next_message(&mut out).unwrap();
-        match r.next_message(&mut out) {
+        r.next_message().unwrap();
+        r.next_message().unwrap();
+        match r.next_message() {
             Err(BagError::RecordTooLarge { offset, .. }) => assert_eq!(offset, n as u64),
             other => panic!("{other:?}"),
         }
