@@ -7,7 +7,10 @@
 //!   `velodyne_msgs/msg/VelodyneScan` (the position packets have no place there);
 //! - an Ouster capture with its IMU and metadata (`../shared/captures`, SKIP without):
 //!   `ouster_sensor_msgs/msg/PacketMsg` on `/lidar_packets` and `/imu_packets`, the metadata
-//!   as a `std_msgs/msg/String` on `/metadata`, which configures the decoder on the way back.
+//!   as a `std_msgs/msg/String` on `/metadata`, which configures the decoder on the way back;
+//! - a Hesai XT32 capture of nebula's tests (`../shared/captures`, SKIP without):
+//!   `pandar_msgs/msg/PandarScan`, its angle-correction CSV given on both sides (the bag holds
+//!   no calibration for Hesai).
 //!
 //! The bags are also opened by an independent reader (`rosbags`): `tools/ci_ros2_bag_check.sh`.
 
@@ -48,9 +51,9 @@ fn bag_datagrams(path: &Path) -> (Vec<Dgram>, BagSource) {
 }
 
 /// Every sweep (timestamp, packets, points) of the datagrams from one source address.
-fn sweeps(datagrams: &[Dgram], calib: Option<&[u8]>) -> Vec<(i64, u32, Vec<Point>)> {
+fn sweeps(datagrams: &[Dgram], calib: Option<(&[u8], &str)>) -> Vec<(i64, u32, Vec<Point>)> {
     let calibs = calib
-        .map(|c| vec![sensor::parse_calibration(c, "metadata", None).unwrap()])
+        .map(|(c, name)| vec![sensor::parse_calibration(c, name, None).unwrap()])
         .unwrap_or_default();
     let mut pool = CalibrationPool::new(calibs, StreamSettings::default());
     let mut demux = Demux::new(Box::new(move |d| sensor::claim(d, &mut pool)), None);
@@ -89,9 +92,23 @@ fn temp_dir(name: &str) -> PathBuf {
     d
 }
 
+/// Where the decoder's calibration comes from on the way back.
+#[derive(Clone, Copy, PartialEq)]
+enum Back {
+    /// The bag carries it (Ouster metadata): `--calib` is not given again.
+    FromBag,
+    /// The calibration file is given to the bag's decoding too.
+    Given,
+}
+
 /// `decode --format ros2 --raw` → bag → the bag's datagrams and sweeps are the capture's;
 /// `decode` of the bag reports the capture's sweeps and points.
-fn round_trip(pcap: &Path, calib: Option<&Path>, keep: impl Fn(&Dgram) -> bool) -> (usize, usize) {
+fn round_trip(
+    pcap: &Path,
+    calib: Option<&Path>,
+    back: Back,
+    keep: impl Fn(&Dgram) -> bool,
+) -> (usize, usize) {
     let dir = temp_dir(
         &pcap
             .file_stem()
@@ -131,15 +148,28 @@ fn round_trip(pcap: &Path, calib: Option<&Path>, keep: impl Fn(&Dgram) -> bool) 
         assert_eq!(w.1, g.1, "port of datagram {i}");
         assert!(w.2 == g.2, "payload of datagram {i}");
     }
-    // The metadata written into the bag is the calibration given to the run.
     let calib_bytes = calib.map(|c| std::fs::read(c).unwrap());
-    assert_eq!(
-        metadata.as_deref().map(str::as_bytes),
-        calib_bytes.as_deref(),
-        "the bag's Ouster metadata"
-    );
-    let a = sweeps(&want, calib_bytes.as_deref());
-    let b = sweeps(&got, metadata.as_deref().map(str::as_bytes));
+    let calib_name = calib.map_or(String::new(), |c| {
+        c.file_name().unwrap().to_string_lossy().into_owned()
+    });
+    let given = calib_bytes.as_deref().map(|b| (b, calib_name.as_str()));
+    let back_calib = match back {
+        Back::FromBag => {
+            // The metadata written into the bag is the calibration given to the run.
+            assert_eq!(
+                metadata.as_deref().map(str::as_bytes),
+                calib_bytes.as_deref(),
+                "the bag's Ouster metadata"
+            );
+            metadata.as_deref().map(|m| (m.as_bytes(), "metadata.json"))
+        }
+        Back::Given => {
+            assert_eq!(metadata, None, "no calibration in the bag");
+            given
+        }
+    };
+    let a = sweeps(&want, given);
+    let b = sweeps(&got, back_calib);
     assert_eq!(a.len(), b.len(), "sweeps");
     let mut points = 0;
     for (k, (x, y)) in a.iter().zip(&b).enumerate() {
@@ -150,7 +180,13 @@ fn round_trip(pcap: &Path, calib: Option<&Path>, keep: impl Fn(&Dgram) -> bool) 
     assert!(points > 0);
 
     // The command line: the bag decodes (metadata from the bag) to what the capture gave.
-    let again = ringscan(&["decode", &bag.display().to_string(), "--json"]);
+    let bag_s = bag.display().to_string();
+    let mut again_args = vec!["decode", bag_s.as_str(), "--json"];
+    let calib_s = calib.map(|c| c.display().to_string()).unwrap_or_default();
+    if back == Back::Given && calib.is_some() {
+        again_args.extend(["--calib", calib_s.as_str()]);
+    }
+    let again = ringscan(&again_args);
     for k in ["sweeps", "points"] {
         assert_eq!(again[k], wrote[k], "{k}: bag vs capture");
     }
@@ -162,7 +198,7 @@ fn round_trip(pcap: &Path, calib: Option<&Path>, keep: impl Fn(&Dgram) -> bool) 
 fn velodyne_packets_round_trip_through_a_ros2_bag() {
     let pcap = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo-vlp16.pcap");
     // VelodyneScan holds the 1206-byte data packets (port 2368) only.
-    let (sweeps, points) = round_trip(&pcap, None, |d| d.2.len() == 1206);
+    let (sweeps, points) = round_trip(&pcap, None, Back::Given, |d| d.2.len() == 1206);
     assert!(sweeps >= 9, "{sweeps} sweeps");
     eprintln!("demo VLP-16: {sweeps} sweeps, {points} points through the bag");
 }
@@ -176,8 +212,24 @@ fn ouster_packets_and_metadata_round_trip_through_a_ros2_bag() {
     let dir = root.join("ouster-lidar__ouster-sdk/tests/pcaps");
     let pcap = dir.join("OS-0-32-U1_v2.2.0_1024x10.pcap");
     let json = dir.join("OS-0-32-U1_v2.2.0_1024x10.json");
-    let (sweeps, points) = round_trip(&pcap, Some(&json), |_| true);
+    let (sweeps, points) = round_trip(&pcap, Some(&json), Back::FromBag, |_| true);
     eprintln!("OS-0-32: {sweeps} sweeps, {points} points through the bag");
+}
+
+#[test]
+fn hesai_packets_round_trip_through_a_ros2_bag() {
+    let Some(root) = common::captures() else {
+        eprintln!("SKIP: ../shared/captures not found");
+        return;
+    };
+    let nebula = root.join("tier4__nebula/src/nebula_hesai");
+    let pcap = nebula.join(
+        "nebula_hesai/test_resources/decoder_ground_truth/xt32/1673400677802009732/1673400677802009732_0.pcap",
+    );
+    let csv = nebula.join("nebula_hesai_decoders/calibration/PandarXT32.csv");
+    let (sweeps, points) = round_trip(&pcap, Some(&csv), Back::Given, |_| true);
+    assert!(sweeps >= 1, "{sweeps} sweeps");
+    eprintln!("XT32: {sweeps} sweeps, {points} points through the bag");
 }
 
 #[test]
