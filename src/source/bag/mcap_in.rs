@@ -442,8 +442,8 @@ fn open_chunk(body: &[u8], inflated: &mut Vec<u8>) -> Result<Records, String> {
         b"zstd" => zstd::stream::read::Decoder::with_buffer(records)
             .is_ok_and(|d| inflate_exact(d, size, inflated))
             .then_some(Records::Inflated(size)),
-        b"lz4" => lz4::Decoder::new(records)
-            .is_ok_and(|d| inflate_exact(d, size, inflated))
+        b"lz4" => super::lz4frame::decompress(records, size, inflated)
+            .is_ok()
             .then_some(Records::Inflated(size)),
         other => {
             return Err(format!(

@@ -58,6 +58,7 @@
 //! that does not decompress in `bad_chunks`. A file cut short ends the stream with
 //! [`BagStats::truncated_at`] saying where; what came before is decoded.
 
+mod lz4frame;
 pub mod mcap_in;
 pub mod messages;
 pub mod ros1;

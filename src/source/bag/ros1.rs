@@ -417,10 +417,7 @@ impl<R: Read> Ros1Reader<R> {
                             size,
                             &mut self.chunk,
                         ),
-                        "lz4" => match lz4::Decoder::new(packed) {
-                            Ok(d) => inflate_exact(d, size, &mut self.chunk),
-                            Err(_) => false,
-                        },
+                        "lz4" => super::lz4frame::decompress(packed, size, &mut self.chunk).is_ok(),
                         _ => false,
                     };
                     if ok && compression != "none" {
