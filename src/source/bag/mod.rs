@@ -1261,7 +1261,7 @@ fn prescan_metadata(path: &Path, kind: &BagKind) -> Result<HashMap<String, Strin
         let buf = m.message();
         read += buf.len() as u64;
         if let Some(c) = m.connection(msg.conn).filter(|c| is_meta(c)) {
-            let text = c.encoding.and_then(|enc| messages::string(enc, &buf).ok());
+            let text = c.encoding.and_then(|enc| messages::string(enc, buf).ok());
             if let Some((a, n)) = text {
                 found
                     .entry(namespace(&c.topic).to_string())
