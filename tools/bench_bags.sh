@@ -11,8 +11,9 @@
 #                  packets, which the bags cannot carry
 #   ouster.pcap    tools/make_big_ouster_capture.py of the OS-2-128 capture, BENCH_FRAMES frames
 #   ouster.{ros1-none,sqlite3-none,mcap-none}  its lidar + IMU packets as PacketMsg, metadata inside
-# Each command runs BENCH_ROUNDS times pinned to CPU 0 (taskset -c 0); the median wall time and
-# the largest peak RSS are reported (/usr/bin/time). `decode` without --out: reading, decoding
+# Each command runs BENCH_ROUNDS times pinned to CPU 0 (taskset -c 0), the commands of a group
+# alternating within each round; the median wall time and the largest peak RSS are reported
+# (/usr/bin/time). `decode` without --out: reading, decoding
 # and sweep assembly; with --out: MCAP written too (zstd chunks).
 #
 # Reference: velodyne_decoder's read_bag needs the ROS 1 `rosbag` Python package, which PyPI
@@ -21,7 +22,8 @@
 # (created here: ouster-sdk==1.0.1).
 #
 # Environment: BENCH_MB (default 100), BENCH_FRAMES (default 600), BENCH_ROUNDS (default 5),
-# BENCH_DIR (default bench-data/bags), BENCH_REPORT (default /tmp/bench_bags.md).
+# BENCH_DIR (default bench-data/bags), BENCH_REPORT (default /tmp/bench_bags.md), BENCH_KEEP=1
+# (keep the inputs in BENCH_DIR afterwards).
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -41,7 +43,7 @@ REF="$ROOT/tools/.venv-bags-ref"
 
 cargo build --release --quiet --bin ringscan
 mkdir -p "$DIR"
-trap 'rm -rf "$DIR"' EXIT
+[ -n "${BENCH_KEEP:-}" ] || trap 'rm -rf "$DIR"' EXIT
 
 echo "== inputs"
 python3 tools/make_big_capture.py --in "$VPCAP_IN" --out "$DIR/velodyne.pcap" --mb "$MB" >/dev/null
@@ -53,46 +55,62 @@ python3 tools/make_test_bags.py --pcap "$DIR/ouster.pcap" --metadata "$OMETA" --
     --name ouster --variants ros1-none,sqlite3-none,mcap-none >/dev/null
 du -sh "$DIR"/* | sed 's|'"$DIR"'/||'
 
-# run LABEL CMD...: median wall seconds and max RSS over ROUNDS runs; one Markdown row.
-run() {
+# One entry: a label and its command, quoted for eval.
+declare -a LABELS=() CMDS=()
+add() {
     local label=$1; shift
-    local times=() rss=0 out="$DIR/time.txt"
+    LABELS+=("$label"); CMDS+=("$(printf '%q ' "$@")")
+}
+# compare: runs the entries added since the last call ROUNDS times, alternating them within each
+# round (this host's speed drifts by tens of percent over minutes: consecutive runs of one
+# variant would compare the minutes, not the inputs); prints each one's median wall seconds, its
+# summary and the largest peak RSS as Markdown rows.
+compare() {
+    local -A times=() rss=()
+    local i t m
     for _ in $(seq "$ROUNDS"); do
-        /usr/bin/time -f "%e %M" -o "$out" taskset -c 0 "$@" >"$DIR/stdout.txt"
-        read -r t m <"$out"
-        times+=("$t"); [ "$m" -gt "$rss" ] && rss=$m
+        for i in "${!LABELS[@]}"; do
+            eval "/usr/bin/time -f '%e %M' -o '$DIR/time.txt' taskset -c 0 ${CMDS[$i]}" \
+                >"$DIR/stdout.$i.txt"
+            read -r t m <"$DIR/time.txt"
+            times[$i]+="$t "
+            [ "$m" -gt "${rss[$i]:-0}" ] && rss[$i]=$m
+        done
     done
-    local median
-    median=$(printf '%s\n' "${times[@]}" | sort -n | awk '{a[NR]=$1} END {print a[int((NR+1)/2)]}')
-    local summary
-    summary=$(python3 -c 'import json,sys
+    for i in "${!LABELS[@]}"; do
+        local median summary
+        median=$(printf '%s\n' ${times[$i]} | sort -n | awk '{a[NR]=$1} END {print a[int((NR+1)/2)]}')
+        summary=$(python3 -c 'import json,sys
 try:
     d=json.load(open(sys.argv[1])); print(d["sweeps"], d["points"], d["capture"]["datagrams"])
 except Exception:
-    print(open(sys.argv[1]).read().strip())' "$DIR/stdout.txt")
-    printf '| %s | %s | %s | %d |\n' "$label" "$median" "$summary" $((rss / 1024)) | tee -a "$REPORT"
+    print(open(sys.argv[1]).read().strip())' "$DIR/stdout.$i.txt")
+        printf '| %s | %s | %s | %d |\n' "${LABELS[$i]}" "$median" "$summary" $((rss[$i] / 1024)) | tee -a "$REPORT"
+    done
+    LABELS=(); CMDS=()
 }
 
 {
-    echo "Run $(date -u +%Y-%m-%dT%H:%MZ), $(nproc) CPUs (pinned to CPU 0), ROUNDS=$ROUNDS, BENCH_MB=$MB, BENCH_FRAMES=$FRAMES"
+    echo "Run $(date -u +%Y-%m-%dT%H:%MZ), $(nproc) CPUs (pinned to CPU 0), ROUNDS=$ROUNDS (variants alternating in each round), BENCH_MB=$MB, BENCH_FRAMES=$FRAMES"
     echo
     echo "| input | median s | sweeps points datagrams | max RSS MiB |"
     echo "|---|---|---|---|"
 } >"$REPORT"
 echo "== Velodyne (HDL-32E), decode only"
-run "velodyne.pcap" "$BIN" decode "$DIR/velodyne.pcap" --calib "$VCALIB" --json
+add "velodyne.pcap" "$BIN" decode "$DIR/velodyne.pcap" --calib "$VCALIB" --json
 for v in ros1-none.bag ros1-lz4.bag sqlite3-none mcap-none; do
-    run "velodyne.$v" "$BIN" decode "$DIR/velodyne.$v" --calib "$VCALIB" --json
+    add "velodyne.$v" "$BIN" decode "$DIR/velodyne.$v" --calib "$VCALIB" --json
 done
+compare
 echo "== Velodyne, decode to MCAP"
-run "velodyne.pcap --out" "$BIN" decode "$DIR/velodyne.pcap" --calib "$VCALIB" --json --out "$DIR/o.mcap"
-run "velodyne.ros1-none.bag --out" "$BIN" decode "$DIR/velodyne.ros1-none.bag" --calib "$VCALIB" --json --out "$DIR/o.mcap"
+add "velodyne.pcap --out" "$BIN" decode "$DIR/velodyne.pcap" --calib "$VCALIB" --json --out "$DIR/o.mcap"
+add "velodyne.ros1-none.bag --out" "$BIN" decode "$DIR/velodyne.ros1-none.bag" --calib "$VCALIB" --json --out "$DIR/o.mcap"
+compare
 echo "== Ouster (OS-2-128), decode only"
-run "ouster.pcap" "$BIN" decode "$DIR/ouster.pcap" --calib "$OMETA" --json
+add "ouster.pcap" "$BIN" decode "$DIR/ouster.pcap" --calib "$OMETA" --json
 for v in ros1-none.bag sqlite3-none mcap-none; do
-    run "ouster.$v" "$BIN" decode "$DIR/ouster.$v" --json
+    add "ouster.$v" "$BIN" decode "$DIR/ouster.$v" --json
 done
-
 echo "== ouster-sdk 1.0.1 bag source (reference)"
 if [ ! -x "$REF/bin/python" ] || ! "$REF/bin/python" -c 'import ouster.sdk' 2>/dev/null; then
     python3 -m venv "$REF" && "$REF/bin/pip" install -q ouster-sdk==1.0.1 || true
@@ -117,9 +135,10 @@ for scans in src:
         points += int(np.count_nonzero(rng))
 print(frames, points, "(ouster-sdk frames, points)")
 EOF
-    run "ouster.ros1-none.bag, ouster-sdk" "$REF/bin/python" "$DIR/sdk_bag.py" "$DIR/ouster.ros1-none.bag"
+    add "ouster.ros1-none.bag, ouster-sdk" "$REF/bin/python" "$DIR/sdk_bag.py" "$DIR/ouster.ros1-none.bag"
 else
     echo "ouster-sdk could not be installed: reference not run" | tee -a "$REPORT"
 fi
+compare
 echo "== report: $REPORT"
 cat "$REPORT"

@@ -18,8 +18,10 @@
 //! query selects no message bytes: each message is read by its rowid through one incremental
 //! blob handle, straight into a reused buffer, after its length is checked (one larger than
 //! [`MAX_MESSAGE_BYTES`](super::MAX_MESSAGE_BYTES) is counted and skipped). SQLite's own cache
-//! is its default (about 2 MiB). The file is opened read-only and `immutable` (no journal, no
-//! lock files: bags on read-only media open).
+//! is its default (about 2 MiB). The file is read through a memory map (its first 2 GiB, the
+//! most SQLite maps), dropped and made afresh every [`REMAP_BYTES`] of messages so that the
+//! pages it touched do not pile up in the process's resident memory. The file is opened
+//! read-only and `immutable` (no journal, no lock files: bags on read-only media open).
 
 use std::collections::{HashMap, VecDeque};
 use std::path::{Path, PathBuf};
@@ -31,9 +33,15 @@ use super::messages::Encoding;
 use super::{BagError, Connection, RawMessage, MAX_MESSAGE_BYTES};
 
 /// Message bytes fetched per query at most (at least one message).
-pub const BATCH_BYTES: usize = 8 << 20;
+pub const BATCH_BYTES: usize = 1 << 20;
 /// Rows fetched per query at most.
 const BATCH_ROWS: usize = 4096;
+/// `PRAGMA mmap_size`: the whole file (SQLite clamps it to its build's maximum).
+const MMAP_SIZE: i64 = 1 << 40;
+/// Message bytes read between two remappings of the file: the pages of the map touched since
+/// the last one count in the process's resident memory until it is dropped, so this bounds
+/// what a bag of any size adds to it.
+const REMAP_BYTES: u64 = 16 << 20;
 
 /// Storage plugin of a rosbag2 bag.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -176,6 +184,8 @@ pub struct SqliteReader {
     done: bool,
     /// Message bytes read so far (progress).
     pub(crate) bytes: u64,
+    /// `bytes` when the file was last mapped afresh.
+    mapped_at: u64,
     /// Messages larger than [`MAX_MESSAGE_BYTES`], skipped.
     pub(crate) oversized: u64,
 }
@@ -238,6 +248,11 @@ impl SqliteReader {
                 );
             }
         }
+        // Memory-mapped reads where SQLite allows them (its first 2 GiB: the build's maximum):
+        // a message's pages then cost page faults (the kernel maps 16 at a time) instead of one
+        // `pread` per 4 KiB page, which made an Ouster bag 27 % slower than its pcap. Failing
+        // to map is not an error: the reads fall back to `pread`.
+        let _ = db.pragma_update(None, "mmap_size", MMAP_SIZE);
         let by_timestamp: bool = db
             .query_row(
                 "SELECT count(*) FROM sqlite_master WHERE type = 'index' AND tbl_name = 'messages' \
@@ -259,6 +274,7 @@ impl SqliteReader {
             spare: Vec::new(),
             done: false,
             bytes: 0,
+            mapped_at: 0,
             oversized: 0,
         })
     }
@@ -299,6 +315,13 @@ impl SqliteReader {
                  WHERE id > ?2 ORDER BY id LIMIT ?3"
             }
         };
+        if self.bytes - self.mapped_at >= REMAP_BYTES {
+            // No statement or blob handle holds a page between two batches: the map can go,
+            // and with it the resident pages it had gathered. Both settings are hints.
+            let _ = self.db.pragma_update(None, "mmap_size", 0);
+            let _ = self.db.pragma_update(None, "mmap_size", MMAP_SIZE);
+            self.mapped_at = self.bytes;
+        }
         let (ts, id) = self.last.unwrap_or((i64::MIN, i64::MIN));
         let path = self.path.clone();
         let mut st = self.db.prepare_cached(sql).map_err(|e| sql_err(&path, e))?;
