@@ -347,3 +347,42 @@ fn helios16p_through_the_family_interface() {
     );
     assert_eq!(s.channels(), Some(16));
 }
+
+/// `ringscan info` words the DIFOP's facts: the motor speed read here by hand from the DIFOP's
+/// bytes 8–9 (big-endian rpm, after the 8-byte header `A5 FF 00 5A 11 11 55 55`), and the
+/// firmware and serial of the same run's `--json` summary.
+#[test]
+fn info_names_the_difop_facts() {
+    let Some(r) = root() else { return };
+    let pcap = pcap_path(&r);
+    let difop = common::datagrams(&pcap)
+        .into_iter()
+        .find(|(_, port, _)| *port == 7788)
+        .expect("a DIFOP on port 7788")
+        .2;
+    assert_eq!(difop[..8], [0xA5, 0xFF, 0x00, 0x5A, 0x11, 0x11, 0x55, 0x55]);
+    let rpm = u16::from_be_bytes([difop[8], difop[9]]);
+    let run = |json: bool| {
+        let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_ringscan"));
+        c.arg("info").arg(&pcap);
+        if json {
+            c.arg("--json");
+        }
+        let out = c.output().unwrap();
+        assert!(out.status.success());
+        String::from_utf8(out.stdout).unwrap()
+    };
+    let text = run(false);
+    let j: serde_json::Value = serde_json::from_str(&run(true)).unwrap();
+    let s = &j["sensors"][0];
+    for want in [
+        "Robosense RS-Helios-16P".to_string(),
+        "750 MSOP + 1 DIFOP packets".to_string(),
+        format!("motor {rpm} rpm"),
+        format!("firmware {}", s["firmware"].as_str().unwrap()),
+        format!("serial {}", s["serial"].as_str().unwrap()),
+    ] {
+        assert!(text.contains(&want), "{want:?} not in:\n{text}");
+    }
+    eprintln!("{text}");
+}

@@ -21,8 +21,8 @@ use super::model::{LivoxModel, Protocol};
 use super::sweep::{LivoxConfig, LivoxFacts, LivoxStream};
 use super::wire::{Sdk1Packet, Sdk2Packet};
 use crate::sensor::{
-    CalibError, Calibration, CalibrationPool, Claimed, Facts, Family, FirstDatagram, ImuSample,
-    OnSweep, PacketCounts, SensorStream, StreamError,
+    summary_str, CalibError, Calibration, CalibrationPool, Claimed, Facts, Family, FirstDatagram,
+    ImuSample, OnSweep, PacketCounts, SensorStream, StreamError,
 };
 
 /// The Livox family.
@@ -94,6 +94,51 @@ impl Family for Livox {
 
     /// MID-360 points / IMU, HAP points / IMU, and the SDK1 data ports Livox-SDK hands the
     /// first four sensors of a host.
+    fn describe(&self, s: &Value) -> Vec<String> {
+        let st = |k: &str| summary_str(&s[k]);
+        let g = |v: &Value| v.as_u64().unwrap_or(0);
+        let d = &s["point_density"];
+        vec![
+            format!(
+                "  sensor {} ({}), ports {}: {}, protocol {}, data type {}, {} lines; {}",
+                st("name"),
+                st("address"),
+                s["ports"],
+                s["model"].as_str().unwrap_or("Livox, model unknown"),
+                st("protocol"),
+                s["data_type"],
+                s["lines"],
+                st("detection")
+            ),
+            format!(
+                "    {} point + {} IMU packets, {} sweeps ({} ms, cut by {}), {} points ({:.0} per sweep, {}–{}); missing {}, malformed {}, discontinuities {}; IMU missing {}, dropped {}",
+                g(&s["data_packets"]),
+                g(&s["imu_packets"]),
+                g(&s["sweeps"]),
+                s["integration_ms"],
+                st("sweep_cut"),
+                g(&s["points"]),
+                d["points_per_sweep_mean"].as_f64().unwrap_or(0.0),
+                g(&d["points_per_sweep_min"]),
+                g(&d["points_per_sweep_max"]),
+                g(&s["missing"]),
+                g(&s["malformed"]),
+                g(&s["discontinuities"]),
+                g(&s["imu_missing"]),
+                g(&s["imu_dropped"])
+            ),
+            format!("    packets per port: {}", s["packets_per_port"]),
+            format!(
+                "    clock: {} ({}); CRC: {} ok, {} failed, {} without",
+                st("clock"),
+                st("time_type"),
+                g(&s["crc_ok"]),
+                g(&s["crc_failures"]),
+                g(&s["crc_absent"])
+            ),
+        ]
+    }
+
     fn default_ports(&self) -> &'static [u16] {
         &[
             56_301, 56_401, 57_000, 58_000, 56_001, 56_002, 56_003, 56_004,

@@ -18,8 +18,8 @@ use super::model::{RobosenseModel, PACKET_LEN};
 use super::sweep::{RobosenseConfig, RobosenseFacts, RobosenseStream};
 use super::wire::{is_difop, msop_shape};
 use crate::sensor::{
-    CalibError, Calibration, CalibrationPool, Claimed, Facts, Family, FirstDatagram, OnSweep,
-    PacketCounts, SensorStream, StreamError,
+    summary_str, CalibError, Calibration, CalibrationPool, Claimed, Facts, Family, FirstDatagram,
+    OnSweep, PacketCounts, SensorStream, StreamError,
 };
 
 /// The Robosense family.
@@ -64,6 +64,59 @@ impl Family for Robosense {
     }
 
     /// MSOP to 6699, DIFOP to 7788.
+    fn describe(&self, s: &Value) -> Vec<String> {
+        let st = |k: &str| summary_str(&s[k]);
+        let g = |k: &str| s[k].as_u64().unwrap_or(0);
+        // What the DIFOP said, or that none was seen.
+        let known = |k: &str| match &s[k] {
+            Value::Null => "unknown".to_string(),
+            Value::String(v) => v.clone(),
+            v => v.to_string(),
+        };
+        let fov = match s["fov_cdeg"]
+            .as_array()
+            .map(|a| a.iter().filter_map(Value::as_u64).collect::<Vec<_>>())
+        {
+            Some(v) if v.len() == 2 => {
+                format!("{:.2}–{:.2}°", v[0] as f64 / 100.0, v[1] as f64 / 100.0)
+            }
+            _ => "unknown".to_string(),
+        };
+        vec![
+            format!(
+                "  sensor {} ({}), ports {}: Robosense {}, {}; {}",
+                st("name"),
+                st("address"),
+                s["ports"],
+                s["model"].as_str().unwrap_or("unknown model"),
+                st("return_mode"),
+                st("detection")
+            ),
+            format!(
+                "    {} MSOP + {} DIFOP packets, {} sweeps, {} points; missing {}, malformed {}, dropped {}, discontinuities {}, held {}",
+                g("data_packets"),
+                g("difop_packets"),
+                g("sweeps"),
+                g("points"),
+                g("missing"),
+                g("malformed"),
+                g("dropped"),
+                g("discontinuities"),
+                g("held")
+            ),
+            format!("    packets per port: {}", s["packets_per_port"]),
+            format!(
+                "    calibration: {}; DIFOP: motor {} rpm, field of view {}, firmware {}, serial {}",
+                st("calibration"),
+                known("motor_rpm"),
+                fov,
+                known("firmware"),
+                known("serial")
+            ),
+            format!("    clock: {} ({})", st("clock"), st("clock_state")),
+        ]
+    }
+
     fn default_ports(&self) -> &'static [u16] {
         &[6699, 7788]
     }
