@@ -49,8 +49,8 @@
 //! one), so a decoder can be configured before its first packet arrives.
 //!
 //! # Memory and errors
-//! The bag is never held in memory: one ROS 1 chunk or MCAP chunk at a time, sqlite3 rows in
-//! batches of at most [`rosbag2::BATCH_BYTES`]; a record or chunk larger than
+//! The bag is never held in memory: one ROS 1 chunk or MCAP chunk at a time, one sqlite3
+//! message at a time; a record or chunk larger than
 //! [`MAX_CHUNK_BYTES`], a message larger than [`MAX_MESSAGE_BYTES`], is refused before it is
 //! allocated (an error for ROS 1 / MCAP records, whose framing is then lost; a counted skip for
 //! sqlite3 rows). A message that does not parse as its type is counted in

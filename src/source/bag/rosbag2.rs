@@ -13,11 +13,12 @@
 //! # sqlite3 reading
 //! Messages come `ORDER BY timestamp, id` (as `ros2 bag play` plays them) through the
 //! `timestamp_idx` index rosbag2 creates; a file without that index is read in `id`
-//! (insertion) order rather than sorted. The query is resumed after the last row read, in
-//! batches that stop at [`BATCH_BYTES`], so at most one batch of message bytes is held. The
-//! query selects no message bytes: each message is read by its rowid through one incremental
-//! blob handle, straight into a reused buffer, after its length is checked (one larger than
-//! [`MAX_MESSAGE_BYTES`](super::MAX_MESSAGE_BYTES) is counted and skipped). SQLite's own cache
+//! (insertion) order rather than sorted. The query selects no message bytes (rowids, topics
+//! and times, in batches of rows, resumed after the last row read); each message is read when
+//! it is asked for, by its rowid, through one incremental blob handle kept open beside the
+//! connection, straight into the one reused buffer the decoder reads, after its length is
+//! checked (one larger than [`MAX_MESSAGE_BYTES`](super::MAX_MESSAGE_BYTES) is counted and
+//! skipped). One message's bytes are held at a time. SQLite's own cache
 //! is its default (about 2 MiB). The file is read through a memory map (its first 2 GiB, the
 //! most SQLite maps), dropped and made afresh every [`REMAP_BYTES`] of messages so that the
 //! pages it touched do not pile up in the process's resident memory. The file is opened
@@ -32,15 +33,14 @@ use yaml_rust2::{Yaml, YamlLoader};
 use super::messages::Encoding;
 use super::{BagError, Connection, RawMessage, MAX_MESSAGE_BYTES};
 
-/// Message bytes fetched per query at most (at least one message).
-pub const BATCH_BYTES: usize = 1 << 20;
-/// Rows fetched per query at most.
-const BATCH_ROWS: usize = 4096;
+/// Rows fetched per query at most (their topics, times and rowids; the bytes are read one
+/// message at a time).
+const BATCH_ROWS: usize = 256;
 /// `PRAGMA mmap_size`: the whole file (SQLite clamps it to its build's maximum).
 const MMAP_SIZE: i64 = 1 << 40;
 /// Message bytes read between two remappings of the file: the pages of the map touched since
 /// the last one count in the process's resident memory until it is dropped, so this bounds
-/// what a bag of any size adds to it.
+/// what a bag of any size adds to it. (A remap closes and later reopens the blob handle.)
 const REMAP_BYTES: u64 = 16 << 20;
 
 /// Storage plugin of a rosbag2 bag.
@@ -165,22 +165,33 @@ pub fn encoding_of(format: &str) -> Option<Encoding> {
     }
 }
 
+/// The one incremental blob handle through which every message is read, kept open beside the
+/// connection it borrows (reopened row to row; opening one compiles a statement).
+type BlobSlot<'a> = Option<rusqlite::blob::Blob<'a>>;
+
+self_cell::self_cell!(
+    /// A connection and its blob handle.
+    struct DbBlob {
+        owner: Db,
+        #[covariant]
+        dependent: BlobSlot,
+    }
+);
+
 /// Messages of one sqlite3 storage file. See the [module documentation](self).
 pub struct SqliteReader {
     path: PathBuf,
-    db: Db,
+    db: DbBlob,
     topics: HashMap<i64, Connection>,
     order: Vec<i64>,
     by_timestamp: bool,
     /// (timestamp, id) of the last row fetched.
     last: Option<(i64, i64)>,
-    /// Fetched messages: topic, timestamp, buffer, length of the message in the buffer.
-    queue: VecDeque<(i64, i64, Vec<u8>, usize)>,
-    /// The message last returned (buffer, length).
+    /// Rows fetched, their bytes not read yet: topic, timestamp, rowid.
+    queue: VecDeque<(i64, i64, i64)>,
+    /// The message last returned: a buffer that keeps its largest length (growing it zeroes
+    /// the new bytes, so it is never shrunk) and the message's length in it.
     current: (Vec<u8>, usize),
-    /// Buffers to reuse. A buffer keeps its largest length (the message's own length is kept
-    /// beside it): growing one zeroes the new bytes, so buffers are never shrunk.
-    spare: Vec<Vec<u8>>,
     done: bool,
     /// Message bytes read so far (progress).
     pub(crate) bytes: u64,
@@ -264,14 +275,13 @@ impl SqliteReader {
             > 0;
         Ok(Self {
             path: path.to_path_buf(),
-            db,
+            db: DbBlob::new(db, |_| None),
             topics,
             order,
             by_timestamp,
             last: None,
             queue: VecDeque::new(),
             current: (Vec::new(), 0),
-            spare: Vec::new(),
             done: false,
             bytes: 0,
             mapped_at: 0,
@@ -292,11 +302,8 @@ impl SqliteReader {
             .collect()
     }
 
+    /// The next rows, in order: their topics, times and rowids (no message bytes).
     fn fetch(&mut self) -> Result<(), BagError> {
-        // The message bytes are not selected: they are read by rowid through one incremental
-        // blob handle, straight from SQLite's pages into the buffer the decoder will read.
-        // Selecting `data` would have SQLite assemble each blob in a buffer of its own first, a
-        // second copy of every byte (6 % of an Ouster bag's decoding time).
         let sql = match (self.by_timestamp, self.last.is_some()) {
             (true, false) => {
                 "SELECT id, topic_id, timestamp, rowid FROM messages \
@@ -315,71 +322,23 @@ impl SqliteReader {
                  WHERE id > ?2 ORDER BY id LIMIT ?3"
             }
         };
-        if self.bytes - self.mapped_at >= REMAP_BYTES {
-            // No statement or blob handle holds a page between two batches: the map can go,
-            // and with it the resident pages it had gathered. Both settings are hints.
-            let _ = self.db.pragma_update(None, "mmap_size", 0);
-            let _ = self.db.pragma_update(None, "mmap_size", MMAP_SIZE);
-            self.mapped_at = self.bytes;
-        }
         let (ts, id) = self.last.unwrap_or((i64::MIN, i64::MIN));
-        let path = self.path.clone();
-        let mut st = self.db.prepare_cached(sql).map_err(|e| sql_err(&path, e))?;
+        let path = &self.path;
+        let mut st = (self.db.borrow_owner())
+            .prepare_cached(sql)
+            .map_err(|e| sql_err(path, e))?;
         let mut rows = st
             .query(rusqlite::params![ts, id, BATCH_ROWS as i64])
-            .map_err(|e| sql_err(&path, e))?;
-        let mut blob: Option<rusqlite::blob::Blob<'_>> = None;
+            .map_err(|e| sql_err(path, e))?;
         let mut n = 0usize;
-        let mut held = 0usize;
-        while held < BATCH_BYTES {
-            let Some(row) = rows.next().map_err(|e| sql_err(&path, e))? else {
-                break;
-            };
+        while let Some(row) = rows.next().map_err(|e| sql_err(path, e))? {
             n += 1;
-            let id: i64 = row.get(0).map_err(|e| sql_err(&path, e))?;
-            let topic: i64 = row.get(1).map_err(|e| sql_err(&path, e))?;
-            let ts: i64 = row.get(2).map_err(|e| sql_err(&path, e))?;
-            let rowid: i64 = row.get(3).map_err(|e| sql_err(&path, e))?;
+            let id: i64 = row.get(0).map_err(|e| sql_err(path, e))?;
+            let topic: i64 = row.get(1).map_err(|e| sql_err(path, e))?;
+            let ts: i64 = row.get(2).map_err(|e| sql_err(path, e))?;
+            let rowid: i64 = row.get(3).map_err(|e| sql_err(path, e))?;
             self.last = Some((ts, id));
-            let opened = match blob.as_mut() {
-                Some(b) => b.reopen(rowid),
-                None => self
-                    .db
-                    .blob_open(rusqlite::MAIN_DB, "messages", "data", rowid, true)
-                    .map(|b| {
-                        blob = Some(b);
-                    }),
-            };
-            let mut buf = self.spare.pop().unwrap_or_default();
-            match (opened, blob.as_ref()) {
-                (Ok(()), Some(b)) => {
-                    let len = usize::try_from(b.size()).unwrap_or(usize::MAX);
-                    if len > MAX_MESSAGE_BYTES {
-                        self.oversized += 1;
-                        self.spare.push(buf);
-                        continue;
-                    }
-                    if buf.len() < len {
-                        buf.resize(len, 0);
-                    }
-                    b.read_at_exact(&mut buf[..len], 0)
-                        .map_err(|e| sql_err(&path, e))?;
-                    held += len;
-                    self.bytes += len as u64;
-                    self.queue.push_back((topic, ts, buf, len));
-                    continue;
-                }
-                // A NULL or numeric `data` (not a blob or text): an empty message, which the
-                // packet parser counts, as before. A failed reopen leaves the handle unusable.
-                (Err(rusqlite::Error::SqliteFailure(e, _)), _)
-                    if e.code == rusqlite::ErrorCode::Unknown =>
-                {
-                    blob = None;
-                }
-                (Err(e), _) => return Err(sql_err(&path, e)),
-                (Ok(()), None) => {}
-            }
-            self.queue.push_back((topic, ts, buf, 0));
+            self.queue.push_back((topic, ts, rowid));
         }
         if n == 0 {
             self.done = true;
@@ -387,26 +346,95 @@ impl SqliteReader {
         Ok(())
     }
 
+    /// Reads the bytes of row `rowid` into `current`, unless larger than [`MAX_MESSAGE_BYTES`]
+    /// (then `Ok(false)`). The bytes go from SQLite's pages straight into the buffer the decoder
+    /// reads next, while they are in cache: selecting `data` would have SQLite assemble each
+    /// blob in a buffer of its own first, and reading a batch ahead of the decoder would have
+    /// them leave the core's cache before it reads them.
+    fn read_row(&mut self, rowid: i64) -> Result<bool, BagError> {
+        if self.bytes - self.mapped_at >= REMAP_BYTES {
+            // With the blob handle closed no statement or handle holds a page (the row query
+            // is done): the map can go, and with it the resident pages it had gathered. Both
+            // settings are hints.
+            self.db.with_dependent_mut(|_, blob| *blob = None);
+            let db = self.db.borrow_owner();
+            let _ = db.pragma_update(None, "mmap_size", 0);
+            let _ = db.pragma_update(None, "mmap_size", MMAP_SIZE);
+            self.mapped_at = self.bytes;
+        }
+        let (path, current) = (&self.path, &mut self.current);
+        self.db.with_dependent_mut(|db, blob| {
+            let opened = match blob.as_mut() {
+                Some(b) => b.reopen(rowid),
+                None => db
+                    .blob_open(rusqlite::MAIN_DB, "messages", "data", rowid, true)
+                    .map(|b| *blob = Some(b)),
+            };
+            match (opened, blob.as_ref()) {
+                (Ok(()), Some(b)) => {
+                    let len = usize::try_from(b.size()).unwrap_or(usize::MAX);
+                    if len > MAX_MESSAGE_BYTES {
+                        return Ok(false);
+                    }
+                    if current.0.len() < len {
+                        current.0.resize(len, 0);
+                    }
+                    b.read_at_exact(&mut current.0[..len], 0)
+                        .map_err(|e| sql_err(path, e))?;
+                    current.1 = len;
+                    Ok(true)
+                }
+                // A NULL or numeric `data` (not a blob or text): an empty message, which the
+                // packet parser counts. A failed reopen leaves the handle unusable.
+                (Err(rusqlite::Error::SqliteFailure(e, _)), _)
+                    if e.code == rusqlite::ErrorCode::Unknown =>
+                {
+                    *blob = None;
+                    current.1 = 0;
+                    Ok(true)
+                }
+                (Err(e), _) => Err(sql_err(path, e)),
+                (Ok(()), None) => {
+                    current.1 = 0;
+                    Ok(true)
+                }
+            }
+        })
+    }
+
     /// The next message; its bytes are [`Self::message`].
     pub fn next_message(&mut self) -> Result<Option<RawMessage>, BagError> {
-        while self.queue.is_empty() {
-            if self.done {
+        loop {
+            while self.queue.is_empty() {
+                if self.done {
+                    return Ok(None);
+                }
+                if let Err(e) = self.fetch() {
+                    self.done = true;
+                    return Err(e);
+                }
+            }
+            let Some((topic, ts, rowid)) = self.queue.pop_front() else {
                 return Ok(None);
+            };
+            match self.read_row(rowid) {
+                Ok(true) => {}
+                Ok(false) => {
+                    self.oversized += 1;
+                    continue;
+                }
+                Err(e) => {
+                    self.done = true;
+                    self.queue.clear();
+                    return Err(e);
+                }
             }
-            if let Err(e) = self.fetch() {
-                self.done = true;
-                return Err(e);
-            }
+            self.bytes += self.current.1 as u64;
+            return Ok(Some(RawMessage {
+                conn: u64::try_from(topic).unwrap_or(u64::MAX),
+                time_ns: ts,
+            }));
         }
-        let Some((topic, ts, buf, len)) = self.queue.pop_front() else {
-            return Ok(None);
-        };
-        let (old, _) = std::mem::replace(&mut self.current, (buf, len));
-        self.spare.push(old);
-        Ok(Some(RawMessage {
-            conn: u64::try_from(topic).unwrap_or(u64::MAX),
-            time_ns: ts,
-        }))
     }
 
     /// The bytes of the message last returned by [`Self::next_message`].
