@@ -16,12 +16,12 @@ use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use ringscan::sensor::ouster::family::OusterCalibration;
-use ringscan::sensor::ouster::OusterStream;
-use ringscan::sensor::{Calibration, FAMILIES};
-use ringscan::sink::mcap::{Behind, SinkOptions, SinkSummary};
-use ringscan::sink::{McapSink, SinkError};
-use ringscan::source::udp::{self, BoundSocket, Queue, ReceiveStats, Received, SocketOptions};
+use crate::sensor::ouster::family::OusterCalibration;
+use crate::sensor::ouster::OusterStream;
+use crate::sensor::{Calibration, FAMILIES};
+use crate::sink::mcap::{Behind, SinkOptions, SinkSummary};
+use crate::sink::{McapSink, SinkError};
+use crate::source::udp::{self, BoundSocket, Queue, ReceiveStats, Received, SocketOptions};
 use serde_json::{json, Value};
 
 use super::run::{
@@ -179,7 +179,7 @@ impl Files {
     /// The file `index` of the run.
     fn path(&self, index: usize) -> PathBuf {
         if self.bag_dir {
-            ringscan::sink::rosbag2::file_path(&self.base, index)
+            crate::sink::rosbag2::file_path(&self.base, index)
         } else {
             Self::path_for(&self.base, self.split, index)
         }
@@ -190,12 +190,12 @@ impl Files {
         if !self.bag_dir {
             return Ok(());
         }
-        let files: Vec<ringscan::sink::rosbag2::BagFile> = self
+        let files: Vec<crate::sink::rosbag2::BagFile> = self
             .closed
             .iter()
             .map(|(p, s)| (p.as_path(), s))
             .chain(last)
-            .map(|(p, s)| ringscan::sink::rosbag2::BagFile {
+            .map(|(p, s)| crate::sink::rosbag2::BagFile {
                 name: p
                     .file_name()
                     .map(|n| n.to_string_lossy().into_owned())
@@ -203,11 +203,9 @@ impl Files {
                 summary: s.clone(),
             })
             .collect();
-        ringscan::sink::rosbag2::write_metadata(&self.base, &files).map_err(|source| {
-            SinkError::Io {
-                context: format!("writing {}/metadata.yaml", self.base.display()),
-                source,
-            }
+        crate::sink::rosbag2::write_metadata(&self.base, &files).map_err(|source| SinkError::Io {
+            context: format!("writing {}/metadata.yaml", self.base.display()),
+            source,
         })
     }
 
@@ -802,7 +800,7 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
                     let files = match out {
                         Some(base) => {
                             let bag_dir = opts.format == FormatArg::Ros2
-                                && ringscan::sink::rosbag2::is_bag_dir(&base);
+                                && crate::sink::rosbag2::is_bag_dir(&base);
                             let mut files = Files {
                                 base,
                                 split,
@@ -817,7 +815,7 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
                             files.current = current.clone();
                             if bag_dir {
                                 // The directory and its first (empty) metadata.yaml.
-                                ringscan::sink::rosbag2::create_dir(&files.base).map_err(
+                                crate::sink::rosbag2::create_dir(&files.base).map_err(
                                     |source| {
                                         file_error(
                                             &files.base,
