@@ -33,6 +33,7 @@ from ._ringscan import (
 from . import _ringscan
 
 __all__ = [
+    "compat",
     "open",
     "Source",
     "Sweep",
@@ -383,3 +384,6 @@ def open(path: PathLike, calib=None, model=None, topics=None, **options: Any) ->
 def info(path: PathLike, calib=None, model=None, topics=None, **options: Any) -> dict:
     """``ringscan info --json`` as a dict: shorthand for ``open(...).info()``."""
     return Source(path, calib=calib, model=model, topics=topics, **options).info()
+
+
+from . import compat  # noqa: E402  (needs the helpers above)

@@ -21,6 +21,8 @@ use ringscan::cli::bag_args::BagArgs;
 use ringscan::cli::run::{decode_capture, DecodeArgs, RunError, SweepReader};
 use ringscan::point::{interleave_extended, Point, EXTENDED_STRIDE, POINT_STRIDE};
 
+mod compat;
+
 create_exception!(
     _ringscan,
     RingscanError,
@@ -57,7 +59,7 @@ const QUEUE: usize = 4;
 
 /// How an error crosses the thread: its class and the command line's message.
 #[derive(Clone, Copy, Debug)]
-enum ErrKind {
+pub(crate) enum ErrKind {
     Usage,
     Input,
     Calib,
@@ -73,7 +75,7 @@ fn kind_of(e: &RunError) -> ErrKind {
     }
 }
 
-fn to_py_err(kind: ErrKind, msg: String) -> PyErr {
+pub(crate) fn to_py_err(kind: ErrKind, msg: String) -> PyErr {
     match kind {
         ErrKind::Usage => UsageError::new_err(msg),
         ErrKind::Input => InputError::new_err(msg),
@@ -81,7 +83,6 @@ fn to_py_err(kind: ErrKind, msg: String) -> PyErr {
         ErrKind::Decode => DecodeError::new_err(msg),
     }
 }
-
 
 /// A block of memory numpy views without copying (`__array_interface__`): the array keeps
 /// this object alive, and nothing in Rust touches the memory once it is handed out.
@@ -124,9 +125,9 @@ impl Buffer {
         }
     }
 
-    fn f32s(v: Vec<f32>, len: usize) -> Self {
+    pub(crate) fn f32s(v: Vec<f32>) -> Self {
         Self {
-            len,
+            len: v.len(),
             data: BufData::F32(v),
             typestr: "<f4",
         }
@@ -336,7 +337,7 @@ fn read_thread(args: &DecodeArgs, tx: &SyncSender<Msg>) {
 
 /// Waits for the next message with the GIL released, waking up to let Ctrl-C through. The
 /// receiver moves into the wait and back (it is `Send`, not `Sync`).
-fn recv(py: Python<'_>, slot: &mut Option<Receiver<Msg>>) -> PyResult<Option<Msg>> {
+pub(crate) fn recv<T: Send>(py: Python<'_>, slot: &mut Option<Receiver<T>>) -> PyResult<Option<T>> {
     loop {
         let Some(rx) = slot.take() else {
             return Ok(None);
@@ -496,5 +497,6 @@ fn _ringscan(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(info, m)?)?;
     m.add_function(wrap_pyfunction!(cli_main, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
+    compat::register(m)?;
     Ok(())
 }
