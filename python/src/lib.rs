@@ -471,6 +471,31 @@ fn info(
     Ok(s.json.to_string())
 }
 
+/// `ringscan decode --json` of a capture or bag into an MCAP file `out` (or no file), as a
+/// JSON string: the fleet's per-capture output.
+#[pyfunction]
+#[pyo3(signature = (path, out=None, model=None, calib=vec![], topics=vec![], threads=1))]
+fn decode(
+    py: Python<'_>,
+    path: PathBuf,
+    out: Option<PathBuf>,
+    model: Option<String>,
+    calib: Vec<String>,
+    topics: Vec<String>,
+    threads: usize,
+) -> PyResult<String> {
+    let mut args = decode_args(
+        path, model, calib, topics, None, None, None, 0.0, None, None, false, None, None, None,
+        None,
+    );
+    args.out = out;
+    args.threads = threads.max(1);
+    let s = py
+        .allow_threads(|| decode_capture(&args).map_err(|e| (kind_of(&e), e.to_string())))
+        .map_err(|(k, m)| to_py_err(k, m))?;
+    Ok(s.json.to_string())
+}
+
 /// Runs the command line with `argv` (program name first); returns its exit code.
 #[pyfunction]
 fn cli_main(py: Python<'_>, argv: Vec<String>) -> u8 {
@@ -496,6 +521,7 @@ fn _ringscan(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Reader>()?;
     m.add_function(wrap_pyfunction!(info, m)?)?;
     m.add_function(wrap_pyfunction!(cli_main, m)?)?;
+    m.add_function(wrap_pyfunction!(decode, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
     compat::register(m)?;
     Ok(())
