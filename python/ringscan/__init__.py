@@ -45,6 +45,16 @@ __all__ = [
     "CalibrationError",
     "DecodeError",
     "info",
+    "Decoder",
+    "listen",
+    "Listener",
+    "voxel_downsample",
+    "segment_ground",
+    "cluster",
+    "deskew",
+    "Odometry",
+    "McapWriter",
+    "fleet",
     "__version__",
 ]
 
@@ -386,4 +396,226 @@ def info(path: PathLike, calib=None, model=None, topics=None, **options: Any) ->
     return Source(path, calib=calib, model=model, topics=topics, **options).info()
 
 
+
+def _sweeps(raws) -> List[Sweep]:
+    return [Sweep(r) for r in raws]
+
+
+class Decoder:
+    """Decodes datagrams the caller receives itself (its own socket, a message queue, a
+    custom file format), as ``decode`` decodes a capture: sensor detection, calibrations,
+    sweep cutting, loss counting.
+
+    ::
+
+        dec = ringscan.Decoder()
+        for payload, (ip, port), t in my_datagrams:
+            for sweep in dec.push(payload, f"{ip}:{port}", 2368, t):
+                ...
+        last = dec.finish()
+
+    ``push`` holds the GIL (a datagram decodes in microseconds); decoding whole files is
+    :func:`open`'s job.
+    """
+
+    def __init__(self, calib=None, model: Optional[str] = None, *, port: Optional[int] = None,
+                 cut_angle: float = 0.0, min_range: Optional[float] = None,
+                 max_range: Optional[float] = None, fields: str = "default"):
+        if model is not None and not isinstance(model, str):
+            raise TypeError(f"model: expected a string such as 'vlp16', got {type(model).__name__}")
+        if fields not in ("default", "all"):
+            raise ValueError(f"fields={fields!r}: expected 'default' or 'all'")
+        self._native = _ringscan.Decoder(
+            model, _paths(calib, "calib"), port, _number(cut_angle, "cut_angle"),
+            _number(min_range, "min_range"), _number(max_range, "max_range"), fields == "all",
+        )
+
+    def push(self, payload: bytes, src: str, port: int, time_ns: int = 0) -> List[Sweep]:
+        """One UDP payload from ``src`` (``"IP:PORT"``) to ``port`` received at ``time_ns`` (ns
+        since the epoch): the sweeps it completed."""
+        if not isinstance(payload, (bytes, bytearray, memoryview)):
+            raise TypeError(f"payload: expected bytes, got {type(payload).__name__}")
+        return _sweeps(self._native.push(bytes(payload), src, port, time_ns))
+
+    def finish(self) -> List[Sweep]:
+        """Ends every stream: the last sweeps."""
+        return _sweeps(self._native.finish())
+
+    def summary(self) -> dict:
+        """Sweeps, points, packets (decoded, dropped, malformed, missing) and sensors so far."""
+        return json.loads(self._native.summary())
+
+
+class Listener:
+    """Live sensors (``ringscan listen``): sockets on their own thread, a bounded queue of
+    datagrams and one of sweeps, each dropping and counting when full. Iterate it for
+    sweeps; ``stop()`` (or Ctrl-C in the loop, or ``duration``) ends it, then ``summary``
+    is ``listen --json``'s (``receive.queue_dropped``, ``receive.sweeps_dropped``...)."""
+
+    def __init__(self, native):
+        self._native = native
+        self.summary: Optional[dict] = None
+
+    def __iter__(self) -> Iterator[Sweep]:
+        while True:
+            raw = self._native.next()
+            if raw is None:
+                s = self._native.summary()
+                self.summary = json.loads(s) if s else None
+                return
+            yield Sweep(raw)
+
+    def stop(self) -> None:
+        self._native.stop()
+
+    def __enter__(self) -> "Listener":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.stop()
+
+
+def listen(sensors: Union[str, Sequence[str]], calib=None, model: Optional[str] = None, *,
+           duration: Optional[float] = None, multicast: Optional[str] = None,
+           interface: str = "0.0.0.0", recv_buffer: Optional[int] = None, api_port: int = 80,
+           queue: int = 16, out: Optional[PathLike] = None) -> Listener:
+    """Receives and decodes live sensors: ``sensors`` as the CLI's ``--sensor IP[:PORT]``.
+    ``out``: also record to this MCAP file. ``queue``: sweeps held for a slow consumer."""
+    return Listener(_ringscan.Listener(
+        _strings(sensors, "sensors"), model, _paths(calib, "calib"), _number(duration, "duration"),
+        multicast, interface, recv_buffer, api_port, queue,
+        None if out is None else _path(out, "out"),
+    ))
+
+
+def _records(points: Any) -> bytes:
+    """24-byte point records from a structured array (any of POINT_DTYPE's fields) or an
+    (N, >=3) array of x, y, z."""
+    a = np.asarray(points)
+    if a.dtype == POINT_DTYPE:
+        return np.ascontiguousarray(a).tobytes()
+    out = np.zeros(len(a), dtype=POINT_DTYPE)
+    if a.dtype.names:
+        missing = {"x", "y", "z"} - set(a.dtype.names)
+        if missing:
+            raise ValueError(f"points: no field {', '.join(sorted(missing))}")
+        for name in POINT_DTYPE.names:
+            if name in a.dtype.names:
+                out[name] = a[name]
+    elif a.ndim == 2 and a.shape[1] >= 3:
+        out["x"], out["y"], out["z"] = a[:, 0], a[:, 1], a[:, 2]
+    else:
+        raise ValueError(f"points: expected a structured array or an (N, 3) array, got shape {a.shape}")
+    return out.tobytes()
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float, np.integer, np.floating)):
+        return repr(float(v)) if isinstance(v, (float, np.floating)) else str(int(v))
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    raise TypeError(f"{v!r}: expected a number, string, bool or list")
+
+
+def _toml(section: str, keys: Dict[str, Any]) -> str:
+    return f"[{section}]\n" + "".join(f"{k} = {_toml_value(v)}\n" for k, v in keys.items())
+
+
+def _points(buf) -> np.ndarray:
+    return np.asarray(buf).view(POINT_DTYPE)
+
+
+def voxel_downsample(points, leaf_m: float = 0.2) -> np.ndarray:
+    """One point per voxel (the pipeline's ``[voxel] leaf_m``)."""
+    return _points(_ringscan.voxel_downsample(_records(points), _toml("voxel", {"leaf_m": leaf_m})))
+
+
+def segment_ground(points, **ground) -> np.ndarray:
+    """A boolean mask, True for ground points. Keys: the pipeline's ``[ground]`` ones
+    (``method="grid"|"ransac"``, ``distance_threshold_m``, ``sectors``, ``sensor_height_m``...)."""
+    return np.frombuffer(_ringscan.segment_ground(_records(points), _toml("ground", ground)), dtype=bool)
+
+
+def cluster(points, **keys):
+    """Euclidean clusters (the pipeline's ``[cluster]``: ``tolerance_m``, ``min_points``,
+    ``max_points``): each point's cluster index (-1 for none, int64) and a list of dicts
+    (``points``, ``centroid``, ``min``, ``max``)."""
+    labels, clusters = _ringscan.cluster(_records(points), _toml("cluster", keys))
+    lab = np.asarray(labels).astype(np.int64)
+    lab[lab == 0xFFFFFFFF] = -1
+    return lab, [dict(points=n, centroid=c, min=lo, max=hi) for n, c, lo, hi in clusters]
+
+
+def deskew(points, linear_mps=(0.0, 0.0, 0.0), angular_degps=(0.0, 0.0, 0.0), reference: str = "start") -> np.ndarray:
+    """Constant-velocity deskew (the pipeline's ``[deskew]``): each point moved by the motion
+    between its firing (``t``, ns) and the sweep's ``reference`` (``start`` or ``end``)."""
+    keys = {"mode": "constant-velocity", "reference": reference, "linear_mps": list(linear_mps), "angular_degps": list(angular_degps)}
+    return _points(_ringscan.deskew(_records(points), _toml("deskew", keys)))
+
+
+class Odometry:
+    """LiDAR odometry (``decode --odometry``): ``method`` (``point-to-plane``,
+    ``point-to-point``, ``continuous-time``), ``voxel`` (m), ``max_range`` (m)."""
+
+    def __init__(self, method: str = "point-to-plane", voxel: Optional[float] = None, max_range: float = 100.0):
+        self._native = _ringscan.Odometry(method, _number(voxel, "voxel"), float(max_range))
+
+    def register(self, points, stamp_ns: int = 0) -> dict:
+        """Registers one sweep (a :class:`Sweep` or its points + ``stamp_ns``): the pose
+        ``world_from_sensor`` (4 x 4), ``status``, and the ICP figures."""
+        if isinstance(points, Sweep):
+            points, stamp_ns = points.points, points.timestamp_ns
+        r = self._native.register(_records(points), int(stamp_ns))
+        r["world_from_sensor"] = np.array(r["world_from_sensor"]).reshape(4, 4)
+        return r
+
+    def reset(self) -> None:
+        self._native.reset()
+
+
+class McapWriter:
+    """MCAP files as ``ringscan decode`` writes them (the same schemas: ``foxglove.PointCloud``
+    or ROS 2 ``sensor_msgs/PointCloud2``, diagnostics channels)::
+
+        with ringscan.McapWriter("out.mcap") as w:
+            lidar = w.add_sensor("front")
+            for sweep in ringscan.open("drive.pcap"):
+                w.write_sweep(lidar, sweep)
+    """
+
+    def __init__(self, path: PathLike, format: str = "foxglove", compression: str = "zstd", threads: int = 1):
+        self._native = _ringscan.McapWriter(_path(path, "path"), format, compression, threads)
+        self.summary: Optional[dict] = None
+
+    def add_sensor(self, name: str, topic_prefix: str = "", metadata: Optional[Dict[str, str]] = None) -> int:
+        return self._native.add_sensor(name, topic_prefix, metadata)
+
+    def write_sweep(self, sensor: int, sweep_or_points, timestamp_ns: Optional[int] = None, log_time_ns: Optional[int] = None) -> None:
+        if isinstance(sweep_or_points, Sweep):
+            sw = sweep_or_points
+            points = sw.points if sw.points.dtype == POINT_DTYPE else sw.points[list(POINT_DTYPE.names)]
+            ts = sw.timestamp_ns if timestamp_ns is None else timestamp_ns
+            log = sw.host_time_ns[1] if log_time_ns is None else log_time_ns
+        else:
+            if timestamp_ns is None:
+                raise TypeError("write_sweep(sensor, points, timestamp_ns): timestamp_ns is needed with bare points")
+            points, ts, log = sweep_or_points, timestamp_ns, log_time_ns
+        self._native.write_sweep(sensor, _records(points), max(0, int(ts)), None if log is None else max(0, int(log)))
+
+    def close(self) -> dict:
+        self.summary = json.loads(self._native.close())
+        return self.summary
+
+    def __enter__(self) -> "McapWriter":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+
 from . import compat  # noqa: E402  (needs the helpers above)
+from . import fleet  # noqa: E402

@@ -22,6 +22,7 @@ use ringscan::cli::run::{decode_capture, DecodeArgs, RunError, SweepReader};
 use ringscan::point::{interleave_extended, Point, EXTENDED_STRIDE, POINT_STRIDE};
 
 mod compat;
+mod stream;
 
 create_exception!(
     _ringscan,
@@ -66,7 +67,7 @@ pub(crate) enum ErrKind {
     Decode,
 }
 
-fn kind_of(e: &RunError) -> ErrKind {
+pub(crate) fn kind_of(e: &RunError) -> ErrKind {
     match e {
         RunError::Usage(_) => ErrKind::Usage,
         RunError::Source { .. } => ErrKind::Input,
@@ -101,7 +102,7 @@ enum BufData {
 }
 
 impl Buffer {
-    fn points(p: Vec<Point>) -> Self {
+    pub(crate) fn points(p: Vec<Point>) -> Self {
         Self {
             len: p.len(),
             data: BufData::Points(p),
@@ -117,7 +118,7 @@ impl Buffer {
         }
     }
 
-    fn u32s(v: Vec<u32>) -> Self {
+    pub(crate) fn u32s(v: Vec<u32>) -> Self {
         Self {
             len: v.len(),
             data: BufData::U32(v),
@@ -202,7 +203,7 @@ enum Msg {
     Error(ErrKind, String),
 }
 
-fn raw_sweep(
+pub(crate) fn raw_sweep(
     py: Python<'_>,
     rs: ringscan::cli::run::ReadSweep,
     desc: Option<ringscan::cli::run::SensorDesc>,
@@ -255,7 +256,7 @@ fn raw_sweep(
 
 /// Decoding options shared by `Reader` and `info` (the command line's flags).
 #[allow(clippy::too_many_arguments)]
-fn decode_args(
+pub(crate) fn decode_args(
     path: PathBuf,
     model: Option<String>,
     calib: Vec<String>,
@@ -524,5 +525,6 @@ fn _ringscan(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(decode, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
     compat::register(m)?;
+    stream::register(m)?;
     Ok(())
 }

@@ -534,6 +534,7 @@ where
                 json: c.json,
                 serve: c.serve,
                 hesai_ptc: c.hesai_ptc,
+                hooks: Default::default(),
             };
             listen::listen_command(&args)
         }

@@ -224,6 +224,13 @@ pub struct OdometrySetup {
     deskew: bool,
 }
 
+impl OdometrySetup {
+    /// The odometry's parameters.
+    pub fn config(&self) -> &OdometryConfig {
+        &self.config
+    }
+}
+
 /// The channels of one sensor's odometry in one MCAP file.
 struct Topics {
     map: TopicId,

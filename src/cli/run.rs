@@ -463,7 +463,8 @@ impl DecodeArgs {
         }
     }
 
-    fn session_options(&self) -> SessionOptions {
+    /// The options of the [`Session`] this run uses.
+    pub fn session_options(&self) -> SessionOptions {
         SessionOptions {
             model: self.model.clone(),
             calib: self.calib.clone(),
@@ -715,6 +716,38 @@ impl Session {
     /// The demultiplexer (per-sensor streams and counters).
     pub fn demux(&self) -> &Demux {
         &self.demux
+    }
+
+    /// Keeps a copy of every decoded sweep (before the pipeline) for [`Session::take_sweeps`].
+    pub fn enable_tap(&mut self) {
+        self.out.tap.get_or_insert_with(Vec::new);
+    }
+
+    /// The sweeps decoded since the last call (with [`Session::enable_tap`]), oldest first.
+    pub fn take_sweeps(&mut self) -> impl Iterator<Item = ReadSweep> + '_ {
+        self.out
+            .tap
+            .iter_mut()
+            .flat_map(|t| t.drain(..))
+            .map(|(sensor, sweep)| ReadSweep { sensor, sweep })
+    }
+
+    /// The sensor of index `idx`, once seen.
+    pub fn sensor_desc(&self, idx: usize) -> Option<SensorDesc> {
+        let (address, stream) = self.demux.stream(idx)?;
+        let name = self
+            .out
+            .sensors
+            .get(idx)
+            .map(|s| s.name.clone())
+            .filter(|n| !n.is_empty())
+            .unwrap_or_else(|| stream.facts().default_name(address));
+        Some(SensorDesc {
+            name,
+            family: stream.facts().family(),
+            address,
+            channels: stream.channels(),
+        })
     }
 
     /// The error a [`PumpError`] means for the user.
@@ -1208,7 +1241,7 @@ impl SweepReader {
     /// pipeline and odometry options are not used.
     pub fn open(args: &DecodeArgs) -> Result<Self, RunError> {
         let (mut session, src) = start_session(args)?;
-        session.out.tap = Some(Vec::new());
+        session.enable_tap();
         Ok(Self {
             src,
             session,
@@ -1240,32 +1273,13 @@ impl SweepReader {
                 self.finished = true;
                 return Err(self.session.run_error(e, &self.path));
             }
-            if let Some(tap) = self.session.out.tap.as_mut() {
-                self.queue.extend(
-                    tap.drain(..)
-                        .map(|(sensor, sweep)| ReadSweep { sensor, sweep }),
-                );
-            }
+            self.queue.extend(self.session.take_sweeps());
         }
     }
 
     /// The sensor of index `idx`, once seen.
     pub fn sensor(&self, idx: usize) -> Option<SensorDesc> {
-        let (address, stream) = self.session.demux().stream(idx)?;
-        let name = self
-            .session
-            .out
-            .sensors
-            .get(idx)
-            .map(|s| s.name.clone())
-            .filter(|n| !n.is_empty())
-            .unwrap_or_else(|| stream.facts().default_name(address));
-        Some(SensorDesc {
-            name,
-            family: stream.facts().family(),
-            address,
-            channels: stream.channels(),
-        })
+        self.session.sensor_desc(idx)
     }
 
     /// The `--json` summary so far (complete once [`Self::next_sweep`] returned `None`).
