@@ -140,12 +140,15 @@ impl Decoder {
     }
 }
 
+/// How a listener's thread ended: the summary (JSON) or the error.
+type Outcome = Arc<Mutex<Option<Result<String, (ErrKind, String)>>>>;
+
 /// `listen` on a thread of its own, its sweeps through a bounded channel.
 #[pyclass(module = "ringscan._ringscan")]
 pub struct Listener {
     rx: Mutex<Option<Receiver<TappedSweep>>>,
     stop: Arc<AtomicBool>,
-    done: Arc<Mutex<Option<Result<String, (ErrKind, String)>>>>,
+    done: Outcome,
     thread: Mutex<Option<std::thread::JoinHandle<()>>>,
 }
 
