@@ -23,7 +23,7 @@ use ringscan::sensor::DecodeOptions;
 use ringscan::source::bag::BagOptions;
 use ringscan::time::complete_toh;
 
-use crate::{recv, to_py_err, Buffer, ErrKind};
+use crate::{next_item, to_py_err, Buffer, ErrKind, Msg};
 
 /// The longest a frame may last (capture time), velodyne_decoder's constant.
 const MAX_FRAME_NS: i64 = 300_000_000;
@@ -40,15 +40,12 @@ struct Settings {
     stamp_first: bool,
 }
 
-enum Frame {
-    Points {
-        host_s: f64,
-        device_s: f64,
-        data: Vec<f32>,
-        n: usize,
-    },
-    End,
-    Error(ErrKind, String),
+/// One frame: its stamp (host, device seconds) and records.
+struct Frame {
+    host_s: f64,
+    device_s: f64,
+    data: Vec<f32>,
+    n: usize,
 }
 
 /// A packet kept for its frame: capture time and bytes.
@@ -142,9 +139,9 @@ impl FrameDecoder {
         Ok(&self.decoders[self.decoders.len() - 1].1)
     }
 
-    fn frame(&mut self, packets: &[Held]) -> Result<Frame, String> {
+    fn frame(&mut self, packets: &[Held]) -> Result<Option<Frame>, String> {
         let (Some(first), Some(last)) = (packets.first(), packets.last()) else {
-            return Ok(Frame::End);
+            return Ok(None);
         };
         let stamp = if self.stamp_first { first } else { last };
         let (stamp_host, stamp_dev) = (stamp.host_ns, device_ns(stamp));
@@ -199,12 +196,12 @@ impl FrameDecoder {
             }
         }
         let n = data.len() / 8;
-        Ok(Frame::Points {
+        Ok(Some(Frame {
             host_s: stamp_host as f64 * 1e-9,
             device_s: stamp_dev as f64 * 1e-9,
             data,
             n,
-        })
+        }))
     }
 }
 
@@ -239,7 +236,7 @@ fn mark_both(
     }
 }
 
-fn run(s: &Settings, tx: &SyncSender<Frame>) -> Result<(), (ErrKind, String)> {
+fn run(s: &Settings, tx: &SyncSender<Msg<Frame>>) -> Result<(), (ErrKind, String)> {
     let path_s = s.path.display().to_string();
     let input = ringscan::source::input::open(&s.path, BagOptions::default())
         .map_err(|e| (ErrKind::Input, format!("{path_s}: {e}")))?;
@@ -313,8 +310,10 @@ fn run(s: &Settings, tx: &SyncSender<Frame>) -> Result<(), (ErrKind, String)> {
         let Some(d) = dec.as_mut() else {
             return Ok(true);
         };
-        let frame = d.frame(&packets).map_err(|e| (ErrKind::Decode, e))?;
-        Ok(tx.send(frame).is_ok())
+        match d.frame(&packets).map_err(|e| (ErrKind::Decode, e))? {
+            Some(frame) => Ok(tx.send(Msg::Item(frame)).is_ok()),
+            None => Ok(true),
+        }
     };
     loop {
         let d = match input.next_datagram() {
@@ -342,14 +341,14 @@ fn run(s: &Settings, tx: &SyncSender<Frame>) -> Result<(), (ErrKind, String)> {
             return Ok(());
         }
     }
-    let _ = tx.send(Frame::End);
+    let _ = tx.send(Msg::End(String::new()));
     Ok(())
 }
 
 /// Frames of a Velodyne pcap, velodyne_decoder's way.
 #[pyclass(module = "ringscan._ringscan")]
 pub struct CompatReader {
-    rx: Mutex<Option<Receiver<Frame>>>,
+    rx: Mutex<Option<Receiver<Msg<Frame>>>>,
 }
 
 #[pymethods]
@@ -399,12 +398,12 @@ impl CompatReader {
             cut,
             stamp_first: timestamp_first_packet,
         };
-        let (tx, rx) = mpsc::sync_channel::<Frame>(QUEUE);
+        let (tx, rx) = mpsc::sync_channel::<Msg<Frame>>(QUEUE);
         std::thread::Builder::new()
             .name("ringscan-compat".into())
             .spawn(move || {
                 if let Err((k, m)) = run(&s, &tx) {
-                    let _ = tx.send(Frame::Error(k, m));
+                    let _ = tx.send(Msg::Error(k, m));
                 }
             })
             .map_err(|e| PyRuntimeError::new_err(format!("starting the decoding thread: {e}")))?;
@@ -416,39 +415,14 @@ impl CompatReader {
     /// `(host_s, device_s, Buffer of n x 8 float32, n)`, or `None` at the end.
     #[allow(clippy::type_complexity)]
     fn next(&self, py: Python<'_>) -> PyResult<Option<(f64, f64, Py<Buffer>, usize)>> {
-        let mut guard = self
-            .rx
-            .lock()
-            .map_err(|_| PyRuntimeError::new_err("the reader is used from two threads"))?;
-        if guard.is_none() {
-            return Ok(None);
-        }
-        match recv(py, &mut guard)? {
-            Some(Frame::Points {
-                host_s,
-                device_s,
-                data,
-                n,
-            }) => Ok(Some((
-                host_s,
-                device_s,
-                Py::new(py, Buffer::f32s(data))?,
-                n,
+        match next_item(py, &self.rx, None)? {
+            Some(f) => Ok(Some((
+                f.host_s,
+                f.device_s,
+                Py::new(py, Buffer::f32s(f.data))?,
+                f.n,
             ))),
-            Some(Frame::End) => {
-                *guard = None;
-                Ok(None)
-            }
-            Some(Frame::Error(k, m)) => {
-                *guard = None;
-                Err(to_py_err(k, m))
-            }
-            None => {
-                *guard = None;
-                Err(PyRuntimeError::new_err(
-                    "the decoding thread stopped without an answer (a bug: please report it)",
-                ))
-            }
+            None => Ok(None),
         }
     }
 

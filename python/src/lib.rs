@@ -191,16 +191,52 @@ pub struct RawSweep {
     columns: Option<Py<Buffer>>,
 }
 
-/// What the decoding thread sends.
-enum Msg {
-    Sweep(
-        Box<(
-            ringscan::cli::run::ReadSweep,
-            Option<ringscan::cli::run::SensorDesc>,
-        )>,
-    ),
+/// What a decoding thread sends: items, then its end (with the summary) or its error.
+pub(crate) enum Msg<T> {
+    Item(T),
     End(String),
     Error(ErrKind, String),
+}
+
+/// A sweep and its sensor, from the reader's thread.
+type SweepMsg = Box<(
+    ringscan::cli::run::ReadSweep,
+    Option<ringscan::cli::run::SensorDesc>,
+)>;
+
+/// The next item from a decoding thread: `None` at its end (the summary kept in `summary`),
+/// its error raised; the channel is closed after either.
+pub(crate) fn next_item<T: Send>(
+    py: Python<'_>,
+    rx: &Mutex<Option<Receiver<Msg<T>>>>,
+    summary: Option<&Mutex<Option<String>>>,
+) -> PyResult<Option<T>> {
+    let mut guard = rx
+        .lock()
+        .map_err(|_| PyRuntimeError::new_err("the reader is used from two threads"))?;
+    if guard.is_none() {
+        return Ok(None);
+    }
+    match recv(py, &mut guard)? {
+        Some(Msg::Item(t)) => Ok(Some(t)),
+        Some(Msg::End(s)) => {
+            *guard = None;
+            if let Some(Ok(mut slot)) = summary.map(Mutex::lock) {
+                *slot = Some(s);
+            }
+            Ok(None)
+        }
+        Some(Msg::Error(kind, msg)) => {
+            *guard = None;
+            Err(to_py_err(kind, msg))
+        }
+        None => {
+            *guard = None;
+            Err(PyRuntimeError::new_err(
+                "the decoding thread stopped without an answer (a bug: please report it)",
+            ))
+        }
+    }
 }
 
 pub(crate) fn raw_sweep(
@@ -295,12 +331,12 @@ pub(crate) fn decode_args(
 /// A capture or bag being decoded on a thread of its own.
 #[pyclass(module = "ringscan._ringscan")]
 pub struct Reader {
-    rx: Mutex<Option<Receiver<Msg>>>,
+    rx: Mutex<Option<Receiver<Msg<SweepMsg>>>>,
     summary: Mutex<Option<String>>,
 }
 
-fn spawn_reader(args: DecodeArgs) -> PyResult<Receiver<Msg>> {
-    let (tx, rx) = mpsc::sync_channel::<Msg>(QUEUE);
+fn spawn_reader(args: DecodeArgs) -> PyResult<Receiver<Msg<SweepMsg>>> {
+    let (tx, rx) = mpsc::sync_channel::<Msg<SweepMsg>>(QUEUE);
     std::thread::Builder::new()
         .name("ringscan-read".into())
         .spawn(move || read_thread(&args, &tx))
@@ -308,7 +344,7 @@ fn spawn_reader(args: DecodeArgs) -> PyResult<Receiver<Msg>> {
     Ok(rx)
 }
 
-fn read_thread(args: &DecodeArgs, tx: &SyncSender<Msg>) {
+fn read_thread(args: &DecodeArgs, tx: &SyncSender<Msg<SweepMsg>>) {
     let mut reader = match SweepReader::open(args) {
         Ok(r) => r,
         Err(e) => {
@@ -320,7 +356,7 @@ fn read_thread(args: &DecodeArgs, tx: &SyncSender<Msg>) {
         let msg = match reader.next_sweep() {
             Ok(Some(rs)) => {
                 let desc = reader.sensor(rs.sensor);
-                Msg::Sweep(Box::new((rs, desc)))
+                Msg::Item(Box::new((rs, desc)))
             }
             Ok(None) => {
                 let _ = tx.send(Msg::End(reader.summary().json.to_string()));
@@ -405,35 +441,12 @@ impl Reader {
 
     /// The next sweep, or `None` at the end; raises the decoding error, if any.
     fn next(&self, py: Python<'_>) -> PyResult<Option<RawSweep>> {
-        let mut guard = self
-            .rx
-            .lock()
-            .map_err(|_| PyRuntimeError::new_err("the reader is used from two threads"))?;
-        if guard.is_none() {
-            return Ok(None);
-        }
-        match recv(py, &mut guard)? {
-            Some(Msg::Sweep(b)) => {
+        match next_item(py, &self.rx, Some(&self.summary))? {
+            Some(b) => {
                 let (rs, desc) = *b;
                 Ok(Some(raw_sweep(py, rs, desc)?))
             }
-            Some(Msg::End(summary)) => {
-                *guard = None;
-                if let Ok(mut s) = self.summary.lock() {
-                    *s = Some(summary);
-                }
-                Ok(None)
-            }
-            Some(Msg::Error(kind, msg)) => {
-                *guard = None;
-                Err(to_py_err(kind, msg))
-            }
-            None => {
-                *guard = None;
-                Err(PyRuntimeError::new_err(
-                    "the decoding thread stopped without an answer (a bug: please report it)",
-                ))
-            }
+            None => Ok(None),
         }
     }
 
@@ -466,10 +479,7 @@ fn info(
         path, model, calib, topics, start, end, None, 0.0, None, None, false, None, None, None,
         None,
     );
-    let s = py
-        .allow_threads(|| decode_capture(&args).map_err(|e| (kind_of(&e), e.to_string())))
-        .map_err(|(k, m)| to_py_err(k, m))?;
-    Ok(s.json.to_string())
+    run_decode(py, &args)
 }
 
 /// `ringscan decode --json` of a capture or bag into an MCAP file `out` (or no file), as a
@@ -491,10 +501,14 @@ fn decode(
     );
     args.out = out;
     args.threads = threads.max(1);
-    let s = py
-        .allow_threads(|| decode_capture(&args).map_err(|e| (kind_of(&e), e.to_string())))
-        .map_err(|(k, m)| to_py_err(k, m))?;
-    Ok(s.json.to_string())
+    run_decode(py, &args)
+}
+
+/// A whole decode without the GIL; its summary as a JSON string.
+fn run_decode(py: Python<'_>, args: &DecodeArgs) -> PyResult<String> {
+    py.allow_threads(|| decode_capture(args).map_err(|e| (kind_of(&e), e.to_string())))
+        .map(|s| s.json.to_string())
+        .map_err(|(k, m)| to_py_err(k, m))
 }
 
 /// Runs the command line with `argv` (program name first); returns its exit code.

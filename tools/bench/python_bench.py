@@ -2,7 +2,7 @@
 """Runner of tools/bench_python.sh: the Python package against velodyne_decoder and ouster-sdk,
 side by side in one run, each tool in a process of its own (its peak RSS from wait4).
 
-    python python_bench.py --vel-mb 200 --ouster-frames 600 --rounds 3 --dir DIR --report R.md
+    python python_bench.py --vel-mb 200 --ouster-frames 120 --rounds 3 --dir DIR --report R.md
 
 Velodyne: a ~200 MB HDL-32E pcap (tools/make_big_capture.py from the Monterey capture) read to
 NumPy by `ringscan.open` (sweeps, `.points`), by `ringscan.compat.read_pcap` and by
@@ -32,6 +32,18 @@ VEL_CALIB = os.path.join(CAPS, "ros-drivers__velodyne/velodyne_pointcloud/params
 OS_IN = os.path.join(CAPS, "ouster-lidar__ouster-sdk/tests/pcaps/OS-2-128-U1_v2.3.0_1024x10.pcap")
 OS_META = os.path.join(CAPS, "ouster-lidar__ouster-sdk/tests/pcaps/OS-2-128-U1_v2.3.0_1024x10.json")
 
+READ_PCAP = r"""
+import json, sys, time, MODULE as vd
+path, calib = sys.argv[1], sys.argv[2]
+cfg = vd.Config(model=vd.Model.HDL32E, calibration=vd.Calibration.read(calib), min_range=0.0, max_range=1000.0)
+t0 = time.perf_counter()
+frames = points = 0; check = 0.0
+for stamp, p in vd.read_pcap(path, cfg):
+    frames += 1; points += len(p)
+    if len(p): check += float(p[len(p) // 2, 0])
+print(json.dumps({"frames": frames, "points": points, "elapsed_s": time.perf_counter() - t0, "check": check}))
+"""
+
 CHILD = {
     "ringscan.open": r"""
 import json, sys, time, numpy as np, ringscan
@@ -44,28 +56,9 @@ for s in ringscan.open(path, calib=calib, min_range=0.0, max_range=1000.0):
     if len(p): check += float(p["x"][len(p) // 2])
 print(json.dumps({"frames": frames, "points": points, "elapsed_s": time.perf_counter() - t0, "check": check}))
 """,
-    "ringscan.compat.read_pcap": r"""
-import json, sys, time, ringscan.compat as vd
-path, calib = sys.argv[1], sys.argv[2]
-cfg = vd.Config(model=vd.Model.HDL32E, calibration=vd.Calibration.read(calib), min_range=0.0, max_range=1000.0)
-t0 = time.perf_counter()
-frames = points = 0; check = 0.0
-for stamp, p in vd.read_pcap(path, cfg):
-    frames += 1; points += len(p)
-    if len(p): check += float(p[len(p) // 2, 0])
-print(json.dumps({"frames": frames, "points": points, "elapsed_s": time.perf_counter() - t0, "check": check}))
-""",
-    "velodyne_decoder.read_pcap": r"""
-import json, sys, time, velodyne_decoder as vd
-path, calib = sys.argv[1], sys.argv[2]
-cfg = vd.Config(model=vd.Model.HDL32E, calibration=vd.Calibration.read(calib), min_range=0.0, max_range=1000.0)
-t0 = time.perf_counter()
-frames = points = 0; check = 0.0
-for stamp, p in vd.read_pcap(path, cfg):
-    frames += 1; points += len(p)
-    if len(p): check += float(p[len(p) // 2, 0])
-print(json.dumps({"frames": frames, "points": points, "elapsed_s": time.perf_counter() - t0, "check": check}))
-""",
+    # The same script for both: the compat module is velodyne_decoder's drop-in.
+    "ringscan.compat.read_pcap": READ_PCAP.replace("MODULE", "ringscan.compat"),
+    "velodyne_decoder.read_pcap": READ_PCAP.replace("MODULE", "velodyne_decoder"),
     "ringscan.open (Ouster)": r"""
 import json, sys, time, numpy as np, ringscan
 path, meta = sys.argv[1], sys.argv[2]
@@ -118,7 +111,7 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--python", default=sys.executable, help="the venv's interpreter")
     ap.add_argument("--vel-mb", type=float, default=200)
-    ap.add_argument("--ouster-frames", type=int, default=600)
+    ap.add_argument("--ouster-frames", type=int, default=120)
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--dir", required=True)
     ap.add_argument("--pin", default="")
