@@ -139,6 +139,7 @@ def read_pcap(
         float(g("max_range", 200.0)),
         None if g("cut_angle", None) is None else float(g("cut_angle", None)),
         bool(g("timestamp_first_packet", False)),
+        (None if t0 is None else float(t0), None if t1 is None else float(t1)),
     )
     try:
         while True:
@@ -146,8 +147,6 @@ def read_pcap(
             if item is None:
                 return
             host, device, buf, n = item
-            if (t0 is not None and host < t0) or (t1 is not None and host > t1):
-                continue
             arr = np.asarray(buf).reshape(n, 8)
             if as_pcl_structs:
                 out = np.zeros(n, dtype=PCL_DTYPE)

@@ -147,9 +147,11 @@ def _write_parquet(src, path: str) -> None:
         if not pending:
             return
         pts = np.concatenate([p for _, _, _, p in pending])
-        sensors = np.concatenate([np.full(len(p), s, dtype=object) for s, _, _, p in pending])
+        # The sensor column as a dictionary: an index per point, the names once.
+        names: Dict[str, int] = {}
+        codes = np.concatenate([np.full(len(p), names.setdefault(s, len(names)), np.int32) for s, _, _, p in pending])
         cols = {
-            "sensor": pa.array(sensors, pa.string()).dictionary_encode(),
+            "sensor": pa.DictionaryArray.from_arrays(pa.array(codes), pa.array(list(names), pa.string())),
             "sweep": pa.array(np.concatenate([np.full(len(p), i, np.uint64) for _, i, _, p in pending])),
             "timestamp_ns": pa.array(np.concatenate([np.full(len(p), t, np.int64) for _, _, t, p in pending])),
         }

@@ -38,6 +38,9 @@ struct Settings {
     /// Cut angle, 0.01°; `None`: at the first packet's azimuth.
     cut: Option<i32>,
     stamp_first: bool,
+    /// `time_range`: packets captured before the start are skipped, the first after the end
+    /// stops reading (velodyne_decoder's `iter_pcap`), seconds.
+    time_range: (Option<f64>, Option<f64>),
 }
 
 /// One frame: its stamp (host, device seconds) and records.
@@ -321,6 +324,13 @@ fn run(s: &Settings, tx: &SyncSender<Msg<Frame>>) -> Result<(), (ErrKind, String
             Ok(None) => break,
             Err(e) => return Err((ErrKind::Input, format!("{path_s}: {e}"))),
         };
+        let t = d.time_ns as f64 * 1e-9;
+        if s.time_range.0.is_some_and(|t0| t < t0) {
+            continue;
+        }
+        if s.time_range.1.is_some_and(|t1| t > t1) {
+            break;
+        }
         let Ok(bytes) = <[u8; DATA_PACKET_LEN]>::try_from(d.payload) else {
             continue;
         };
@@ -354,7 +364,8 @@ pub struct CompatReader {
 #[pymethods]
 impl CompatReader {
     #[new]
-    #[pyo3(signature = (path, model=None, calibration=None, min_range=0.1, max_range=200.0, cut_angle=None, timestamp_first_packet=false))]
+    #[pyo3(signature = (path, model=None, calibration=None, min_range=0.1, max_range=200.0, cut_angle=None, timestamp_first_packet=false, time_range=(None, None)))]
+    #[allow(clippy::too_many_arguments)]
     fn new(
         path: PathBuf,
         model: Option<String>,
@@ -363,6 +374,7 @@ impl CompatReader {
         max_range: f32,
         cut_angle: Option<f64>,
         timestamp_first_packet: bool,
+        time_range: (Option<f64>, Option<f64>),
     ) -> PyResult<Self> {
         let model = match model.as_deref() {
             None => None,
@@ -397,6 +409,7 @@ impl CompatReader {
             },
             cut,
             stamp_first: timestamp_first_packet,
+            time_range,
         };
         let (tx, rx) = mpsc::sync_channel::<Msg<Frame>>(QUEUE);
         std::thread::Builder::new()

@@ -97,8 +97,13 @@ def test_pcl_structs_and_time_range():
         assert a.dtype == b.dtype
         for name in ("intensity", "ring", "column", "return_type"):
             np.testing.assert_array_equal(a[name], b[name])
-    first = ours[0].stamp.host
-    assert len(list(rc.read_pcap(abspath(rel), cfg, time_range=(first + 1e-3, None)))) == len(ours) - 1
+    # time_range selects packets by capture time before the frames are cut, as velodyne_decoder.
+    start = ours[0].stamp.host - 0.05
+    for tr in [(start, None), (None, start), (start, start + 0.02)]:
+        a = list(rc.read_pcap(abspath(rel), cfg, time_range=tr))
+        b = list(vd.read_pcap(abspath(rel), vd.Config(model=vd.Model.VLP16), time_range=tr))
+        assert [len(p) for _, p in a] == [len(p) for _, p in b], tr
+        assert all(abs(x.stamp.host - y.stamp.host) < 1e-6 for x, y in zip(a, b))
 
 
 def test_bad_config_is_a_clear_error(tmp_path):
