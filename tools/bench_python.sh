@@ -4,7 +4,7 @@
 # and an Ouster capture vs ouster-sdk 1.0.1's open_source + XYZLut; tools/bench/python_bench.py
 # tells what is timed.
 #
-#   tools/bench_python.sh [--vel-mb 200] [--ouster-frames 600] [--rounds 3]
+#   tools/bench_python.sh [--vel-mb 200] [--ouster-frames 120] [--rounds 3]
 #
 # Creates tools/.venv-bench-python (git-ignored): the package built with the release profile
 # from this clone, velodyne-decoder 3.1.0, ouster-sdk 1.0.1. Scratch captures go to
