@@ -80,8 +80,8 @@ info = src.sensor_info[0]
 lut = core.XYZLut(info, use_extrinsics=False)
 frames = points = 0; check = 0.0
 for scans in src:
-    # ouster-sdk 1.0: a FrameSet (iterable of frames, one per sensor) per step.
-    for scan in ([scans] if hasattr(scans, "field") else scans):
+    # ouster-sdk 1.0: a FrameSet (the frames of every sensor) per step.
+    for scan in scans:
         if scan is None:
             continue
         rng = scan.field(core.ChanField.RANGE)
