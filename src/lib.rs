@@ -61,6 +61,11 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+// The command line lives in the library (behind `cli`) so that the Python package runs the
+// same code for `python -m ringscan` and for its readers; its items are the commands' own.
+#[cfg(feature = "cli")]
+#[allow(missing_docs)]
+pub mod cli;
 pub mod deskew;
 pub mod pipeline;
 pub mod point;

@@ -11,22 +11,22 @@ use std::io::{IsTerminal, Write};
 use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::mpsc::{Receiver, RecvTimeoutError};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use ringscan::sensor::ouster::family::OusterCalibration;
-use ringscan::sensor::ouster::OusterStream;
-use ringscan::sensor::{Calibration, FAMILIES};
-use ringscan::sink::mcap::{Behind, SinkOptions, SinkSummary};
-use ringscan::sink::{McapSink, SinkError};
-use ringscan::source::udp::{self, BoundSocket, Queue, ReceiveStats, Received, SocketOptions};
+use crate::sensor::ouster::family::OusterCalibration;
+use crate::sensor::ouster::OusterStream;
+use crate::sensor::{Calibration, FAMILIES};
+use crate::sink::mcap::{Behind, SinkOptions, SinkSummary};
+use crate::sink::{McapSink, SinkError};
+use crate::source::udp::{self, BoundSocket, Queue, ReceiveStats, Received, SocketOptions};
 use serde_json::{json, Value};
 
 use super::run::{
-    fields_name, output_json, sink_options_with, ChunkCompression, RunError, Session,
-    SessionOptions, Sink,
+    fields_name, output_json, sink_options_with, ChunkCompression, ReadSweep, RunError, SensorDesc,
+    Session, SessionOptions, Sink,
 };
 use super::sensors::load_calibs;
 use super::FormatArg;
@@ -108,6 +108,36 @@ pub struct ListenArgs {
     /// `--hesai-ptc[=PORT]`: fetch the angle correction of every `--sensor` without a bound
     /// `--calib` over Hesai's TCP control protocol at this port before listening.
     pub hesai_ptc: Option<u16>,
+    /// What a caller embedding `listen` adds (the Python package).
+    pub hooks: ListenHooks,
+}
+
+/// A decoded sweep handed to an embedding caller, with its sensor.
+pub type TappedSweep = (ReadSweep, Option<SensorDesc>);
+
+/// What a caller embedding `listen` adds (the Python package): a stop flag instead of the
+/// process's signals, and every decoded sweep through a bounded channel; a sweep that finds
+/// the channel full is dropped and counted (`receive.sweeps_dropped`), as the receive queue
+/// drops datagrams, so a slow consumer never holds up the sockets.
+#[derive(Debug, Clone, Default)]
+pub struct ListenHooks {
+    /// Set it to stop listening (checked every 100 ms); SIGINT and SIGTERM are then left to
+    /// the caller.
+    pub stop: Option<Arc<AtomicBool>>,
+    /// Where decoded sweeps go.
+    pub sweeps: Option<SyncSender<TappedSweep>>,
+    /// Sweeps dropped because the channel was full.
+    pub sweeps_dropped: Arc<AtomicU64>,
+}
+
+/// What `listen` ends with.
+pub struct ListenOutcome {
+    /// The `--json` summary.
+    pub json: Value,
+    /// Packets lost (missing, dropped or malformed).
+    pub lost: u64,
+    /// The output files and their summaries.
+    pub files: Vec<(PathBuf, SinkSummary)>,
 }
 
 /// From the decode thread to the main thread.
@@ -179,7 +209,7 @@ impl Files {
     /// The file `index` of the run.
     fn path(&self, index: usize) -> PathBuf {
         if self.bag_dir {
-            ringscan::sink::rosbag2::file_path(&self.base, index)
+            crate::sink::rosbag2::file_path(&self.base, index)
         } else {
             Self::path_for(&self.base, self.split, index)
         }
@@ -190,12 +220,12 @@ impl Files {
         if !self.bag_dir {
             return Ok(());
         }
-        let files: Vec<ringscan::sink::rosbag2::BagFile> = self
+        let files: Vec<crate::sink::rosbag2::BagFile> = self
             .closed
             .iter()
             .map(|(p, s)| (p.as_path(), s))
             .chain(last)
-            .map(|(p, s)| ringscan::sink::rosbag2::BagFile {
+            .map(|(p, s)| crate::sink::rosbag2::BagFile {
                 name: p
                     .file_name()
                     .map(|n| n.to_string_lossy().into_owned())
@@ -203,11 +233,9 @@ impl Files {
                 summary: s.clone(),
             })
             .collect();
-        ringscan::sink::rosbag2::write_metadata(&self.base, &files).map_err(|source| {
-            SinkError::Io {
-                context: format!("writing {}/metadata.yaml", self.base.display()),
-                source,
-            }
+        crate::sink::rosbag2::write_metadata(&self.base, &files).map_err(|source| SinkError::Io {
+            context: format!("writing {}/metadata.yaml", self.base.display()),
+            source,
         })
     }
 
@@ -387,9 +415,30 @@ struct DecodeThread {
     last_health: Instant,
     /// Datagrams waiting for their sensor's metadata.
     held: Held,
+    /// Where decoded sweeps go, and the count of those dropped ([`ListenHooks`]).
+    tap: Option<(SyncSender<TappedSweep>, Arc<AtomicU64>)>,
 }
 
 impl DecodeThread {
+    /// Hands the sweeps decoded so far to the embedding caller, if any.
+    fn forward_sweeps(&mut self) {
+        let Some((tx, dropped)) = &self.tap else {
+            return;
+        };
+        let sweeps: Vec<ReadSweep> = self.session.take_sweeps().collect();
+        for rs in sweeps {
+            let desc = self.session.sensor_desc(rs.sensor);
+            match tx.try_send((rs, desc)) {
+                Ok(()) => {}
+                Err(TrySendError::Full(_)) => {
+                    dropped.fetch_add(1, Ordering::Relaxed);
+                }
+                // The caller is gone: it stops the run through its flag.
+                Err(TrySendError::Disconnected(_)) => {}
+            }
+        }
+    }
+
     fn run(mut self, rx: Receiver<Received>) -> Result<DecodeResult, RunError> {
         let mut last_check = Instant::now();
         loop {
@@ -407,6 +456,7 @@ impl DecodeThread {
                     if self.session.demux().stats().ignored > ignored {
                         self.unclaimed(r);
                     }
+                    self.forward_sweeps();
                     let (sweeps, points) = self.session.totals();
                     self.live.sweeps.store(sweeps, Ordering::Relaxed);
                     self.live.points.store(points, Ordering::Relaxed);
@@ -420,6 +470,7 @@ impl DecodeThread {
                     let _ = self.session.close_sink();
                     return Err(self.with_path(e));
                 }
+                self.forward_sweeps();
             }
         }
         match self.finish() {
@@ -618,6 +669,7 @@ impl DecodeThread {
             let _ = self.session.close_sink();
             return Err((err, path));
         }
+        self.forward_sweeps();
         if let Err(e) = self.session.finish_odometry() {
             let _ = self.session.close_sink();
             return Err((e, path));
@@ -712,6 +764,46 @@ fn kernel_drops(sockets: &[BoundSocket]) -> u64 {
 
 /// `ringscan listen`.
 pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
+    let ListenOutcome {
+        json: json_out,
+        lost,
+        files,
+    } = listen_run(args)?;
+    if args.json {
+        println!("{json_out}");
+    } else {
+        let g = |v: &Value| v.as_u64().unwrap_or(0);
+        let p = &json_out["packets"];
+        let r = &json_out["receive"];
+        println!(
+            "listened {:.1} s ({}): {} datagrams, {} sweeps, {} points; packets decoded {}, dropped {} (queue {}, kernel {}), malformed {}, missing {}, from other sources {}",
+            json_out["elapsed_s"].as_f64().unwrap_or(0.0),
+            json_out["stop"].as_str().unwrap_or(""),
+            g(&r["datagrams"]),
+            g(&json_out["sweeps"]),
+            g(&json_out["points"]),
+            g(&p["decoded"]),
+            g(&p["dropped"]),
+            g(&r["queue_dropped"]),
+            g(&r["kernel_dropped"]),
+            g(&p["malformed"]),
+            g(&p["missing"]),
+            g(&r["other_source"]),
+        );
+        for (path, s) in &files {
+            println!("  wrote {}: {:?}", path.display(), s.messages);
+        }
+    }
+    if args.strict && lost > 0 {
+        return Err(RunError::Strict(format!(
+            "--strict: {lost} packets missing, dropped or malformed"
+        )));
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Listens until a signal, `--duration` or the hooks' stop flag; the summary.
+pub fn listen_run(args: &ListenArgs) -> Result<ListenOutcome, RunError> {
     if args.sensors.is_empty() {
         return Err(RunError::Usage(
             "listen: give at least one --sensor IP[:PORT]".into(),
@@ -792,17 +884,22 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
         let live = live.clone();
         let sensors = addrs.clone();
         let ev = ev_tx.clone();
+        let hooks_sweeps = args.hooks.sweeps.clone();
+        let hooks_dropped = args.hooks.sweeps_dropped.clone();
         std::thread::Builder::new()
             .name("ringscan-decode".into())
             .spawn(move || -> Result<DecodeResult, RunError> {
                 let setup = (|| -> Result<(Session, Option<Files>), RunError> {
                     let mut session = Session::new(&opts)?;
+                    if hooks_sweeps.is_some() {
+                        session.enable_tap();
+                    }
                     session.set_sensor_hint(n_sensors);
                     session.set_live(live_view);
                     let files = match out {
                         Some(base) => {
                             let bag_dir = opts.format == FormatArg::Ros2
-                                && ringscan::sink::rosbag2::is_bag_dir(&base);
+                                && crate::sink::rosbag2::is_bag_dir(&base);
                             let mut files = Files {
                                 base,
                                 split,
@@ -817,7 +914,7 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
                             files.current = current.clone();
                             if bag_dir {
                                 // The directory and its first (empty) metadata.yaml.
-                                ringscan::sink::rosbag2::create_dir(&files.base).map_err(
+                                crate::sink::rosbag2::create_dir(&files.base).map_err(
                                     |source| {
                                         file_error(
                                             &files.base,
@@ -861,6 +958,7 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
                     epochs: Vec::new(),
                     last_health: Instant::now(),
                     held: Held::default(),
+                    tap: hooks_sweeps.map(|tx| (tx, hooks_dropped)),
                 };
                 let r = t.run(rx);
                 if r.is_err() {
@@ -907,18 +1005,29 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
             tasks.push(tokio::spawn(udp::receive(sock, s.port, sources.clone(), q)));
         }
         drop(tx);
-        let mut sigterm = match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
-            Ok(s) => s,
-            Err(e) => return Err(RunError::Live(format!("installing the SIGTERM handler: {e}"))),
+        // An embedding caller stops the run with its flag and keeps the process's signals.
+        let stop = args.hooks.stop.clone();
+        let mut sigterm = match &stop {
+            Some(_) => None,
+            None => match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+                Ok(s) => Some(s),
+                Err(e) => return Err(RunError::Live(format!("installing the SIGTERM handler: {e}"))),
+            },
         };
+        let mut stop_tick = tokio::time::interval(Duration::from_millis(100));
         let deadline = args.duration.map(|d| tokio::time::Instant::now() + d);
         let mut tick = tokio::time::interval(Duration::from_secs(1));
         let mut prev = (Instant::now(), 0, 0, 0);
         let api_port = args.api_port;
         let reason = loop {
             tokio::select! {
-                _ = tokio::signal::ctrl_c() => break "SIGINT",
-                _ = sigterm.recv() => break "SIGTERM",
+                _ = tokio::signal::ctrl_c(), if stop.is_none() => break "SIGINT",
+                _ = async { match sigterm.as_mut() { Some(s) => { s.recv().await; } None => std::future::pending().await } } => break "SIGTERM",
+                _ = stop_tick.tick(), if stop.is_some() => {
+                    if stop.as_ref().is_some_and(|s| s.load(Ordering::Relaxed)) {
+                        break "stopped by the caller";
+                    }
+                }
                 _ = async { match deadline { Some(d) => tokio::time::sleep_until(d).await, None => std::future::pending().await } } => break "duration reached",
                 ev = ev_rx.recv() => match ev {
                     Some(Event::Fetch(addr)) => {
@@ -997,6 +1106,7 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
             "bytes": stats.bytes.load(Ordering::Relaxed),
             "other_source": stats.other_source.load(Ordering::Relaxed),
             "queue_dropped": queue_dropped,
+            "sweeps_dropped": args.hooks.sweeps_dropped.load(Ordering::Relaxed),
             "queue_peak_bytes": stats.queued_bytes_peak.load(Ordering::Relaxed),
             "kernel_dropped": kernel,
             "errors": stats.errors.load(Ordering::Relaxed),
@@ -1025,34 +1135,11 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
     );
     m.insert("elapsed_s".into(), json!(elapsed));
     let lost = result.lost + queue_dropped + kernel;
-    let json_out = Value::Object(m);
-    if args.json {
-        println!("{json_out}");
-    } else {
-        let g = |v: &Value| v.as_u64().unwrap_or(0);
-        let p = &json_out["packets"];
-        println!(
-            "listened {:.1} s ({reason}): {} datagrams, {} sweeps, {} points; packets decoded {}, dropped {} (queue {queue_dropped}, kernel {kernel}), malformed {}, missing {}, from other sources {}",
-            elapsed,
-            g(&json_out["receive"]["datagrams"]),
-            g(&json_out["sweeps"]),
-            g(&json_out["points"]),
-            g(&p["decoded"]),
-            g(&p["dropped"]),
-            g(&p["malformed"]),
-            g(&p["missing"]),
-            g(&json_out["receive"]["other_source"]),
-        );
-        for (path, s) in &result.files {
-            println!("  wrote {}: {:?}", path.display(), s.messages);
-        }
-    }
-    if args.strict && lost > 0 {
-        return Err(RunError::Strict(format!(
-            "--strict: {lost} packets missing, dropped or malformed"
-        )));
-    }
-    Ok(ExitCode::SUCCESS)
+    Ok(ListenOutcome {
+        json: Value::Object(m),
+        lost,
+        files: result.files,
+    })
 }
 
 #[cfg(test)]

@@ -1,15 +1,15 @@
 //! Command-line front end: clap commands, progress, exit codes. No algorithms live here.
 
-mod input;
-mod listen;
-mod odometry;
-mod pipeline;
-mod ptc;
-mod render;
-mod replay;
-mod run;
-mod sensors;
-mod serve;
+pub mod bag_args;
+pub mod listen;
+pub mod odometry;
+pub mod pipeline;
+pub mod ptc;
+pub mod render;
+pub mod replay;
+pub mod run;
+pub mod sensors;
+pub mod serve;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -203,11 +203,11 @@ struct DecodeCmd {
     #[command(flatten)]
     serve: serve::ServeArgs,
     #[command(flatten)]
-    bag: input::BagArgs,
+    bag: bag_args::BagArgs,
     /// With --serve: publish sweeps at this speed of their capture times (`1.0` = as recorded,
     /// `2`, `0.5`, or `max` = as fast as they are decoded).
     #[arg(long, value_name = "FACTOR|max", default_value = "1.0", value_parser = replay::parse_rate)]
-    serve_rate: ringscan::source::udp::Rate,
+    serve_rate: crate::source::udp::Rate,
 }
 
 #[derive(clap::Args, Debug)]
@@ -224,7 +224,7 @@ struct InfoCmd {
     #[arg(long)]
     json: bool,
     #[command(flatten)]
-    bag: input::BagArgs,
+    bag: bag_args::BagArgs,
 }
 
 #[derive(clap::Args, Debug)]
@@ -318,7 +318,7 @@ struct ListenCmd {
     #[arg(long, default_value_t = 80)]
     api_port: u16,
     /// Receive buffer to ask for per socket, bytes (the kernel caps it at net.core.rmem_max).
-    #[arg(long, default_value_t = ringscan::source::udp::DEFAULT_RECV_BUFFER)]
+    #[arg(long, default_value_t = crate::source::udp::DEFAULT_RECV_BUFFER)]
     recv_buffer: usize,
     /// Stop by itself after this many seconds.
     #[arg(long, value_name = "S")]
@@ -351,7 +351,7 @@ struct ReplayCmd {
     port_offset: i32,
     /// Speed: a factor of real time (`1.0`, `10`) or `max`.
     #[arg(long, default_value = "1.0", value_parser = replay::parse_rate)]
-    rate: ringscan::source::udp::Rate,
+    rate: crate::source::udp::Rate,
     /// Send the capture this many times.
     #[arg(long = "loop", default_value_t = 1)]
     loops: u32,
@@ -367,7 +367,7 @@ struct ReplayCmd {
     #[arg(long)]
     json: bool,
     #[command(flatten)]
-    bag: input::BagArgs,
+    bag: bag_args::BagArgs,
 }
 
 /// `--threads`: a positive number.
@@ -421,9 +421,26 @@ fn parse_fov(s: &str) -> Result<(f64, f64), String> {
     Ok((num(a)?, num(b)?))
 }
 
-/// Entry point: parse, run, map errors to exit codes (0 ok, 1 error, 2 usage).
+/// Entry point of the binary: [`run`] on the process's arguments.
 pub fn main() -> ExitCode {
-    let cli = Cli::parse();
+    ExitCode::from(run(std::env::args_os()))
+}
+
+/// Parses `args` (the program name first), runs the command and returns its exit code (0 ok,
+/// 1 error, 2 usage); `python -m ringscan` calls this.
+pub fn run<I, T>(args: I) -> u8
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
+    let cli = match Cli::try_parse_from(args) {
+        Ok(c) => c,
+        Err(e) => {
+            // --help and --version are "errors" that print to stdout and exit 0.
+            let _ = e.print();
+            return u8::try_from(e.exit_code()).unwrap_or(2);
+        }
+    };
     init_logging(cli.verbose);
     let result = match cli.command {
         Command::Decode(c) => {
@@ -460,6 +477,7 @@ pub fn main() -> ExitCode {
                 serve: c.serve,
                 serve_rate: c.serve_rate,
                 bag: c.bag,
+                keep_columns: false,
             };
             run::decode_command(&args)
         }
@@ -472,7 +490,7 @@ pub fn main() -> ExitCode {
                 Some(d) if d.is_finite() && d > 0.0 => Some(std::time::Duration::from_secs_f64(d)),
                 Some(d) => {
                     eprintln!("error: --duration {d}: expected a positive number of seconds");
-                    return ExitCode::from(2);
+                    return 2;
                 }
                 None => None,
             };
@@ -501,6 +519,7 @@ pub fn main() -> ExitCode {
                     pipeline: c.pipeline,
                     format: c.format,
                     odometry: c.odometry,
+                    keep_columns: false,
                 },
                 format: c.format,
                 fields_minimal: c.fields == FieldsArg::Minimal,
@@ -515,6 +534,7 @@ pub fn main() -> ExitCode {
                 json: c.json,
                 serve: c.serve,
                 hesai_ptc: c.hesai_ptc,
+                hooks: Default::default(),
             };
             listen::listen_command(&args)
         }
@@ -523,7 +543,7 @@ pub fn main() -> ExitCode {
                 Some(d) if d.is_finite() && d > 0.0 => Some(std::time::Duration::from_secs_f64(d)),
                 Some(d) => {
                     eprintln!("error: --duration {d}: expected a positive number of seconds");
-                    return ExitCode::from(2);
+                    return 2;
                 }
                 None => None,
             },
@@ -540,12 +560,12 @@ pub fn main() -> ExitCode {
         Command::HesaiCalib(c) => hesai_calib_command(&c),
     };
     match result {
-        Ok(code) => code,
+        Ok(_) => 0,
         Err(e) => {
             eprintln!("error: {e}");
             match e {
-                RunError::Usage(_) => ExitCode::from(2),
-                _ => ExitCode::from(1),
+                RunError::Usage(_) => 2,
+                _ => 1,
             }
         }
     }

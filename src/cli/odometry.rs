@@ -1,4 +1,4 @@
-//! `--odometry`: LiDAR odometry (`ringscan::registration::odometry`) run per sensor on every sweep
+//! `--odometry`: LiDAR odometry (`crate::registration::odometry`) run per sensor on every sweep
 //! of `decode`, and its outputs:
 //! - `/tf`: one `foxglove.FrameTransform` per sweep, parent `odom`, child the sensor's frame
 //!   (the pose `odom_from_sensor`, stamped with the pose's time);
@@ -32,7 +32,7 @@
 //! of a gyro bias up to [`GYRO_BIAS_RADPS`]. It holds the rotation where the scene cannot (yaw
 //! on an empty floor); elsewhere the lidar, far more precise than that bias, decides.
 //!
-//! The algorithms live in `ringscan::registration::odometry`; this file owns the clock, the files and
+//! The algorithms live in `crate::registration::odometry`; this file owns the clock, the files and
 //! the MCAP channels.
 
 use std::collections::BTreeMap;
@@ -41,22 +41,22 @@ use std::io::{BufWriter, Seek, Write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use crate::deskew::{ImuTrack, Twist};
+use crate::point::Point;
+use crate::registration::odometry::ImuRotation;
+use crate::registration::odometry::Odometry;
+use crate::registration::odometry::OdometryConfig;
+use crate::registration::odometry::OdometryMethod;
+use crate::registration::odometry::OdometryStep;
+use crate::registration::odometry::SweepMotion;
+use crate::registration::odometry::TrackStatus;
+use crate::sensor::ImuSample;
+use crate::sink::foxglove::PointCloudPrefix;
+use crate::sink::scene;
+use crate::sink::{McapSink, SensorId, SinkError, TopicId};
+use crate::sweep::Sweep;
 use nalgebra::{Isometry3, Point3};
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
-use ringscan::deskew::{ImuTrack, Twist};
-use ringscan::point::Point;
-use ringscan::registration::odometry::ImuRotation;
-use ringscan::registration::odometry::Odometry;
-use ringscan::registration::odometry::OdometryConfig;
-use ringscan::registration::odometry::OdometryMethod;
-use ringscan::registration::odometry::OdometryStep;
-use ringscan::registration::odometry::SweepMotion;
-use ringscan::registration::odometry::TrackStatus;
-use ringscan::sensor::ImuSample;
-use ringscan::sink::foxglove::PointCloudPrefix;
-use ringscan::sink::scene;
-use ringscan::sink::{McapSink, SensorId, SinkError, TopicId};
-use ringscan::sweep::Sweep;
 use serde_json::{json, Value};
 
 /// The gyro bias the IMU rotation prior allows for, rad/s (0.57 °/s: a MEMS gyro without
@@ -224,6 +224,13 @@ pub struct OdometrySetup {
     deskew: bool,
 }
 
+impl OdometrySetup {
+    /// The odometry's parameters.
+    pub fn config(&self) -> &OdometryConfig {
+        &self.config
+    }
+}
+
 /// The channels of one sensor's odometry in one MCAP file.
 struct Topics {
     map: TopicId,
@@ -372,7 +379,7 @@ impl OdometryRunner {
 
     /// Adds a gyro sample of sensor `idx` (its metadata's `imu_to_sensor_transform`).
     pub fn push_imu(&mut self, idx: usize, imu_to_sensor: &[f64; 16], s: &ImuSample) {
-        if idx >= ringscan::sweep::demux::MAX_SENSORS {
+        if idx >= crate::sweep::demux::MAX_SENSORS {
             return;
         }
         while self.imu.len() <= idx {
@@ -612,7 +619,7 @@ impl OdometryRunner {
             return Ok(Some(diag));
         };
         let format = sink.format();
-        if format != ringscan::sink::Format::Foxglove {
+        if format != crate::sink::Format::Foxglove {
             scene::encode_transform(format, &mut self.buf, stamp, &odom_frame, &frame, &pose)?;
         }
         let tf = match self.tf {
@@ -669,9 +676,9 @@ impl OdometryRunner {
                     stamp,
                     &t.map_prefix,
                     &so.odom_frame,
-                    ringscan::point::POINT_STRIDE,
-                    &ringscan::point::POINT_FIELDS,
-                    ringscan::point::as_bytes(&so.map_points),
+                    crate::point::POINT_STRIDE,
+                    &crate::point::POINT_FIELDS,
+                    crate::point::as_bytes(&so.map_points),
                     "map",
                 )?;
                 sink.write_message(t.map, log_time, &self.buf)?;

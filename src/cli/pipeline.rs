@@ -1,29 +1,29 @@
 //! `--pipeline`, `--deskew`, `--extrinsics`: the perception pipeline run on every decoded sweep,
-//! its MCAP outputs and its `--json` figures. The algorithms live in `ringscan::pipeline` and
-//! `ringscan::deskew`; this file reads files, owns the clock and writes.
+//! its MCAP outputs and its `--json` figures. The algorithms live in `crate::pipeline` and
+//! `crate::deskew`; this file reads files, owns the clock and writes.
 
 use std::io::{Seek, Write};
 use std::time::Instant;
 
+use crate::deskew::PoseTable;
+use crate::pipeline::config::DeskewMode;
+use crate::pipeline::config::PipelineConfig;
+use crate::pipeline::filter::Extrinsics;
+use crate::pipeline::run::Pipeline;
+use crate::pipeline::run::StageTimes;
+use crate::pipeline::run::SweepStats;
+use crate::sensor::ImuSample;
+use crate::sink::scene::{self, PipelineTopics};
+use crate::sink::{McapSink, SensorId, SinkError, TopicId};
+use crate::sweep::Sweep;
 use nalgebra::Isometry3;
-use ringscan::deskew::PoseTable;
-use ringscan::pipeline::config::DeskewMode;
-use ringscan::pipeline::config::PipelineConfig;
-use ringscan::pipeline::filter::Extrinsics;
-use ringscan::pipeline::run::Pipeline;
-use ringscan::pipeline::run::StageTimes;
-use ringscan::pipeline::run::SweepStats;
-use ringscan::sensor::ImuSample;
-use ringscan::sink::scene::{self, PipelineTopics};
-use ringscan::sink::{McapSink, SensorId, SinkError, TopicId};
-use ringscan::sweep::Sweep;
 use serde_json::{json, Value};
 
 /// The pipeline flags of `decode`.
 #[derive(clap::Args, Debug, Clone, Default)]
 pub struct PipelineArgs {
     /// Perception pipeline run on every sweep: `none`, `default`, or a TOML file of
-    /// parameters (see `ringscan::pipeline::config`). Writes `ground`, `obstacles` and
+    /// parameters (see `crate::pipeline::config`). Writes `ground`, `obstacles` and
     /// `clusters` per sensor.
     #[arg(long, value_name = "none|default|FILE.toml")]
     pub pipeline: Option<String>,
@@ -297,7 +297,7 @@ impl PipelineRunner {
 
     /// The constant twist sensor `idx` (named `name`) deskews with (modes
     /// `constant-velocity`, `odometry`).
-    pub fn twist(&mut self, idx: usize, name: &str) -> Result<ringscan::deskew::Twist, SinkError> {
+    pub fn twist(&mut self, idx: usize, name: &str) -> Result<crate::deskew::Twist, SinkError> {
         Self::sensor(
             &mut self.sensors,
             &self.setup,
@@ -568,8 +568,8 @@ impl PipelineRunner {
                 "filter.min_range_m": cfg.filter.min_range_m,
                 "filter.max_range_m": if cfg.filter.max_range_m.is_finite() { json!(cfg.filter.max_range_m) } else { Value::Null },
                 "ground.method": match cfg.ground.method {
-                    ringscan::pipeline::config::GroundMethodName::Grid => "grid",
-                    ringscan::pipeline::config::GroundMethodName::Ransac => "ransac",
+                    crate::pipeline::config::GroundMethodName::Grid => "grid",
+                    crate::pipeline::config::GroundMethodName::Ransac => "ransac",
                 },
                 "cluster.tolerance_m": cfg.cluster.tolerance_m,
                 "cluster.min_points": cfg.cluster.min_points,

@@ -6,7 +6,7 @@
 //! request = `47 74`, command, one zero byte, payload length (u32 big-endian), payload;
 //! response = `47 74`, command, return code (0 = success), payload length (u32 big-endian),
 //! payload. This is the I/O edge: the library only parses what comes back
-//! ([`ringscan::sensor::hesai::family::parse_hesai_calibration`]).
+//! ([`crate::sensor::hesai::family::parse_hesai_calibration`]).
 
 use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpStream};
@@ -67,7 +67,7 @@ pub fn command(
 /// ringscan reads.
 pub fn fetch_angle_correction(addr: SocketAddr, timeout: Duration) -> Result<Vec<u8>, String> {
     let bytes = command(addr, GET_ANGLE_CORRECTION, &[], timeout)?;
-    match ringscan::sensor::hesai::family::parse_hesai_calibration(&bytes) {
+    match crate::sensor::hesai::family::parse_hesai_calibration(&bytes) {
         Some(Ok(_)) => Ok(bytes),
         Some(Err(e)) => Err(format!("{addr}: the sensor's angle correction: {e}")),
         None => Err(format!(

@@ -11,11 +11,11 @@ use std::io::{BufWriter, Read};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+use crate::sink::read::{PointCloud, Quaternion, SceneUpdate};
+use crate::sink::scene::cluster_color;
 use mcap::records::Record;
 use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader};
 use prost::Message as _;
-use ringscan::sink::read::{PointCloud, Quaternion, SceneUpdate};
-use ringscan::sink::scene::cluster_color;
 
 use super::run::RunError;
 

@@ -7,10 +7,10 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
-use ringscan::source::udp::{due_offset, Rate};
+use crate::source::udp::{due_offset, Rate};
 use serde_json::json;
 
-use super::input::{self, BagArgs, Input};
+use super::bag_args::{self as input, BagArgs, Input};
 use super::run::RunError;
 
 /// Everything `replay` needs.

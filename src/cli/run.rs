@@ -6,19 +6,19 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
-use ringscan::sensor::DecodeOptions;
-use ringscan::sensor::StreamError;
-use ringscan::sensor::{Calibration, Facts, FirstDatagram, StreamSettings};
-use ringscan::sink::mcap::{
+use crate::sensor::DecodeOptions;
+use crate::sensor::StreamError;
+use crate::sensor::{Calibration, Facts, FirstDatagram, StreamSettings};
+use crate::sink::mcap::{
     create_file, Behind, Compression, Format, PointFields, SensorId, SensorInfo, SinkOptions,
     SinkSummary, SweepMsg,
 };
-use ringscan::sink::{McapSink, SinkError};
-use ringscan::source::pcap::PcapSource;
-use ringscan::sweep::{Demux, Sweep};
+use crate::sink::{McapSink, SinkError};
+use crate::source::pcap::PcapSource;
+use crate::sweep::{Demux, Sweep};
 use serde_json::{json, Value};
 
-use super::input::{self, BagArgs, Input, InputError};
+use super::bag_args::{self as input, BagArgs, Input, InputError};
 use super::odometry::{OdometryArgs, OdometryRunner};
 use super::pipeline::{PipelineArgs, PipelineRunner};
 use super::sensors::{self, load_calibs, Chooser};
@@ -71,13 +71,15 @@ pub struct DecodeArgs {
     /// `--serve`: the live view.
     pub serve: super::serve::ServeArgs,
     /// `--serve-rate`: publishing speed of the live view.
-    pub serve_rate: ringscan::source::udp::Rate,
+    pub serve_rate: crate::source::udp::Rate,
     /// `--pipeline`, `--deskew`, `--extrinsics`.
     pub pipeline: PipelineArgs,
     /// `--odometry`, `--trajectory`, `--map-every`.
     pub odometry: OdometryArgs,
     /// `--topic`, `--start`, `--end` (bags).
     pub bag: BagArgs,
+    /// Keep each point's firing column in the sweeps ([`SweepReader`]'s organised images).
+    pub keep_columns: bool,
 }
 
 /// Why a run failed.
@@ -109,9 +111,9 @@ pub enum RunError {
 fn parse_model(m: Option<&str>) -> Result<Option<String>, RunError> {
     match m {
         None => Ok(None),
-        Some(s) if ringscan::sensor::family_of_model(s).is_some() => Ok(Some(s.to_string())),
+        Some(s) if crate::sensor::family_of_model(s).is_some() => Ok(Some(s.to_string())),
         Some(s) => {
-            let all: Vec<&str> = ringscan::sensor::FAMILIES
+            let all: Vec<&str> = crate::sensor::FAMILIES
                 .iter()
                 .flat_map(|f| f.models().iter().copied())
                 .collect();
@@ -156,6 +158,8 @@ struct Output {
     odometry: Option<OdometryRunner>,
     /// `--serve`: the live view, also fed by the pipeline.
     live: Option<super::serve::SharedPublisher>,
+    /// A copy of every decoded sweep (before the pipeline), for [`SweepReader`].
+    tap: Option<Vec<(usize, Sweep)>>,
 }
 
 impl Output {
@@ -257,6 +261,9 @@ impl Output {
                 self.error = Some(e);
                 return;
             }
+        }
+        if let Some(tap) = self.tap.as_mut() {
+            tap.push((idx, sweep.clone()));
         }
         let several = !(self.n_sensors_hint <= 1 && idx == 0);
         // `--deskew odometry`: the odometry's last motion deskews this sweep; the twist used is
@@ -415,10 +422,49 @@ pub struct SessionOptions {
     pub format: FormatArg,
     /// `--odometry`, `--trajectory`, `--map-every`.
     pub odometry: OdometryArgs,
+    /// Keep each point's firing column in the sweeps (organised images, [`SweepReader`]).
+    pub keep_columns: bool,
 }
 
 impl DecodeArgs {
-    fn session_options(&self) -> SessionOptions {
+    /// `decode`'s defaults for `input`: no output, every sensor, no range limits, the
+    /// calibrations built in.
+    pub fn new(input: PathBuf) -> Self {
+        Self {
+            input,
+            out: None,
+            model: None,
+            calib: Vec::new(),
+            name: None,
+            port: None,
+            cut_angle_deg: 0.0,
+            min_range: None,
+            max_range: None,
+            dual_return_threshold_m: None,
+            fov_deg: None,
+            integration_ms: None,
+            fields_all: false,
+            fields_minimal: false,
+            compression: ChunkCompression::default(),
+            threads: super::default_threads(),
+            chunk_size: crate::sink::mcap::DEFAULT_CHUNK_SIZE,
+            format: FormatArg::Foxglove,
+            raw: false,
+            strict: false,
+            crc: None,
+            json: false,
+            input_bytes: None,
+            pipeline: PipelineArgs::default(),
+            odometry: OdometryArgs::default(),
+            serve: Default::default(),
+            serve_rate: crate::source::udp::Rate::Max,
+            bag: BagArgs::default(),
+            keep_columns: false,
+        }
+    }
+
+    /// The options of the [`Session`] this run uses.
+    pub fn session_options(&self) -> SessionOptions {
         SessionOptions {
             model: self.model.clone(),
             calib: self.calib.clone(),
@@ -436,6 +482,7 @@ impl DecodeArgs {
             pipeline: self.pipeline.clone(),
             format: self.format,
             odometry: self.odometry.clone(),
+            keep_columns: self.keep_columns,
         }
     }
 }
@@ -517,7 +564,7 @@ impl Session {
                 decode,
                 cut_angle: cut,
                 keep_extras: opts.fields_all,
-                keep_columns: false,
+                keep_columns: opts.keep_columns,
                 crc: opts.crc,
                 dual_return_threshold_m: opts.dual_return_threshold_m,
                 fov_cdeg: opts.fov_deg.map(|(a, b)| {
@@ -553,6 +600,7 @@ impl Session {
             pipeline,
             odometry,
             live: None,
+            tap: None,
         };
         Ok(Self {
             demux,
@@ -656,7 +704,7 @@ impl Session {
     }
 
     /// The output's chunk counters so far, if there is an output.
-    pub fn chunk_stats(&self) -> Option<ringscan::sink::mcap::WriterStats> {
+    pub fn chunk_stats(&self) -> Option<crate::sink::mcap::WriterStats> {
         self.out.sink.as_ref().map(|s| s.chunk_stats())
     }
 
@@ -668,6 +716,38 @@ impl Session {
     /// The demultiplexer (per-sensor streams and counters).
     pub fn demux(&self) -> &Demux {
         &self.demux
+    }
+
+    /// Keeps a copy of every decoded sweep (before the pipeline) for [`Session::take_sweeps`].
+    pub fn enable_tap(&mut self) {
+        self.out.tap.get_or_insert_with(Vec::new);
+    }
+
+    /// The sweeps decoded since the last call (with [`Session::enable_tap`]), oldest first.
+    pub fn take_sweeps(&mut self) -> impl Iterator<Item = ReadSweep> + '_ {
+        self.out
+            .tap
+            .iter_mut()
+            .flat_map(|t| t.drain(..))
+            .map(|(sensor, sweep)| ReadSweep { sensor, sweep })
+    }
+
+    /// The sensor of index `idx`, once seen.
+    pub fn sensor_desc(&self, idx: usize) -> Option<SensorDesc> {
+        let (address, stream) = self.demux.stream(idx)?;
+        let name = self
+            .out
+            .sensors
+            .get(idx)
+            .map(|s| s.name.clone())
+            .filter(|n| !n.is_empty())
+            .unwrap_or_else(|| stream.facts().default_name(address));
+        Some(SensorDesc {
+            name,
+            family: stream.facts().family(),
+            address,
+            channels: stream.channels(),
+        })
     }
 
     /// The error a [`PumpError`] means for the user.
@@ -948,7 +1028,7 @@ impl Default for ChunkCompression {
     fn default() -> Self {
         Self {
             kind: Compression::Zstd,
-            zstd_level: ringscan::sink::mcap::DEFAULT_ZSTD_LEVEL,
+            zstd_level: crate::sink::mcap::DEFAULT_ZSTD_LEVEL,
         }
     }
 }
@@ -958,7 +1038,7 @@ impl std::str::FromStr for ChunkCompression {
 
     /// `zstd`, `zstd:LEVEL`, `lz4` or `none`.
     fn from_str(s: &str) -> Result<Self, String> {
-        let levels = ringscan::sink::mcap::ZSTD_LEVELS;
+        let levels = crate::sink::mcap::ZSTD_LEVELS;
         match s {
             "zstd" => Ok(Self::default()),
             "lz4" => Ok(Self {
@@ -990,15 +1070,14 @@ impl std::str::FromStr for ChunkCompression {
     }
 }
 
-/// Runs a decode: the library entry of `ringscan decode` (and of `info` with no output).
-pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
-    let started = Instant::now();
-    let path_s = args.input.display().to_string();
+/// The session of a capture or bag and its input, ready to pump: the bag's metadata added and
+/// the sensors counted (topic names).
+fn start_session(args: &DecodeArgs) -> Result<(Session, Input<Box<dyn Read>>), RunError> {
     let open = || -> Result<Input<Box<dyn Read>>, RunError> {
         match args.input_bytes {
             Some(b) => Ok(Input::Pcap(Box::new(
                 PcapSource::new(Box::new(b) as Box<dyn Read>).map_err(|err| RunError::Source {
-                    path: path_s.clone(),
+                    path: args.input.display().to_string(),
                     err: err.into(),
                 })?,
             ))),
@@ -1016,6 +1095,33 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
         return Err(RunError::Usage(format!("--name: the capture holds {n_sensors_hint} sensors; names are given per sensor automatically")));
     }
     session.set_sensor_hint(n_sensors_hint);
+    Ok((session, open()?))
+}
+
+/// The `--json` summary of a finished run, and the packets lost.
+fn summary_json(
+    session: &Session,
+    src: &Input<Box<dyn Read>>,
+    path: &str,
+    output: Value,
+    elapsed_s: f64,
+) -> Summary {
+    let (mut m, lost) = session.summary();
+    m.insert("input".into(), json!(path));
+    m.insert("capture".into(), src.capture_json());
+    m.insert("output".into(), output);
+    m.insert("elapsed_s".into(), json!(elapsed_s));
+    Summary {
+        json: Value::Object(m),
+        lost,
+    }
+}
+
+/// Runs a decode: the library entry of `ringscan decode` (and of `info` with no output).
+pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
+    let started = Instant::now();
+    let path_s = args.input.display().to_string();
+    let (mut session, mut src) = start_session(args)?;
     let sink_opts = sink_options_with(
         args.format,
         args.compression,
@@ -1027,15 +1133,15 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
     let bag_dir = args
         .out
         .as_deref()
-        .filter(|p| args.format == FormatArg::Ros2 && ringscan::sink::rosbag2::is_bag_dir(p));
+        .filter(|p| args.format == FormatArg::Ros2 && crate::sink::rosbag2::is_bag_dir(p));
     let sink = match (&args.out, bag_dir) {
         (_, Some(dir)) => {
-            ringscan::sink::rosbag2::create_dir(dir).map_err(|source| SinkError::Io {
+            crate::sink::rosbag2::create_dir(dir).map_err(|source| SinkError::Io {
                 context: format!("creating the rosbag2 directory {}", dir.display()),
                 source,
             })?;
             Some(create_file(
-                &ringscan::sink::rosbag2::file_path(dir, 0),
+                &crate::sink::rosbag2::file_path(dir, 0),
                 sink_opts.clone(),
             )?)
         }
@@ -1047,14 +1153,14 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
         let (Some(dir), Some(s)) = (bag_dir, summary) else {
             return Ok(());
         };
-        let file = ringscan::sink::rosbag2::BagFile {
-            name: ringscan::sink::rosbag2::file_path(dir, 0)
+        let file = crate::sink::rosbag2::BagFile {
+            name: crate::sink::rosbag2::file_path(dir, 0)
                 .file_name()
                 .map(|n| n.to_string_lossy().into_owned())
                 .unwrap_or_default(),
             summary: s.clone(),
         };
-        ringscan::sink::rosbag2::write_metadata(dir, &[file]).map_err(|source| SinkError::Io {
+        crate::sink::rosbag2::write_metadata(dir, &[file]).map_err(|source| SinkError::Io {
             context: format!("writing {}/metadata.yaml", dir.display()),
             source,
         })
@@ -1070,7 +1176,6 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
             .filter(|m| m.is_file())
             .map(|m| m.len()),
     };
-    let mut src = open()?;
     // Finalise the output on success and on error alike: the file is always a valid MCAP.
     if let Err(e) = pump(&mut src, &mut session, total) {
         if let Ok(s) = session.close_sink() {
@@ -1081,37 +1186,117 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
     let sink_summary = session.close_sink()?;
     commit_bag(&sink_summary)?;
     session.finish_odometry()?;
-    let elapsed = started.elapsed().as_secs_f64();
+    let output = match &sink_summary {
+        Some(s) => output_json(
+            s,
+            args.out.as_deref(),
+            &sink_opts,
+            fields_name(args.fields_all, args.fields_minimal),
+        ),
+        None => Value::Null,
+    };
+    Ok(summary_json(
+        &session,
+        &src,
+        &path_s,
+        output,
+        started.elapsed().as_secs_f64(),
+    ))
+}
 
-    let (mut m, lost) = session.summary();
-    m.insert("input".into(), json!(path_s));
-    m.insert("capture".into(), src.capture_json());
-    m.insert(
-        "output".into(),
-        match &sink_summary {
-            Some(s) => output_json(
-                s,
-                args.out.as_deref(),
-                &sink_opts,
-                fields_name(args.fields_all, args.fields_minimal),
-            ),
-            None => Value::Null,
-        },
-    );
-    m.insert("elapsed_s".into(), json!(elapsed));
-    Ok(Summary {
-        json: Value::Object(m),
-        lost,
-    })
+/// A decoded sweep handed out by [`SweepReader`], with the index of its sensor.
+pub struct ReadSweep {
+    /// The sensor's index (order of first appearance).
+    pub sensor: usize,
+    /// The sweep as the stream cut it (no pipeline).
+    pub sweep: Sweep,
+}
+
+/// What a [`SweepReader`] knows of a sensor.
+#[derive(Clone, Debug)]
+pub struct SensorDesc {
+    /// The name `decode` gives it (its topic prefix when there are several).
+    pub name: String,
+    /// The sensor family (`velodyne`, `ouster`, ...).
+    pub family: &'static str,
+    /// Source IPv4 address.
+    pub address: Ipv4Addr,
+    /// Channels (rows of its organised image), once known.
+    pub channels: Option<usize>,
+}
+
+/// A capture or bag read sweep by sweep: the same session as `decode` (sensor detection,
+/// calibrations, the bag's metadata), without an output; the Python package's `open`.
+pub struct SweepReader {
+    src: Input<Box<dyn Read>>,
+    session: Session,
+    path: String,
+    queue: std::collections::VecDeque<ReadSweep>,
+    finished: bool,
+    started: Instant,
+}
+
+impl SweepReader {
+    /// Opens `args.input` (or `args.input_bytes`) with `args`' decoding options; `out`, the
+    /// pipeline and odometry options are not used.
+    pub fn open(args: &DecodeArgs) -> Result<Self, RunError> {
+        let (mut session, src) = start_session(args)?;
+        session.enable_tap();
+        Ok(Self {
+            src,
+            session,
+            path: args.input.display().to_string(),
+            queue: std::collections::VecDeque::new(),
+            finished: false,
+            started: Instant::now(),
+        })
+    }
+
+    /// The next sweep of any sensor, in the order the streams finish them; `None` at the end.
+    pub fn next_sweep(&mut self) -> Result<Option<ReadSweep>, RunError> {
+        loop {
+            if let Some(s) = self.queue.pop_front() {
+                return Ok(Some(s));
+            }
+            if self.finished {
+                return Ok(None);
+            }
+            let pumped = match self.src.next_datagram() {
+                Ok(Some(d)) => self.session.push(d.time_ns, d.src, d.dst.port(), d.payload),
+                Ok(None) => {
+                    self.finished = true;
+                    self.session.finish_streams()
+                }
+                Err(e) => Err(PumpError::Source(e)),
+            };
+            if let Err(e) = pumped {
+                self.finished = true;
+                return Err(self.session.run_error(e, &self.path));
+            }
+            self.queue.extend(self.session.take_sweeps());
+        }
+    }
+
+    /// The sensor of index `idx`, once seen.
+    pub fn sensor(&self, idx: usize) -> Option<SensorDesc> {
+        self.session.sensor_desc(idx)
+    }
+
+    /// The `--json` summary so far (complete once [`Self::next_sweep`] returned `None`).
+    pub fn summary(&self) -> Summary {
+        summary_json(
+            &self.session,
+            &self.src,
+            &self.path,
+            Value::Null,
+            self.started.elapsed().as_secs_f64(),
+        )
+    }
 }
 
 /// A bag's Ouster metadata configures its sensor unless `--calib` binds a file to that
 /// sensor's address; an unbound `--calib` metadata that fits the sensor is matched first.
-fn add_bag_metadata(
-    session: &mut Session,
-    bag: &ringscan::source::bag::BagSource,
-    calib: &[String],
-) {
+fn add_bag_metadata(session: &mut Session, bag: &crate::source::bag::BagSource, calib: &[String]) {
     for s in bag.sensors() {
         let Some(text) = &s.metadata else { continue };
         let bound = calib.iter().any(|c| {
@@ -1196,34 +1381,11 @@ pub fn info_command(
     json_out: bool,
 ) -> Result<ExitCode, RunError> {
     let args = DecodeArgs {
-        input: input.to_path_buf(),
-        out: None,
         model: model.map(str::to_string),
         calib: calib.to_vec(),
-        name: None,
-        port: None,
-        cut_angle_deg: 0.0,
-        min_range: None,
-        max_range: None,
-        dual_return_threshold_m: None,
-        fov_deg: None,
-        integration_ms: None,
-        fields_all: false,
-        fields_minimal: false,
-        compression: ChunkCompression::default(),
-        threads: super::default_threads(),
-        chunk_size: ringscan::sink::mcap::DEFAULT_CHUNK_SIZE,
-        format: FormatArg::Foxglove,
-        raw: false,
-        strict: false,
-        crc: None,
         json: json_out,
-        input_bytes: None,
-        pipeline: PipelineArgs::default(),
-        odometry: OdometryArgs::default(),
-        serve: Default::default(),
-        serve_rate: ringscan::source::udp::Rate::Max,
         bag: bag.clone(),
+        ..DecodeArgs::new(input.to_path_buf())
     };
     let s = decode_capture(&args)?;
     if json_out {
@@ -1237,34 +1399,10 @@ pub fn info_command(
 /// `ringscan demo`.
 pub fn demo_command(out: &Path, json_out: bool) -> Result<ExitCode, RunError> {
     let args = DecodeArgs {
-        input: PathBuf::from("fixtures/demo-vlp16.pcap (built in)"),
         out: Some(out.to_path_buf()),
-        model: None,
-        calib: Vec::new(),
-        name: None,
-        port: None,
-        cut_angle_deg: 0.0,
-        min_range: None,
-        max_range: None,
-        dual_return_threshold_m: None,
-        fov_deg: None,
-        integration_ms: None,
-        fields_all: false,
-        fields_minimal: false,
-        compression: ChunkCompression::default(),
-        threads: super::default_threads(),
-        chunk_size: ringscan::sink::mcap::DEFAULT_CHUNK_SIZE,
-        format: FormatArg::Foxglove,
-        raw: false,
-        strict: false,
-        crc: None,
         json: json_out,
         input_bytes: Some(DEMO_PCAP),
-        pipeline: PipelineArgs::default(),
-        odometry: OdometryArgs::default(),
-        serve: Default::default(),
-        serve_rate: ringscan::source::udp::Rate::Max,
-        bag: BagArgs::default(),
+        ..DecodeArgs::new(PathBuf::from("fixtures/demo-vlp16.pcap (built in)"))
     };
     let s = decode_capture(&args)?;
     if json_out {
@@ -1324,7 +1462,7 @@ fn print_text(j: &Value) {
     }
     for s in j["sensors"].as_array().into_iter().flatten() {
         let kind = s["kind"].as_str().unwrap_or("");
-        let Some(family) = ringscan::sensor::family(kind) else {
+        let Some(family) = crate::sensor::family(kind) else {
             println!("  sensor of an unknown kind {kind:?}: {s}");
             continue;
         };

@@ -1,11 +1,11 @@
 //! What the command line adds to the sensor families: reading `--calib` files, and naming a
-//! sensor's channels. Everything per family is behind [`ringscan::sensor`]'s interface.
+//! sensor's channels. Everything per family is behind [`crate::sensor`]'s interface.
 
 use std::collections::BTreeMap;
 use std::net::Ipv4Addr;
 use std::path::Path;
 
-use ringscan::sensor::{
+use crate::sensor::{
     self, Calibration, CalibrationPool, Claimed, Facts, FirstDatagram, StreamSettings,
     MAX_CALIB_BYTES,
 };

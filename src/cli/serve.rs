@@ -1,4 +1,4 @@
-//! `--serve ADDR`: the live view of `decode` and `listen` ([`ringscan::sink::live_view`]).
+//! `--serve ADDR`: the live view of `decode` and `listen` ([`crate::sink::live_view`]).
 //!
 //! Per sensor the same topics and payloads as the MCAP file: `<prefix>/points`
 //! (`foxglove.PointCloud`, the bytes the MCAP sink writes with `--format foxglove`, also when the
@@ -12,15 +12,15 @@
 use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
-use ringscan::pipeline::cluster::Cluster;
-use ringscan::point::{interleave_extended, Point, EXTENDED_FIELDS, EXTENDED_STRIDE};
-use ringscan::sink::foxglove::{self, PointCloudPrefix};
-use ringscan::sink::live_view::{
+use crate::pipeline::cluster::Cluster;
+use crate::point::{interleave_extended, Point, EXTENDED_FIELDS, EXTENDED_STRIDE};
+use crate::sink::foxglove::{self, PointCloudPrefix};
+use crate::sink::live_view::{
     ChannelId, ChannelSpec, LiveView, LiveViewStats, ServeOptions, DEFAULT_QUEUE_MESSAGES,
 };
-use ringscan::sink::scene::{self, SceneEncoder, OBSTACLE_FIELDS, OBSTACLE_STRIDE};
-use ringscan::source::udp::Rate;
-use ringscan::sweep::Sweep;
+use crate::sink::scene::{self, SceneEncoder, OBSTACLE_FIELDS, OBSTACLE_STRIDE};
+use crate::source::udp::Rate;
+use crate::sweep::Sweep;
 use serde_json::{json, Value};
 
 use super::run::RunError;

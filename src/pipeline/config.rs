@@ -49,9 +49,11 @@
 //! naming the key (`voxel.leaf_m`, …). The core holds only the plain struct and its checks;
 //! parsing TOML needs the `config` feature.
 
+use super::cluster::ClusterParams;
 #[cfg(feature = "config")]
 use super::filter::CropBox;
 use super::filter::{FilterConfig, FilterError};
+use super::ground::{GroundMethod, PolarGridParams};
 use crate::deskew::Reference;
 
 /// Why a configuration was rejected.
@@ -220,6 +222,30 @@ impl Default for GroundConfig {
     }
 }
 
+impl GroundConfig {
+    /// The segmenter's method and parameters.
+    pub fn method(&self) -> GroundMethod {
+        match self.method {
+            GroundMethodName::Grid => GroundMethod::PolarGrid(PolarGridParams {
+                sectors: self.sectors,
+                radial_bin_m: self.radial_bin_m,
+                max_range_m: self.max_range_m,
+                distance_threshold_m: self.distance_threshold_m,
+                max_slope_deg: self.max_slope_deg,
+                max_step_m: self.max_step_m,
+                sensor_height_m: self.sensor_height_m,
+                riser_column_deg: self.riser_column_deg,
+                riser_margin_m: self.riser_margin_m,
+            }),
+            GroundMethodName::Ransac => GroundMethod::Ransac {
+                distance_threshold_m: self.distance_threshold_m,
+                iterations: self.iterations,
+                seed: self.seed,
+            },
+        }
+    }
+}
+
 /// `[cluster]`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ClusterConfig {
@@ -229,6 +255,13 @@ pub struct ClusterConfig {
     pub min_points: usize,
     /// `cluster.max_points`: larger clusters are dropped.
     pub max_points: usize,
+}
+
+impl ClusterConfig {
+    /// The clusterer's parameters.
+    pub fn params(&self) -> ClusterParams {
+        ClusterParams::new(self.tolerance_m, self.min_points, self.max_points)
+    }
 }
 
 impl Default for ClusterConfig {

@@ -20,10 +20,10 @@
 
 use nalgebra::{Isometry3, Vector3};
 
-use super::cluster::{Cluster, ClusterParams, Clusterer, Clusters};
-use super::config::{ConfigError, DeskewMode, GroundMethodName, PipelineConfig};
+use super::cluster::{Cluster, Clusterer, Clusters};
+use super::config::{ConfigError, DeskewMode, PipelineConfig};
 use super::filter::{Filter, FilterStats};
-use super::ground::{GroundMethod, GroundSegmenter, PolarGridParams};
+use super::ground::GroundSegmenter;
 use super::voxel::{VoxelConfig, VoxelGrid};
 use super::PipelineError;
 use crate::deskew::{DeskewError, Deskewer, ImuTrack, PoseTable, Twist};
@@ -142,26 +142,6 @@ impl Pipeline {
             linear_mps: Vector3::from(d.linear_mps),
             angular_radps: Vector3::from(d.angular_degps.map(f64::to_radians)),
         };
-        let g = &config.ground;
-        let method = match g.method {
-            GroundMethodName::Grid => GroundMethod::PolarGrid(PolarGridParams {
-                sectors: g.sectors,
-                radial_bin_m: g.radial_bin_m,
-                max_range_m: g.max_range_m,
-                distance_threshold_m: g.distance_threshold_m,
-                max_slope_deg: g.max_slope_deg,
-                max_step_m: g.max_step_m,
-                sensor_height_m: g.sensor_height_m,
-                riser_column_deg: g.riser_column_deg,
-                riser_margin_m: g.riser_margin_m,
-            }),
-            GroundMethodName::Ransac => GroundMethod::Ransac {
-                distance_threshold_m: g.distance_threshold_m,
-                iterations: g.iterations,
-                seed: g.seed,
-            },
-        };
-        let c = &config.cluster;
         Ok(Self {
             mode: d.mode.clone(),
             deskewer: Deskewer::new(d.reference),
@@ -172,13 +152,10 @@ impl Pipeline {
             base_from_sensor,
             voxel: VoxelGrid::new(VoxelConfig::cubic(config.voxel_leaf_m))
                 .map_err(|e| stage_error("voxel", e))?,
-            ground: GroundSegmenter::new(method).map_err(|e| stage_error("ground", e))?,
-            clusterer: Clusterer::new(ClusterParams::new(
-                c.tolerance_m,
-                c.min_points,
-                c.max_points,
-            ))
-            .map_err(|e| stage_error("cluster", e))?,
+            ground: GroundSegmenter::new(config.ground.method())
+                .map_err(|e| stage_error("ground", e))?,
+            clusterer: Clusterer::new(config.cluster.params())
+                .map_err(|e| stage_error("cluster", e))?,
             filtered: Vec::new(),
             voxels: Vec::new(),
             labels: Vec::new(),

@@ -6,6 +6,8 @@ use std::net::SocketAddrV4;
 
 #[cfg(feature = "bag")]
 pub mod bag;
+#[cfg(all(feature = "pcap", feature = "bag"))]
+pub mod input;
 pub mod link;
 #[cfg(feature = "pcap")]
 pub mod pcap;

@@ -1,53 +1,16 @@
-//! The input of `decode`, `info` and `replay`: a pcap / pcapng capture or a ROS bag, told apart
-//! by its bytes ([`ringscan::source::bag::detect`]); both give the same datagrams.
+//! One input file, whatever it is: a pcap / pcapng capture or a ROS bag, told apart by its bytes
+//! ([`crate::source::bag::detect`]); both give the same datagrams. The command line's `decode`,
+//! `info` and `replay` and the Python package read through it.
 
 use std::fs::File;
 use std::io::{BufReader, Read};
 use std::path::Path;
 
-use ringscan::source::bag::{self, BagOptions, BagSource, TimeBound};
-use ringscan::source::pcap::{PcapSource, SourceError};
-use ringscan::source::Datagram;
 use serde_json::{json, Value};
 
-use super::run::RunError;
-
-/// Options that apply to bags.
-#[derive(clap::Args, Debug, Clone, Default)]
-pub struct BagArgs {
-    /// Bags: read only this topic (repeatable); the sensors' Ouster metadata topics are read
-    /// anyway.
-    #[arg(long = "topic", value_name = "TOPIC")]
-    pub topics: Vec<String>,
-    /// Bags: skip messages recorded before this, seconds after the bag's first message (or, above
-    /// 1e9, seconds since the Unix epoch).
-    #[arg(long, value_name = "S")]
-    pub start: Option<f64>,
-    /// Bags: skip messages recorded after this (seconds, as --start).
-    #[arg(long, value_name = "S")]
-    pub end: Option<f64>,
-}
-
-impl BagArgs {
-    fn given(&self) -> bool {
-        !self.topics.is_empty() || self.start.is_some() || self.end.is_some()
-    }
-
-    fn options(&self) -> Result<BagOptions, RunError> {
-        for (name, v) in [("--start", self.start), ("--end", self.end)] {
-            if v.is_some_and(|s| !s.is_finite() || s < 0.0) {
-                return Err(RunError::Usage(format!(
-                    "{name}: expected a non-negative number of seconds"
-                )));
-            }
-        }
-        Ok(BagOptions {
-            topics: self.topics.clone(),
-            start: self.start.map(TimeBound::from_seconds),
-            end: self.end.map(TimeBound::from_seconds),
-        })
-    }
-}
+use crate::source::bag::{self, BagOptions, BagSource};
+use crate::source::pcap::{PcapSource, SourceError};
+use crate::source::Datagram;
 
 /// Why an input could not be read.
 #[derive(Debug, thiserror::Error)]
@@ -62,37 +25,25 @@ pub enum InputError {
 
 /// A capture or a bag.
 pub enum Input<R: Read> {
+    /// A pcap or pcapng capture.
     Pcap(Box<PcapSource<R>>),
+    /// A ROS 1 bag, a rosbag2 directory or a bare `.db3` / `.mcap` bag file.
     Bag(Box<BagSource>),
 }
 
-/// Opens `path` as a bag when its bytes say so, else as a capture.
-pub fn open(path: &Path, bag_args: &BagArgs) -> Result<Input<Box<dyn Read>>, RunError> {
-    let serr = |err: InputError| RunError::Source {
-        path: path.display().to_string(),
-        err,
-    };
+/// Opens `path` as a bag when its bytes say so (read with `bag_options`), else as a capture.
+pub fn open(path: &Path, bag_options: BagOptions) -> Result<Input<Box<dyn Read>>, InputError> {
     // A path that cannot be read gets the capture reader's error message.
     if let Ok(Some(_)) = bag::detect(path) {
-        let source = BagSource::open(path, bag_args.options()?).map_err(|e| serr(e.into()))?;
+        let source = BagSource::open(path, bag_options)?;
         return Ok(Input::Bag(Box::new(source)));
     }
-    if bag_args.given() {
-        return Err(RunError::Usage(format!(
-            "--topic / --start / --end: {} is not a bag",
-            path.display()
-        )));
-    }
-    let file = File::open(path).map_err(|source| {
-        serr(InputError::Pcap(SourceError::Open {
-            path: path.to_path_buf(),
-            source,
-        }))
+    let file = File::open(path).map_err(|source| SourceError::Open {
+        path: path.to_path_buf(),
+        source,
     })?;
     let reader: Box<dyn Read> = Box::new(BufReader::with_capacity(1 << 16, file));
-    Ok(Input::Pcap(Box::new(
-        PcapSource::new(reader).map_err(|e| serr(e.into()))?,
-    )))
+    Ok(Input::Pcap(Box::new(PcapSource::new(reader)?)))
 }
 
 impl<R: Read> Input<R> {

@@ -1,0 +1,544 @@
+//! `ringscan._ringscan`: the native half of the Python package. Thin: every decision (input
+//! kinds, sensor detection, calibrations, sweep cutting, summaries, error messages) is the
+//! library's and the command line's; this file moves sweeps across threads and into Python.
+//!
+//! Decoding runs on a thread of its own, which owns the reader (the session is not `Send`), and
+//! hands sweeps over a bounded channel: the GIL is released while Python waits, memory stays
+//! bounded whatever the capture's size, and Python's work on one sweep overlaps the decoding of
+//! the next.
+
+use std::path::PathBuf;
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError, SyncSender};
+use std::sync::Mutex;
+use std::time::Duration;
+
+use pyo3::create_exception;
+use pyo3::exceptions::{PyException, PyRuntimeError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use ringscan::cli::bag_args::BagArgs;
+use ringscan::cli::run::{decode_capture, DecodeArgs, RunError, SweepReader};
+use ringscan::point::{interleave_extended, Point, EXTENDED_STRIDE, POINT_STRIDE};
+
+mod compat;
+mod stream;
+
+create_exception!(
+    _ringscan,
+    RingscanError,
+    PyException,
+    "Base of every ringscan error."
+);
+create_exception!(
+    _ringscan,
+    UsageError,
+    RingscanError,
+    "Bad options (the command line's exit code 2)."
+);
+create_exception!(
+    _ringscan,
+    InputError,
+    RingscanError,
+    "The capture or bag could not be read."
+);
+create_exception!(
+    _ringscan,
+    CalibrationError,
+    RingscanError,
+    "A calibration file could not be used."
+);
+create_exception!(
+    _ringscan,
+    DecodeError,
+    RingscanError,
+    "A sensor's stream could not be decoded, or the output could not be written."
+);
+
+/// Sweeps held between the decoding thread and Python.
+const QUEUE: usize = 4;
+
+/// How an error crosses the thread: its class and the command line's message.
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum ErrKind {
+    Usage,
+    Input,
+    Calib,
+    Decode,
+}
+
+pub(crate) fn kind_of(e: &RunError) -> ErrKind {
+    match e {
+        RunError::Usage(_) => ErrKind::Usage,
+        RunError::Source { .. } => ErrKind::Input,
+        RunError::Calib { .. } => ErrKind::Calib,
+        _ => ErrKind::Decode,
+    }
+}
+
+pub(crate) fn to_py_err(kind: ErrKind, msg: String) -> PyErr {
+    match kind {
+        ErrKind::Usage => UsageError::new_err(msg),
+        ErrKind::Input => InputError::new_err(msg),
+        ErrKind::Calib => CalibrationError::new_err(msg),
+        ErrKind::Decode => DecodeError::new_err(msg),
+    }
+}
+
+/// A block of memory numpy views without copying (`__array_interface__`): the array keeps
+/// this object alive, and nothing in Rust touches the memory once it is handed out.
+#[pyclass(module = "ringscan._ringscan", frozen)]
+pub struct Buffer {
+    data: BufData,
+    len: usize,
+    typestr: &'static str,
+}
+
+enum BufData {
+    Points(Vec<Point>),
+    Bytes(Vec<u8>),
+    U32(Vec<u32>),
+    F32(Vec<f32>),
+}
+
+impl Buffer {
+    pub(crate) fn points(p: Vec<Point>) -> Self {
+        Self {
+            len: p.len(),
+            data: BufData::Points(p),
+            typestr: "|V24",
+        }
+    }
+
+    fn records(bytes: Vec<u8>, stride: usize, typestr: &'static str) -> Self {
+        Self {
+            len: bytes.len() / stride.max(1),
+            data: BufData::Bytes(bytes),
+            typestr,
+        }
+    }
+
+    pub(crate) fn u32s(v: Vec<u32>) -> Self {
+        Self {
+            len: v.len(),
+            data: BufData::U32(v),
+            typestr: "<u4",
+        }
+    }
+
+    pub(crate) fn f32s(v: Vec<f32>) -> Self {
+        Self {
+            len: v.len(),
+            data: BufData::F32(v),
+            typestr: "<f4",
+        }
+    }
+
+    fn address(&self) -> usize {
+        match &self.data {
+            BufData::Points(v) => v.as_ptr() as usize,
+            BufData::Bytes(v) => v.as_ptr() as usize,
+            BufData::U32(v) => v.as_ptr() as usize,
+            BufData::F32(v) => v.as_ptr() as usize,
+        }
+    }
+}
+
+#[pymethods]
+impl Buffer {
+    /// The numpy array interface (version 3): one-dimensional, `len` records.
+    #[getter]
+    fn __array_interface__<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        d.set_item("version", 3)?;
+        d.set_item("shape", (self.len,))?;
+        d.set_item("typestr", self.typestr)?;
+        // An empty vector's pointer is dangling but non-null and never read: numpy accepts it.
+        d.set_item("data", (self.address(), false))?;
+        Ok(d)
+    }
+
+    fn __len__(&self) -> usize {
+        self.len
+    }
+}
+
+/// One decoded sweep as the native module hands it out; `ringscan.Sweep` wraps it.
+#[pyclass(module = "ringscan._ringscan", frozen, get_all)]
+pub struct RawSweep {
+    index: u64,
+    timestamp_ns: i64,
+    clock: &'static str,
+    device_time_ns: i64,
+    first_host_ns: i64,
+    last_host_ns: i64,
+    packets: u32,
+    missing_packets: u64,
+    missing_columns: u64,
+    frame_id: u32,
+    columns_count: u32,
+    first_azimuth_cdeg: u16,
+    sensor: String,
+    sensor_index: usize,
+    family: &'static str,
+    address: String,
+    channels: Option<usize>,
+    /// `Point` records (24 bytes), or `Point` + `PointExtra` records (32 bytes) with extras.
+    points: Py<Buffer>,
+    /// Whether `points` holds the extended records.
+    extended: bool,
+    /// Each point's firing column, when kept (organised sensors), else `None`.
+    columns: Option<Py<Buffer>>,
+}
+
+/// What a decoding thread sends: items, then its end (with the summary) or its error.
+pub(crate) enum Msg<T> {
+    Item(T),
+    End(String),
+    Error(ErrKind, String),
+}
+
+/// A sweep and its sensor, from the reader's thread.
+type SweepMsg = Box<(
+    ringscan::cli::run::ReadSweep,
+    Option<ringscan::cli::run::SensorDesc>,
+)>;
+
+/// The next item from a decoding thread: `None` at its end (the summary kept in `summary`),
+/// its error raised; the channel is closed after either.
+pub(crate) fn next_item<T: Send>(
+    py: Python<'_>,
+    rx: &Mutex<Option<Receiver<Msg<T>>>>,
+    summary: Option<&Mutex<Option<String>>>,
+) -> PyResult<Option<T>> {
+    let mut guard = rx
+        .lock()
+        .map_err(|_| PyRuntimeError::new_err("the reader is used from two threads"))?;
+    if guard.is_none() {
+        return Ok(None);
+    }
+    match recv(py, &mut guard)? {
+        Some(Msg::Item(t)) => Ok(Some(t)),
+        Some(Msg::End(s)) => {
+            *guard = None;
+            if let Some(Ok(mut slot)) = summary.map(Mutex::lock) {
+                *slot = Some(s);
+            }
+            Ok(None)
+        }
+        Some(Msg::Error(kind, msg)) => {
+            *guard = None;
+            Err(to_py_err(kind, msg))
+        }
+        None => {
+            *guard = None;
+            Err(PyRuntimeError::new_err(
+                "the decoding thread stopped without an answer (a bug: please report it)",
+            ))
+        }
+    }
+}
+
+pub(crate) fn raw_sweep(
+    py: Python<'_>,
+    rs: ringscan::cli::run::ReadSweep,
+    desc: Option<ringscan::cli::run::SensorDesc>,
+) -> PyResult<RawSweep> {
+    let mut sw = rs.sweep;
+    let extended = !sw.extras.is_empty() && sw.extras.len() == sw.points.len();
+    let points = if extended {
+        let mut bytes = Vec::new();
+        interleave_extended(&sw.points, &sw.extras, &mut bytes);
+        Buffer::records(bytes, EXTENDED_STRIDE, "|V32")
+    } else {
+        debug_assert_eq!(POINT_STRIDE, 24);
+        Buffer::points(std::mem::take(&mut sw.points))
+    };
+    let n = points.len;
+    let columns = if sw.columns.len() == n && n > 0 {
+        Some(Py::new(py, Buffer::u32s(std::mem::take(&mut sw.columns)))?)
+    } else {
+        None
+    };
+    let desc = desc.unwrap_or(ringscan::cli::run::SensorDesc {
+        name: String::new(),
+        family: "",
+        address: std::net::Ipv4Addr::UNSPECIFIED,
+        channels: None,
+    });
+    Ok(RawSweep {
+        index: sw.index,
+        timestamp_ns: sw.timestamp_ns,
+        clock: sw.clock.name(),
+        device_time_ns: sw.device_time_ns,
+        first_host_ns: sw.first_host_ns,
+        last_host_ns: sw.last_host_ns,
+        packets: sw.packets,
+        missing_packets: sw.missing_packets,
+        missing_columns: sw.missing_columns,
+        frame_id: sw.frame_id,
+        columns_count: sw.columns_count,
+        first_azimuth_cdeg: sw.first_azimuth,
+        sensor: desc.name,
+        sensor_index: rs.sensor,
+        family: desc.family,
+        address: desc.address.to_string(),
+        channels: desc.channels,
+        points: Py::new(py, points)?,
+        extended,
+        columns,
+    })
+}
+
+/// Decoding options shared by `Reader` and `info` (the command line's flags).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn decode_args(
+    path: PathBuf,
+    model: Option<String>,
+    calib: Vec<String>,
+    topics: Vec<String>,
+    start: Option<f64>,
+    end: Option<f64>,
+    port: Option<u16>,
+    cut_angle_deg: f64,
+    min_range: Option<f32>,
+    max_range: Option<f32>,
+    fields_all: bool,
+    crc: Option<bool>,
+    dual_return_threshold_m: Option<f32>,
+    fov_deg: Option<(f64, f64)>,
+    integration_ms: Option<f64>,
+) -> DecodeArgs {
+    DecodeArgs {
+        model,
+        calib,
+        port,
+        cut_angle_deg,
+        min_range,
+        max_range,
+        fields_all,
+        crc,
+        dual_return_threshold_m,
+        fov_deg,
+        integration_ms,
+        bag: BagArgs { topics, start, end },
+        // One thread: a fleet runs one decoding thread per task.
+        threads: 1,
+        ..DecodeArgs::new(path)
+    }
+}
+
+/// A capture or bag being decoded on a thread of its own.
+#[pyclass(module = "ringscan._ringscan")]
+pub struct Reader {
+    rx: Mutex<Option<Receiver<Msg<SweepMsg>>>>,
+    summary: Mutex<Option<String>>,
+}
+
+fn spawn_reader(args: DecodeArgs) -> PyResult<Receiver<Msg<SweepMsg>>> {
+    let (tx, rx) = mpsc::sync_channel::<Msg<SweepMsg>>(QUEUE);
+    std::thread::Builder::new()
+        .name("ringscan-read".into())
+        .spawn(move || read_thread(&args, &tx))
+        .map_err(|e| PyRuntimeError::new_err(format!("starting the decoding thread: {e}")))?;
+    Ok(rx)
+}
+
+fn read_thread(args: &DecodeArgs, tx: &SyncSender<Msg<SweepMsg>>) {
+    let mut reader = match SweepReader::open(args) {
+        Ok(r) => r,
+        Err(e) => {
+            let _ = tx.send(Msg::Error(kind_of(&e), e.to_string()));
+            return;
+        }
+    };
+    loop {
+        let msg = match reader.next_sweep() {
+            Ok(Some(rs)) => {
+                let desc = reader.sensor(rs.sensor);
+                Msg::Item(Box::new((rs, desc)))
+            }
+            Ok(None) => {
+                let _ = tx.send(Msg::End(reader.summary().json.to_string()));
+                return;
+            }
+            Err(e) => Msg::Error(kind_of(&e), e.to_string()),
+        };
+        let stop = matches!(msg, Msg::Error(..));
+        // A closed channel: the Python side is gone; stop decoding.
+        if tx.send(msg).is_err() || stop {
+            return;
+        }
+    }
+}
+
+/// Waits for the next message with the GIL released, waking up to let Ctrl-C through. The
+/// receiver moves into the wait and back (it is `Send`, not `Sync`).
+pub(crate) fn recv<T: Send>(py: Python<'_>, slot: &mut Option<Receiver<T>>) -> PyResult<Option<T>> {
+    loop {
+        let Some(rx) = slot.take() else {
+            return Ok(None);
+        };
+        let (rx, got) = py.allow_threads(move || {
+            let got = rx.recv_timeout(Duration::from_millis(100));
+            (rx, got)
+        });
+        *slot = Some(rx);
+        match got {
+            Ok(m) => return Ok(Some(m)),
+            Err(RecvTimeoutError::Timeout) => py.check_signals()?,
+            Err(RecvTimeoutError::Disconnected) => return Ok(None),
+        }
+    }
+}
+
+#[pymethods]
+impl Reader {
+    #[new]
+    #[pyo3(signature = (path, model=None, calib=vec![], topics=vec![], start=None, end=None, port=None, cut_angle=0.0, min_range=None, max_range=None, fields_all=false, crc=None, dual_return_threshold=None, fov=None, integration_ms=None, keep_columns=true))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        path: PathBuf,
+        model: Option<String>,
+        calib: Vec<String>,
+        topics: Vec<String>,
+        start: Option<f64>,
+        end: Option<f64>,
+        port: Option<u16>,
+        cut_angle: f64,
+        min_range: Option<f32>,
+        max_range: Option<f32>,
+        fields_all: bool,
+        crc: Option<bool>,
+        dual_return_threshold: Option<f32>,
+        fov: Option<(f64, f64)>,
+        integration_ms: Option<f64>,
+        keep_columns: bool,
+    ) -> PyResult<Self> {
+        let mut args = decode_args(
+            path,
+            model,
+            calib,
+            topics,
+            start,
+            end,
+            port,
+            cut_angle,
+            min_range,
+            max_range,
+            fields_all,
+            crc,
+            dual_return_threshold,
+            fov,
+            integration_ms,
+        );
+        args.keep_columns = keep_columns;
+        Ok(Self {
+            rx: Mutex::new(Some(spawn_reader(args)?)),
+            summary: Mutex::new(None),
+        })
+    }
+
+    /// The next sweep, or `None` at the end; raises the decoding error, if any.
+    fn next(&self, py: Python<'_>) -> PyResult<Option<RawSweep>> {
+        match next_item(py, &self.rx, Some(&self.summary))? {
+            Some(b) => {
+                let (rs, desc) = *b;
+                Ok(Some(raw_sweep(py, rs, desc)?))
+            }
+            None => Ok(None),
+        }
+    }
+
+    /// The `--json` summary (a JSON string) once the reader reached the end, else `None`.
+    fn summary(&self) -> Option<String> {
+        self.summary.lock().ok().and_then(|s| s.clone())
+    }
+
+    /// Stops decoding (the thread ends at its next sweep).
+    fn close(&self) {
+        if let Ok(mut g) = self.rx.lock() {
+            *g = None;
+        }
+    }
+}
+
+/// `ringscan info --json` on a capture or bag, as a JSON string.
+#[pyfunction]
+#[pyo3(signature = (path, model=None, calib=vec![], topics=vec![], start=None, end=None))]
+fn info(
+    py: Python<'_>,
+    path: PathBuf,
+    model: Option<String>,
+    calib: Vec<String>,
+    topics: Vec<String>,
+    start: Option<f64>,
+    end: Option<f64>,
+) -> PyResult<String> {
+    let args = decode_args(
+        path, model, calib, topics, start, end, None, 0.0, None, None, false, None, None, None,
+        None,
+    );
+    run_decode(py, &args)
+}
+
+/// `ringscan decode --json` of a capture or bag into an MCAP file `out` (or no file), as a
+/// JSON string: the fleet's per-capture output.
+#[pyfunction]
+#[pyo3(signature = (path, out=None, model=None, calib=vec![], topics=vec![], threads=1))]
+fn decode(
+    py: Python<'_>,
+    path: PathBuf,
+    out: Option<PathBuf>,
+    model: Option<String>,
+    calib: Vec<String>,
+    topics: Vec<String>,
+    threads: usize,
+) -> PyResult<String> {
+    let mut args = decode_args(
+        path, model, calib, topics, None, None, None, 0.0, None, None, false, None, None, None,
+        None,
+    );
+    args.out = out;
+    args.threads = threads.max(1);
+    run_decode(py, &args)
+}
+
+/// A whole decode without the GIL; its summary as a JSON string.
+fn run_decode(py: Python<'_>, args: &DecodeArgs) -> PyResult<String> {
+    py.allow_threads(|| decode_capture(args).map_err(|e| (kind_of(&e), e.to_string())))
+        .map(|s| s.json.to_string())
+        .map_err(|(k, m)| to_py_err(k, m))
+}
+
+/// Runs the command line with `argv` (program name first); returns its exit code.
+#[pyfunction]
+fn cli_main(py: Python<'_>, argv: Vec<String>) -> u8 {
+    py.allow_threads(|| ringscan::cli::run(argv))
+}
+
+/// The library's version.
+#[pyfunction]
+fn version() -> &'static str {
+    env!("CARGO_PKG_VERSION")
+}
+
+#[pymodule]
+fn _ringscan(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    let py = m.py();
+    m.add("RingscanError", py.get_type::<RingscanError>())?;
+    m.add("UsageError", py.get_type::<UsageError>())?;
+    m.add("InputError", py.get_type::<InputError>())?;
+    m.add("CalibrationError", py.get_type::<CalibrationError>())?;
+    m.add("DecodeError", py.get_type::<DecodeError>())?;
+    m.add_class::<Buffer>()?;
+    m.add_class::<RawSweep>()?;
+    m.add_class::<Reader>()?;
+    m.add_function(wrap_pyfunction!(info, m)?)?;
+    m.add_function(wrap_pyfunction!(cli_main, m)?)?;
+    m.add_function(wrap_pyfunction!(decode, m)?)?;
+    m.add_function(wrap_pyfunction!(version, m)?)?;
+    compat::register(m)?;
+    stream::register(m)?;
+    Ok(())
+}

@@ -1,0 +1,581 @@
+//! The rest of the Python API on top of the same code as the command line: the streaming
+//! [`Decoder`] (datagrams a caller receives itself), [`Listener`] (live sensors, `listen`'s
+//! sockets and bounded queues), the pipeline stages and the odometry on arrays (configured by
+//! the CLI's TOML keys and flags, so their checks and messages), and [`McapWriter`] (the
+//! CLI's MCAP sink and schemas).
+
+use std::net::{Ipv4Addr, SocketAddrV4};
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{self, Receiver};
+use std::sync::{Arc, Mutex};
+
+use pyo3::exceptions::PyRuntimeError;
+use pyo3::prelude::*;
+use pyo3::types::{PyBytes, PyDict};
+
+use ringscan::cli::listen::{listen_run, parse_sensor, ListenArgs, ListenHooks, TappedSweep};
+use ringscan::cli::odometry::{MethodArg, OdometryArgs};
+use ringscan::cli::run::{DecodeArgs, Session};
+use ringscan::deskew::{Deskewer, Twist};
+use ringscan::pipeline::cluster::{Clusterer, Clusters};
+use ringscan::pipeline::config::PipelineConfig;
+use ringscan::pipeline::ground::GroundSegmenter;
+use ringscan::pipeline::voxel::{VoxelConfig, VoxelGrid};
+use ringscan::point::Point;
+use ringscan::registration::odometry::Odometry as CoreOdometry;
+use ringscan::sink::mcap::{create_file, SensorId, SensorInfo, SweepMsg};
+
+use crate::{decode_args, kind_of, raw_sweep, recv, to_py_err, Buffer, ErrKind, RawSweep};
+
+/// Points from bytes of 24-byte records (any alignment).
+fn points_of(bytes: &[u8]) -> PyResult<Vec<Point>> {
+    if bytes.len() % 24 != 0 {
+        return Err(to_py_err(
+            ErrKind::Usage,
+            format!("{} bytes: not whole 24-byte point records", bytes.len()),
+        ));
+    }
+    Ok(bytemuck::pod_collect_to_vec::<u8, Point>(bytes))
+}
+
+fn pipeline_config(toml: &str) -> PyResult<PipelineConfig> {
+    PipelineConfig::from_toml(toml).map_err(|e| to_py_err(ErrKind::Usage, format!("pipeline: {e}")))
+}
+
+/// Datagrams pushed by the caller, decoded as `decode` decodes a capture.
+#[pyclass(module = "ringscan._ringscan", unsendable)]
+pub struct Decoder {
+    session: Session,
+}
+
+#[pymethods]
+impl Decoder {
+    #[new]
+    #[pyo3(signature = (model=None, calib=vec![], port=None, cut_angle=0.0, min_range=None, max_range=None, fields_all=false, keep_columns=true))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        model: Option<String>,
+        calib: Vec<String>,
+        port: Option<u16>,
+        cut_angle: f64,
+        min_range: Option<f32>,
+        max_range: Option<f32>,
+        fields_all: bool,
+        keep_columns: bool,
+    ) -> PyResult<Self> {
+        let mut args = decode_args(
+            PathBuf::from("datagrams"),
+            model,
+            calib,
+            Vec::new(),
+            None,
+            None,
+            port,
+            cut_angle,
+            min_range,
+            max_range,
+            fields_all,
+            None,
+            None,
+            None,
+            None,
+        );
+        args.keep_columns = keep_columns;
+        let mut session = Session::new(&args.session_options())
+            .map_err(|e| to_py_err(kind_of(&e), e.to_string()))?;
+        session.enable_tap();
+        Ok(Self { session })
+    }
+
+    /// Feeds one UDP payload from `src` ("IP:PORT") to `port`, received at `time_ns`; returns
+    /// the sweeps it completed.
+    #[pyo3(signature = (payload, src, port, time_ns=0))]
+    fn push(
+        &mut self,
+        py: Python<'_>,
+        payload: &[u8],
+        src: &str,
+        port: u16,
+        time_ns: i64,
+    ) -> PyResult<Vec<RawSweep>> {
+        let src: SocketAddrV4 = src.parse().map_err(|_| {
+            to_py_err(
+                ErrKind::Usage,
+                format!("src {src:?}: expected \"IPv4:PORT\""),
+            )
+        })?;
+        if let Err(e) = self.session.push(time_ns, src, port, payload) {
+            let e = self.session.run_error(e, "datagrams");
+            return Err(to_py_err(kind_of(&e), e.to_string()));
+        }
+        self.drain(py)
+    }
+
+    /// Ends every stream: their last sweeps.
+    fn finish(&mut self, py: Python<'_>) -> PyResult<Vec<RawSweep>> {
+        if let Err(e) = self.session.finish_streams() {
+            let e = self.session.run_error(e, "datagrams");
+            return Err(to_py_err(kind_of(&e), e.to_string()));
+        }
+        self.drain(py)
+    }
+
+    /// The summary's shared fields (sweeps, points, packets, sensors), a JSON string.
+    fn summary(&self) -> String {
+        serde_json::Value::Object(self.session.summary().0).to_string()
+    }
+}
+
+impl Decoder {
+    fn drain(&mut self, py: Python<'_>) -> PyResult<Vec<RawSweep>> {
+        let sweeps: Vec<_> = self.session.take_sweeps().collect();
+        sweeps
+            .into_iter()
+            .map(|rs| {
+                let desc = self.session.sensor_desc(rs.sensor);
+                raw_sweep(py, rs, desc)
+            })
+            .collect()
+    }
+}
+
+/// How a listener's thread ended: the summary (JSON) or the error.
+type Outcome = Arc<Mutex<Option<Result<String, (ErrKind, String)>>>>;
+
+/// `listen` on a thread of its own, its sweeps through a bounded channel.
+#[pyclass(module = "ringscan._ringscan")]
+pub struct Listener {
+    rx: Mutex<Option<Receiver<TappedSweep>>>,
+    stop: Arc<AtomicBool>,
+    done: Outcome,
+    thread: Mutex<Option<std::thread::JoinHandle<()>>>,
+}
+
+#[pymethods]
+impl Listener {
+    #[new]
+    #[pyo3(signature = (sensors, model=None, calib=vec![], duration=None, multicast=None, interface="0.0.0.0", recv_buffer=None, api_port=80, queue=16, out=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        sensors: Vec<String>,
+        model: Option<String>,
+        calib: Vec<String>,
+        duration: Option<f64>,
+        multicast: Option<&str>,
+        interface: &str,
+        recv_buffer: Option<usize>,
+        api_port: u16,
+        queue: usize,
+        out: Option<PathBuf>,
+    ) -> PyResult<Self> {
+        let sensors = sensors
+            .iter()
+            .map(|s| parse_sensor(s).map_err(|e| to_py_err(ErrKind::Usage, format!("sensor {e}"))))
+            .collect::<PyResult<Vec<_>>>()?;
+        let ip = |s: &str, what: &str| -> PyResult<Ipv4Addr> {
+            s.parse().map_err(|_| {
+                to_py_err(
+                    ErrKind::Usage,
+                    format!("{what} {s:?}: expected an IPv4 address"),
+                )
+            })
+        };
+        let duration = match duration {
+            Some(d) if d.is_finite() && d > 0.0 => Some(std::time::Duration::from_secs_f64(d)),
+            Some(d) => {
+                return Err(to_py_err(
+                    ErrKind::Usage,
+                    format!("duration {d}: expected a positive number of seconds"),
+                ))
+            }
+            None => None,
+        };
+        let d = DecodeArgs {
+            model,
+            calib,
+            keep_columns: true,
+            ..DecodeArgs::new(PathBuf::from("udp"))
+        };
+        let (tx, rx) = mpsc::sync_channel::<TappedSweep>(queue.max(1));
+        let stop = Arc::new(AtomicBool::new(false));
+        let args = ListenArgs {
+            sensors,
+            out,
+            split_every: None,
+            session: d.session_options(),
+            format: d.format,
+            fields_minimal: false,
+            threads: 1,
+            chunk_size: d.chunk_size,
+            multicast: multicast.map(|m| ip(m, "multicast")).transpose()?,
+            interface: ip(interface, "interface")?,
+            api_port,
+            recv_buffer: recv_buffer.unwrap_or(ringscan::source::udp::DEFAULT_RECV_BUFFER),
+            duration,
+            strict: false,
+            json: true,
+            serve: Default::default(),
+            hesai_ptc: None,
+            hooks: ListenHooks {
+                stop: Some(stop.clone()),
+                sweeps: Some(tx),
+                sweeps_dropped: Default::default(),
+            },
+        };
+        let done = Arc::new(Mutex::new(None));
+        let done_t = done.clone();
+        let thread = std::thread::Builder::new()
+            .name("ringscan-listen".into())
+            .spawn(move || {
+                let r = listen_run(&args)
+                    .map(|o| o.json.to_string())
+                    .map_err(|e| (kind_of(&e), e.to_string()));
+                if let Ok(mut g) = done_t.lock() {
+                    *g = Some(r);
+                }
+            })
+            .map_err(|e| PyRuntimeError::new_err(format!("starting the listener: {e}")))?;
+        Ok(Self {
+            rx: Mutex::new(Some(rx)),
+            stop,
+            done,
+            thread: Mutex::new(Some(thread)),
+        })
+    }
+
+    /// The next sweep, or `None` once listening stopped (then `summary()`).
+    fn next(&self, py: Python<'_>) -> PyResult<Option<RawSweep>> {
+        let mut guard = self
+            .rx
+            .lock()
+            .map_err(|_| PyRuntimeError::new_err("the listener is used from two threads"))?;
+        if guard.is_none() {
+            return Ok(None);
+        }
+        match recv(py, &mut guard) {
+            Ok(Some((rs, desc))) => Ok(Some(raw_sweep(py, rs, desc)?)),
+            Ok(None) => {
+                *guard = None;
+                self.join(py);
+                match self.done.lock().ok().and_then(|mut g| g.take()) {
+                    Some(Err((k, m))) => Err(to_py_err(k, m)),
+                    Some(Ok(s)) => {
+                        if let Ok(mut g) = self.done.lock() {
+                            *g = Some(Ok(s));
+                        }
+                        Ok(None)
+                    }
+                    None => Ok(None),
+                }
+            }
+            Err(e) => {
+                // Ctrl-C in the consumer: stop the sockets too.
+                self.stop.store(true, Ordering::Relaxed);
+                Err(e)
+            }
+        }
+    }
+
+    /// Asks the listener to stop (the summary follows once `next()` returned `None`).
+    fn stop(&self) {
+        self.stop.store(true, Ordering::Relaxed);
+    }
+
+    /// The `listen --json` summary (a JSON string) once stopped, else `None`.
+    fn summary(&self) -> Option<String> {
+        match self.done.lock().ok()?.as_ref()? {
+            Ok(s) => Some(s.clone()),
+            Err(_) => None,
+        }
+    }
+}
+
+impl Listener {
+    fn join(&self, py: Python<'_>) {
+        let handle = self.thread.lock().ok().and_then(|mut g| g.take());
+        if let Some(h) = handle {
+            py.allow_threads(move || {
+                let _ = h.join();
+            });
+        }
+    }
+}
+
+impl Drop for Listener {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+    }
+}
+
+/// `[voxel]` of the pipeline: one point per voxel (the centroid).
+#[pyfunction]
+fn voxel_downsample(py: Python<'_>, points: &[u8], toml: &str) -> PyResult<Py<Buffer>> {
+    let pts = points_of(points)?;
+    let cfg = pipeline_config(toml)?;
+    let mut grid = VoxelGrid::new(VoxelConfig::cubic(cfg.voxel_leaf_m))
+        .map_err(|e| to_py_err(ErrKind::Usage, format!("voxel: {e}")))?;
+    let out = py.allow_threads(move || {
+        let mut out = Vec::new();
+        grid.downsample(&pts, &mut out);
+        out
+    });
+    Py::new(py, Buffer::points(out))
+}
+
+/// `[ground]` of the pipeline: whether each point is ground (one byte per point).
+#[pyfunction]
+fn segment_ground(py: Python<'_>, points: &[u8], toml: &str) -> PyResult<Py<PyBytes>> {
+    let pts = points_of(points)?;
+    let cfg = pipeline_config(toml)?;
+    let mut seg = GroundSegmenter::new(cfg.ground.method())
+        .map_err(|e| to_py_err(ErrKind::Usage, format!("ground: {e}")))?;
+    let labels = py.allow_threads(move || {
+        let mut labels = Vec::new();
+        seg.segment(&pts, &mut labels);
+        labels.into_iter().map(u8::from).collect::<Vec<u8>>()
+    });
+    Ok(PyBytes::new(py, &labels).unbind())
+}
+
+/// `[cluster]` of the pipeline: each point's cluster (u32, `u32::MAX` for none) and each
+/// cluster's point count, centroid, min and max.
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+fn cluster(
+    py: Python<'_>,
+    points: &[u8],
+    toml: &str,
+) -> PyResult<(Py<Buffer>, Vec<(usize, [f32; 3], [f32; 3], [f32; 3])>)> {
+    let pts = points_of(points)?;
+    let cfg = pipeline_config(toml)?;
+    let mut clusterer = Clusterer::new(cfg.cluster.params())
+        .map_err(|e| to_py_err(ErrKind::Usage, format!("cluster: {e}")))?;
+    let (labels, list) = py.allow_threads(move || {
+        let mut out = Clusters::new();
+        clusterer.cluster(&pts, &mut out);
+        let mut labels = vec![u32::MAX; pts.len()];
+        for k in 0..out.len() {
+            for &i in out.points_of(k) {
+                if let Some(l) = labels.get_mut(i as usize) {
+                    *l = k as u32;
+                }
+            }
+        }
+        let list = out
+            .as_slice()
+            .iter()
+            .map(|c| (c.point_count, c.centroid, c.min, c.max))
+            .collect::<Vec<_>>();
+        (labels, list)
+    });
+    Ok((Py::new(py, Buffer::u32s(labels))?, list))
+}
+
+/// `[deskew]` of the pipeline, constant velocity: the points moved to the sweep's start (or
+/// end) pose.
+#[pyfunction]
+fn deskew(py: Python<'_>, points: &[u8], toml: &str) -> PyResult<Py<Buffer>> {
+    let mut pts = points_of(points)?;
+    let cfg = pipeline_config(toml)?;
+    let d = &cfg.deskew;
+    let twist = Twist {
+        linear_mps: d.linear_mps.into(),
+        angular_radps: d.angular_degps.map(f64::to_radians).into(),
+    };
+    let reference = d.reference;
+    let pts = py.allow_threads(move || {
+        Deskewer::new(reference).deskew_constant_velocity(&mut pts, &twist);
+        pts
+    });
+    Py::new(py, Buffer::points(pts))
+}
+
+/// The LiDAR odometry, configured as `decode --odometry`'s flags.
+#[pyclass(module = "ringscan._ringscan", unsendable)]
+pub struct Odometry {
+    inner: CoreOdometry,
+}
+
+#[pymethods]
+impl Odometry {
+    #[new]
+    #[pyo3(signature = (method="point-to-plane", voxel=None, max_range=100.0))]
+    fn new(method: &str, voxel: Option<f64>, max_range: f64) -> PyResult<Self> {
+        use clap::ValueEnum;
+        let m = MethodArg::from_str(method, true).map_err(|_| {
+            to_py_err(
+                ErrKind::Usage,
+                format!(
+                    "method {method:?}: expected point-to-plane, point-to-point or continuous-time"
+                ),
+            )
+        })?;
+        let args = OdometryArgs {
+            odometry: true,
+            odometry_method: m,
+            odometry_voxel: voxel,
+            odometry_max_range: max_range,
+            ..OdometryArgs::default()
+        };
+        let setup = args
+            .setup(false, false)
+            .map_err(|e| to_py_err(ErrKind::Usage, e))?
+            .ok_or_else(|| to_py_err(ErrKind::Usage, "odometry: not configured".into()))?;
+        let inner = CoreOdometry::new(*setup.config())
+            .map_err(|e| to_py_err(ErrKind::Usage, format!("--odometry: {e}")))?;
+        Ok(Self { inner })
+    }
+
+    /// Registers one sweep's points (24-byte records, `t` in ns since `stamp_ns`): a dict
+    /// with the pose (`world_from_sensor`, 16 floats row-major), status, ICP figures.
+    fn register<'py>(
+        &mut self,
+        py: Python<'py>,
+        points: &[u8],
+        stamp_ns: i64,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let pts = points_of(points)?;
+        let step = self.inner.register_points(&pts, stamp_ns);
+        let m = step.world_from_sensor.to_homogeneous();
+        let rows: Vec<f64> = (0..4)
+            .flat_map(|r| (0..4).map(move |c| (r, c)))
+            .map(|(r, c)| m[(r, c)])
+            .collect();
+        let d = PyDict::new(py);
+        d.set_item("stamp_ns", step.stamp_ns)?;
+        d.set_item("index", step.index)?;
+        d.set_item("world_from_sensor", rows)?;
+        d.set_item("status", format!("{:?}", step.status))?;
+        d.set_item("points", step.points)?;
+        d.set_item("source_points", step.source_points)?;
+        d.set_item("keyframe", step.keyframe)?;
+        d.set_item("map_points", step.map_points)?;
+        d.set_item("threshold_m", step.threshold_m)?;
+        Ok(d)
+    }
+
+    /// Forgets the map and the trajectory.
+    fn reset(&mut self) {
+        self.inner.reset();
+    }
+}
+
+/// MCAP files with the command line's schemas and channels.
+#[pyclass(module = "ringscan._ringscan", unsendable)]
+pub struct McapWriter {
+    sink: Option<ringscan::cli::run::Sink>,
+    sensors: Vec<SensorId>,
+    path: PathBuf,
+}
+
+#[pymethods]
+impl McapWriter {
+    #[new]
+    #[pyo3(signature = (path, format="foxglove", compression="zstd", threads=1))]
+    fn new(path: PathBuf, format: &str, compression: &str, threads: usize) -> PyResult<Self> {
+        let fmt = match format {
+            "foxglove" => ringscan::cli::FormatArg::Foxglove,
+            "ros2" => ringscan::cli::FormatArg::Ros2,
+            f => {
+                return Err(to_py_err(
+                    ErrKind::Usage,
+                    format!("format {f:?}: expected 'foxglove' or 'ros2'"),
+                ))
+            }
+        };
+        let comp = compression
+            .parse()
+            .map_err(|e: String| to_py_err(ErrKind::Usage, format!("compression {e}")))?;
+        let d = DecodeArgs::new(path.clone());
+        let opts =
+            ringscan::cli::run::sink_options_with(fmt, comp, threads.max(1), d.chunk_size, false);
+        let sink =
+            create_file(&path, opts).map_err(|e| to_py_err(ErrKind::Decode, e.to_string()))?;
+        Ok(Self {
+            sink: Some(sink),
+            sensors: Vec::new(),
+            path,
+        })
+    }
+
+    /// Adds a sensor (topics `<topic_prefix>/points`, ...); returns its handle.
+    #[pyo3(signature = (name, topic_prefix="", metadata=None))]
+    fn add_sensor(
+        &mut self,
+        name: &str,
+        topic_prefix: &str,
+        metadata: Option<std::collections::BTreeMap<String, String>>,
+    ) -> PyResult<usize> {
+        let sink = self.open()?;
+        let id = sink
+            .add_sensor(&SensorInfo {
+                name: name.to_string(),
+                topic_prefix: topic_prefix.to_string(),
+                metadata: metadata.unwrap_or_default(),
+                calibration: None,
+            })
+            .map_err(|e| to_py_err(ErrKind::Usage, e.to_string()))?;
+        self.sensors.push(id);
+        Ok(self.sensors.len() - 1)
+    }
+
+    /// Writes one sweep (24-byte point records) of sensor `sensor`.
+    #[pyo3(signature = (sensor, points, timestamp_ns, log_time_ns=None))]
+    fn write_sweep(
+        &mut self,
+        sensor: usize,
+        points: &[u8],
+        timestamp_ns: u64,
+        log_time_ns: Option<u64>,
+    ) -> PyResult<()> {
+        let pts = points_of(points)?;
+        let id = *self
+            .sensors
+            .get(sensor)
+            .ok_or_else(|| to_py_err(ErrKind::Usage, format!("sensor {sensor}: not added")))?;
+        let sink = self.open()?;
+        sink.write_sweep(
+            id,
+            &SweepMsg {
+                log_time_ns: log_time_ns.unwrap_or(timestamp_ns),
+                timestamp_ns,
+                points: &pts,
+            },
+        )
+        .map_err(|e| to_py_err(ErrKind::Decode, e.to_string()))
+    }
+
+    /// Finishes the file; returns the messages per topic as a JSON string.
+    fn close(&mut self) -> PyResult<String> {
+        match self.sink.take() {
+            Some(s) => {
+                let summary = s
+                    .finish()
+                    .map_err(|e| to_py_err(ErrKind::Decode, e.to_string()))?;
+                Ok(serde_json::json!({"path": self.path.display().to_string(), "topics": summary.messages}).to_string())
+            }
+            None => Ok("{}".into()),
+        }
+    }
+}
+
+impl McapWriter {
+    fn open(&mut self) -> PyResult<&mut ringscan::cli::run::Sink> {
+        self.sink
+            .as_mut()
+            .ok_or_else(|| to_py_err(ErrKind::Usage, "the MCAP writer is closed".into()))
+    }
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<Decoder>()?;
+    m.add_class::<Listener>()?;
+    m.add_class::<Odometry>()?;
+    m.add_class::<McapWriter>()?;
+    m.add_function(wrap_pyfunction!(voxel_downsample, m)?)?;
+    m.add_function(wrap_pyfunction!(segment_ground, m)?)?;
+    m.add_function(wrap_pyfunction!(cluster, m)?)?;
+    m.add_function(wrap_pyfunction!(deskew, m)?)?;
+    Ok(())
+}

@@ -1,0 +1,206 @@
+"""The rest of the API, each against a truth of its own:
+
+* ``Decoder``: every datagram of a capture pushed by hand gives ``ringscan.open``'s sweeps
+  (themselves the CLI's, test_golden.py);
+* ``listen``: the CLI's ``replay`` of a capture over loopback gives the capture's points;
+* ``McapWriter``: sweeps written from Python read back with the official reader as the CLI's
+  own MCAP (same schemas, channels, point bytes);
+* the pipeline stages on hand-built clouds whose answer is known (voxel centroids, a plane
+  and boxes, two blobs, a known motion), and the odometry on a sweep moved by a known offset.
+"""
+
+from __future__ import annotations
+
+import socket
+import struct
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import ringscan
+from conftest import REPO
+from test_golden import mcap_clouds
+
+DEMO = REPO / "fixtures" / "demo-vlp16.pcap"
+
+
+def datagrams(path):
+    """(time_ns, src "ip:port", dst port, payload) of a classic pcap of Ethernet/IPv4/UDP."""
+    data = path.read_bytes()
+    magic = struct.unpack_from("<I", data, 0)[0]
+    scale = 1000 if magic == 0xA1B2C3D4 else 1
+    pos = 24
+    while pos + 16 <= len(data):
+        sec, frac, incl = struct.unpack_from("<III", data, pos)
+        rec = data[pos + 16 : pos + 16 + incl]
+        pos += 16 + incl
+        ip = rec[14:34]
+        src = ".".join(str(b) for b in ip[12:16])
+        sport, dport = struct.unpack_from(">HH", rec, 34)
+        yield sec * 10**9 + frac * scale, f"{src}:{sport}", dport, rec[42:]
+
+
+def test_decoder_equals_open():
+    dec = ringscan.Decoder()
+    pushed = []
+    for t, src, port, payload in datagrams(DEMO):
+        pushed += dec.push(payload, src, port, t)
+    pushed += dec.finish()
+    opened = list(ringscan.open(DEMO))
+    assert len(pushed) == len(opened) > 5
+    for a, b in zip(pushed, opened):
+        assert a.timestamp_ns == b.timestamp_ns and a.sensor == b.sensor
+        assert a.points.tobytes() == b.points.tobytes()
+    assert dec.summary()["points"] == sum(len(s) for s in opened)
+    with pytest.raises(ringscan.UsageError, match="IPv4:PORT"):
+        dec.push(b"x", "nowhere", 2368)
+    with pytest.raises(TypeError):
+        dec.push("text", "1.2.3.4:5", 2368)
+
+
+def free_port_offset() -> int:
+    for off in range(20000, 40000, 97):
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            s.bind(("127.0.0.1", 2368 + off))
+            return off
+        except OSError:
+            continue
+        finally:
+            s.close()
+    raise RuntimeError("no free port")
+
+
+def test_listen_over_loopback_gives_the_capture_points():
+    off = free_port_offset()
+    opened = list(ringscan.open(DEMO))
+    live = ringscan.listen([f"127.0.0.1:{2368 + off}"], queue=64)
+    got = []
+    reader = threading.Thread(target=lambda: got.extend(live))
+    reader.start()
+    time.sleep(0.5)
+    subprocess.run([sys.executable, "-m", "ringscan", "replay", str(DEMO), "--to", "127.0.0.1", "--port-offset", str(off), "--rate", "1", "--per-source-loopback"], check=True, capture_output=True)
+    time.sleep(0.5)
+    live.stop()
+    reader.join(timeout=30)
+    assert not reader.is_alive()
+    s = live.summary
+    assert s["stop"] == "stopped by the caller"
+    assert s["receive"]["queue_dropped"] == 0 and s["receive"]["sweeps_dropped"] == 0
+    assert s["sweeps"] == len(opened) == len(got)
+    for a, b in zip(got, opened):
+        assert a.points.tobytes() == b.points.tobytes()
+
+
+def test_listen_bad_sensor_is_a_usage_error():
+    with pytest.raises(ringscan.UsageError, match="IPv4"):
+        ringscan.listen(["not-an-ip"])
+
+
+def test_mcap_writer_writes_the_cli_schemas(tmp_path):
+    cli = tmp_path / "cli.mcap"
+    subprocess.run([sys.executable, "-m", "ringscan", "decode", str(DEMO), "--out", str(cli), "--threads", "1"], check=True, capture_output=True)
+    ours = tmp_path / "py.mcap"
+    with ringscan.McapWriter(ours) as w:
+        sid = w.add_sensor("vlp16-201")
+        for sweep in ringscan.open(DEMO):
+            w.write_sweep(sid, sweep)
+    assert w.summary["topics"]["/points"] == len(list(ringscan.open(DEMO)))
+    assert mcap_clouds(ours) == mcap_clouds(cli)
+
+    from mcap.reader import make_reader
+
+    def schemas(p):
+        with open(p, "rb") as f:
+            s = make_reader(f).get_summary()
+        return {(c.topic, s.schemas[c.schema_id].name) for c in s.channels.values()}
+
+    assert ("/points", "foxglove.PointCloud") in schemas(ours)
+    assert schemas(ours) <= schemas(cli)
+    with pytest.raises(ringscan.UsageError, match="format"):
+        ringscan.McapWriter(tmp_path / "x.mcap", format="pcd")
+
+
+def cloud(xyz, t=None):
+    p = np.zeros(len(xyz), dtype=ringscan.POINT_DTYPE)
+    p["x"], p["y"], p["z"] = np.asarray(xyz, dtype=np.float32).T
+    if t is not None:
+        p["t"] = t
+    return p
+
+
+def test_voxel_downsample_gives_centroids():
+    # Two voxels of 1 m: 8 corners of a 0.5 m cube in each.
+    corners = np.array([[x, y, z] for x in (0.1, 0.6) for y in (0.1, 0.6) for z in (0.1, 0.6)])
+    pts = cloud(np.vstack([corners, corners + [5.0, 0, 0]]))
+    out = ringscan.voxel_downsample(pts, leaf_m=1.0)
+    got = sorted(map(tuple, np.round(np.stack([out["x"], out["y"], out["z"]], 1), 4)))
+    assert got == [(0.35, 0.35, 0.35), (5.35, 0.35, 0.35)]
+    with pytest.raises(ringscan.UsageError, match="voxel.leaf_m"):
+        ringscan.voxel_downsample(pts, leaf_m=-1.0)
+
+
+def test_ground_plane_and_boxes():
+    rng = np.random.default_rng(1)
+    ground = np.column_stack([rng.uniform(-20, 20, 4000), rng.uniform(-20, 20, 4000), np.full(4000, -1.8)])
+    box = np.column_stack([rng.uniform(5, 6, 500), rng.uniform(-0.5, 0.5, 500), rng.uniform(-1.0, 0.5, 500)])
+    mask = ringscan.segment_ground(cloud(np.vstack([ground, box])), method="ransac", distance_threshold_m=0.1)
+    assert mask[:4000].mean() > 0.99 and mask[4000:].mean() < 0.01
+
+
+def test_cluster_two_blobs():
+    rng = np.random.default_rng(2)
+    a = rng.normal([10, 0, 0], 0.1, (300, 3))
+    b = rng.normal([0, 10, 0], 0.1, (200, 3))
+    labels, clusters = ringscan.cluster(cloud(np.vstack([a, b])), tolerance_m=0.5, min_points=5)
+    assert sorted(c["points"] for c in clusters) == [200, 300]
+    assert len(set(labels[:300])) == 1 and len(set(labels[300:])) == 1 and labels[0] != labels[300]
+    big = [c for c in clusters if c["points"] == 300][0]
+    assert abs(big["centroid"][0] - 10) < 0.05
+
+
+def test_deskew_known_motion():
+    # Moving forward at 10 m/s: a point fired 0.1 s after the sweep start is 1 m farther
+    # forward in the start frame than where it was measured.
+    pts = cloud([[5.0, 0.0, 0.0], [5.0, 0.0, 0.0]], t=[0, 100_000_000])
+    out = ringscan.deskew(pts, linear_mps=(10.0, 0.0, 0.0))
+    assert abs(out["x"][0] - 5.0) < 1e-5 and abs(out["x"][1] - 6.0) < 1e-4
+
+
+def test_odometry_recovers_a_known_shift():
+    sweeps = list(ringscan.open(DEMO))
+    s = sweeps[2].points.copy()
+    s["t"] = 0
+    odo = ringscan.Odometry(voxel=0.5, max_range=50.0)
+    assert odo.register(s, 0)["status"] == "Initialized"
+    moved = s.copy()
+    moved["x"] -= 0.3  # the sensor moved 0.3 m forward
+    r = odo.register(moved, 100_000_000)
+    assert r["status"] == "Converged"
+    assert abs(r["world_from_sensor"][0, 3] - 0.3) < 0.02
+    assert np.abs(r["world_from_sensor"][1:3, 3]).max() < 0.02
+    with pytest.raises(ringscan.UsageError, match="method"):
+        ringscan.Odometry(method="magic")
+    with pytest.raises(ringscan.UsageError, match="odometry-max-range"):
+        ringscan.Odometry(max_range=-1)
+
+
+def test_image_is_channel_by_column():
+    sweep = list(ringscan.open(DEMO))[3]
+    img = sweep.image("intensity")
+    assert img.shape[0] == 16 and img.shape[1] > 800
+    p = sweep.points
+    # every point lands in the cell of its ring and column
+    assert (img > 0).sum() == (p["intensity"] > 0).sum()
+
+
+def test_pandas_and_numpy_views():
+    sweep = next(iter(ringscan.open(DEMO)))
+    assert sweep.xyz.shape == (len(sweep), 3)
+    pd = pytest.importorskip("pandas", reason="SKIP: pandas is not installed")
+    df = sweep.to_pandas()
+    assert list(df.columns) == list(ringscan.POINT_DTYPE.names) and len(df) == len(sweep)

@@ -1,0 +1,126 @@
+"""The fleet (must-show 4, its correctness part; the speed is tools/bench_fleet.sh): a few small
+captures and bags and corrupt ones decoded on a multiprocessing pool and on a local Ray
+instance. Every capture is a row of the summary table; a corrupt one has its error (the CLI's
+message), the others complete; the Parquet read back with pyarrow holds exactly the points of
+the command line's MCAP (``python -m ringscan decode``); Ray and the pool give the same tables."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import ringscan
+from ringscan import fleet
+from conftest import CAPTURES, REPO, abspath
+from test_golden import mcap_clouds
+
+pa = pytest.importorskip("pyarrow", reason="SKIP: pyarrow is not installed")
+import pyarrow.parquet as pq  # noqa: E402
+
+
+def inputs(tmp_path):
+    caps = [
+        str(REPO / "fixtures" / "demo-vlp16.pcap"),
+        str(REPO / "fixtures" / "bags" / "demo-vlp16.ros1-lz4.bag"),
+        str(REPO / "fixtures" / "bags" / "demo-vlp16.sqlite3-message"),
+    ]
+    if CAPTURES is not None:
+        caps.append(abspath("jerry73204__rust-lidar-utils/test_files/hdl32_example.pcap"))
+    empty = tmp_path / "corrupt-empty.pcap"
+    empty.write_bytes(b"")
+    bad = tmp_path / "corrupt-magic.pcap"
+    bad.write_bytes(b"\x00\x01\x02\x03" * 100)
+    return caps, [str(empty), str(bad)]
+
+
+def cli_error(path) -> str:
+    r = subprocess.run([sys.executable, "-m", "ringscan", "info", path], capture_output=True, text=True)
+    assert r.returncode == 1
+    return r.stderr.strip().splitlines()[-1].removeprefix("error: ")
+
+
+def check_table(table, good, corrupt):
+    rows = {r["capture"]: r for r in table.to_pylist()}
+    assert sorted(rows) == sorted(good + corrupt), "every capture is a row"
+    for c in corrupt:
+        assert rows[c]["status"] == "error"
+        assert rows[c]["error_type"] == "InputError"
+        assert rows[c]["error"] == cli_error(c)
+        assert rows[c]["parquet"] is None
+    for c in good:
+        assert rows[c]["status"] == "ok", rows[c]
+        assert rows[c]["points"] > 0
+    return rows
+
+
+def parquet_equals_cli_mcap(row, tmp_path):
+    cli_out = tmp_path / "cli.mcap"
+    subprocess.run([sys.executable, "-m", "ringscan", "decode", row["capture"], "--out", str(cli_out), "--threads", "1"], check=True, capture_output=True)
+    clouds = mcap_clouds(cli_out)
+    assert len(clouds) == 1
+    ((topic, sweeps),) = clouds.items()
+    t = pq.read_table(row["parquet"])
+    assert t.num_rows == row["points"]
+    rec = np.zeros(t.num_rows, dtype=ringscan.POINT_DTYPE)
+    for name in ringscan.POINT_DTYPE.names:
+        rec[name] = t.column(name).to_numpy()
+    # Sweep by sweep: the Parquet rows of sweep k are the k-th PointCloud's records.
+    sweep_col = t.column("sweep").to_numpy()
+    ts_col = t.column("timestamp_ns").to_numpy()
+    idx = np.unique(sweep_col)
+    assert len(idx) == len(sweeps)
+    for k, (ts, stride, data) in zip(idx, sweeps):
+        sel = sweep_col == k
+        assert stride == 24
+        ref = np.frombuffer(data, dtype=ringscan.POINT_DTYPE)
+        assert len(ref) == sel.sum() and (rec[sel] == ref).all()
+        assert set(ts_col[sel]) == {ts}
+
+
+def comparable(table):
+    drop = {"decode_s", "parquet", "mcap"}
+    return sorted((tuple((k, v) for k, v in r.items() if k not in drop) for r in table.to_pylist()))
+
+
+def test_pool(tmp_path):
+    good, corrupt = inputs(tmp_path)
+    out = tmp_path / "out"
+    table = fleet.decode(good + corrupt, str(out), engine="pool", workers=2, mcap=True)
+    rows = check_table(table, good, corrupt)
+    assert pq.read_table(out / "summary.parquet").num_rows == len(good) + len(corrupt)
+    for c in good:
+        parquet_equals_cli_mcap(rows[c], tmp_path)
+        # the fleet's MCAP is the CLI's
+        assert mcap_clouds(rows[c]["mcap"]) == mcap_clouds_cli(c, tmp_path)
+
+
+def mcap_clouds_cli(capture, tmp_path):
+    out = tmp_path / "again.mcap"
+    subprocess.run([sys.executable, "-m", "ringscan", "decode", capture, "--out", str(out), "--threads", "1"], check=True, capture_output=True)
+    return mcap_clouds(out)
+
+
+def test_directory_listing(tmp_path):
+    found = fleet.list_captures(str(REPO / "fixtures" / "bags"))
+    assert str(REPO / "fixtures" / "bags" / "demo-vlp16.sqlite3-message") in found
+    assert str(REPO / "fixtures" / "bags" / "demo-vlp16.ros1-bz2.bag") in found
+    assert not any(f.endswith(".zstd") or f.endswith(".yaml") for f in found)
+
+
+def test_ray_matches_the_pool(tmp_path):
+    ray = pytest.importorskip("ray", reason="SKIP: ray is not installed (the multiprocessing pool is tested)")
+    good, corrupt = inputs(tmp_path)
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        t_ray = fleet.decode(good + corrupt, str(tmp_path / "ray"), engine="ray")
+    finally:
+        ray.shutdown()
+    check_table(t_ray, good, corrupt)
+    t_pool = fleet.decode(good + corrupt, str(tmp_path / "pool"), engine="pool", workers=2)
+    assert comparable(t_ray) == comparable(t_pool)
+    for r_ray, r_pool in zip(sorted(t_ray.to_pylist(), key=lambda r: r["capture"]), sorted(t_pool.to_pylist(), key=lambda r: r["capture"])):
+        if r_ray["status"] == "ok":
+            assert pq.read_table(r_ray["parquet"]).equals(pq.read_table(r_pool["parquet"]))

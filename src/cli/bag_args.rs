@@ -1,0 +1,67 @@
+//! The input options of `decode`, `info` and `replay` (bags: `--topic`, `--start`, `--end`);
+//! the reading itself is [`crate::source::input`].
+
+use std::io::Read;
+use std::path::Path;
+
+use crate::source::bag::{BagOptions, TimeBound};
+pub use crate::source::input::{Input, InputError};
+
+use super::run::RunError;
+
+/// Options that apply to bags.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct BagArgs {
+    /// Bags: read only this topic (repeatable); the sensors' Ouster metadata topics are read
+    /// anyway.
+    #[arg(long = "topic", value_name = "TOPIC")]
+    pub topics: Vec<String>,
+    /// Bags: skip messages recorded before this, seconds after the bag's first message (or, above
+    /// 1e9, seconds since the Unix epoch).
+    #[arg(long, value_name = "S")]
+    pub start: Option<f64>,
+    /// Bags: skip messages recorded after this (seconds, as --start).
+    #[arg(long, value_name = "S")]
+    pub end: Option<f64>,
+}
+
+impl BagArgs {
+    fn given(&self) -> bool {
+        !self.topics.is_empty() || self.start.is_some() || self.end.is_some()
+    }
+
+    fn options(&self) -> Result<BagOptions, RunError> {
+        for (name, v) in [("--start", self.start), ("--end", self.end)] {
+            if v.is_some_and(|s| !s.is_finite() || s < 0.0) {
+                return Err(RunError::Usage(format!(
+                    "{name}: expected a non-negative number of seconds"
+                )));
+            }
+        }
+        Ok(BagOptions {
+            topics: self.topics.clone(),
+            start: self.start.map(TimeBound::from_seconds),
+            end: self.end.map(TimeBound::from_seconds),
+        })
+    }
+}
+
+/// Opens `path` as a bag when its bytes say so, else as a capture; the bag options on anything
+/// but a bag are a usage error.
+pub fn open(path: &Path, bag_args: &BagArgs) -> Result<Input<Box<dyn Read>>, RunError> {
+    let not_a_bag = || {
+        RunError::Usage(format!(
+            "--topic / --start / --end: {} is not a bag",
+            path.display()
+        ))
+    };
+    match crate::source::input::open(path, bag_args.options()?) {
+        Ok(input) if bag_args.given() && input.bag().is_none() => Err(not_a_bag()),
+        Ok(input) => Ok(input),
+        Err(InputError::Pcap(_)) if bag_args.given() => Err(not_a_bag()),
+        Err(err) => Err(RunError::Source {
+            path: path.display().to_string(),
+            err,
+        }),
+    }
+}
