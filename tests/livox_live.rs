@@ -61,10 +61,7 @@ fn swaying() -> Trajectory {
                 * UnitQuaternion::from_euler_angles(roll, 0.0, 0.0);
             (
                 T0 + ms * 1_000_000,
-                Isometry3::from_parts(
-                    Translation3::new(40.0, 0.0, scenes::SENSOR_HEIGHT_M),
-                    r,
-                ),
+                Isometry3::from_parts(Translation3::new(40.0, 0.0, scenes::SENSOR_HEIGHT_M), r),
             )
         })
         .collect();
