@@ -303,6 +303,7 @@ impl SensorStream for LivoxStream {
             "imu_packets": st.imu_packets,
             "imu_missing": st.imu_missing,
             "imu_dropped": st.imu_dropped,
+            "imu_uncovered_sweeps": st.imu_uncovered_sweeps,
             "position_packets": 0,
             "malformed": st.malformed,
             "missing": st.missing,

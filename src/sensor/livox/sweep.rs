@@ -8,6 +8,16 @@
 //! protocol says `frame_cnt` means nothing for non-repetitive scanning, so that sensor stays on
 //! the period). Loss: SDK2 from `udp_cnt` (+1 per packet, 0 at a frame's start), SDK1 from the
 //! device-time gap between consecutive packets.
+//!
+//! Once the stream has seen IMU packets, a finished sweep waits for the first IMU sample at or
+//! after its last point before it is handed over (on the next datagram, so that a caller that
+//! drains [`LivoxStream::drain_imu`] after each push has fed that sample to its deskewer
+//! first), and at most until the next sweep is finished. The points and IMU samples come on two
+//! ports: live, an IMU packet can reach the host after the point packet that cuts the sweep
+//! (two sockets read in any order, in bursts under load), and the sweep's deskew would then
+//! hold the angular velocity where a capture read in order interpolates it. Waiting for the
+//! covering sample makes the IMU a deskewer sees for a sweep the same in both, at the cost of
+//! up to one IMU period (5 ms at 200 Hz) of latency.
 
 use std::collections::VecDeque;
 
@@ -89,6 +99,9 @@ pub struct LivoxStats {
     pub points: u64,
     /// Points with a non-zero tag.
     pub tagged_points: u64,
+    /// Sweeps handed over without an IMU sample at or after their last point (the IMU
+    /// stopped or lags by more than a sweep).
+    pub imu_uncovered_sweeps: u64,
     /// Fewest / most points in a sweep.
     pub min_sweep_points: u64,
     /// Most points in a sweep.
@@ -149,6 +162,15 @@ pub struct LivoxStream {
     sweep: Sweep,
     next_index: u64,
     open: bool,
+    /// Device time of the open sweep's last record so far.
+    open_end_ns: i64,
+    /// A finished sweep waiting for its IMU coverage (the module's doc), and its last record's
+    /// device time.
+    held: Sweep,
+    held_waiting: bool,
+    held_end_ns: i64,
+    /// Device time of the newest IMU sample decoded.
+    newest_imu_ns: Option<i64>,
     /// First-record time of the last point packet: a later packet earlier than it is a
     /// restart of the device clock (a packet's records may overlap the next one's by a
     /// spacing, depending on how the sensor fills `time_interval`).
@@ -191,6 +213,11 @@ impl LivoxStream {
             sweep: Sweep::default(),
             next_index: 0,
             open: false,
+            open_end_ns: 0,
+            held: Sweep::default(),
+            held_waiting: false,
+            held_end_ns: 0,
+            newest_imu_ns: None,
             last_packet_ns: None,
             last_udp: None,
             last_imu_udp: None,
@@ -228,6 +255,9 @@ impl LivoxStream {
         payload: &[u8],
         on_sweep: &mut dyn FnMut(&Sweep, &LivoxFacts),
     ) {
+        if self.held_waiting && self.covered(self.held_end_ns) {
+            self.release(on_sweep);
+        }
         let r = match self.cfg.protocol {
             Protocol::Sdk2 => self.push_sdk2(host_ns, payload, on_sweep),
             Protocol::Sdk1 => self.push_sdk1(host_ns, payload, on_sweep),
@@ -240,12 +270,15 @@ impl LivoxStream {
         }
     }
 
-    /// Emits the open sweep.
+    /// Emits the sweep waiting for its IMU samples, if any, and the open sweep.
     pub fn finish(&mut self, on_sweep: &mut dyn FnMut(&Sweep, &LivoxFacts)) {
         self.emit(on_sweep);
+        self.release(on_sweep);
     }
 
     fn queue_imu(&mut self, s: ImuSample) {
+        // The latest, not the largest: after a device clock restart, older times count again.
+        self.newest_imu_ns = i64::try_from(s.sensor_ns).ok();
         if self.imu.len() < MAX_IMU_QUEUE {
             self.imu.push_back(s);
         } else {
@@ -351,7 +384,11 @@ impl LivoxStream {
             start,
             &mut self.sweep.points,
         );
-        self.after_packet(host_ns, ts);
+        self.after_packet(
+            host_ns,
+            ts,
+            ts.saturating_add(i64::try_from(interval).unwrap_or(i64::MAX)),
+        );
         Ok(())
     }
 
@@ -418,7 +455,8 @@ impl LivoxStream {
             start,
             &mut self.sweep.points,
         );
-        self.after_packet(host_ns, ts);
+        let last = ts.saturating_add(step.saturating_mul(n.saturating_sub(1) as i64));
+        self.after_packet(host_ns, ts, last);
         Ok(())
     }
 
@@ -457,9 +495,16 @@ impl LivoxStream {
         };
         self.sweep.first_host_ns = host_ns;
         self.sweep.frame_id = frame;
+        self.open_end_ns = ts;
     }
 
-    fn after_packet(&mut self, host_ns: i64, first_ns: i64) {
+    /// Whether IMU samples reach `end_ns` (or none has been seen: nothing to wait for).
+    fn covered(&self, end_ns: i64) -> bool {
+        self.stats.imu_packets == 0 || self.newest_imu_ns.is_some_and(|t| t >= end_ns)
+    }
+
+    fn after_packet(&mut self, host_ns: i64, first_ns: i64, last_ns: i64) {
+        self.open_end_ns = self.open_end_ns.max(last_ns);
         self.stats.packets += 1;
         self.sweep.packets += 1;
         self.sweep.columns_count = self.sweep.columns_count.saturating_add(1);
@@ -467,15 +512,37 @@ impl LivoxStream {
         self.last_packet_ns = Some(first_ns);
     }
 
+    /// Finishes the open sweep: handed over now when its IMU samples are in, else held (the
+    /// module's doc); a sweep still held from before goes first, covered or not.
     fn emit(&mut self, on_sweep: &mut dyn FnMut(&Sweep, &LivoxFacts)) {
         if !self.open {
             return;
         }
         self.open = false;
-        let n = self.sweep.points.len() as u64;
+        if self.held_waiting {
+            self.stats.imu_uncovered_sweeps += 1;
+            self.release(on_sweep);
+        }
+        // The buffers trade places: no allocation per sweep.
+        std::mem::swap(&mut self.sweep, &mut self.held);
+        self.held_waiting = true;
+        self.held_end_ns = self.open_end_ns;
+        self.next_index += 1;
+        if self.covered(self.held_end_ns) {
+            self.release(on_sweep);
+        }
+    }
+
+    /// Hands over the held sweep, if any.
+    fn release(&mut self, on_sweep: &mut dyn FnMut(&Sweep, &LivoxFacts)) {
+        if !self.held_waiting {
+            return;
+        }
+        self.held_waiting = false;
+        let n = self.held.points.len() as u64;
         self.stats.sweeps += 1;
         self.stats.points += n;
-        self.stats.tagged_points += self.sweep.points.iter().filter(|p| p.pad != 0).count() as u64;
+        self.stats.tagged_points += self.held.points.iter().filter(|p| p.pad != 0).count() as u64;
         self.stats.min_sweep_points = if self.stats.sweeps == 1 {
             n
         } else {
@@ -483,7 +550,6 @@ impl LivoxStream {
         };
         self.stats.max_sweep_points = self.stats.max_sweep_points.max(n);
         self.facts.last_sweep_points = n;
-        self.next_index += 1;
-        on_sweep(&self.sweep, &self.facts);
+        on_sweep(&self.held, &self.facts);
     }
 }
