@@ -18,5 +18,8 @@ python3 -m venv "$venv"
 "$venv/bin/pip" install --quiet -r tools/requirements-python-test.txt
 MATURIN_PEP517_ARGS="--profile ${RINGSCAN_PY_PROFILE:-dev}" \
   "$venv/bin/pip" install ./python
-cd "$root/python"
-RINGSCAN_BIN=${RINGSCAN_BIN:-} "$root/$venv/bin/python" -m pytest -q -rs tests ${PYTEST_ARGS:-}
+# From the repository root with pytest's own script: neither puts python/ on sys.path, where
+# the package's sources (without the built extension) would shadow the installed package, in
+# pytest and in the `python -m ringscan` children the tests start.
+cd "$root"
+RINGSCAN_BIN=${RINGSCAN_BIN:-} "$root/$venv/bin/pytest" -q -rs python/tests ${PYTEST_ARGS:-}
