@@ -17,68 +17,6 @@ use std::time::Duration;
 
 use listen_util::*;
 
-fn varint(b: &[u8], at: &mut usize) -> u64 {
-    let mut v = 0u64;
-    for shift in (0..64).step_by(7) {
-        let byte = b[*at];
-        *at += 1;
-        v |= u64::from(byte & 0x7f) << shift;
-        if byte & 0x80 == 0 {
-            break;
-        }
-    }
-    v
-}
-
-/// The top-level fields of a protobuf message: (field number, its raw bytes including the key,
-/// the payload of a length-delimited field).
-fn fields(msg: &[u8]) -> Vec<(u64, &[u8], &[u8])> {
-    let mut out = Vec::new();
-    let mut at = 0;
-    while at < msg.len() {
-        let start = at;
-        let key = varint(msg, &mut at);
-        let mut payload: &[u8] = &[];
-        match key & 7 {
-            0 => {
-                varint(msg, &mut at);
-            }
-            1 => at += 8,
-            5 => at += 4,
-            2 => {
-                let len = varint(msg, &mut at) as usize;
-                payload = &msg[at..at + len];
-                at += len;
-            }
-            w => panic!("wire type {w}"),
-        }
-        out.push((key >> 3, &msg[start..at], payload));
-    }
-    out
-}
-
-/// A message with its timestamps left out: field 1 (`timestamp`) of a foxglove PointCloud or
-/// FrameTransform, or of every entity and deletion of a SceneUpdate. `decode` stamps sweeps
-/// from the capture's packet times, `listen` from the host's receive times; everything else
-/// must be equal.
-fn without_stamps(topic: &str, msg: &[u8]) -> Vec<u8> {
-    let scene = topic == "/clusters";
-    let mut out = Vec::new();
-    for (field, raw, payload) in fields(msg) {
-        if scene {
-            out.push(field as u8);
-            for (f, r, _) in fields(payload) {
-                if f != 1 {
-                    out.extend_from_slice(r);
-                }
-            }
-        } else if field != 1 {
-            out.extend_from_slice(raw);
-        }
-    }
-    out
-}
-
 /// Payloads per topic without their stamps (and without `/diagnostics`, whose health and
 /// timings depend on the host).
 fn payloads(bytes: &[u8], into: &mut BTreeMap<String, Vec<Vec<u8>>>) {

@@ -93,69 +93,6 @@ fn simulate(pcap: &Path) -> (Vec<LivoxTruth>, Trajectory) {
     (truth, sim.trajectory.clone())
 }
 
-fn varint(b: &[u8], at: &mut usize) -> u64 {
-    let mut v = 0u64;
-    for shift in (0..64).step_by(7) {
-        let byte = b[*at];
-        *at += 1;
-        v |= u64::from(byte & 0x7f) << shift;
-        if byte & 0x80 == 0 {
-            break;
-        }
-    }
-    v
-}
-
-/// Top-level protobuf fields: (number, raw bytes with the key, payload if length-delimited).
-fn fields(msg: &[u8]) -> Vec<(u64, &[u8], &[u8])> {
-    let mut out = Vec::new();
-    let mut at = 0;
-    while at < msg.len() {
-        let start = at;
-        let key = varint(msg, &mut at);
-        let mut payload: &[u8] = &[];
-        match key & 7 {
-            0 => {
-                varint(msg, &mut at);
-            }
-            1 => at += 8,
-            5 => at += 4,
-            2 => {
-                let len = varint(msg, &mut at) as usize;
-                payload = &msg[at..at + len];
-                at += len;
-            }
-            w => panic!("wire type {w}"),
-        }
-        out.push((key >> 3, &msg[start..at], payload));
-    }
-    out
-}
-
-/// A protobuf message without its timestamps (field 1 of a PointCloud or FrameTransform, of
-/// every entity of a SceneUpdate); the JSON IMU samples as they are (their `timestamp_ns` is
-/// the sensor's, the same in both paths).
-fn without_stamps(topic: &str, msg: &[u8]) -> Vec<u8> {
-    if topic.ends_with("/imu") {
-        return msg.to_vec();
-    }
-    let scene = topic.ends_with("/clusters");
-    let mut out = Vec::new();
-    for (field, raw, payload) in fields(msg) {
-        if scene {
-            out.push(field as u8);
-            for (f, r, _) in fields(payload) {
-                if f != 1 {
-                    out.extend_from_slice(r);
-                }
-            }
-        } else if field != 1 {
-            out.extend_from_slice(raw);
-        }
-    }
-    out
-}
-
 /// Messages per topic, in file order, without stamps and without `/diagnostics` (host health).
 fn payloads(files: &[PathBuf]) -> BTreeMap<String, Vec<Vec<u8>>> {
     let mut out: BTreeMap<String, Vec<Vec<u8>>> = BTreeMap::new();

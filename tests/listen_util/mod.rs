@@ -211,3 +211,55 @@ pub fn decode(pcap: &Path, out: &Path, extra: &[String]) -> serde_json::Value {
     );
     serde_json::from_slice(&o.stdout).expect("decode json")
 }
+
+// ----- comparing decode's and listen's MCAP messages -----------------------------------------
+
+/// Top-level protobuf fields: (number, raw bytes with the key, payload if length-delimited).
+pub fn fields(msg: &[u8]) -> Vec<(u64, &[u8], &[u8])> {
+    let mut out = Vec::new();
+    let mut at = 0;
+    while at < msg.len() {
+        let start = at;
+        let key = varint(msg, &mut at).expect("a protobuf varint");
+        let mut payload: &[u8] = &[];
+        match key & 7 {
+            0 => {
+                varint(msg, &mut at).expect("a protobuf varint");
+            }
+            1 => at += 8,
+            5 => at += 4,
+            2 => {
+                let len = varint(msg, &mut at).expect("a protobuf varint") as usize;
+                payload = &msg[at..at + len];
+                at += len;
+            }
+            w => panic!("wire type {w}"),
+        }
+        out.push((key >> 3, &msg[start..at], payload));
+    }
+    out
+}
+
+/// A protobuf message without its timestamps (field 1 of a PointCloud or FrameTransform, of
+/// every entity of a SceneUpdate); the JSON IMU samples as they are (their `timestamp_ns` is
+/// the sensor's, the same in both paths).
+pub fn without_stamps(topic: &str, msg: &[u8]) -> Vec<u8> {
+    if topic.ends_with("/imu") {
+        return msg.to_vec();
+    }
+    let scene = topic.ends_with("/clusters");
+    let mut out = Vec::new();
+    for (field, raw, payload) in fields(msg) {
+        if scene {
+            out.push(field as u8);
+            for (f, r, _) in fields(payload) {
+                if f != 1 {
+                    out.extend_from_slice(r);
+                }
+            }
+        } else if field != 1 {
+            out.extend_from_slice(raw);
+        }
+    }
+    out
+}
