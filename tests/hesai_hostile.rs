@@ -99,7 +99,7 @@ fn short_long_and_marked_wrong_packets_are_counted_not_decoded() {
     let good = xt32_packet();
     let mut s = stream_for(HesaiModel::PandarXt32);
     let mut points = 0;
-    let mut on = |sw: &ringscan::sweep::Sweep, _: &_| points += sw.points.len();
+    let mut on = |sw: &mut ringscan::sweep::Sweep, _: &_| points += sw.points.len();
     s.push(0, &good, &mut on).unwrap();
     assert_eq!(s.stats().packets, 1);
     let cases: Vec<Vec<u8>> = vec![
@@ -152,7 +152,7 @@ fn crc_failures_are_dropped_and_counted() {
     b[t + 30..t + 34].copy_from_slice(&tail.to_le_bytes());
 
     let mut s = stream_for(model);
-    let mut on = |_: &ringscan::sweep::Sweep, _: &_| {};
+    let mut on = |_: &mut ringscan::sweep::Sweep, _: &_| {};
     s.push(0, &b, &mut on).unwrap();
     assert_eq!((s.stats().crc_ok, s.stats().crc_failures), (1, 0));
     let mut bad_body = b.clone();

@@ -100,7 +100,7 @@ fn run(model: HesaiModel, calib: HesaiCalibration, mode: u8) -> Figures {
     let mut stream = HesaiStream::new(cfg);
     let mut fig = Figures::default();
     let mut streamed = 0usize;
-    let mut on_sweep = |sw: &ringscan::sweep::Sweep, _: &_| {
+    let mut on_sweep = |sw: &mut ringscan::sweep::Sweep, _: &_| {
         streamed += sw.points.len();
         for p in &sw.points {
             assert!(i64::from(p.t) < 200_000_000, "t {} ns", p.t);

@@ -43,7 +43,8 @@ fn sweeps(seconds: f64) -> (Vec<(i64, Vec<Point>)>, Trajectory) {
         ..StreamConfig::default()
     });
     let mut out = Vec::new();
-    let mut on_sweep = |s: &ringscan::sweep::Sweep, _: &ringscan::sensor::velodyne::SensorFacts| {
+    let mut on_sweep = |s: &mut ringscan::sweep::Sweep,
+                        _: &ringscan::sensor::velodyne::SensorFacts| {
         out.push((s.timestamp_ns, s.points.clone()));
     };
     let mut truth = Vec::new();

@@ -17,6 +17,7 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use proptest::prelude::*;
 use proptest::test_runner::{Config, TestCaseError, TestRunner};
 
+use ringscan::point::Point;
 use ringscan::sensor::ouster::calib::parse;
 use ringscan::sensor::ouster::calib::OusterInfo;
 use ringscan::sensor::ouster::model::PacketFormat;
@@ -149,8 +150,10 @@ fn check_case(c: &Case) -> Result<usize, TestCaseError> {
             .collect();
         let mut n = 0usize;
         let mut failure = None;
+        let mut seq: Vec<(Point, u32)> = Vec::new();
         dec.decode_with(&p, 0, |pt, x, row, col| {
             n += 1;
+            seq.push((pt, col as u32));
             let Some(t) = by_key.get(&(col as u16, row as u16, pt.ret)) else {
                 failure = Some(format!(
                     "no truth for pixel ({row}, {col}) return {}",
@@ -180,6 +183,14 @@ fn check_case(c: &Case) -> Result<usize, TestCaseError> {
             return Err(TestCaseError::fail(format!("{profile}: {f}")));
         }
         prop_assert_eq!(n, truth.len(), "{}: one point per return", profile);
+        // The append loop with columns (what `ringscan.open` keeps for `.image()`) gives the
+        // same points, in the same order, at the columns the truth checked above.
+        let (mut pts, mut cols) = (Vec::new(), Vec::new());
+        dec.decode_columns(&p, 0, &mut pts, &mut cols)
+            .map_err(|e| TestCaseError::fail(e.to_string()))?;
+        let (want_pts, want_cols): (Vec<Point>, Vec<u32>) = seq.into_iter().unzip();
+        prop_assert!(pts == want_pts, "{}: decode_columns points differ", profile);
+        prop_assert_eq!(cols, want_cols, "{}: decode_columns columns", profile);
         matched += n;
     }
     Ok(matched)
@@ -227,7 +238,7 @@ fn wrap_case(profile: Profile, first_frame: u64, frames: u64) -> Result<(), Test
     };
     let mut expected_points: HashMap<u32, usize> = HashMap::new();
     let mut sweeps: Vec<(u64, u32, usize)> = Vec::new();
-    let mut on_sweep = |s: &Sweep, _: &ringscan::sensor::ouster::OusterFacts| {
+    let mut on_sweep = |s: &mut Sweep, _: &ringscan::sensor::ouster::OusterFacts| {
         sweeps.push((s.index, s.frame_id, s.points.len()));
     };
     for _ in 0..frames * per_frame {

@@ -92,7 +92,7 @@ fn run(model: RobosenseModel, dual: bool) -> (usize, f64, i64) {
     let (mut n, mut max_xyz, mut max_t) = (0usize, 0f64, 0i64);
     let mut expected_times = Vec::new();
     let mut streamed = Vec::new();
-    let mut on_sweep = |sw: &ringscan::sweep::Sweep, _: &_| {
+    let mut on_sweep = |sw: &mut ringscan::sweep::Sweep, _: &_| {
         for p in &sw.points {
             streamed.push(sw.device_time_ns + i64::from(p.t));
         }

@@ -76,7 +76,8 @@ fn decode(args: &[String], input: &str) -> Result<Sweeps, Box<dyn std::error::Er
         ..StreamConfig::default()
     });
     let mut sweeps: Sweeps = Vec::new();
-    let mut on_sweep = |s: &ringscan::sweep::Sweep, _: &ringscan::sensor::velodyne::SensorFacts| {
+    let mut on_sweep = |s: &mut ringscan::sweep::Sweep,
+                        _: &ringscan::sensor::velodyne::SensorFacts| {
         if !s.points.is_empty() {
             sweeps.push((s.timestamp_ns, s.points.clone()));
         }

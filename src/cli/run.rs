@@ -247,7 +247,7 @@ impl Output {
         &mut self,
         idx: usize,
         addr: Ipv4Addr,
-        sweep: &Sweep,
+        sweep: &mut Sweep,
         facts: &dyn Facts,
         ports: &[u16],
     ) {
@@ -263,6 +263,16 @@ impl Output {
             }
         }
         if let Some(tap) = self.tap.as_mut() {
+            // A session that only hands its sweeps out (the Python reader) moves their buffers:
+            // nothing below would read the sweep.
+            let only_tap = self.sink.is_none()
+                && self.pipeline.is_none()
+                && self.live.is_none()
+                && self.odometry.is_none();
+            if only_tap {
+                tap.push((idx, sweep.take_buffers()));
+                return;
+            }
             tap.push((idx, sweep.clone()));
         }
         let several = !(self.n_sensors_hint <= 1 && idx == 0);
@@ -306,7 +316,7 @@ impl Output {
                     }
                 }
             }
-            None => sweep,
+            None => &*sweep,
         };
         if let Some(live) = &self.live {
             live.borrow_mut().sweep(idx, sweep);

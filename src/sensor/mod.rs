@@ -342,8 +342,11 @@ pub trait Facts {
     fn as_any(&self) -> &dyn Any;
 }
 
-/// Called with each finished sweep and the facts of its sensor.
-pub type OnSweep<'a> = dyn FnMut(&Sweep, &dyn Facts) + 'a;
+/// Called with each finished sweep and the facts of its sensor. The sweep is lent mutably so
+/// that a consumer that keeps it can move its buffers out ([`Sweep::take_buffers`]) instead of
+/// copying them: a stream reads nothing of a sweep after handing it out, and clears it before
+/// reusing it.
+pub type OnSweep<'a> = dyn FnMut(&mut Sweep, &dyn Facts) + 'a;
 
 /// One sensor's stream: its datagrams in, sweeps out.
 pub trait SensorStream: Send + core::fmt::Debug {

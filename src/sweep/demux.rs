@@ -104,7 +104,7 @@ impl Demux {
         src: SensorKey,
         dst_port: u16,
         payload: &[u8],
-        on_sweep: &mut dyn FnMut(usize, &Sweep, &dyn Facts),
+        on_sweep: &mut dyn FnMut(usize, &mut Sweep, &dyn Facts),
     ) -> Result<Option<usize>, (usize, StreamError)> {
         let idx = match self.sensors.iter().position(|(k, _, _)| *k == src) {
             Some(i) => i,
@@ -160,7 +160,7 @@ impl Demux {
     /// Ends every stream, emitting their last sweeps.
     pub fn finish(
         &mut self,
-        on_sweep: &mut dyn FnMut(usize, &Sweep, &dyn Facts),
+        on_sweep: &mut dyn FnMut(usize, &mut Sweep, &dyn Facts),
     ) -> Result<(), (usize, StreamError)> {
         // A stream that fails does not keep the others from finishing; the first error is
         // returned.

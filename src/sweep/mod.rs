@@ -63,6 +63,22 @@ impl Sweep {
         self.columns_count = 0;
     }
 
+    /// This sweep's values with its point buffers moved out, leaving empty buffers of the same
+    /// capacity in their place: what a consumer that keeps a sweep handed out by a stream takes
+    /// instead of a clone (the stream's next sweep refills the fresh buffers without growing).
+    pub fn take_buffers(&mut self) -> Sweep {
+        let (np, nc, ne) = (self.points.len(), self.columns.len(), self.extras.len());
+        let points = std::mem::replace(&mut self.points, Vec::with_capacity(np));
+        let columns = std::mem::replace(&mut self.columns, Vec::with_capacity(nc));
+        let extras = std::mem::replace(&mut self.extras, Vec::with_capacity(ne));
+        Sweep {
+            points,
+            columns,
+            extras,
+            ..self.clone()
+        }
+    }
+
     /// Whether the sweep holds no packet.
     pub fn is_empty(&self) -> bool {
         self.packets == 0

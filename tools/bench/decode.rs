@@ -146,7 +146,7 @@ fn stream_pass(input: &Input) -> u64 {
     };
     let mut stream = VelodyneStream::new(cfg);
     let mut points = 0u64;
-    let mut cb = |s: &Sweep, _: &SensorFacts| points += s.points.len() as u64;
+    let mut cb = |s: &mut Sweep, _: &SensorFacts| points += s.points.len() as u64;
     for (t, p) in &input.datagrams {
         stream.push(*t, p, &mut cb).expect("stream");
     }

@@ -158,7 +158,7 @@ fn main() {
         sweeps = 0;
         let t = Instant::now();
         let mut on_sweep =
-            |s: &ringscan::sweep::Sweep, _: &ringscan::sensor::velodyne::SensorFacts| {
+            |s: &mut ringscan::sweep::Sweep, _: &ringscan::sensor::velodyne::SensorFacts| {
                 points += s.points.len() as u64;
                 sweeps += 1;
             };

@@ -86,7 +86,7 @@ fn hesai_decoder_pass(dec: &mut HesaiDecoder, packets: &[&[u8]], out: &mut Vec<P
 fn hesai_stream_pass(calib: &HesaiCalibration, input: &[(i64, Vec<u8>)]) -> u64 {
     let mut stream = HesaiStream::new(HesaiConfig::new(Some(calib.clone()), "PandarXT32.csv"));
     let mut points = 0u64;
-    let mut cb = |s: &ringscan::sweep::Sweep, _: &_| points += s.points.len() as u64;
+    let mut cb = |s: &mut ringscan::sweep::Sweep, _: &_| points += s.points.len() as u64;
     for (t, p) in input {
         stream.push(*t, p, &mut cb).expect("stream");
     }
@@ -120,7 +120,7 @@ fn velodyne_stream_pass(
     };
     let mut stream = ringscan::sensor::velodyne::VelodyneStream::new(cfg);
     let mut points = 0u64;
-    let mut cb = |s: &ringscan::sweep::Sweep, _: &_| points += s.points.len() as u64;
+    let mut cb = |s: &mut ringscan::sweep::Sweep, _: &_| points += s.points.len() as u64;
     for (t, p) in input {
         stream.push(*t, p, &mut cb).expect("stream");
     }

@@ -74,7 +74,7 @@ fn livox_stream_pass(input: &[(i64, Vec<u8>)]) -> u64 {
         LivoxModel::Mid360.protocol(),
     ));
     let mut points = 0u64;
-    let mut cb = |sw: &ringscan::sweep::Sweep, _: &_| points += sw.points.len() as u64;
+    let mut cb = |sw: &mut ringscan::sweep::Sweep, _: &_| points += sw.points.len() as u64;
     for (t, p) in input {
         s.push(*t, p, &mut cb);
     }

@@ -59,7 +59,7 @@ fn main() {
     };
     let mut stream = VelodyneStream::new(cfg);
     let mut sweeps: Vec<(u64, Vec<u8>)> = Vec::new();
-    let mut cb = |s: &Sweep, _: &SensorFacts| {
+    let mut cb = |s: &mut Sweep, _: &SensorFacts| {
         sweeps.push((
             s.last_host_ns.max(0) as u64,
             ringscan::point::as_bytes(&s.points).to_vec(),

@@ -163,7 +163,8 @@ fn main() {
             };
             let mut stream = OusterStream::new(cfg).unwrap_or_else(|e| die(format!("{e}")));
             let (mut frames, mut points) = (0u64, 0u64);
-            let mut on = |s: &ringscan::sweep::Sweep, _: &ringscan::sensor::ouster::OusterFacts| {
+            let mut on = |s: &mut ringscan::sweep::Sweep,
+                          _: &ringscan::sensor::ouster::OusterFacts| {
                 frames += 1;
                 points += s.points.len() as u64;
             };

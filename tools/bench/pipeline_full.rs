@@ -59,7 +59,7 @@ fn os2_sweep(root: &Path) -> Option<Sweep> {
     .ok()?;
     let mut src = PcapSource::open(&dir.join("OS-2-128-U1_v2.3.0_1024x10.pcap")).ok()?;
     let mut best: Option<Sweep> = None;
-    let mut keep = |s: &Sweep, _: &_| {
+    let mut keep = |s: &mut Sweep, _: &_| {
         if best
             .as_ref()
             .is_none_or(|b| s.points.len() > b.points.len())
@@ -91,7 +91,7 @@ fn hdl32_sweep(root: &Path) -> Option<Sweep> {
     .ok()?;
     let mut sweeps = Vec::new();
     while let Ok(Some(d)) = src.next_datagram() {
-        let _ = stream.push(d.time_ns, d.payload, &mut |s: &Sweep, _: &_| {
+        let _ = stream.push(d.time_ns, d.payload, &mut |s: &mut Sweep, _: &_| {
             sweeps.push(s.clone())
         });
     }

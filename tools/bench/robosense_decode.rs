@@ -94,7 +94,7 @@ fn robosense_decoder_pass(
 fn robosense_stream_pass(angles: &RobosenseAngles, input: &[(i64, Vec<u8>)]) -> u64 {
     let mut stream = RobosenseStream::new(RobosenseConfig::new(Some(angles.clone())));
     let mut points = 0u64;
-    let mut cb = |s: &ringscan::sweep::Sweep, _: &_| points += s.points.len() as u64;
+    let mut cb = |s: &mut ringscan::sweep::Sweep, _: &_| points += s.points.len() as u64;
     for (t, p) in input {
         stream.push(*t, p, &mut cb).expect("stream");
     }
@@ -128,7 +128,7 @@ fn velodyne_stream_pass(
     };
     let mut stream = ringscan::sensor::velodyne::VelodyneStream::new(cfg);
     let mut points = 0u64;
-    let mut cb = |s: &ringscan::sweep::Sweep, _: &_| points += s.points.len() as u64;
+    let mut cb = |s: &mut ringscan::sweep::Sweep, _: &_| points += s.points.len() as u64;
     for (t, p) in input {
         stream.push(*t, p, &mut cb).expect("stream");
     }

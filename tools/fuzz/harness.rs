@@ -1878,7 +1878,7 @@ pub fn ouster_stream(data: &[u8]) {
     let mut sweeps = 0u64;
     let mut points = 0u64;
     let mut template: Vec<u8> = Vec::new();
-    let mut on_sweep = |s: &Sweep, _: &ringscan::sensor::ouster::sweep::OusterFacts| {
+    let mut on_sweep = |s: &mut Sweep, _: &ringscan::sensor::ouster::sweep::OusterFacts| {
         sweeps += 1;
         points += s.points.len() as u64;
         assert!(
@@ -2385,7 +2385,7 @@ pub fn hesai_packet(data: &[u8]) {
     let l = &model.spec().layout;
     let mut stream = HesaiStream::new(cfg);
     let mut points = 0usize;
-    let mut on_sweep = |sw: &Sweep, _: &ringscan::sensor::hesai::HesaiFacts| {
+    let mut on_sweep = |sw: &mut Sweep, _: &ringscan::sensor::hesai::HesaiFacts| {
         for p in &sw.points {
             check_hesai_point(p, model, max_m);
         }
@@ -2531,7 +2531,7 @@ pub fn robosense_packet(data: &[u8]) {
     } + 0.2;
     let mut stream = RobosenseStream::new(cfg);
     let mut points = 0usize;
-    let mut on_sweep = |sw: &Sweep, _: &ringscan::sensor::robosense::RobosenseFacts| {
+    let mut on_sweep = |sw: &mut Sweep, _: &ringscan::sensor::robosense::RobosenseFacts| {
         for p in &sw.points {
             assert!(
                 p.x.is_finite() && p.y.is_finite() && p.z.is_finite(),

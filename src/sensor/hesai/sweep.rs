@@ -293,7 +293,7 @@ impl HesaiStream {
         &mut self,
         host_ns: i64,
         payload: &[u8],
-        on_sweep: &mut dyn FnMut(&Sweep, &HesaiFacts),
+        on_sweep: &mut dyn FnMut(&mut Sweep, &HesaiFacts),
     ) -> Result<(), crate::sensor::DecodeError> {
         self.ensure_decoder(payload)?;
         let Some(model) = self.facts.model else {
@@ -550,20 +550,20 @@ impl HesaiStream {
         }
     }
 
-    fn emit_front(&mut self, on_sweep: &mut dyn FnMut(&Sweep, &HesaiFacts)) {
-        if let Some(o) = self.open.pop_front() {
+    fn emit_front(&mut self, on_sweep: &mut dyn FnMut(&mut Sweep, &HesaiFacts)) {
+        if let Some(mut o) = self.open.pop_front() {
             if !o.sweep.points.is_empty() || o.sweep.packets > 0 {
                 self.stats.sweeps += 1;
                 self.stats.points += o.sweep.points.len() as u64;
                 self.facts.clock = o.sweep.clock;
-                on_sweep(&o.sweep, &self.facts);
+                on_sweep(&mut o.sweep, &self.facts);
             }
             self.spare.push(o.sweep);
         }
         self.base_gen += 1;
     }
 
-    fn emit_all(&mut self, on_sweep: &mut dyn FnMut(&Sweep, &HesaiFacts)) {
+    fn emit_all(&mut self, on_sweep: &mut dyn FnMut(&mut Sweep, &HesaiFacts)) {
         while !self.open.is_empty() {
             self.emit_front(on_sweep);
         }
@@ -579,7 +579,7 @@ impl HesaiStream {
     }
 
     /// Emits the sweeps still open, at the end of the input.
-    pub fn finish(&mut self, on_sweep: &mut dyn FnMut(&Sweep, &HesaiFacts)) {
+    pub fn finish(&mut self, on_sweep: &mut dyn FnMut(&mut Sweep, &HesaiFacts)) {
         self.emit_all(on_sweep);
     }
 }

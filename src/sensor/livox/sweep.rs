@@ -253,7 +253,7 @@ impl LivoxStream {
         &mut self,
         host_ns: i64,
         payload: &[u8],
-        on_sweep: &mut dyn FnMut(&Sweep, &LivoxFacts),
+        on_sweep: &mut dyn FnMut(&mut Sweep, &LivoxFacts),
     ) {
         if self.held_waiting && self.covered(self.held_end_ns) {
             self.release(on_sweep);
@@ -271,7 +271,7 @@ impl LivoxStream {
     }
 
     /// Emits the sweep waiting for its IMU samples, if any, and the open sweep.
-    pub fn finish(&mut self, on_sweep: &mut dyn FnMut(&Sweep, &LivoxFacts)) {
+    pub fn finish(&mut self, on_sweep: &mut dyn FnMut(&mut Sweep, &LivoxFacts)) {
         self.emit(on_sweep);
         self.release(on_sweep);
     }
@@ -298,7 +298,7 @@ impl LivoxStream {
         &mut self,
         host_ns: i64,
         payload: &[u8],
-        on_sweep: &mut dyn FnMut(&Sweep, &LivoxFacts),
+        on_sweep: &mut dyn FnMut(&mut Sweep, &LivoxFacts),
     ) -> Result<(), LivoxWireError> {
         let p = Sdk2Packet::new(payload)?;
         if self.cfg.check_crc {
@@ -396,7 +396,7 @@ impl LivoxStream {
         &mut self,
         host_ns: i64,
         payload: &[u8],
-        on_sweep: &mut dyn FnMut(&Sweep, &LivoxFacts),
+        on_sweep: &mut dyn FnMut(&mut Sweep, &LivoxFacts),
     ) -> Result<(), LivoxWireError> {
         let p = Sdk1Packet::new(payload)?;
         let Some(ts) = p.timestamp_ns() else {
@@ -514,7 +514,7 @@ impl LivoxStream {
 
     /// Finishes the open sweep: handed over now when its IMU samples are in, else held (the
     /// module's doc); a sweep still held from before goes first, covered or not.
-    fn emit(&mut self, on_sweep: &mut dyn FnMut(&Sweep, &LivoxFacts)) {
+    fn emit(&mut self, on_sweep: &mut dyn FnMut(&mut Sweep, &LivoxFacts)) {
         if !self.open {
             return;
         }
@@ -534,7 +534,7 @@ impl LivoxStream {
     }
 
     /// Hands over the held sweep, if any.
-    fn release(&mut self, on_sweep: &mut dyn FnMut(&Sweep, &LivoxFacts)) {
+    fn release(&mut self, on_sweep: &mut dyn FnMut(&mut Sweep, &LivoxFacts)) {
         if !self.held_waiting {
             return;
         }
@@ -550,6 +550,6 @@ impl LivoxStream {
         };
         self.stats.max_sweep_points = self.stats.max_sweep_points.max(n);
         self.facts.last_sweep_points = n;
-        on_sweep(&self.held, &self.facts);
+        on_sweep(&mut self.held, &self.facts);
     }
 }

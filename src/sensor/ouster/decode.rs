@@ -604,18 +604,52 @@ impl OusterDecoder {
         sweep_start_ns: u64,
         out: &mut Vec<Point>,
     ) -> Result<Decoded, DecodeError> {
+        self.append(p, sweep_start_ns, out, None)
+    }
+
+    /// [`Self::decode`], also appending each point's column (measurement id) to `columns`:
+    /// what an organised image of the sweep needs, at the speed of the append loop (one
+    /// fill per block of rows instead of a call per point through [`Self::decode_with`]).
+    pub fn decode_columns(
+        &self,
+        p: &LidarPacket<'_>,
+        sweep_start_ns: u64,
+        out: &mut Vec<Point>,
+        columns: &mut Vec<u32>,
+    ) -> Result<Decoded, DecodeError> {
+        self.append(p, sweep_start_ns, out, Some(columns))
+    }
+
+    fn append(
+        &self,
+        p: &LidarPacket<'_>,
+        sweep_start_ns: u64,
+        out: &mut Vec<Point>,
+        mut columns: Option<&mut Vec<u32>>,
+    ) -> Result<Decoded, DecodeError> {
         self.check_format(p)?;
         let Some(rd) = self.readers else {
-            return Ok(self.decode_generic(p, sweep_start_ns, &mut |pt, _, _, _| out.push(pt)));
+            return Ok(self.decode_generic(p, sweep_start_ns, &mut |pt, _, _, m| {
+                out.push(pt);
+                if let Some(c) = columns.as_deref_mut() {
+                    c.push(m as u32);
+                }
+            }));
         };
         let dual = self.returns() == 2;
+        let cols = &mut columns;
         Ok(match self.layout.pixel_bytes {
-            4 => self.append_fixed::<4>(p, sweep_start_ns, &rd, dual, out),
-            8 => self.append_fixed::<8>(p, sweep_start_ns, &rd, dual, out),
-            12 => self.append_fixed::<12>(p, sweep_start_ns, &rd, dual, out),
-            16 => self.append_fixed::<16>(p, sweep_start_ns, &rd, dual, out),
-            20 => self.append_fixed::<20>(p, sweep_start_ns, &rd, dual, out),
-            _ => self.decode_generic(p, sweep_start_ns, &mut |pt, _, _, _| out.push(pt)),
+            4 => self.append_fixed::<4>(p, sweep_start_ns, &rd, dual, out, cols),
+            8 => self.append_fixed::<8>(p, sweep_start_ns, &rd, dual, out, cols),
+            12 => self.append_fixed::<12>(p, sweep_start_ns, &rd, dual, out, cols),
+            16 => self.append_fixed::<16>(p, sweep_start_ns, &rd, dual, out, cols),
+            20 => self.append_fixed::<20>(p, sweep_start_ns, &rd, dual, out, cols),
+            _ => self.decode_generic(p, sweep_start_ns, &mut |pt, _, _, m| {
+                out.push(pt);
+                if let Some(c) = cols.as_deref_mut() {
+                    c.push(m as u32);
+                }
+            }),
         })
     }
 
@@ -627,11 +661,12 @@ impl OusterDecoder {
         rd: &Readers,
         dual: bool,
         out: &mut Vec<Point>,
+        columns: &mut Option<&mut Vec<u32>>,
     ) -> Decoded {
         if dual {
-            self.append_returns::<N, true>(p, sweep_start_ns, rd, out)
+            self.append_returns::<N, true>(p, sweep_start_ns, rd, out, columns)
         } else {
-            self.append_returns::<N, false>(p, sweep_start_ns, rd, out)
+            self.append_returns::<N, false>(p, sweep_start_ns, rd, out, columns)
         }
     }
 
@@ -643,6 +678,7 @@ impl OusterDecoder {
         sweep_start_ns: u64,
         rd: &Readers,
         out: &mut Vec<Point>,
+        columns: &mut Option<&mut Vec<u32>>,
     ) -> Decoded {
         let mut n = Decoded::default();
         let h = self.h;
@@ -680,6 +716,9 @@ impl OusterDecoder {
                 }
                 let k = k.min(STAGE);
                 out.extend_from_slice(&stage[..k]);
+                if let Some(c) = columns.as_deref_mut() {
+                    c.resize(c.len() + k, m as u32);
+                }
                 n.points += k;
             }
         }

@@ -268,7 +268,7 @@ impl RobosenseStream {
         &mut self,
         host_ns: i64,
         payload: &[u8],
-        on_sweep: &mut dyn FnMut(&Sweep, &RobosenseFacts),
+        on_sweep: &mut dyn FnMut(&mut Sweep, &RobosenseFacts),
     ) -> Result<(), DecodeError> {
         if is_difop(payload) {
             return self.push_difop(payload, on_sweep);
@@ -305,7 +305,7 @@ impl RobosenseStream {
     fn push_difop(
         &mut self,
         payload: &[u8],
-        on_sweep: &mut dyn FnMut(&Sweep, &RobosenseFacts),
+        on_sweep: &mut dyn FnMut(&mut Sweep, &RobosenseFacts),
     ) -> Result<(), DecodeError> {
         let Ok(d) = Difop::new(payload) else {
             self.stats.malformed += 1;
@@ -374,7 +374,7 @@ impl RobosenseStream {
         &mut self,
         host_ns: i64,
         payload: &[u8],
-        on_sweep: &mut dyn FnMut(&Sweep, &RobosenseFacts),
+        on_sweep: &mut dyn FnMut(&mut Sweep, &RobosenseFacts),
     ) {
         let (Some(model), Some(dec)) = (self.facts.model, self.decoder.take()) else {
             return;
@@ -522,7 +522,7 @@ impl RobosenseStream {
         host_ns: i64,
         period_ns: i64,
         clock: ClockSource,
-        on_sweep: &mut dyn FnMut(&Sweep, &RobosenseFacts),
+        on_sweep: &mut dyn FnMut(&mut Sweep, &RobosenseFacts),
     ) {
         if starts[b] {
             self.emit(on_sweep);
@@ -547,13 +547,13 @@ impl RobosenseStream {
         }
     }
 
-    fn emit(&mut self, on_sweep: &mut dyn FnMut(&Sweep, &RobosenseFacts)) {
-        if let Some((sw, _)) = self.open.take() {
+    fn emit(&mut self, on_sweep: &mut dyn FnMut(&mut Sweep, &RobosenseFacts)) {
+        if let Some((mut sw, _)) = self.open.take() {
             if !sw.points.is_empty() || sw.packets > 0 {
                 self.stats.sweeps += 1;
                 self.stats.points += sw.points.len() as u64;
                 self.facts.clock = sw.clock;
-                on_sweep(&sw, &self.facts);
+                on_sweep(&mut sw, &self.facts);
             }
             self.spare = Some(sw);
         }
@@ -561,7 +561,7 @@ impl RobosenseStream {
 
     /// Emits the open sweep and decodes nothing more of the held packets (they never got
     /// their angles: counted as dropped).
-    pub fn finish(&mut self, on_sweep: &mut dyn FnMut(&Sweep, &RobosenseFacts)) {
+    pub fn finish(&mut self, on_sweep: &mut dyn FnMut(&mut Sweep, &RobosenseFacts)) {
         self.stats.dropped += self.held.len() as u64;
         self.held.clear();
         self.emit(on_sweep);

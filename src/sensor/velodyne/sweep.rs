@@ -217,7 +217,7 @@ impl VelodyneStream {
         &mut self,
         host_ns: i64,
         payload: &[u8],
-        on_sweep: &mut dyn FnMut(&Sweep, &SensorFacts),
+        on_sweep: &mut dyn FnMut(&mut Sweep, &SensorFacts),
     ) -> Result<(), StreamError> {
         match payload.len() {
             DATA_PACKET_LEN => self.push_data(host_ns, payload, on_sweep),
@@ -235,7 +235,7 @@ impl VelodyneStream {
     /// Ends the stream: decodes packets still held for detection and emits the last sweep.
     pub fn finish(
         &mut self,
-        on_sweep: &mut dyn FnMut(&Sweep, &SensorFacts),
+        on_sweep: &mut dyn FnMut(&mut Sweep, &SensorFacts),
     ) -> Result<(), StreamError> {
         if self.decoder.is_none() && !self.pending.is_empty() {
             self.detect()?;
@@ -279,7 +279,7 @@ impl VelodyneStream {
         &mut self,
         host_ns: i64,
         payload: &[u8],
-        on_sweep: &mut dyn FnMut(&Sweep, &SensorFacts),
+        on_sweep: &mut dyn FnMut(&mut Sweep, &SensorFacts),
     ) -> Result<(), StreamError> {
         let Ok(packet) = DataPacket::new(payload) else {
             self.stats.malformed += 1;
@@ -311,7 +311,7 @@ impl VelodyneStream {
         Ok(())
     }
 
-    fn replay_pending(&mut self, on_sweep: &mut dyn FnMut(&Sweep, &SensorFacts)) {
+    fn replay_pending(&mut self, on_sweep: &mut dyn FnMut(&mut Sweep, &SensorFacts)) {
         let pending = core::mem::take(&mut self.pending);
         for (host, bytes) in &pending {
             if let Ok(p) = DataPacket::new(&bytes[..]) {
@@ -419,7 +419,7 @@ impl VelodyneStream {
         &mut self,
         host_ns: i64,
         p: &DataPacket<'_>,
-        on_sweep: &mut dyn FnMut(&Sweep, &SensorFacts),
+        on_sweep: &mut dyn FnMut(&mut Sweep, &SensorFacts),
     ) {
         let Some(dec) = self.decoder.as_ref() else {
             return;
@@ -593,7 +593,7 @@ impl VelodyneStream {
         self.cur.last_host_ns = host_ns;
     }
 
-    fn emit(&mut self, on_sweep: &mut dyn FnMut(&Sweep, &SensorFacts)) {
+    fn emit(&mut self, on_sweep: &mut dyn FnMut(&mut Sweep, &SensorFacts)) {
         if !self.sweep_open {
             return;
         }
@@ -601,7 +601,7 @@ impl VelodyneStream {
         if self.cur.packets > 0 {
             self.stats.sweeps += 1;
             self.next_index += 1;
-            on_sweep(&self.cur, &self.facts);
+            on_sweep(&mut self.cur, &self.facts);
         }
     }
 }
