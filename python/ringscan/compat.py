@@ -91,8 +91,8 @@ def _calib_path(calibration: Any) -> Optional[str]:
 
 class Config:
     """velodyne_decoder's ``Config``: ``model``, ``calibration``, ``min_range`` (m),
-    ``max_range`` (m), ``min_angle`` / ``max_angle`` (degrees; only the full turn is
-    supported), ``cut_angle`` (degrees or None), ``timestamp_first_packet``."""
+    ``max_range`` (m), ``min_angle`` / ``max_angle`` (degrees: the points whose firing
+    azimuth is inside, as velodyne_decoder tests it), ``cut_angle`` (degrees or None), ``timestamp_first_packet``."""
 
     def __init__(
         self,
@@ -128,8 +128,6 @@ def read_pcap(
     config = config if config is not None else Config()
     path = _path(pcap_file, "pcap_file")
     g = lambda name, default: getattr(config, name, default)  # noqa: E731
-    if (g("min_angle", 0.0) or 0.0) != 0.0 or (g("max_angle", 360.0) or 360.0) != 360.0:
-        raise NotImplementedError("ringscan.compat.read_pcap: min_angle / max_angle other than 0 / 360")
     t0, t1 = time_range
     reader = _ringscan.CompatReader(
         path,
@@ -140,6 +138,8 @@ def read_pcap(
         None if g("cut_angle", None) is None else float(g("cut_angle", None)),
         bool(g("timestamp_first_packet", False)),
         (None if t0 is None else float(t0), None if t1 is None else float(t1)),
+        float(g("min_angle", 0.0)),
+        float(g("max_angle", 360.0)),
     )
     try:
         while True:

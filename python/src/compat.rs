@@ -38,6 +38,8 @@ struct Settings {
     /// Cut angle, 0.01°; `None`: at the first packet's azimuth.
     cut: Option<i32>,
     stamp_first: bool,
+    /// `min_angle` / `max_angle`, 0.01°; `None`: the full turn.
+    window: Option<(u16, u16)>,
     /// `time_range`: packets captured before the start are skipped, the first after the end
     /// stops reading (velodyne_decoder's `iter_pcap`), seconds.
     time_range: (Option<f64>, Option<f64>),
@@ -129,6 +131,7 @@ struct FrameDecoder {
     opts: DecodeOptions,
     decoders: Vec<(ReturnMode, VelodyneDecoder)>,
     stamp_first: bool,
+    window: Option<(u16, u16)>,
 }
 
 impl FrameDecoder {
@@ -161,12 +164,33 @@ impl FrameDecoder {
             };
             let dt_s = (device_ns(p) - stamp_dev) as f64 * 1e-9;
             let dual = mode.is_dual();
-            let decoder = self.decoder(mode)?;
+            self.decoder(mode)?;
+            let Some(decoder) = self
+                .decoders
+                .iter()
+                .find(|(m, _)| *m == mode)
+                .map(|(_, d)| d)
+            else {
+                continue;
+            };
             let base = next_col;
             let start = data.len();
             slot_seen.clear();
             let mut last_col = None;
+            let window = self
+                .window
+                .map(|w| Window::new(w, self.model, mode, &packet));
+            let laser_of_ring = &self.laser_of_ring;
             decoder.decode_with(&packet, 0..BLOCKS, 0, |pt, col| {
+                if let Some(w) = &window {
+                    let laser = laser_of_ring
+                        .get(usize::from(pt.ring))
+                        .copied()
+                        .unwrap_or(0);
+                    if !w.keeps(&packet, col, laser, pt.t) {
+                        return;
+                    }
+                }
                 let ret_type = if pt.ret == 0 { 1.0 } else { 2.0 };
                 if dual {
                     slot_seen.push((col, pt.ring, data.len()));
@@ -205,6 +229,97 @@ impl FrameDecoder {
             data,
             n,
         }))
+    }
+}
+
+/// Nanoseconds as velodyne_decoder's float seconds.
+fn secs(ns: f64) -> f32 {
+    (ns * 1e-9) as f32
+}
+
+/// velodyne_decoder's azimuth window (`min_angle` / `max_angle`), tested per point on the
+/// azimuth its `PacketDecoder` tests: for the VLP-16, Puck Hi-Res, VLP-32C and HDL-32E the
+/// firing's azimuth (its block's azimuth + the packet's mean rotation rate × the firing's
+/// delay after the block's first firing, rounded to 0.01°), for the HDL-64E and VLS-128 the
+/// azimuth of the block that holds the point. Bounds are inclusive; when `min > max`,
+/// velodyne_decoder keeps `max ≤ azimuth ≤ min`, and so does this.
+struct Window {
+    min: u16,
+    max: u16,
+    model: VelodyneModel,
+    mode: ReturnMode,
+    /// 0.01° per s (16/32-beam models).
+    rate: f32,
+}
+
+impl Window {
+    fn new(
+        (min, max): (u16, u16),
+        model: VelodyneModel,
+        mode: ReturnMode,
+        p: &DataPacket<'_>,
+    ) -> Self {
+        // In velodyne_decoder's units and precision: float seconds from its timing table.
+        let diff = (i32::from(p.azimuth(BLOCKS - 1)) - i32::from(p.azimuth(0))).rem_euclid(36_000);
+        let duration = secs(model.firing(mode, BLOCKS - 1, 0).0) - secs(model.firing(mode, 0, 0).0);
+        let rate = if duration > 0.0 {
+            diff as f32 / duration
+        } else {
+            0.0
+        };
+        Self {
+            min,
+            max,
+            model,
+            mode,
+            rate,
+        }
+    }
+
+    fn contains(&self, az: u16) -> bool {
+        if self.min <= self.max {
+            az >= self.min && az <= self.max
+        } else {
+            az <= self.min && az >= self.max
+        }
+    }
+
+    /// Whether the point of firing column `col` (in the packet), laser `laser` and firing
+    /// time `t_ns` (after the packet's first firing) is inside the window.
+    fn keeps(&self, p: &DataPacket<'_>, col: usize, laser: usize, t_ns: u32) -> bool {
+        let dual = self.mode.is_dual();
+        let bank = laser / 32;
+        let block = match self.model {
+            VelodyneModel::Vlp16 | VelodyneModel::PuckHiRes => (col / 2) * if dual { 2 } else { 1 },
+            VelodyneModel::Vlp32c | VelodyneModel::Hdl32e => col * if dual { 2 } else { 1 },
+            VelodyneModel::Hdl64eS2 | VelodyneModel::Hdl64eS3 => {
+                if dual {
+                    4 * col + bank
+                } else {
+                    2 * col + bank
+                }
+            }
+            VelodyneModel::Vls128 => {
+                if dual {
+                    2 * bank
+                } else {
+                    4 * col + bank
+                }
+            }
+        };
+        if block >= BLOCKS {
+            return false;
+        }
+        let block_az = p.azimuth(block);
+        let az = match self.model {
+            VelodyneModel::Hdl64eS2 | VelodyneModel::Hdl64eS3 | VelodyneModel::Vls128 => block_az,
+            _ => {
+                let dt = secs(f64::from(t_ns)) - secs(self.model.firing(self.mode, block, 0).0);
+                let a = f32::from(block_az) + self.rate * dt;
+                ((a + 36_000.0).round() as i64).rem_euclid(36_000) as u16
+            }
+        };
+        self.contains(az)
     }
 }
 
@@ -308,6 +423,7 @@ fn run(s: &Settings, tx: &SyncSender<Msg<Frame>>) -> Result<(), (ErrKind, String
                 opts: s.opts,
                 decoders: Vec::new(),
                 stamp_first: s.stamp_first,
+                window: s.window,
             });
         }
         let Some(d) = dec.as_mut() else {
@@ -364,7 +480,7 @@ pub struct CompatReader {
 #[pymethods]
 impl CompatReader {
     #[new]
-    #[pyo3(signature = (path, model=None, calibration=None, min_range=0.1, max_range=200.0, cut_angle=None, timestamp_first_packet=false, time_range=(None, None)))]
+    #[pyo3(signature = (path, model=None, calibration=None, min_range=0.1, max_range=200.0, cut_angle=None, timestamp_first_packet=false, time_range=(None, None), min_angle=0.0, max_angle=360.0))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         path: PathBuf,
@@ -375,7 +491,19 @@ impl CompatReader {
         cut_angle: Option<f64>,
         timestamp_first_packet: bool,
         time_range: (Option<f64>, Option<f64>),
+        min_angle: f64,
+        max_angle: f64,
     ) -> PyResult<Self> {
+        if !(min_angle.is_finite() && max_angle.is_finite()) {
+            return Err(to_py_err(
+                ErrKind::Usage,
+                format!("min_angle {min_angle} / max_angle {max_angle}: expected degrees"),
+            ));
+        }
+        // velodyne_decoder: each angle taken modulo 360° to 0.01°; equal bounds mean the full turn.
+        let to_cdeg = |a: f64| ((a % 360.0 + 360.0) % 360.0 * 100.0).round() as u16;
+        let (lo, hi) = (to_cdeg(min_angle), to_cdeg(max_angle));
+        let window = (lo != hi).then_some((lo, hi));
         let model = match model.as_deref() {
             None => None,
             Some(m) => Some(VelodyneModel::from_id(m).ok_or_else(|| {
@@ -409,6 +537,7 @@ impl CompatReader {
             },
             cut,
             stamp_first: timestamp_first_packet,
+            window,
             time_range,
         };
         let (tx, rx) = mpsc::sync_channel::<Msg<Frame>>(QUEUE);
