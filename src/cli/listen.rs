@@ -1015,8 +1015,7 @@ pub fn listen_run_with(
         None => None,
         Some(c) => {
             let device = addrs.first().copied().unwrap_or(Ipv4Addr::LOCALHOST);
-            match super::livox_ctl::configure(c, configure_model, device, args.interface, &ports)
-            {
+            match super::livox_ctl::configure(c, configure_model, device, args.interface, &ports) {
                 Ok(x) => Some(x),
                 Err(e) => {
                     drop(tx);

@@ -606,7 +606,13 @@ pub fn sdk1_heartbeat(seq: u16) -> Vec<u8> {
 
 /// Start (`true`) or stop sampling.
 pub fn sdk1_sampling(seq: u16, start: bool) -> Vec<u8> {
-    sdk1_frame(sdk1_type::CMD, seq, 0, sdk1_cmd::SAMPLING, &[u8::from(start)])
+    sdk1_frame(
+        sdk1_type::CMD,
+        seq,
+        0,
+        sdk1_cmd::SAMPLING,
+        &[u8::from(start)],
+    )
 }
 
 /// Disconnect.
@@ -645,7 +651,10 @@ mod tests {
         }
         let h = sdk1_handshake(3, Ipv4Addr::LOCALHOST, 1, 2, 3);
         let q = sdk1_parse(&h).unwrap();
-        assert_eq!((q.seq, q.cmd_id, q.payload.len()), (3, sdk1_cmd::HANDSHAKE, 10));
+        assert_eq!(
+            (q.seq, q.cmd_id, q.payload.len()),
+            (3, sdk1_cmd::HANDSHAKE, 10)
+        );
         for i in 0..h.len() {
             let mut g = h.clone();
             g[i] ^= 0x10;
