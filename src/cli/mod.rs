@@ -550,7 +550,7 @@ where
                 hesai_ptc: c.hesai_ptc,
                 hooks: Default::default(),
             };
-            let configure = c.configure.then(|| livox_ctl::ConfigureArgs {
+            let configure = c.configure.then_some(livox_ctl::ConfigureArgs {
                 device_ip: c.device_ip,
                 control_port: c.control_port,
             });
