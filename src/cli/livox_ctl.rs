@@ -54,11 +54,20 @@ pub struct Configured {
     heartbeat: Option<(Arc<AtomicBool>, JoinHandle<Value>)>,
 }
 
+impl Drop for Configured {
+    /// A run that ends on an error stops the heartbeat too.
+    fn drop(&mut self) {
+        if let Some((stop, _)) = &self.heartbeat {
+            stop.store(true, Ordering::Relaxed);
+        }
+    }
+}
+
 impl Configured {
     /// Stops the heartbeat (SDK1: stop sampling, disconnect) and returns the summary.
-    pub fn finish(self) -> Value {
-        let mut s = self.summary;
-        if let Some((stop, t)) = self.heartbeat {
+    pub fn finish(mut self) -> Value {
+        let mut s = std::mem::take(&mut self.summary);
+        if let Some((stop, t)) = self.heartbeat.take() {
             stop.store(true, Ordering::Relaxed);
             if let Ok(hb) = t.join() {
                 if let Some(o) = s.as_object_mut() {
