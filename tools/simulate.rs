@@ -19,8 +19,9 @@
 //!
 //! Sensor and output:
 //! - `--model M`: vlp16, puck-hires, hdl32e, vlp32c, hdl64e-s2, hdl64e-s3, vls128, `mid360` /
-//!   `avia` (Livox; `--data-type 1|2|3` for the MID-360, `--imu` adds its 200 Hz IMU packets;
-//!   with `--udp ADDR:PORT` the MID-360's IMU goes to PORT + 100), or `ouster`
+//!   `hap` / `avia` (Livox; `--data-type 1|2|3` for the MID-360 and the HAP, `--imu` adds
+//!   their 200 Hz IMU packets; with `--udp ADDR:PORT` an SDK2 model's IMU goes to PORT + 100),
+//!   or `ouster`
 //!   (needs `--metadata FILE.json`; `--profile NAME` overrides its lidar profile, e.g.
 //!   `RNG15_RFL8_NIR8`; `--columns W --fps F` its mode). Velodyne: `--mode
 //!   strongest|last|dual`, `--hz F` (rotation rate), `--calib FILE` (required for HDL-64E /
@@ -60,7 +61,7 @@ use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4, UdpSocket};
 use std::time::{Duration, Instant};
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
-use ringscan::sensor::livox::model::LivoxModel;
+use ringscan::sensor::livox::model::{LivoxModel, Protocol};
 use ringscan::sensor::livox::sim::LivoxSim;
 use ringscan::sensor::ouster::calib::OusterInfo;
 use ringscan::sensor::ouster::model::Profile;
@@ -279,10 +280,11 @@ fn main() -> Res<()> {
     let mut records = 0u64;
 
     if let Some(model) = ringscan::sensor::livox::LivoxModel::from_id(&model_name)
-        .filter(|m| matches!(m, LivoxModel::Mid360 | LivoxModel::Avia))
+        .filter(|m| matches!(m, LivoxModel::Mid360 | LivoxModel::Hap | LivoxModel::Avia))
     {
-        // Livox: MID-360 (SDK2; points from 56300 to 56301, IMU from 56400 to 56401) or Avia
-        // (SDK1; points and IMU to 56001), IMU packets at 200 Hz with `--imu`.
+        // Livox: MID-360 (SDK2; points from 56300 to 56301, IMU from 56400 to 56401), HAP
+        // (SDK2; points from and to 57000, IMU from and to 58000) or Avia (SDK1; points and IMU
+        // to 56001), IMU packets at 200 Hz with `--imu`.
         let mut sim = LivoxSim::new(model, t0_ns);
         sim.trajectory = trajectory.clone();
         if let Some(dt) = num::<u8>(&args, "--data-type")? {
@@ -292,6 +294,7 @@ fn main() -> Res<()> {
         let ip = Ipv4Addr::new(192, 168, 1, 12);
         let (psrc, isrc) = match model {
             LivoxModel::Mid360 => (SocketAddrV4::new(ip, 56_300), SocketAddrV4::new(ip, 56_400)),
+            LivoxModel::Hap => (SocketAddrV4::new(ip, 57_000), SocketAddrV4::new(ip, 58_000)),
             _ => (SocketAddrV4::new(ip, 65_000), SocketAddrV4::new(ip, 65_000)),
         };
         let mut truth = Vec::new();
@@ -300,11 +303,11 @@ fn main() -> Res<()> {
         let mut n = 0u64;
         for (host, port, bytes) in &packets {
             let is_imu = *port == model.imu_port().unwrap_or(0)
-                && (model == LivoxModel::Mid360 || bytes.len() == 42);
+                && (model.protocol() == Protocol::Sdk2 || bytes.len() == 42);
             if is_imu && !imu {
                 continue;
             }
-            let (src, dst) = if is_imu && model == LivoxModel::Mid360 {
+            let (src, dst) = if is_imu && model.protocol() == Protocol::Sdk2 {
                 (isrc, udp_port.map_or(*port, |p| p + 100))
             } else {
                 (psrc, udp_port.unwrap_or(*port))

@@ -16,6 +16,8 @@ use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use crate::sensor::livox::model::ALL_MODELS;
+use crate::sensor::livox::LivoxModel;
 use crate::sensor::ouster::family::OusterCalibration;
 use crate::sensor::ouster::OusterStream;
 use crate::sensor::{Calibration, FAMILIES};
@@ -762,13 +764,16 @@ fn kernel_drops(sockets: &[BoundSocket]) -> u64 {
     sockets.iter().filter_map(BoundSocket::kernel_drops).sum()
 }
 
-/// `ringscan listen`.
-pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
+/// `ringscan listen` (`configure`: `--configure`, Livox).
+pub fn listen_command(
+    args: &ListenArgs,
+    configure: Option<&super::livox_ctl::ConfigureArgs>,
+) -> Result<ExitCode, RunError> {
     let ListenOutcome {
         json: json_out,
         lost,
         files,
-    } = listen_run(args)?;
+    } = listen_run_with(args, configure)?;
     if args.json {
         println!("{json_out}");
     } else {
@@ -804,6 +809,35 @@ pub fn listen_command(args: &ListenArgs) -> Result<ExitCode, RunError> {
 
 /// Listens until a signal, `--duration` or the hooks' stop flag; the summary.
 pub fn listen_run(args: &ListenArgs) -> Result<ListenOutcome, RunError> {
+    listen_run_with(args, None)
+}
+
+/// The Livox model `--configure` starts: `--model` if given (an error if it is not a Livox
+/// model), else `None` (SDK2 discovery says which).
+fn configure_model(args: &ListenArgs) -> Result<Option<LivoxModel>, RunError> {
+    match args.session.model.as_deref() {
+        None => Ok(None),
+        Some(m) => LivoxModel::from_id(m).map(Some).ok_or_else(|| {
+            let ids: Vec<&str> = ALL_MODELS.iter().map(|m| m.id()).collect();
+            RunError::Usage(format!(
+                "--configure starts Livox sensors only; --model {m} is not one ({})",
+                ids.join(", ")
+            ))
+        }),
+    }
+}
+
+/// [`listen_run`], first configuring a Livox sensor to stream when `configure` is given
+/// (after the sockets are bound, so its first datagrams are not lost), and keeping it
+/// streaming (the SDK1 heartbeat) until the end.
+pub fn listen_run_with(
+    args: &ListenArgs,
+    configure: Option<&super::livox_ctl::ConfigureArgs>,
+) -> Result<ListenOutcome, RunError> {
+    let configure_model = match configure {
+        Some(_) => configure_model(args)?,
+        None => None,
+    };
     if args.sensors.is_empty() {
         return Err(RunError::Usage(
             "listen: give at least one --sensor IP[:PORT]".into(),
@@ -977,6 +1011,21 @@ pub fn listen_run(args: &ListenArgs) -> Result<ListenOutcome, RunError> {
         Err(_) => return Err(RunError::Live("the decode thread did not start".into())),
     }
 
+    let configured = match configure {
+        None => None,
+        Some(c) => {
+            let device = addrs.first().copied().unwrap_or(Ipv4Addr::LOCALHOST);
+            match super::livox_ctl::configure(c, configure_model, device, args.interface, &ports) {
+                Ok(x) => Some(x),
+                Err(e) => {
+                    drop(tx);
+                    let _ = decode.join();
+                    return Err(e);
+                }
+            }
+        }
+    };
+
     tracing::info!(
         "listening on UDP ports {:?} for {:?}",
         ports.iter().collect::<Vec<_>>(),
@@ -1065,6 +1114,7 @@ pub fn listen_run(args: &ListenArgs) -> Result<ListenOutcome, RunError> {
     if terminal {
         eprintln!();
     }
+    let control = configured.map(super::livox_ctl::Configured::finish);
     let reason = reason?;
     tracing::info!("stopping: {reason}");
     let result = match decode.join() {
@@ -1134,6 +1184,9 @@ pub fn listen_run(args: &ListenArgs) -> Result<ListenOutcome, RunError> {
         ),
     );
     m.insert("elapsed_s".into(), json!(elapsed));
+    if let Some(c) = control {
+        m.insert("livox_control".into(), c);
+    }
     let lost = result.lost + queue_dropped + kernel;
     Ok(ListenOutcome {
         json: Value::Object(m),

@@ -2,6 +2,7 @@
 
 pub mod bag_args;
 pub mod listen;
+pub mod livox_ctl;
 pub mod odometry;
 pub mod pipeline;
 pub mod ptc;
@@ -266,6 +267,19 @@ struct ListenCmd {
     /// over Hesai's TCP control protocol (port 9347, or PORT).
     #[arg(long, value_name = "PORT", num_args = 0..=1, default_missing_value = "9347")]
     hesai_ptc: Option<u16>,
+    /// Livox: start the sensor before listening (SDK2: discovery, point / IMU destination,
+    /// work mode; SDK1: handshake, start sampling, 1 Hz heartbeat while listening). The model
+    /// from --model (SDK1 sensors need it), else SDK2 discovery.
+    #[arg(long)]
+    configure: bool,
+    /// --configure: the sensor's address (default: the first --sensor's; a broadcast address
+    /// works for SDK2 discovery).
+    #[arg(long, value_name = "IP", requires = "configure")]
+    device_ip: Option<std::net::Ipv4Addr>,
+    /// --configure: the host UDP port commands are sent from (default: SDK2 56101 MID-360 /
+    /// 56000 HAP; SDK1 any).
+    #[arg(long, value_name = "PORT", requires = "configure")]
+    control_port: Option<u16>,
     /// Join this multicast group on every port.
     #[arg(long, value_name = "GROUP")]
     multicast: Option<std::net::Ipv4Addr>,
@@ -536,7 +550,11 @@ where
                 hesai_ptc: c.hesai_ptc,
                 hooks: Default::default(),
             };
-            listen::listen_command(&args)
+            let configure = c.configure.then_some(livox_ctl::ConfigureArgs {
+                device_ip: c.device_ip,
+                control_port: c.control_port,
+            });
+            listen::listen_command(&args, configure.as_ref())
         }
         Command::Replay(c) => replay::replay_command(&replay::ReplayArgs {
             duration: match c.duration {

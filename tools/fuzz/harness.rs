@@ -2658,3 +2658,40 @@ pub fn livox_packet(data: &[u8]) {
     assert_eq!(st.packets + st.imu_packets + st.malformed, pushed);
     assert!(s.drain_imu().count() <= LIVOX_MAX_IMU_QUEUE);
 }
+
+/// Target `livox_control`: any bytes as a Livox control frame of both protocols
+/// (`sensor::livox::control::sdk2_parse` / `sdk1_parse`, what `listen --configure` reads from
+/// the network), then the ACK and broadcast readers on what they hold.
+///
+/// No panic; a frame that parses spans the whole input, its data is the input after the
+/// header (SDK2) or between the command bytes and the CRC-32 (SDK1), and the frame built
+/// again from its fields parses to the same fields.
+pub fn livox_control(data: &[u8]) {
+    use ringscan::sensor::livox::control as c;
+    if let Ok(f) = c::sdk2_parse(data) {
+        assert_eq!(f.data.len() + c::SDK2_HEADER, data.len());
+        assert_eq!(f.data, &data[c::SDK2_HEADER..]);
+        let again = c::sdk2_frame(f.seq, f.cmd_id, f.cmd_type, f.sender_type, f.data);
+        let g = c::sdk2_parse(&again).expect("a rebuilt SDK2 frame parses");
+        assert_eq!(
+            (g.seq, g.cmd_id, g.cmd_type, g.sender_type, g.data),
+            (f.seq, f.cmd_id, f.cmd_type, f.sender_type, f.data)
+        );
+        if let Ok(a) = c::sdk2_discovery_ack(f.data) {
+            let _ = (a.serial_str(), c::sdk2_model(a.dev_type));
+        }
+        let _ = c::sdk2_params_ack(f.data).map(|(r, _)| c::sdk2_return_name(r));
+    }
+    if let Ok(f) = c::sdk1_parse(data) {
+        assert_eq!(f.payload.len() + c::SDK1_WRAPPER, data.len());
+        let again = c::sdk1_frame(f.cmd_type, f.seq, f.cmd_set, f.cmd_id, f.payload);
+        assert_eq!(
+            again, data,
+            "SDK1 frames have no free bytes: rebuilt byte for byte"
+        );
+        if let Some(b) = c::sdk1_broadcast(&f) {
+            let _ = (b.code_str(), c::sdk1_model(b.dev_type));
+        }
+        let _ = c::sdk1_ack_code(&f, c::sdk1_cmd::HEARTBEAT).map(c::sdk1_return_name);
+    }
+}

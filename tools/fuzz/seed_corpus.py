@@ -15,6 +15,7 @@ import hashlib
 import os
 import random
 import struct
+import zlib
 import sys
 from pathlib import Path
 
@@ -439,6 +440,7 @@ def main():
                 put("ouster_stream", hdr0 + bytes([6]) + bytes(stream_ops[:60000]), "real")
     put("calib_ouster", b"\xa5" + ouster_header(1, 1, 0, 0), "gen")
     bag_seeds()
+    livox_control_seeds()
     for prof in range(8):
         for hi in range(4):
             put("ouster_packet", ouster_header(prof, 1, hi, 0) + b"\0" + bytes(rng.randrange(256) for _ in range(3000)), "rand")
@@ -447,6 +449,45 @@ def main():
 
     for t in sorted(os.listdir(CORPUS)):
         print(f"{t}: {len(os.listdir(CORPUS / t))} seeds")
+
+
+def livox_control_seeds():
+    """Livox control frames of both protocols, built from the protocol documents (the CRCs pass,
+    so the fuzzer starts past them)."""
+    def crc16(data, poly, init, reflected):
+        r = init
+        for b in data:
+            for i in range(8):
+                bit = (b >> i) & 1 if reflected else (b >> (7 - i)) & 1
+                top = r & 1 if reflected else (r >> 15) & 1
+                r = (r >> 1) if reflected else ((r << 1) & 0xFFFF)
+                if bit ^ top:
+                    r ^= poly
+        return r
+
+    def sdk2(seq, cmd_id, cmd_type, data):
+        h = struct.pack("<BBHIHBB6x", 0xAA, 0, 24 + len(data), seq, cmd_id, cmd_type, cmd_type)
+        h += struct.pack("<H", crc16(h, 0x1021, 0xFFFF, False))
+        return h + struct.pack("<I", zlib.crc32(data) if data else 0) + data
+
+    def sdk1(cmd_type, seq, cmd_id, payload):
+        h = struct.pack("<BBHBH", 0xAA, 1, 15 + len(payload), cmd_type, seq)
+        b = h + struct.pack("<H", crc16(h, 0x8408, 0x4C49, True)) + bytes([0, cmd_id]) + payload
+        return b + struct.pack("<I", zlib.crc32(b, 0x564F580A))
+
+    kv = struct.pack("<HH", 2, 0) + struct.pack("<HH4sHH", 6, 8, bytes([127, 0, 0, 1]), 56301, 56300)
+    kv += struct.pack("<HHB", 0x1A, 1, 1)
+    for f in [
+        sdk2(1, 0, 0, b""),
+        sdk2(1, 0, 1, bytes([0, 9]) + b"47MDL9K0A1".ljust(16, b"\0") + bytes([127, 0, 0, 2]) + struct.pack("<H", 56100)),
+        sdk2(2, 0x100, 0, kv),
+        sdk2(2, 0x100, 1, bytes([0x22, 6, 0])),
+        sdk1(2, 1, 0, b"3WEDH7600101X1".ljust(16, b"\0") + bytes([7, 0, 0])),
+        sdk1(0, 2, 1, bytes([127, 0, 0, 1]) + struct.pack("<HHH", 56001, 55501, 56001)),
+        sdk1(1, 2, 1, bytes([0])),
+        sdk1(1, 3, 3, bytes([0, 1, 0, 0, 0, 0, 0])),
+    ]:
+        put("livox_control", f, "doc")
 
 
 def bag_seeds():

@@ -8,6 +8,7 @@
 //! points; [`family`] is the interface the rest of ringscan uses. No calibration files: the
 //! sensors send Cartesian (or spherical) points in their own frame.
 
+pub mod control;
 pub mod decode;
 pub mod family;
 pub mod model;

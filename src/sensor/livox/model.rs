@@ -144,7 +144,8 @@ impl LivoxModel {
     /// The IMU's origin in the point-cloud frame, mm, axes aligned with it, where the maker
     /// publishes it: MID-360 user manual, (11.0, 23.29, −44.12) mm (FAST-LIO's `mid360.yaml`
     /// carries the same as the lidar in the IMU frame, −(…)). Others: `None` (the transform
-    /// defaults to identity; override it).
+    /// defaults to identity; override it): the HAP (TX) user manual gives only the point-cloud
+    /// origin in its mounting frame, (8, 0, 23) mm, and no IMU position.
     pub const fn imu_position_mm(self) -> Option<[f64; 3]> {
         match self {
             Self::Mid360 => Some([11.0, 23.29, -44.12]),

@@ -1,12 +1,21 @@
 //! Livox packet encoders (points → byte-exact SDK2 / SDK1 packets) and a simulator of the
-//! MID-360 (SDK2) and the Avia (SDK1) over a [`Scene`], with ground truth and IMU packets.
+//! MID-360 and the HAP (SDK2) and the Avia (SDK1) over a [`Scene`], with ground truth and IMU
+//! packets.
 //!
 //! The scanning pattern is an approximation, not Livox's: the MID-360's non-repetitive
 //! pattern is drawn from its published field of view (360° × −7°..+52°) and point rate
 //! (200 000 points/s, 96 points a packet, so one packet per 480 µs); its 4 lines (record
 //! `i % 4`) start 90° apart in azimuth and sweep the elevation range at incommensurate rates,
 //! so the pattern does not repeat. The Avia's rosette covers its 70.4° circular field of view
-//! at 240 000 points/s, six lines. Directions are on the 0.01° grid so spherical records carry
+//! at 240 000 points/s, six lines. The HAP (HAP (TX) user manual, table 1.2.1: field of view
+//! 120° horizontal × 25° vertical, 452 000 points/s, 10 Hz frames) sends the same SDK2 point
+//! and IMU packets as the MID-360 (Livox SDK2 protocol, HAP: the same 36-byte header and data
+//! types); its six lines (livox_ros_driver2 `kLineNumberHAP`) sweep ±60° in azimuth, stacked
+//! in elevation over ±12.5° and drifting through it, one record every 2220 ns (450 450
+//! points/s: the published rate to the nearest step whose 95 steps are whole 0.1 µs of the
+//! header's time interval). The manual places the HAP's point-cloud origin at (8, 0, 23) mm of
+//! its mounting frame but publishes no IMU position: its IMU frame is taken as the lidar's.
+//! Directions are on the 0.01° grid so spherical records carry
 //! them exactly; distances and coordinates are rounded to the data type's unit. Record `i` of
 //! an SDK2 packet is measured at `timestamp + i · time_interval / (N − 1)` (the protocol's
 //! rule), of an SDK1 packet at `timestamp + i · 4167 ns`; its pose is the trajectory's at that
@@ -15,7 +24,7 @@
 
 use nalgebra::{Isometry3, Point3, Translation3, Vector3};
 
-use super::model::LivoxModel;
+use super::model::{LivoxModel, Protocol};
 use super::wire::{crc32, SDK1_HEADER_LEN, SDK2_HEADER_LEN};
 use crate::sim::motion::{Trajectory, GRAVITY};
 use crate::sim::scene::{Hit, Scene};
@@ -199,7 +208,7 @@ pub struct ImuTruth {
 /// A simulated MID-360 (SDK2) or Avia (SDK1).
 #[derive(Clone, Debug)]
 pub struct LivoxSim {
-    /// Model: [`LivoxModel::Mid360`] or [`LivoxModel::Avia`].
+    /// Model: [`LivoxModel::Mid360`], [`LivoxModel::Hap`] or [`LivoxModel::Avia`].
     pub model: LivoxModel,
     /// SDK2 data type (1, 2 or 3); the Avia always sends type 2 of SDK1.
     pub data_type: u8,
@@ -242,6 +251,7 @@ impl LivoxSim {
     pub fn step_ns(&self) -> i64 {
         match self.model {
             LivoxModel::Mid360 => 5_000,
+            LivoxModel::Hap => 2_220,
             _ => 4_167,
         }
     }
@@ -266,6 +276,15 @@ impl LivoxSim {
                     (el * 100.0).round() as i32,
                 )
             }
+            LivoxModel::Hap => {
+                // A triangle wave across ±60°, the six lines 4.17° apart in elevation and
+                // drifting through ±12.5° at an incommensurate rate.
+                let u = (t_s * 13.3 + l / 6.0 + k as f64 * 0.000_29).rem_euclid(1.0);
+                let az = -60.0 + 120.0 * (1.0 - (2.0 * u - 1.0).abs());
+                let ph = t_s * 7.9 + l / 6.0 + (k as f64 * 0.618_034).fract() * 0.02;
+                let el = -12.5 + 25.0 * (0.5 - 0.5 * (TAU * ph).cos());
+                ((az * 100.0).round() as i32, (el * 100.0).round() as i32)
+            }
             _ => {
                 let r = 35.2 * (TAU * (t_s * 31.3 + l / 12.0)).sin().abs();
                 let th = TAU * (t_s * 107.0 + l / 6.0);
@@ -286,7 +305,7 @@ impl LivoxSim {
         let step = self.step_ns();
         let ts = self.stamp0_ns + self.packet_index as i64 * self.packet_period_ns();
         let lines = self.model.lines();
-        let sdk2 = self.model == LivoxModel::Mid360;
+        let sdk2 = self.model.protocol() == Protocol::Sdk2;
         let mut raw = vec![RawPoint::default(); RECORDS];
         for (i, slot) in raw.iter_mut().enumerate() {
             let t = ts + step * i as i64;
@@ -384,7 +403,7 @@ impl LivoxSim {
         let f = k.specific_force_body() / GRAVITY;
         let gyro = [g.x as f32, g.y as f32, g.z as f32];
         let acc = [f.x as f32, f.y as f32, f.z as f32];
-        let bytes = if self.model == LivoxModel::Mid360 {
+        let bytes = if self.model.protocol() == Protocol::Sdk2 {
             let h = Sdk2Header {
                 udp_cnt: self.imu_index as u16,
                 time_type: self.time_type,
