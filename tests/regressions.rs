@@ -58,6 +58,7 @@ fn replay(file: &str) {
         "hesai_packet" => harness::hesai_packet(&data),
         "calib_hesai" => harness::calib_hesai(&data),
         "livox_packet" => harness::livox_packet(&data),
+        "lvx" => harness::lvx(&data),
         other => panic!("{file}: no fuzz target named {other:?}"),
     }
 }

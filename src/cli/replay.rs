@@ -47,7 +47,8 @@ pub fn parse_rate(s: &str) -> Result<Rate, String> {
 /// Sockets, one per sending address.
 struct Senders {
     per_source: bool,
-    /// Bind to the source address itself (a bag's sensors already come from 127.0.0.N).
+    /// Bind to the source address itself (a bag's or recording's sensors already come from
+    /// 127.0.0.N).
     exact: bool,
     sockets: Vec<UdpSocket>,
     by_source: HashMap<Ipv4Addr, usize>,
@@ -121,7 +122,7 @@ pub fn replay_command(args: &ReplayArgs) -> Result<ExitCode, RunError> {
     let over = |started: &Instant| args.duration.is_some_and(|d| started.elapsed() >= d);
     'loops: for _ in 0..args.loops.max(1) {
         let mut src = input::open(&args.input, &args.bag)?;
-        senders.exact = matches!(src, Input::Bag(_));
+        senders.exact = matches!(src, Input::Bag(_) | Input::Lvx(_));
         let mut loop_first: Option<i64> = None;
         while let Some(d) = src.next_datagram().map_err(serr)? {
             if over(&started) {

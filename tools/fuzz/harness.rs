@@ -2658,3 +2658,53 @@ pub fn livox_packet(data: &[u8]) {
     assert_eq!(st.packets + st.imu_packets + st.malformed, pushed);
     assert!(s.drain_imu().count() <= LIVOX_MAX_IMU_QUEUE);
 }
+
+// ----- lvx -------------------------------------------------------------------------------------
+
+use ringscan::source::lvx::LvxSource;
+
+/// A Livox recording. Byte 0 picks what precedes the rest: nothing (the rest is a whole file),
+/// or valid `.lvx2` / `.lvx` headers with one device (MID-360 id 0 / Avia index 0), so the
+/// fuzzer starts at the frames. Every datagram goes into a `LivoxStream` of the file's model.
+/// No panic; the source never reads past the input, returns no datagram longer than one UDP
+/// payload and no more datagrams than packages; the stream counts each datagram once.
+pub fn lvx(data: &[u8]) {
+    let Some((&sel, rest)) = data.split_first() else {
+        return;
+    };
+    let mut file = Vec::with_capacity(data.len() + 100);
+    if sel % 3 != 0 {
+        let v2 = sel % 3 == 1;
+        file.extend_from_slice(b"livox_tech\0\0\0\0\0\0");
+        file.extend_from_slice(if v2 { &[2, 0, 0, 0] } else { &[1, 1, 0, 0] });
+        file.extend_from_slice(&0xAC0E_A767u32.to_le_bytes());
+        file.extend_from_slice(&50u32.to_le_bytes());
+        file.push(1);
+        file.extend_from_slice(&[0; 32]);
+        if v2 {
+            file.extend_from_slice(&[0, 0, 0, 0, 8, 9, 0]);
+        } else {
+            file.extend_from_slice(&[0, 7, 0]);
+        }
+        file.extend_from_slice(&[0; 24]);
+    }
+    file.extend_from_slice(rest);
+    let Ok(mut src) = LvxSource::new(&file[..]) else {
+        return;
+    };
+    let model = src.model().unwrap_or(LIVOX_MODELS[0]);
+    let mut s = LivoxStream::new(LivoxConfig::new(Some(model), model.protocol()));
+    let mut pushed = 0u64;
+    while let Ok(Some(d)) = src.next_datagram() {
+        assert!(d.payload.len() <= 1500, "{} bytes", d.payload.len());
+        s.push(d.time_ns, d.payload, &mut |_, _| {});
+        pushed += 1;
+    }
+    s.finish(&mut |_, _| {});
+    let st = src.stats();
+    assert!(st.bytes <= file.len() as u64, "{st:?}");
+    assert_eq!(st.datagrams, pushed);
+    assert!(st.datagrams <= st.packages);
+    let ls = s.stats();
+    assert_eq!(ls.packets + ls.imu_packets + ls.malformed, pushed);
+}
