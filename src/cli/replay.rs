@@ -116,6 +116,7 @@ pub fn replay_command(args: &ReplayArgs) -> Result<ExitCode, RunError> {
     };
     let started = Instant::now();
     let (mut sent, mut bytes, mut errors, mut skipped) = (0u64, 0u64, 0u64, 0u64);
+    let mut points_frames = 0u64;
     // Where each loop starts on the replay clock.
     let mut loop_base_ns: i64 = 0;
     let mut last_rel_ns: i64 = 0;
@@ -137,6 +138,11 @@ pub fn replay_command(args: &ReplayArgs) -> Result<ExitCode, RunError> {
                 if due > now + Duration::from_micros(200) {
                     std::thread::sleep(due - now);
                 }
+            }
+            // Points a ROS driver decoded (a CustomMsg bag's frames) were never on the wire.
+            if crate::sensor::livox::frame::PointsFrame::is_frame(d.payload) {
+                points_frames += 1;
+                continue;
             }
             let port = i32::from(d.dst.port()) + args.port_offset;
             let Ok(port) = u16::try_from(port) else {
@@ -173,6 +179,7 @@ pub fn replay_command(args: &ReplayArgs) -> Result<ExitCode, RunError> {
         "bytes": bytes,
         "send_errors": errors,
         "skipped_port_out_of_range": skipped,
+        "skipped_decoded_points_messages": points_frames,
         "sources": senders.by_source.len(),
         "elapsed_s": elapsed,
         "datagrams_per_s": if elapsed > 0.0 { sent as f64 / elapsed } else { 0.0 },

@@ -2183,9 +2183,22 @@ fn bag_check_packets(
     if let Ok((a, n)) = messages::string(enc, msg) {
         assert!(a + n <= msg.len());
     }
+    // Livox CustomMsg: a whole points frame of no more points than 19-byte groups of the
+    // message, or nothing.
+    let mut frame = Vec::new();
+    match messages::livox_custom(enc, msg, &mut frame) {
+        Ok(_) => {
+            let f = ringscan::sensor::livox::frame::PointsFrame::new(&frame)
+                .expect("a CustomMsg read is a whole frame");
+            assert!(f.len() <= msg.len() / 19);
+            assert_eq!(f.points().count(), f.len());
+        }
+        Err(_) => assert!(frame.is_empty(), "frame left after an error"),
+    }
 }
 
-/// `bag_messages`: byte 0 picks the type and the encoding, the rest is one message.
+/// `bag_messages`: byte 0 picks the type and the encoding, the rest is one message (every
+/// message is also read as a Livox CustomMsg).
 pub fn bag_messages(data: &[u8]) {
     use ringscan::source::bag::messages::{Encoding, MsgKind};
     let Some((&sel, msg)) = data.split_first() else {

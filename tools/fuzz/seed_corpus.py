@@ -487,6 +487,14 @@ def bag_seeds():
     put("bag_messages", b"\x07" + b"\x00\x01\x00\x00" + struct.pack("<I", 3) + b"{}\x00", "string-cdr")
     for sel in (2, 3, 4, 5, 6):
         put("bag_messages", bytes([sel]) + bytes(scan), f"scan-as-{sel}")
+    # Livox CustomMsg (CDR: header "f", timebase aligned to 8, two points, the first padded).
+    pt = lambda k: struct.pack("<IfffBBB", 100 * k, 1.0 + k, -2.0, 0.5, 7, 0x10, k % 4)
+    cm = b"\x00\x01\x00\x00" + struct.pack("<iI", 1, 2) + struct.pack("<I", 2) + b"f\x00\x00\x00" \
+        + struct.pack("<QIB3x", 10**18, 2, 3) + struct.pack("<I", 2) + pt(0) + b"\x00" + pt(1)
+    put("bag_messages", b"\x00" + cm, "livox-custom-cdr")
+    cm1 = struct.pack("<IIII", 1, 1, 2, 1) + b"f" + struct.pack("<QIB3x", 10**18, 2, 3) \
+        + struct.pack("<I", 2) + pt(0) + pt(1)
+    put("bag_messages", b"\x08" + cm1, "livox-custom-ros1")
 
 
 def lvx_seeds():
