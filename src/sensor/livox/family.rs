@@ -55,7 +55,10 @@ pub fn config_for(d: &FirstDatagram<'_>, named: Option<LivoxModel>) -> Option<Li
     }
     let protocol = detect_protocol(d.payload)?;
     let (model, detection) = match named {
-        Some(m) if m.protocol() == protocol => (Some(m), "named with --model".to_string()),
+        Some(m) if m.protocol() == protocol => (
+            Some(m),
+            "named (--model, or a recording's device type)".to_string(),
+        ),
         Some(_) => return None,
         None => match protocol {
             Protocol::Sdk2 => match LivoxModel::sdk2_from_port(d.port) {
