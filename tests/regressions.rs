@@ -59,6 +59,7 @@ fn replay(file: &str) {
         "calib_hesai" => harness::calib_hesai(&data),
         "livox_packet" => harness::livox_packet(&data),
         "livox_control" => harness::livox_control(&data),
+        "lvx" => harness::lvx(&data),
         other => panic!("{file}: no fuzz target named {other:?}"),
     }
 }

@@ -47,7 +47,8 @@ pub fn parse_rate(s: &str) -> Result<Rate, String> {
 /// Sockets, one per sending address.
 struct Senders {
     per_source: bool,
-    /// Bind to the source address itself (a bag's sensors already come from 127.0.0.N).
+    /// Bind to the source address itself (a bag's or recording's sensors already come from
+    /// 127.0.0.N).
     exact: bool,
     sockets: Vec<UdpSocket>,
     by_source: HashMap<Ipv4Addr, usize>,
@@ -115,13 +116,14 @@ pub fn replay_command(args: &ReplayArgs) -> Result<ExitCode, RunError> {
     };
     let started = Instant::now();
     let (mut sent, mut bytes, mut errors, mut skipped) = (0u64, 0u64, 0u64, 0u64);
+    let mut points_frames = 0u64;
     // Where each loop starts on the replay clock.
     let mut loop_base_ns: i64 = 0;
     let mut last_rel_ns: i64 = 0;
     let over = |started: &Instant| args.duration.is_some_and(|d| started.elapsed() >= d);
     'loops: for _ in 0..args.loops.max(1) {
         let mut src = input::open(&args.input, &args.bag)?;
-        senders.exact = matches!(src, Input::Bag(_));
+        senders.exact = matches!(src, Input::Bag(_) | Input::Lvx(_));
         let mut loop_first: Option<i64> = None;
         while let Some(d) = src.next_datagram().map_err(serr)? {
             if over(&started) {
@@ -136,6 +138,11 @@ pub fn replay_command(args: &ReplayArgs) -> Result<ExitCode, RunError> {
                 if due > now + Duration::from_micros(200) {
                     std::thread::sleep(due - now);
                 }
+            }
+            // Points a ROS driver decoded (a CustomMsg bag's frames) were never on the wire.
+            if crate::sensor::livox::frame::PointsFrame::is_frame(d.payload) {
+                points_frames += 1;
+                continue;
             }
             let port = i32::from(d.dst.port()) + args.port_offset;
             let Ok(port) = u16::try_from(port) else {
@@ -172,6 +179,7 @@ pub fn replay_command(args: &ReplayArgs) -> Result<ExitCode, RunError> {
         "bytes": bytes,
         "send_errors": errors,
         "skipped_port_out_of_range": skipped,
+        "skipped_decoded_points_messages": points_frames,
         "sources": senders.by_source.len(),
         "elapsed_s": elapsed,
         "datagrams_per_s": if elapsed > 0.0 { sent as f64 / elapsed } else { 0.0 },

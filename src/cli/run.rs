@@ -1094,8 +1094,13 @@ fn start_session(args: &DecodeArgs) -> Result<(Session, Input<Box<dyn Read>>), R
             None => input::open(&args.input, &args.bag),
         }
     };
-    let mut session = Session::new(&args.session_options())?;
     let first = open()?;
+    let mut options = args.session_options();
+    // A Livox recording names its devices' model, which SDK1 packets do not.
+    if options.model.is_none() {
+        options.model = first.model_hint().map(str::to_string);
+    }
+    let mut session = Session::new(&options)?;
     if let Some(b) = first.bag() {
         add_bag_metadata(&mut session, b, &args.calib);
     }

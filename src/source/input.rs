@@ -1,5 +1,6 @@
-//! One input file, whatever it is: a pcap / pcapng capture or a ROS bag, told apart by its bytes
-//! ([`crate::source::bag::detect`]); both give the same datagrams. The command line's `decode`,
+//! One input file, whatever it is: a pcap / pcapng capture, a ROS bag or a Livox Viewer
+//! recording (`.lvx` / `.lvx2`), told apart by its bytes ([`crate::source::bag::detect`],
+//! [`crate::source::lvx::detect`]); all give the same datagrams. The command line's `decode`,
 //! `info` and `replay` and the Python package read through it.
 
 use std::fs::File;
@@ -8,7 +9,9 @@ use std::path::Path;
 
 use serde_json::{json, Value};
 
+use crate::sensor::livox::lvx as lvx_format;
 use crate::source::bag::{self, BagOptions, BagSource};
+use crate::source::lvx::{self, LvxError, LvxSource};
 use crate::source::pcap::{PcapSource, SourceError};
 use crate::source::Datagram;
 
@@ -21,18 +24,32 @@ pub enum InputError {
     /// A bag.
     #[error(transparent)]
     Bag(#[from] bag::BagError),
+    /// A Livox recording.
+    #[error(transparent)]
+    Lvx(#[from] LvxError),
 }
 
-/// A capture or a bag.
+/// A capture, a bag or a Livox recording.
 pub enum Input<R: Read> {
     /// A pcap or pcapng capture.
     Pcap(Box<PcapSource<R>>),
     /// A ROS 1 bag, a rosbag2 directory or a bare `.db3` / `.mcap` bag file.
     Bag(Box<BagSource>),
+    /// A Livox Viewer recording.
+    Lvx(Box<LvxSource<R>>),
 }
 
-/// Opens `path` as a bag when its bytes say so (read with `bag_options`), else as a capture.
+/// Opens `path` as a bag or a Livox recording when its bytes say so (a bag read with
+/// `bag_options`), else as a capture.
 pub fn open(path: &Path, bag_options: BagOptions) -> Result<Input<Box<dyn Read>>, InputError> {
+    if is_lvx_file(path) {
+        let file = File::open(path).map_err(|source| SourceError::Open {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let reader: Box<dyn Read> = Box::new(BufReader::with_capacity(1 << 16, file));
+        return Ok(Input::Lvx(Box::new(LvxSource::new(reader)?)));
+    }
     // A path that cannot be read gets the capture reader's error message.
     if let Ok(Some(_)) = bag::detect(path) {
         let source = BagSource::open(path, bag_options)?;
@@ -46,12 +63,22 @@ pub fn open(path: &Path, bag_options: BagOptions) -> Result<Input<Box<dyn Read>>
     Ok(Input::Pcap(Box::new(PcapSource::new(reader)?)))
 }
 
+/// Whether the file at `path` starts like a Livox recording.
+fn is_lvx_file(path: &Path) -> bool {
+    let mut head = [0u8; 24];
+    File::open(path)
+        .and_then(|mut f| f.read_exact(&mut head))
+        .is_ok()
+        && lvx::detect(&head)
+}
+
 impl<R: Read> Input<R> {
     /// The next datagram.
     pub fn next_datagram(&mut self) -> Result<Option<Datagram<'_>>, InputError> {
         match self {
             Self::Pcap(s) => Ok(s.next_datagram()?),
             Self::Bag(s) => Ok(s.next_datagram()?),
+            Self::Lvx(s) => Ok(s.next_datagram()?),
         }
     }
 
@@ -60,14 +87,24 @@ impl<R: Read> Input<R> {
         match self {
             Self::Pcap(s) => s.stats().bytes,
             Self::Bag(s) => s.stats().bytes,
+            Self::Lvx(s) => s.stats().bytes,
         }
     }
 
     /// The bag, if the input is one.
     pub fn bag(&self) -> Option<&BagSource> {
         match self {
-            Self::Pcap(_) => None,
             Self::Bag(b) => Some(b),
+            _ => None,
+        }
+    }
+
+    /// The `--model` the input itself names (a Livox recording's device type, when all its
+    /// devices are of one known model): SDK1 packets do not name their model.
+    pub fn model_hint(&self) -> Option<&'static str> {
+        match self {
+            Self::Lvx(s) => s.model().map(|m| m.id()),
+            _ => None,
         }
     }
 
@@ -92,6 +129,52 @@ impl<R: Read> Input<R> {
                     "truncated_records": cap.truncated_records,
                     "truncated_tail_offset": cap.truncated_tail,
                     "duration_s": duration(cap.first_time_ns, cap.last_time_ns),
+                })
+            }
+            Self::Lvx(s) => {
+                let st = s.stats();
+                let devices: Vec<Value> = s
+                    .devices()
+                    .iter()
+                    .enumerate()
+                    .map(|(i, d)| {
+                        json!({
+                            "address": LvxSource::<R>::address(i).to_string(),
+                            "lidar_sn": d.lidar_sn,
+                            "hub_sn": d.hub_sn,
+                            "id": d.id,
+                            "device_type": d.device_type,
+                            "model": d.model.map(|m| m.name()),
+                            "extrinsic_rpy_deg_xyz_m": d.extrinsic,
+                        })
+                    })
+                    .collect();
+                json!({
+                    "records": st.packages,
+                    "bytes": st.bytes,
+                    "datagrams": st.datagrams,
+                    "non_udp": 0,
+                    "malformed_records": st.malformed_packages,
+                    "fragments": 0,
+                    "reassembled": 0,
+                    "fragments_expired": 0,
+                    "truncated_records": 0,
+                    "truncated_tail_offset": st.truncated_at,
+                    "duration_s": duration(st.first_time_ns, st.last_time_ns),
+                    "lvx": {
+                        "version": match s.version() {
+                            lvx_format::LvxVersion::Lvx1 => "lvx 1.1",
+                            lvx_format::LvxVersion::Lvx2 => "lvx2 2.0",
+                        },
+                        "frame_duration_ms": s.frame_duration_ms(),
+                        "frames": st.frames,
+                        "packages": st.packages,
+                        "malformed_packages": st.malformed_packages,
+                        "first_malformed": st.first_malformed.as_ref().map(|(o, w)| json!({"offset": o, "reason": w})),
+                        "unknown_device": st.unknown_device,
+                        "truncated_at": st.truncated_at,
+                        "devices": devices,
+                    },
                 })
             }
             Self::Bag(b) => {

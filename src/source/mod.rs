@@ -1,4 +1,5 @@
-//! Edge: where datagrams come from (pcap / pcapng captures, ROS bags, live UDP sockets).
+//! Edge: where datagrams come from (pcap / pcapng captures, ROS bags, Livox recordings, live
+//! UDP sockets).
 //!
 //! Knows nothing of packet formats: it yields [`Datagram`]s.
 
@@ -9,6 +10,7 @@ pub mod bag;
 #[cfg(all(feature = "pcap", feature = "bag"))]
 pub mod input;
 pub mod link;
+pub mod lvx;
 #[cfg(feature = "pcap")]
 pub mod pcap;
 pub mod reassembly;

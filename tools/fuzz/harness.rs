@@ -2183,9 +2183,22 @@ fn bag_check_packets(
     if let Ok((a, n)) = messages::string(enc, msg) {
         assert!(a + n <= msg.len());
     }
+    // Livox CustomMsg: a whole points frame of no more points than 19-byte groups of the
+    // message, or nothing.
+    let mut frame = Vec::new();
+    match messages::livox_custom(enc, msg, &mut frame) {
+        Ok(_) => {
+            let f = ringscan::sensor::livox::frame::PointsFrame::new(&frame)
+                .expect("a CustomMsg read is a whole frame");
+            assert!(f.len() <= msg.len() / 19);
+            assert_eq!(f.points().count(), f.len());
+        }
+        Err(_) => assert!(frame.is_empty(), "frame left after an error"),
+    }
 }
 
-/// `bag_messages`: byte 0 picks the type and the encoding, the rest is one message.
+/// `bag_messages`: byte 0 picks the type and the encoding, the rest is one message (every
+/// message is also read as a Livox CustomMsg).
 pub fn bag_messages(data: &[u8]) {
     use ringscan::source::bag::messages::{Encoding, MsgKind};
     let Some((&sel, msg)) = data.split_first() else {
@@ -2694,4 +2707,54 @@ pub fn livox_control(data: &[u8]) {
         }
         let _ = c::sdk1_ack_code(&f, c::sdk1_cmd::HEARTBEAT).map(c::sdk1_return_name);
     }
+}
+
+// ----- lvx -------------------------------------------------------------------------------------
+
+use ringscan::source::lvx::LvxSource;
+
+/// A Livox recording. Byte 0 picks what precedes the rest: nothing (the rest is a whole file),
+/// or valid `.lvx2` / `.lvx` headers with one device (MID-360 id 0 / Avia index 0), so the
+/// fuzzer starts at the frames. Every datagram goes into a `LivoxStream` of the file's model.
+/// No panic; the source never reads past the input, returns no datagram longer than one UDP
+/// payload and no more datagrams than packages; the stream counts each datagram once.
+pub fn lvx(data: &[u8]) {
+    let Some((&sel, rest)) = data.split_first() else {
+        return;
+    };
+    let mut file = Vec::with_capacity(data.len() + 100);
+    if sel % 3 != 0 {
+        let v2 = sel % 3 == 1;
+        file.extend_from_slice(b"livox_tech\0\0\0\0\0\0");
+        file.extend_from_slice(if v2 { &[2, 0, 0, 0] } else { &[1, 1, 0, 0] });
+        file.extend_from_slice(&0xAC0E_A767u32.to_le_bytes());
+        file.extend_from_slice(&50u32.to_le_bytes());
+        file.push(1);
+        file.extend_from_slice(&[0; 32]);
+        if v2 {
+            file.extend_from_slice(&[0, 0, 0, 0, 8, 9, 0]);
+        } else {
+            file.extend_from_slice(&[0, 7, 0]);
+        }
+        file.extend_from_slice(&[0; 24]);
+    }
+    file.extend_from_slice(rest);
+    let Ok(mut src) = LvxSource::new(&file[..]) else {
+        return;
+    };
+    let model = src.model().unwrap_or(LIVOX_MODELS[0]);
+    let mut s = LivoxStream::new(LivoxConfig::new(Some(model), model.protocol()));
+    let mut pushed = 0u64;
+    while let Ok(Some(d)) = src.next_datagram() {
+        assert!(d.payload.len() <= 1500, "{} bytes", d.payload.len());
+        s.push(d.time_ns, d.payload, &mut |_, _| {});
+        pushed += 1;
+    }
+    s.finish(&mut |_, _| {});
+    let st = src.stats();
+    assert!(st.bytes <= file.len() as u64, "{st:?}");
+    assert_eq!(st.datagrams, pushed);
+    assert!(st.datagrams <= st.packages);
+    let ls = s.stats();
+    assert_eq!(ls.packets + ls.imu_packets + ls.malformed, pushed);
 }

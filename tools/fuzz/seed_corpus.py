@@ -441,6 +441,7 @@ def main():
     put("calib_ouster", b"\xa5" + ouster_header(1, 1, 0, 0), "gen")
     bag_seeds()
     livox_control_seeds()
+    lvx_seeds()
     for prof in range(8):
         for hi in range(4):
             put("ouster_packet", ouster_header(prof, 1, hi, 0) + b"\0" + bytes(rng.randrange(256) for _ in range(3000)), "rand")
@@ -527,6 +528,47 @@ def bag_seeds():
     put("bag_messages", b"\x07" + b"\x00\x01\x00\x00" + struct.pack("<I", 3) + b"{}\x00", "string-cdr")
     for sel in (2, 3, 4, 5, 6):
         put("bag_messages", bytes([sel]) + bytes(scan), f"scan-as-{sel}")
+    # Livox CustomMsg (CDR: header "f", timebase aligned to 8, two points, the first padded).
+    pt = lambda k: struct.pack("<IfffBBB", 100 * k, 1.0 + k, -2.0, 0.5, 7, 0x10, k % 4)
+    cm = b"\x00\x01\x00\x00" + struct.pack("<iI", 1, 2) + struct.pack("<I", 2) + b"f\x00\x00\x00" \
+        + struct.pack("<QIB3x", 10**18, 2, 3) + struct.pack("<I", 2) + pt(0) + b"\x00" + pt(1)
+    put("bag_messages", b"\x00" + cm, "livox-custom-cdr")
+    cm1 = struct.pack("<IIII", 1, 1, 2, 1) + b"f" + struct.pack("<QIB3x", 10**18, 2, 3) \
+        + struct.pack("<I", 2) + pt(0) + pt(1)
+    put("bag_messages", b"\x08" + cm1, "livox-custom-ros1")
+
+
+def lvx_seeds():
+    """Seeds of the lvx target: small .lvx2 / .lvx files from the LVX specifications, whole
+    (selector 0) and as frames after the harness's own headers (selectors 1 and 2)."""
+
+    def frames(at, frame_list):
+        out = b""
+        for i, pkgs in enumerate(frame_list):
+            n = 24 + sum(len(p) for p in pkgs)
+            out += struct.pack("<QQQ", at, at + n, i) + b"".join(pkgs)
+            at += n
+        return out
+
+    def lvx2_pkg(ts, udp, records):
+        data = b"".join(struct.pack("<iiiBB", k, -k, 2 * k, k & 0xFF, 0) for k in range(records))
+        return struct.pack("<BIBBQHBIB4s", 0, 0, 8, 1, ts, udp, 1, len(data), 0, bytes(4)) + data
+
+    def lvx1_pkg(ts):
+        data = b"".join(struct.pack("<iiiBB", k, -k, 2 * k, k & 0xFF, 0) for k in range(96))
+        return b"\x00" + struct.pack("<BBBBIBBQ", 5, 1, 1, 0, 0, 1, 2, ts) + data
+
+    v2 = [[lvx2_pkg(10, 0, 96), lvx2_pkg(500_000, 1, 96)], [lvx2_pkg(1_000_000, 2, 96)]]
+    v1 = [[lvx1_pkg(10), lvx1_pkg(400_000)]]
+    head = b"livox_tech" + bytes(6)
+    whole2 = head + bytes([2, 0, 0, 0]) + struct.pack("<IIB", 0xAC0EA767, 50, 1) + bytes(32) \
+        + struct.pack("<IBBB", 0, 8, 9, 0) + bytes(24)
+    whole1 = head + bytes([1, 1, 0, 0]) + struct.pack("<IIB", 0xAC0EA767, 50, 1) + bytes(32) \
+        + bytes([0, 7, 0]) + bytes(24)
+    put("lvx", b"\x00" + whole2 + frames(len(whole2), v2), "lvx2")
+    put("lvx", b"\x00" + whole1 + frames(len(whole1), v1), "lvx1")
+    put("lvx", b"\x01" + frames(92, v2), "lvx2-frames")
+    put("lvx", b"\x02" + frames(88, v1), "lvx1-frames")
 
 
 if __name__ == "__main__":

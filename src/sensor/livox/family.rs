@@ -15,6 +15,7 @@ use std::sync::Arc;
 
 use serde_json::{json, Map, Value};
 
+use super::frame::PointsFrame;
 #[cfg(test)]
 use super::model::ALL_MODELS;
 use super::model::{LivoxModel, Protocol};
@@ -46,9 +47,18 @@ pub fn detect_protocol(payload: &[u8]) -> Option<Protocol> {
 
 /// Builds the stream configuration for a first datagram, or `None` when it is not Livox's.
 pub fn config_for(d: &FirstDatagram<'_>, named: Option<LivoxModel>) -> Option<LivoxConfig> {
+    if PointsFrame::is_frame(d.payload) {
+        // Points a ROS driver decoded (a bag's CustomMsg): no packet says the model.
+        let mut cfg = LivoxConfig::new(named, Protocol::Sdk2);
+        cfg.detection = "livox_ros_driver CustomMsg points (decoded by the driver)".to_string();
+        return Some(cfg);
+    }
     let protocol = detect_protocol(d.payload)?;
     let (model, detection) = match named {
-        Some(m) if m.protocol() == protocol => (Some(m), "named with --model".to_string()),
+        Some(m) if m.protocol() == protocol => (
+            Some(m),
+            "named (--model, or a recording's device type)".to_string(),
+        ),
         Some(_) => return None,
         None => match protocol {
             Protocol::Sdk2 => match LivoxModel::sdk2_from_port(d.port) {
@@ -266,7 +276,7 @@ impl SensorStream for LivoxStream {
     fn summary(&self) -> (Value, PacketCounts) {
         let (st, f) = (self.stats(), LivoxStream::facts(self));
         let counts = PacketCounts {
-            decoded: st.packets + st.imu_packets,
+            decoded: st.packets + st.imu_packets + st.frames,
             malformed: st.malformed,
             missing: st.missing,
             position: 0,
@@ -289,7 +299,7 @@ impl SensorStream for LivoxStream {
             "time_type": f.time_type_name(),
             "data_type": f.data_type,
             "integration_ms": f.period_ns as f64 / 1e6,
-            "sweep_cut": if f.frame_cut { "frame_cnt" } else { "time" },
+            "sweep_cut": if st.frames > 0 { "message" } else if f.frame_cut { "frame_cnt" } else { "time" },
             "point_density": {
                 "points_per_sweep_mean": mean,
                 "points_per_sweep_min": st.min_sweep_points,
@@ -300,6 +310,7 @@ impl SensorStream for LivoxStream {
             "crc_failures": st.crc_failures,
             "crc_absent": st.crc_absent,
             "data_packets": st.packets,
+            "custom_msg_frames": st.frames,
             "imu_packets": st.imu_packets,
             "imu_missing": st.imu_missing,
             "imu_dropped": st.imu_dropped,

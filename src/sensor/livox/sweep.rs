@@ -22,8 +22,10 @@
 use std::collections::VecDeque;
 
 use super::decode::{sdk2_offset_ns, LivoxDecoder};
+use super::frame::PointsFrame;
 use super::model::{LivoxModel, Protocol, STANDARD_GRAVITY};
 use super::wire::{read_imu, LivoxWireError, Record, Sdk1Packet, Sdk2Packet};
+use crate::point::Point;
 use crate::sensor::{DecodeOptions, ImuSample};
 use crate::sweep::Sweep;
 use crate::time::ClockSource;
@@ -102,6 +104,10 @@ pub struct LivoxStats {
     /// Sweeps handed over without an IMU sample at or after their last point (the IMU
     /// stopped or lags by more than a sweep).
     pub imu_uncovered_sweeps: u64,
+    /// Frames of decoded points (`CustomMsg` from a bag, [`super::frame`]) read.
+    pub frames: u64,
+    /// Points of those frames with a non-finite coordinate: dropped.
+    pub frame_points_dropped: u64,
     /// Fewest / most points in a sweep.
     pub min_sweep_points: u64,
     /// Most points in a sweep.
@@ -258,6 +264,13 @@ impl LivoxStream {
         if self.held_waiting && self.covered(self.held_end_ns) {
             self.release(on_sweep);
         }
+        if PointsFrame::is_frame(payload) {
+            match PointsFrame::new(payload) {
+                Some(f) => self.push_frame(host_ns, f, on_sweep),
+                None => self.stats.malformed += 1,
+            }
+            return;
+        }
         let r = match self.cfg.protocol {
             Protocol::Sdk2 => self.push_sdk2(host_ns, payload, on_sweep),
             Protocol::Sdk1 => self.push_sdk1(host_ns, payload, on_sweep),
@@ -268,6 +281,54 @@ impl LivoxStream {
                 self.stats.crc_failures += 1;
             }
         }
+    }
+
+    /// A frame of points decoded already: one sweep of its own (a sweep still open is finished
+    /// first), `ring` = line, `t` = `offset_time`, intensity = reflectivity, the tag kept; the
+    /// range filter applies, as to packets.
+    fn push_frame(
+        &mut self,
+        host_ns: i64,
+        f: PointsFrame<'_>,
+        on_sweep: &mut dyn FnMut(&Sweep, &LivoxFacts),
+    ) {
+        let ts = i64::try_from(f.timebase_ns()).unwrap_or(i64::MAX);
+        self.emit(on_sweep);
+        self.begin(host_ns, ts, 0);
+        let r = self.cfg.range;
+        let (min2, max2) = (r.min_range * r.min_range, r.max_range * r.max_range);
+        let mut last = ts;
+        let mut lines = self.facts.lines;
+        for p in f.points() {
+            let [x, y, z] = p.xyz;
+            if !(x.is_finite() && y.is_finite() && z.is_finite()) {
+                self.stats.frame_points_dropped += 1;
+                continue;
+            }
+            let d2 = x * x + y * y + z * z;
+            if d2 == 0.0 || d2 < min2 || d2 > max2 {
+                continue;
+            }
+            last = last.max(ts.saturating_add(i64::from(p.offset_time_ns)));
+            lines = lines.max(u16::from(p.line) + 1);
+            self.sweep.points.push(Point {
+                x,
+                y,
+                z,
+                intensity: f32::from(p.reflectivity),
+                t: p.offset_time_ns,
+                ring: u16::from(p.line),
+                ret: 0,
+                pad: p.tag,
+            });
+        }
+        self.facts.lines = lines;
+        self.stats.frames += 1;
+        self.open_end_ns = last;
+        self.sweep.packets += 1;
+        self.sweep.last_host_ns = host_ns;
+        self.last_packet_ns = Some(ts);
+        self.emit(on_sweep);
     }
 
     /// Emits the sweep waiting for its IMU samples, if any, and the open sweep.

@@ -17,6 +17,7 @@
 //! | `robosense_msgs/msg/RobosenseScan` | Header, `RobosensePacket[]`, either {time stamp, uint8 is_difop, uint8\[1500\] data, uint32 size} (nebula PR #79) or {time stamp, uint8\[1248\] data, uint32 size} (nebula main): the variant whose layout consumes the message exactly | each packet's |
 //! | `rslidar_msg/msg/RslidarPacket` | Header, uint8 is_difop, uint8 is_frame_begin, uint8\[\] data | its header's |
 //! | `std_msgs/msg/String` | string data (Ouster metadata JSON) | — |
+//! | `livox_ros_driver2/msg/CustomMsg`, `livox_ros_driver/CustomMsg` | Header, uint64 timebase, uint32 point_num, uint8 lidar_id, uint8\[3\] rsvd, `CustomPoint[]` = {uint32 offset_time, float32 x y z, uint8 reflectivity, tag, line}: points, not packets ([`livox_custom`]) | its header's |
 //!
 //! ROS 1 serialization: little-endian, no padding, `time` = u32 sec + u32 nsec, Header = u32
 //! seq + time + string, strings and arrays prefixed by a u32 count. CDR (ROS 2): a 4-byte
@@ -58,6 +59,8 @@ pub enum MsgKind {
     RslidarPacket,
     /// `std_msgs/String` (Ouster metadata on `<ns>/metadata`).
     StdString,
+    /// `livox_ros_driver/CustomMsg`, `livox_ros_driver2/CustomMsg`: decoded points.
+    LivoxCustomMsg,
 }
 
 impl MsgKind {
@@ -77,13 +80,15 @@ impl MsgKind {
             ("robosense_msgs", "RobosenseScan") => Self::RobosenseScan,
             ("rslidar_msg" | "rslidar_msgs", "RslidarPacket") => Self::RslidarPacket,
             ("std_msgs", "String") => Self::StdString,
+            ("livox_ros_driver" | "livox_ros_driver2", "CustomMsg") => Self::LivoxCustomMsg,
             _ => return None,
         })
     }
 
-    /// Whether messages of this kind carry packets (all but `std_msgs/String`).
+    /// Whether messages of this kind carry packets (all but `std_msgs/String` and the
+    /// decoded points of `CustomMsg`).
     pub fn carries_packets(self) -> bool {
-        self != Self::StdString
+        !matches!(self, Self::StdString | Self::LivoxCustomMsg)
     }
 }
 
@@ -200,6 +205,16 @@ impl<'a> Cursor<'a> {
         Ok(self.take(1)?[0])
     }
 
+    fn u64(&mut self) -> Result<u64, MsgError> {
+        self.align_to(8);
+        let b: [u8; 8] = self.take(8)?.try_into().unwrap_or([0; 8]);
+        Ok(if self.big_endian {
+            u64::from_be_bytes(b)
+        } else {
+            u64::from_le_bytes(b)
+        })
+    }
+
     fn u32(&mut self) -> Result<u32, MsgError> {
         self.align_to(4);
         let b: [u8; 4] = self.take(4)?.try_into().unwrap_or([0; 4]);
@@ -282,7 +297,7 @@ pub fn packets(
         MsgKind::HesaiUdpFrame => scan_var(enc, msg, true, out),
         MsgKind::RobosenseScan => robosense(enc, msg, out),
         MsgKind::RslidarPacket => rslidar(enc, msg, out),
-        MsgKind::StdString => Ok(()),
+        MsgKind::StdString | MsgKind::LivoxCustomMsg => Ok(()),
     };
     if r.is_err() {
         out.clear();
@@ -299,6 +314,47 @@ pub fn string(enc: Encoding, msg: &[u8]) -> Result<(usize, usize), MsgError> {
         len -= 1;
     }
     Ok((start, len))
+}
+
+/// Reads a Livox `CustomMsg` into a points frame ([`crate::sensor::livox::frame`]) in `out`;
+/// returns its header stamp (ns). `point_num` is not consulted: the sequence's own count frames
+/// the bytes. On error `out` is cleared.
+pub fn livox_custom(enc: Encoding, msg: &[u8], out: &mut Vec<u8>) -> Result<i64, MsgError> {
+    use crate::sensor::livox::frame::{self, FramePoint};
+    let r = (|| {
+        let mut c = Cursor::new(msg, enc)?;
+        let stamp = c.header()?;
+        let timebase = c.u64()?;
+        c.u32()?; // point_num
+        let lidar_id = c.u8()?;
+        c.take(3)?; // rsvd
+        let n = c.count(frame::POINT_LEN)?;
+        frame::write_header(out, timebase, lidar_id, n as u32);
+        out.reserve(n * frame::POINT_LEN);
+        for _ in 0..n {
+            let offset_time_ns = c.u32()?;
+            let x = f32::from_bits(c.u32()?);
+            let y = f32::from_bits(c.u32()?);
+            let z = f32::from_bits(c.u32()?);
+            let b = c.take(3)?;
+            frame::push_point(
+                out,
+                &FramePoint {
+                    offset_time_ns,
+                    xyz: [x, y, z],
+                    reflectivity: b[0],
+                    tag: b[1],
+                    line: b[2],
+                },
+            );
+        }
+        c.end()?;
+        Ok(stamp)
+    })();
+    if r.is_err() {
+        out.clear();
+    }
+    r
 }
 
 /// Header + Packet[] where a packet is {time, uint8[N] data[, uint32 size]}.
@@ -428,6 +484,7 @@ impl fmt::Display for MsgKind {
             Self::RobosenseScan => "robosense_msgs/RobosenseScan",
             Self::RslidarPacket => "rslidar_msg/RslidarPacket",
             Self::StdString => "std_msgs/String",
+            Self::LivoxCustomMsg => "livox_ros_driver CustomMsg",
         };
         f.write_str(s)
     }

@@ -30,6 +30,11 @@
 //!   `nebula_msgs/NebulaPackets` by its first packet (1206 bytes: Velodyne; `EE FF`: Hesai;
 //!   `55 AA` / `A5 FF`: Robosense MSOP / DIFOP; else 2368).
 //!
+//! - Livox `CustomMsg` (`livox_ros_driver2`, `livox_ros_driver`): points the driver decoded,
+//!   not packets. Each topic is one sensor; each message becomes one points frame
+//!   ([`crate::sensor::livox::frame`], the one "datagram" of that message, to 56301) that the
+//!   Livox stream turns into one sweep.
+//!
 //! The source port equals the destination port; the destination address is 127.0.0.1.
 //! [`BagSource::sensors`] lists the assignment.
 //!
@@ -797,6 +802,8 @@ pub enum Family {
     Hesai,
     /// Robosense.
     Robosense,
+    /// Livox (`CustomMsg` points).
+    Livox,
     /// Not known (nebula packets whose first packet says nothing).
     Unknown,
 }
@@ -809,6 +816,7 @@ impl Family {
             Self::Ouster => "ouster",
             Self::Hesai => "hesai",
             Self::Robosense => "robosense",
+            Self::Livox => "livox",
             Self::Unknown => "unknown",
         }
     }
@@ -919,6 +927,10 @@ pub struct BagSource {
     /// Ouster metadata by namespace (from the pre-scan and the stream).
     metadata: HashMap<String, String>,
     packets: Vec<PacketRef>,
+    /// The points frame of the current message when it is a Livox `CustomMsg`: its one
+    /// "packet" is this, not a range of the message.
+    frame: Vec<u8>,
+    frame_current: bool,
     cursor: usize,
     current: (usize, i64, bool),
     first_message_ns: Option<i64>,
@@ -977,6 +989,8 @@ impl BagSource {
             sensors: Vec::new(),
             metadata,
             packets: Vec::new(),
+            frame: Vec::new(),
+            frame_current: false,
             cursor: 0,
             current: (0, 0, false),
             first_message_ns: None,
@@ -1068,6 +1082,7 @@ impl BagSource {
             MsgKind::VelodyneScan => (c.topic.clone(), Family::Velodyne),
             MsgKind::PandarScan | MsgKind::HesaiUdpFrame => (c.topic.clone(), Family::Hesai),
             MsgKind::RobosenseScan | MsgKind::RslidarPacket => (c.topic.clone(), Family::Robosense),
+            MsgKind::LivoxCustomMsg => (c.topic.clone(), Family::Livox),
             _ => (c.topic.clone(), Family::Unknown),
         };
         let imu = kind == MsgKind::OusterPacket
@@ -1109,6 +1124,10 @@ impl BagSource {
                     Family::Robosense => {
                         s.data_port = 6699;
                         s.aux_port = 7788;
+                    }
+                    Family::Livox => {
+                        s.data_port = 56_301;
+                        s.aux_port = 56_401;
                     }
                     _ => {}
                 }
@@ -1154,13 +1173,16 @@ impl BagSource {
         self.stats.datagrams += 1;
         self.stats.first_time_ns.get_or_insert(time_ns);
         self.stats.last_time_ns = Some(time_ns);
+        let bytes = if self.frame_current {
+            &self.frame[..]
+        } else {
+            self.messages.message()
+        };
         Ok(Some(Datagram {
             time_ns,
             src: SocketAddrV4::new(s.address, port),
             dst: SocketAddrV4::new(Ipv4Addr::LOCALHOST, port),
-            payload: (self.messages.message())
-                .get(p.start..p.start + p.len)
-                .unwrap_or(&[]),
+            payload: bytes.get(p.start..p.start + p.len).unwrap_or(&[]),
         }))
     }
 
@@ -1204,7 +1226,20 @@ impl BagSource {
                 Role::Packets { sensor, imu } => {
                     let kind = route.kind.unwrap_or(MsgKind::StdString);
                     let msg = self.messages.message();
-                    match messages::packets(kind, route.encoding, msg, &mut self.packets) {
+                    self.frame_current = kind == MsgKind::LivoxCustomMsg;
+                    let read = if self.frame_current {
+                        messages::livox_custom(route.encoding, msg, &mut self.frame).map(|stamp| {
+                            self.packets.push(PacketRef {
+                                start: 0,
+                                len: self.frame.len(),
+                                stamp_ns: Some(stamp),
+                                difop: false,
+                            });
+                        })
+                    } else {
+                        messages::packets(kind, route.encoding, msg, &mut self.packets)
+                    };
+                    match read {
                         Ok(()) => {
                             self.stats.packet_messages += 1;
                             self.current = (sensor, m.time_ns, imu);
