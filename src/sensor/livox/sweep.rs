@@ -290,7 +290,7 @@ impl LivoxStream {
         &mut self,
         host_ns: i64,
         f: PointsFrame<'_>,
-        on_sweep: &mut dyn FnMut(&Sweep, &LivoxFacts),
+        on_sweep: &mut dyn FnMut(&mut Sweep, &LivoxFacts),
     ) {
         let ts = i64::try_from(f.timebase_ns()).unwrap_or(i64::MAX);
         self.emit(on_sweep);
