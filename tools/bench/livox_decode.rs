@@ -15,7 +15,7 @@
 use std::path::{Path, PathBuf};
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
-use ringscan::sensor::livox::decode::sdk2_offset_ns;
+use ringscan::sensor::livox::decode::Spacing;
 use ringscan::sensor::livox::model::LivoxModel;
 use ringscan::sensor::livox::sim::LivoxSim;
 use ringscan::sensor::livox::{LivoxConfig, LivoxDecoder, LivoxStream, Sdk2Packet};
@@ -55,7 +55,7 @@ fn livox_decoder_pass(dec: &LivoxDecoder, packets: &[&[u8]], out: &mut Vec<Point
                 k,
                 |j| p.record_bytes(j),
                 0,
-                |j| sdk2_offset_ns(j, k, iv),
+                Spacing::sdk2(k, iv),
                 0,
                 out,
             )

@@ -65,7 +65,8 @@ impl LivoxDecoder {
     }
 
     /// Appends the points of `records` records read by `rec(i)` of layout `kind`; record `i`
-    /// is at `first_ns + time(i)` (device ns), and `t` is measured from `sweep_start_ns`.
+    /// is at `first_ns + spacing`'s `i`-th offset (device ns), and `t` is measured from
+    /// `sweep_start_ns`.
     #[allow(clippy::too_many_arguments)]
     pub fn decode<'a>(
         &self,
@@ -73,8 +74,104 @@ impl LivoxDecoder {
         records: usize,
         rec: impl Fn(usize) -> &'a [u8],
         first_ns: i64,
-        time: impl Fn(usize) -> i64,
+        spacing: Spacing,
         sweep_start_ns: i64,
+        out: &mut Vec<Point>,
+    ) -> PacketPoints {
+        // The Cartesian single-return layouts (every MID-360 / HAP / Avia default) get loops of
+        // their own: fixed offsets, no per-record dispatch on the layout.
+        let run = Run {
+            records,
+            first_ns,
+            spacing,
+            sweep_start_ns,
+        };
+        match kind {
+            Record::CartesianMmTag => self.cartesian(run, rec, out, |r| {
+                Some((
+                    [i32_le(r, 0)?, i32_le(r, 4)?, i32_le(r, 8)?],
+                    0.001,
+                    *r.get(12)?,
+                    *r.get(13)?,
+                ))
+            }),
+            Record::CartesianCmTag => self.cartesian(run, rec, out, |r| {
+                let c = |o| Some(i32::from(i16::from_le_bytes([*r.get(o)?, *r.get(o + 1)?])));
+                Some(([c(0)?, c(2)?, c(4)?], 0.01, *r.get(6)?, *r.get(7)?))
+            }),
+            _ => self.general(kind, run, rec, out),
+        }
+    }
+
+    /// Single-return Cartesian records: `read` gives (xyz in units, metres per unit,
+    /// reflectivity, tag), `None` for a record cut short.
+    #[inline(always)]
+    fn cartesian<'a>(
+        &self,
+        run: Run,
+        rec: impl Fn(usize) -> &'a [u8],
+        out: &mut Vec<Point>,
+        read: impl Fn(&[u8]) -> Option<([i32; 3], f32, u8, u8)>,
+    ) -> PacketPoints {
+        let before = out.len();
+        out.reserve(run.records);
+        let (min2, max2) = self.range2();
+        let mut times = run.spacing.offsets();
+        let mut ring = 0u16;
+        let mut last = run.first_ns;
+        for i in 0..run.records {
+            let at = run.first_ns.saturating_add(times.next_offset());
+            last = at;
+            let this_ring = ring;
+            ring += 1;
+            if ring == self.lines {
+                ring = 0;
+            }
+            let Some((xyz, scale, reflectivity, tag)) = read(rec(i)) else {
+                continue;
+            };
+            if xyz == [0, 0, 0] {
+                continue;
+            }
+            let (x, y, z) = (
+                xyz[0] as f32 * scale,
+                xyz[1] as f32 * scale,
+                xyz[2] as f32 * scale,
+            );
+            let d2 = x * x + y * y + z * z;
+            if d2 < min2 || d2 > max2 {
+                continue;
+            }
+            out.push(Point {
+                x,
+                y,
+                z,
+                intensity: f32::from(reflectivity),
+                t: rel_t(at, run.sweep_start_ns),
+                ring: this_ring,
+                ret: 0,
+                pad: tag,
+            });
+        }
+        PacketPoints {
+            points: out.len() - before,
+            last_ns: last,
+        }
+    }
+
+    fn range2(&self) -> (f32, f32) {
+        (
+            self.range.min_range * self.range.min_range,
+            self.range.max_range * self.range.max_range,
+        )
+    }
+
+    /// Every other layout: spherical (through the tables), multi-return, SDK1 type 0.
+    fn general<'a>(
+        &self,
+        kind: Record,
+        run: Run,
+        rec: impl Fn(usize) -> &'a [u8],
         out: &mut Vec<Point>,
     ) -> PacketPoints {
         let before = out.len();
@@ -85,16 +182,14 @@ impl LivoxDecoder {
             _ => (false, false),
         };
         let scale = if cm { 0.01f32 } else { 0.001f32 };
-        let (min2, max2) = (
-            self.range.min_range * self.range.min_range,
-            self.range.max_range * self.range.max_range,
-        );
-        let mut last = first_ns;
-        for i in 0..records {
+        let (min2, max2) = self.range2();
+        let mut times = run.spacing.offsets();
+        let mut last = run.first_ns;
+        for i in 0..run.records {
             let r = rec(i);
-            let at = first_ns.saturating_add(time(i));
+            let at = run.first_ns.saturating_add(times.next_offset());
             last = at;
-            let t = u32::try_from(at.saturating_sub(sweep_start_ns).max(0)).unwrap_or(u32::MAX);
+            let t = rel_t(at, run.sweep_start_ns);
             let ring = (i % usize::from(self.lines)) as u16;
             let (st, ct, sp, cp) = if spherical {
                 let (theta, phi) = read_angles(r, kind);
@@ -145,6 +240,91 @@ impl LivoxDecoder {
     }
 }
 
+/// One packet's records: how many, the first one's time, their spacing, the sweep's start.
+#[derive(Clone, Copy)]
+struct Run {
+    records: usize,
+    first_ns: i64,
+    spacing: Spacing,
+    sweep_start_ns: i64,
+}
+
+/// `t` of a point at device time `at` in a sweep that started at `start` (clamped to u32).
+#[inline]
+fn rel_t(at: i64, start: i64) -> u32 {
+    u32::try_from(at.saturating_sub(start).max(0)).unwrap_or(u32::MAX)
+}
+
+#[inline]
+fn i32_le(r: &[u8], o: usize) -> Option<i32> {
+    Some(i32::from_le_bytes(r.get(o..o + 4)?.try_into().ok()?))
+}
+
+/// The times of a packet's records after its first: record `i` at `⌊i · num / den⌋` ns.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Spacing {
+    num: u64,
+    den: u64,
+}
+
+impl Spacing {
+    /// SDK2: `n` records spread over `interval_ns` from the first to the last
+    /// ([`sdk2_offset_ns`]).
+    pub fn sdk2(n: usize, interval_ns: u64) -> Self {
+        if n < 2 {
+            return Self { num: 0, den: 1 };
+        }
+        Self {
+            num: interval_ns,
+            den: n as u64 - 1,
+        }
+    }
+
+    /// A fixed step between records (SDK1), ns.
+    pub fn step(step_ns: u64) -> Self {
+        Self {
+            num: step_ns,
+            den: 1,
+        }
+    }
+
+    /// The offsets 0, ⌊num/den⌋, ⌊2·num/den⌋, … computed by steps, without a division per
+    /// record.
+    fn offsets(self) -> Offsets {
+        let den = self.den.max(1);
+        Offsets {
+            q: self.num / den,
+            r: self.num % den,
+            den,
+            acc_q: 0,
+            acc_r: 0,
+        }
+    }
+}
+
+struct Offsets {
+    q: u64,
+    r: u64,
+    den: u64,
+    acc_q: u64,
+    acc_r: u64,
+}
+
+impl Offsets {
+    /// This record's offset, then step to the next.
+    #[inline(always)]
+    fn next_offset(&mut self) -> i64 {
+        let v = self.acc_q;
+        self.acc_q = self.acc_q.saturating_add(self.q);
+        self.acc_r += self.r;
+        if self.acc_r >= self.den {
+            self.acc_r -= self.den;
+            self.acc_q = self.acc_q.saturating_add(1);
+        }
+        i64::try_from(v).unwrap_or(i64::MAX)
+    }
+}
+
 /// SDK2 time of record `i` of `n` after the first, ns.
 #[inline]
 pub fn sdk2_offset_ns(i: usize, n: usize, interval_ns: u64) -> i64 {
@@ -157,6 +337,31 @@ pub fn sdk2_offset_ns(i: usize, n: usize, interval_ns: u64) -> i64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn stepped_offsets_equal_the_division() {
+        for (n, iv) in [
+            (96usize, 47_500u64),
+            (100, 6_553_500),
+            (2, 1),
+            (1, 5),
+            (97, 0),
+            (1440, 99_999),
+        ] {
+            let mut o = Spacing::sdk2(n, iv).offsets();
+            for i in 0..n {
+                assert_eq!(
+                    o.next_offset(),
+                    sdk2_offset_ns(i, n, iv),
+                    "record {i} of {n}"
+                );
+            }
+        }
+        let mut o = Spacing::step(4_167).offsets();
+        for i in 0..100 {
+            assert_eq!(o.next_offset(), 4_167 * i);
+        }
+    }
 
     #[test]
     fn sdk2_offsets_span_the_interval() {

@@ -21,7 +21,7 @@
 
 use std::collections::VecDeque;
 
-use super::decode::{sdk2_offset_ns, LivoxDecoder};
+use super::decode::{LivoxDecoder, Spacing};
 use super::frame::PointsFrame;
 use super::model::{LivoxModel, Protocol, STANDARD_GRAVITY};
 use super::wire::{read_imu, LivoxWireError, Record, Sdk1Packet, Sdk2Packet};
@@ -441,7 +441,7 @@ impl LivoxStream {
             n,
             |i| p.record_bytes(i),
             ts,
-            |i| sdk2_offset_ns(i, n, interval),
+            Spacing::sdk2(n, interval),
             start,
             &mut self.sweep.points,
         );
@@ -512,7 +512,7 @@ impl LivoxStream {
             n,
             |i| p.record_bytes(i),
             ts,
-            |i| step * i as i64,
+            Spacing::step(u64::try_from(step).unwrap_or(0)),
             start,
             &mut self.sweep.points,
         );
