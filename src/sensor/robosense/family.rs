@@ -250,7 +250,8 @@ impl SensorStream for RobosenseStream {
     }
 
     fn ready(&self) -> bool {
-        self.decoder().is_some()
+        // The M1 needs nothing beyond its packets.
+        self.decoder().is_some() || RobosenseStream::facts(self).model == Some(RobosenseModel::M1)
     }
 
     fn facts(&self) -> &dyn Facts {

@@ -618,6 +618,12 @@ impl RobosenseStream {
                 missing = u64::from(seq.saturating_sub(1))
                     + u64::from(self.m1_max_seq.saturating_sub(prev));
                 self.m1_seq = Some(seq);
+            } else if seq < prev {
+                // A late packet: the gap it left was counted as lost.
+                self.stats.missing = self.stats.missing.saturating_sub(1);
+                if let Some((sw, _)) = &mut self.open {
+                    sw.missing_packets = sw.missing_packets.saturating_sub(1);
+                }
             }
         } else {
             self.m1_seq = Some(seq);
@@ -663,9 +669,8 @@ impl RobosenseStream {
         }
         let keep_columns = self.cfg.keep_columns;
         if let Some((sw, t0)) = &mut self.open {
-            if !cut {
-                sw.missing_packets += missing;
-            }
+            // Counter gaps before this packet (across a frame end: counted in the new one).
+            sw.missing_packets += missing;
             sw.packets += 1;
             sw.last_host_ns = host_ns;
             let col_base = sw.columns_count;
