@@ -1,4 +1,5 @@
-//! Per-model facts of the Robosense spinning sensors, as data.
+//! Per-model facts of the Robosense spinning sensors, as data (and the M1's few, whose layout
+//! lives in [`super::m1`]).
 //!
 //! Every model sends 1248-byte MSOP packets. Two packet shapes exist:
 //!

@@ -1,5 +1,5 @@
-//! Robosense packet encoders (MSOP and DIFOP, byte-exact) and a spinning-sensor simulator over
-//! a [`Scene`], with ground truth.
+//! Robosense packet encoders (MSOP and DIFOP, byte-exact) and simulators over a [`Scene`], with
+//! ground truth: [`RobosenseSim`] for the spinning models, [`M1Sim`] for the M1 (at the end).
 //!
 //! [`RobosenseSim`] fires every slot of every block at the model's firing time relative to the
 //! packet's header time; the block azimuth is the head's azimuth at the firing, rounded to
@@ -161,7 +161,7 @@ pub struct RobosenseTruth {
     pub ret: u8,
 }
 
-/// A simulated Robosense sensor.
+/// A simulated spinning Robosense sensor (the M1's simulator is [`M1Sim`]).
 #[derive(Clone, Debug)]
 pub struct RobosenseSim {
     /// Model.

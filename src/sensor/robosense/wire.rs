@@ -283,6 +283,9 @@ impl<'a> Difop<'a> {
     /// used (a sign byte other than 0 / 1 — an unprogrammed table reads `FF` — or an angle
     /// outside −90°..180°).
     pub fn angles(&self, model: RobosenseModel) -> Result<Vec<(f64, f64)>, String> {
+        if model.spec().shape == Shape::Mems {
+            return Err("the M1 has no angle table (its points carry their angles)".into());
+        }
         let n = model.lasers();
         let Some((start, entries)) = model.spec().difop_angles else {
             let mut v = Vec::with_capacity(16);
