@@ -332,3 +332,157 @@ fn rs16_difop_pitch_table() {
     assert_eq!(a[0], (-15.0, 0.0));
     assert_eq!(a[9], (3.0, 0.0));
 }
+
+/// RS-LiDAR-M1 / M1 Plus MSOP, built byte by byte from the layout in RoboSense's SDK
+/// (`decoder_RSM1.hpp`: `RSM1MsopHeader`, `RSM1Block`, `RSM1Channel`) and the M1 Plus
+/// datasheet's MSOP table: 1210 bytes; id `55 AA 5A A5`; packet counter u16 BE at 4; protocol
+/// version at 6; return mode at 8; Unix time at 10–19 (u48 s, u32 µs, BE); lidar type at 30;
+/// temperature at 31 (°C + 80); 25 blocks of 47 bytes from byte 32, each a time offset (µs), a
+/// return byte and 5 channels of 9 bytes: radius u16 BE (5 mm), elevation and azimuth u16 BE
+/// (0.01°, 32768 = 0°), intensity, attribute, elongation. Point: `x = r·cos el·cos az`,
+/// `y = r·cos el·sin az`, `z = r·sin el`; time = packet time + block offset; ring = channel.
+fn m1_packet() -> Vec<u8> {
+    let mut b = vec![0u8; 1210];
+    b[..4].copy_from_slice(&[0x55, 0xAA, 0x5A, 0xA5]);
+    b[4..6].copy_from_slice(&[0x01, 0x2C]); // packet 300 of the frame
+    b[6..8].copy_from_slice(&[0x00, 0x01]);
+    b[8] = 0x04; // strongest
+                 // 1_709_296_496 s = 0x65E1CB70; 789_012 µs = 0x000C0A14.
+    b[10..20].copy_from_slice(&[0, 0, 0x65, 0xE1, 0xCB, 0x70, 0x00, 0x0C, 0x0A, 0x14]);
+    b[30] = 0x10;
+    b[31] = 0x78; // 120 − 80 = 40 °C
+                  // Block 0 (byte 32), channel 0 (byte 34): 10 m (2000 = 0x07D0), elevation +5.00°
+                  // (33268 = 0x81F4), azimuth −30.00° (29768 = 0x7448), intensity 77.
+    b[32] = 0;
+    b[34..43].copy_from_slice(&[0x07, 0xD0, 0x81, 0xF4, 0x74, 0x48, 77, 0, 0]);
+    // Block 7 (byte 32 + 7·47 = 361): 42 µs after the packet time, return byte 1; channel 3
+    // (byte 361 + 2 + 27 = 390): 3 m (600 = 0x0258), elevation −10.00° (31768 = 0x7C18),
+    // azimuth +59.90° (38758 = 0x9766), intensity 200.
+    b[361] = 42;
+    b[362] = 1;
+    b[390..399].copy_from_slice(&[0x02, 0x58, 0x7C, 0x18, 0x97, 0x66, 200, 0, 0]);
+    // Block 10 (byte 502), channel 1: angles but radius 0 — no return.
+    b[502 + 2 + 9 + 2..502 + 2 + 9 + 6].copy_from_slice(&[0x81, 0xF4, 0x74, 0x48]);
+    // Block 24 (byte 1160), channel 4 (byte 1198, the last 9 bytes before the 3 reserved):
+    // 0.15 m (30 = 0x001E), under the M1's 0.2 m minimum — no point.
+    b[1160] = 144;
+    b[1198..1207].copy_from_slice(&[0x00, 0x1E, 0x7B, 0x1E, 0x97, 0x70, 9, 0, 0]);
+    b
+}
+
+fn spherical(r: f64, el_deg: f64, az_deg: f64) -> [f64; 3] {
+    let (el, az) = (el_deg.to_radians(), az_deg.to_radians());
+    [
+        r * el.cos() * az.cos(),
+        r * el.cos() * az.sin(),
+        r * el.sin(),
+    ]
+}
+
+#[test]
+fn m1_msop_decodes_to_the_values_written() {
+    use ringscan::sensor::robosense::m1::{M1Decoder, M1Msop};
+    let b = m1_packet();
+    let m = M1Msop::new(&b).unwrap();
+    assert_eq!(m.seq(), 300);
+    assert_eq!(m.protocol_version(), 1);
+    assert_eq!(m.return_mode(), 4);
+    assert_eq!(m.lidar_type(), 0x10);
+    assert_eq!(m.temperature_c(), 40);
+    assert_eq!(m.stamp_ns(), Some(STAMP));
+    let mut pts = Vec::new();
+    M1Decoder::new(DecodeOptions::default()).decode(&m, |d| pts.push(d));
+    assert_eq!(
+        pts.len(),
+        2,
+        "no return and under-range points are not points"
+    );
+    let (a, c) = (pts[0], pts[1]);
+    assert_eq!((a.block, a.channel, a.offset_ns), (0, 0, 0));
+    close(&a.point, spherical(10.0, 5.0, -30.0));
+    // −30° azimuth is to the right: y < 0 (REP 103, y left).
+    assert!(a.point.y < -4.0);
+    assert_eq!((a.point.intensity, a.point.ring, a.point.ret), (77.0, 0, 0));
+    assert_eq!((c.block, c.channel, c.offset_ns), (7, 3, 42_000));
+    close(&c.point, spherical(3.0, -10.0, 59.9));
+    assert_eq!(
+        (c.point.intensity, c.point.ring, c.point.ret),
+        (200.0, 3, 1)
+    );
+    // The caller's range filter applies within the M1's own.
+    let mut n = 0;
+    M1Decoder::new(DecodeOptions {
+        min_range: 5.0,
+        max_range: f32::INFINITY,
+    })
+    .decode(&m, |_| n += 1);
+    assert_eq!(n, 1);
+}
+
+/// The M1 through the family interface, from its bytes alone: claimed by size and id (no
+/// DIFOP, no angle file), decoded at once; the frame ends where the packet counter restarts;
+/// a gap in the counter is counted; the 256-byte DIFOP (id, frame rate at 9, firmware at
+/// 28–37, serial at 38–43) fills the device facts.
+#[test]
+fn m1_through_the_family_interface() {
+    use ringscan::sensor::{claim, CalibrationPool, FirstDatagram, StreamSettings};
+    let p300 = m1_packet();
+    let mut pool = CalibrationPool::new(Vec::new(), StreamSettings::default());
+    let first = FirstDatagram {
+        src: std::net::Ipv4Addr::new(192, 168, 1, 200),
+        port: 6699,
+        payload: &p300,
+    };
+    let mut s = claim(&first, &mut pool).expect("claimed").expect("stream");
+    assert!(s.is_lidar_datagram(&p300));
+    let mut sweeps: Vec<(i64, Vec<Point>, u64)> = Vec::new();
+    let mut on = |sw: &ringscan::sweep::Sweep, _: &dyn ringscan::sensor::Facts| {
+        sweeps.push((sw.device_time_ns, sw.points.clone(), sw.missing_packets))
+    };
+    s.push(STAMP, &p300, &mut on).unwrap();
+    assert!(s.ready());
+    // Packet 302 (301 lost), 317 µs later; then packet 2 of the next frame (1 lost, and
+    // 303–630 of this one: the largest counter seen is 302, so those are not known lost).
+    let mut p302 = p300.clone();
+    p302[4..6].copy_from_slice(&[0x01, 0x2E]);
+    p302[16..20].copy_from_slice(&[0x00, 0x0C, 0x0B, 0x51]); // 789_329 µs
+    s.push(STAMP, &p302, &mut on).unwrap();
+    let mut p2 = p300.clone();
+    p2[4..6].copy_from_slice(&[0x00, 0x02]);
+    p2[16..20].copy_from_slice(&[0x00, 0x0D, 0x0B, 0x00]); // 854_784 µs
+    s.push(STAMP, &p2, &mut on).unwrap();
+    let mut difop = vec![0u8; 256];
+    difop[..8].copy_from_slice(&[0xA5, 0xFF, 0x00, 0x5A, 0x11, 0x11, 0x55, 0x55]);
+    difop[9] = 10;
+    difop[28..38].copy_from_slice(&[1, 2, 3, 4, 5, 6, 7, 8, 9, 10]);
+    difop[38..44].copy_from_slice(&[0xAB, 0xCD, 0xEF, 0x01, 0x23, 0x45]);
+    s.push(STAMP, &difop, &mut on).unwrap();
+    s.finish(&mut on).unwrap();
+    assert_eq!(sweeps.len(), 2);
+    assert_eq!(sweeps[0].0, STAMP);
+    assert_eq!(sweeps[0].1.len(), 4);
+    assert_eq!(sweeps[0].2, 1);
+    // Second packet's block 7 point: 317 µs + 42 µs after the sweep's start.
+    assert_eq!(sweeps[0].1[3].t, 359_000);
+    assert_eq!(sweeps[1].0, STAMP + 65_772_000);
+    assert_eq!(sweeps[1].2, 1);
+    let (v, counts) = s.summary();
+    assert_eq!(v["model"], "RS-LiDAR-M1");
+    assert_eq!(v["model_id"], "rsm1");
+    assert_eq!(v["serial"], "abcdef012345");
+    assert_eq!(v["firmware"], "0102030405/060708090a");
+    assert_eq!(v["frame_rate"], 10);
+    assert_eq!(v["temperature_c"], 40);
+    assert_eq!(v["return_mode"], "strongest (0x04)");
+    assert_eq!(v["held"], 0);
+    assert_eq!(
+        (counts.decoded, counts.missing, counts.malformed),
+        (3, 2, 0)
+    );
+    let lines = ringscan::sensor::family("robosense").unwrap().describe(&v);
+    assert!(lines[0].contains("Robosense RS-LiDAR-M1"), "{lines:?}");
+    assert!(
+        lines[3].contains("serial abcdef012345") && lines[3].contains("40 °C"),
+        "{lines:?}"
+    );
+}

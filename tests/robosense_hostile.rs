@@ -221,3 +221,106 @@ fn unix_seconds_beyond_the_i64_range_are_no_time() {
     p[20..26].copy_from_slice(&[0xFF; 6]);
     push(&mut s, &p);
 }
+
+/// A valid M1 packet (1210 bytes, id `55 AA 5A A5`), counter `seq`, time `secs` s, every
+/// channel at 4 m straight ahead.
+fn m1_packet(seq: u16, secs: u32) -> Vec<u8> {
+    let mut b = vec![0u8; 1210];
+    b[..4].copy_from_slice(&[0x55, 0xAA, 0x5A, 0xA5]);
+    b[4..6].copy_from_slice(&seq.to_be_bytes());
+    b[12..16].copy_from_slice(&secs.to_be_bytes());
+    for blk in 0..25 {
+        for c in 0..5 {
+            let o = 32 + 47 * blk + 2 + 9 * c;
+            b[o..o + 6].copy_from_slice(&[0x03, 0x20, 0x80, 0x00, 0x80, 0x00]);
+        }
+    }
+    b
+}
+
+/// M1: truncated, oversized, wrong-id and spinning-size packets, a µs field out of range, a
+/// wrong-size DIFOP and a spinning model's DIFOP on the M1's stream — each a counted drop;
+/// the good packets around them still decode (125 points each).
+#[test]
+fn m1_bad_packets_are_counted_drops() {
+    use ringscan::sensor::robosense::m1::M1Msop;
+    let mut s = RobosenseStream::new(RobosenseConfig::new(None));
+    let good = m1_packet(1, 1_700_000_000);
+    assert_eq!(push(&mut s, &good), 0);
+    assert_eq!(s.stats().packets, 1);
+    assert_eq!(s.facts().model, Some(RobosenseModel::M1));
+    let mut bad = 0;
+    for len in [0usize, 4, 32, 1209, 1211, 1248, 65_507] {
+        let mut p = good.clone();
+        p.resize(len, 0);
+        assert!(M1Msop::new(&p).is_err());
+        push(&mut s, &p);
+        bad += 1;
+    }
+    let mut p = good.clone();
+    p[2] = 0x5B; // not the M1's id
+    push(&mut s, &p);
+    bad += 1;
+    let mut p = m1_packet(2, 1_700_000_000);
+    p[16..20].copy_from_slice(&1_000_000u32.to_be_bytes()); // a µs field of a whole second
+    push(&mut s, &p);
+    bad += 1;
+    let mut d = vec![0u8; 255];
+    d[..8].copy_from_slice(&[0xA5, 0xFF, 0x00, 0x5A, 0x11, 0x11, 0x55, 0x55]);
+    push(&mut s, &d);
+    bad += 1;
+    d.resize(1248, 0); // a spinning model's DIFOP: not this sensor's
+    push(&mut s, &d);
+    bad += 1;
+    assert_eq!(s.stats().malformed, bad, "{:?}", s.stats());
+    // The stream goes on: packets 2 and 20 (3–19 missing), then 19 late (a counter a little
+    // below the last one is a late packet of the same frame, no longer missing), then the
+    // next frame's packet 1, which ends the first frame.
+    push(&mut s, &m1_packet(2, 1_700_000_000));
+    push(&mut s, &m1_packet(20, 1_700_000_000));
+    assert_eq!(push(&mut s, &m1_packet(19, 1_700_000_000)), 0);
+    let n = push(&mut s, &m1_packet(1, 1_700_000_000));
+    assert_eq!(n, 4 * 125);
+    assert_eq!(s.held(), 0);
+    assert_eq!((s.stats().packets, s.stats().missing), (5, 16));
+}
+
+/// M1 garbage: random bytes behind the M1's id and size (angles, radii, offsets, counters and
+/// times at random) never panic, every packet is counted once, memory stays bounded (no
+/// packet is held), and every point is finite, within 200 m, on a channel 0..4, return 0 / 1.
+#[test]
+fn m1_random_bytes_never_panic() {
+    let mut x = 0x2545_F491_4F6C_DD1Du64;
+    let mut rnd = move || {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        x
+    };
+    let mut s = RobosenseStream::new(RobosenseConfig::new(None));
+    let mut n = 0usize;
+    for i in 0..3000 {
+        let mut p: Vec<u8> = (0..1210).map(|_| rnd() as u8).collect();
+        p[..4].copy_from_slice(&[0x55, 0xAA, 0x5A, 0xA5]);
+        if i % 2 == 0 {
+            // A plausible time, so that most packets decode.
+            p[10..16].copy_from_slice(&[0, 0, 0x65, 0, 0, (i / 2) as u8]);
+            p[16..20].copy_from_slice(&((rnd() % 1_000_000) as u32).to_be_bytes());
+        }
+        s.push(i as i64, &p, &mut |sw, _| {
+            for q in &sw.points {
+                assert!(q.x.is_finite() && q.y.is_finite() && q.z.is_finite());
+                assert!((q.x * q.x + q.y * q.y + q.z * q.z).sqrt() <= 200.01);
+                assert!(q.ring < 5 && q.ret <= 1, "{q:?}");
+            }
+            n += sw.points.len();
+        })
+        .unwrap();
+        assert_eq!(s.held(), 0);
+    }
+    s.finish(&mut |sw, _| n += sw.points.len());
+    let st = s.stats();
+    assert_eq!(st.packets + st.malformed, 3000, "{st:?}");
+    assert!(st.packets >= 1500, "{st:?}");
+    assert!(n > 0 && n as u64 == st.points);
+}

@@ -11,11 +11,18 @@
 //! elements = points produced (`decoder/*`: the packet view and the decoder into one reused
 //! buffer, cleared every 500 packets; `stream/*`: the whole stream — `RobosenseStream` /
 //! `VelodyneStream` — sweeps cut and handed to a callback that counts their points).
+//! The RS-LiDAR-M1 (`robosense-m1`) has no public capture here: its input is two frames (1260
+//! MSOP packets, single return) from the simulator (`sim::M1Sim`, a sensor 1.8 m above the
+//! urban scene), made before timing, through `M1Decoder` / `RobosenseStream`.
+//! `RINGSCAN_CAPTURES` names the captures folder when it is not `../shared/captures` (a
+//! worktree elsewhere).
 
 use std::path::{Path, PathBuf};
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
 use ringscan::sensor::robosense::family::parse_robosense_calibration;
+use ringscan::sensor::robosense::m1::{M1Decoder, M1Msop};
+use ringscan::sensor::robosense::sim::M1Sim;
 use ringscan::sensor::robosense::{
     Msop, RobosenseAngles, RobosenseConfig, RobosenseDecoder, RobosenseModel, RobosenseStream,
 };
@@ -102,6 +109,52 @@ fn robosense_stream_pass(angles: &RobosenseAngles, input: &[(i64, Vec<u8>)]) -> 
     points
 }
 
+fn m1_input() -> Vec<(i64, Vec<u8>)> {
+    let scene = ringscan::sim::scenes::named("urban").expect("scene");
+    let mut sim = M1Sim::new(1_714_564_800_000_000_000);
+    sim.trajectory = ringscan::sim::motion::Trajectory::twist(
+        sim.stamp0_ns,
+        nalgebra::Isometry3::translation(40.0, 0.0, ringscan::sim::scenes::SENSOR_HEIGHT_M),
+        nalgebra::Vector3::zeros(),
+        nalgebra::Vector3::zeros(),
+    );
+    let mut truth = Vec::new();
+    (0..1260)
+        .map(|_| {
+            truth.clear();
+            sim.next_packet(&scene, &mut truth)
+        })
+        .collect()
+}
+
+fn m1_decoder_pass(dec: &M1Decoder, packets: &[&[u8]], out: &mut Vec<Point>) -> usize {
+    let mut n = 0;
+    out.clear();
+    for (i, p) in packets.iter().enumerate() {
+        let p = M1Msop::new(p).expect("an M1 packet");
+        dec.decode(&p, |d| {
+            out.push(d.point);
+            n += 1;
+        });
+        if i % 500 == 499 {
+            black_box(&*out);
+            out.clear();
+        }
+    }
+    n
+}
+
+fn m1_stream_pass(input: &[(i64, Vec<u8>)]) -> u64 {
+    let mut stream = RobosenseStream::new(RobosenseConfig::new(None));
+    let mut points = 0u64;
+    let mut cb = |s: &ringscan::sweep::Sweep, _: &_| points += s.points.len() as u64;
+    for (t, p) in input {
+        stream.push(*t, p, &mut cb).expect("stream");
+    }
+    stream.finish(&mut cb);
+    points
+}
+
 fn velodyne_decoder_pass(dec: &VelodyneDecoder, packets: &[&[u8]], out: &mut Vec<Point>) -> usize {
     let mut n = 0;
     out.clear();
@@ -137,7 +190,10 @@ fn velodyne_stream_pass(
 }
 
 fn bench(c: &mut Criterion) {
-    let shared = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/captures");
+    let shared = std::env::var_os("RINGSCAN_CAPTURES").map_or_else(
+        || PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/captures"),
+        PathBuf::from,
+    );
     assert!(shared.is_dir(), "{} is needed", shared.display());
 
     let (angles, input) = helios_input(&shared);
@@ -157,6 +213,25 @@ fn bench(c: &mut Criterion) {
     g.throughput(Throughput::Elements(stream_points));
     g.bench_function("robosense-helios16p", |b| {
         b.iter(|| black_box(robosense_stream_pass(&angles, black_box(&input))))
+    });
+    g.finish();
+
+    let m1 = m1_input();
+    let m1_packets: Vec<&[u8]> = m1.iter().map(|(_, p)| p.as_slice()).collect();
+    let m1_dec = M1Decoder::new(DecodeOptions::default());
+    let points = m1_decoder_pass(&m1_dec, &m1_packets, &mut out) as u64;
+    let mut g = c.benchmark_group("decoder");
+    g.throughput(Throughput::Elements(points));
+    g.bench_function("robosense-m1", |b| {
+        b.iter(|| black_box(m1_decoder_pass(&m1_dec, black_box(&m1_packets), &mut out)))
+    });
+    g.finish();
+    let stream_points = m1_stream_pass(&m1);
+    assert_eq!(stream_points, points);
+    let mut g = c.benchmark_group("stream");
+    g.throughput(Throughput::Elements(stream_points));
+    g.bench_function("robosense-m1", |b| {
+        b.iter(|| black_box(m1_stream_pass(black_box(&m1))))
     });
     g.finish();
 

@@ -2490,8 +2490,10 @@ pub fn robosense_packet(data: &[u8]) {
     let Some((&sel, payload)) = data.split_first() else {
         return;
     };
-    let model = ROBOSENSE_MODELS[usize::from(sel) % ROBOSENSE_MODELS.len()];
+    // Low nibble: the model (bits 0x10–0x80 are the options).
+    let model = ROBOSENSE_MODELS[usize::from(sel & 0x0F) % ROBOSENSE_MODELS.len()];
     let dual = sel & 0x10 != 0;
+    robosense_m1_views(payload);
     if let Ok(p) = Msop::new(payload, model) {
         let shape = model.spec().shape;
         for b in 0..shape.blocks() {
@@ -2528,7 +2530,8 @@ pub fn robosense_packet(data: &[u8]) {
             }
         }
     }
-    let angles = (sel & 0x40 == 0).then(|| robosense_angles(model));
+    // The M1 has no angle file (5 channels is no table's row count).
+    let angles = (sel & 0x40 == 0 && model != RobosenseModel::M1).then(|| robosense_angles(model));
     let mut cfg = RobosenseConfig::new(angles);
     if sel & 0x20 == 0 {
         cfg.model = Some(model);
@@ -2574,6 +2577,42 @@ pub fn robosense_packet(data: &[u8]) {
     }
     stream.finish(&mut on_sweep);
     assert!(points <= 2 * 12 * 128, "{points} points from two packets");
+}
+
+/// The M1's views and decoder on any bytes: they refuse what is not an M1 packet, every
+/// accessor answers, at most 125 points a packet, each finite, within 200 m, at its block's
+/// offset (< 256 µs), on channel 0..4, return 0 / 1.
+fn robosense_m1_views(payload: &[u8]) {
+    use ringscan::sensor::robosense::m1::{is_m1_msop, M1Decoder, M1Difop, M1Msop};
+    let msop = M1Msop::new(payload);
+    assert_eq!(msop.is_ok(), is_m1_msop(payload));
+    if let Ok(p) = msop {
+        let _ = (
+            p.seq(),
+            p.protocol_version(),
+            p.return_mode(),
+            p.time_mode(),
+            p.lidar_type(),
+            p.temperature_c(),
+            p.stamp_ns(),
+        );
+        let mut n = 0;
+        M1Decoder::new(Default::default()).decode(&p, |d| {
+            n += 1;
+            let q = d.point;
+            assert!(q.x.is_finite() && q.y.is_finite() && q.z.is_finite());
+            assert!(
+                (q.x * q.x + q.y * q.y + q.z * q.z).sqrt() <= 200.01,
+                "{q:?}"
+            );
+            assert!(d.offset_ns >= 0 && d.offset_ns < 256_000);
+            assert!(q.ring < 5 && q.ret <= 1);
+        });
+        assert!(n <= 125);
+    }
+    if let Ok(d) = M1Difop::new(payload) {
+        let _ = (d.frame_rate(), d.network(), d.firmware(), d.serial());
+    }
 }
 
 /// Any bytes as a Robosense angle CSV: recognised only when every line is one or two numbers

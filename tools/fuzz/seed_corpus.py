@@ -383,6 +383,22 @@ def main():
         for c in sorted(rs.glob("**/calibration/robosense/*.csv")):
             put("calib_robosense", c.read_bytes(), c.stem)
     put("calib_robosense", b"".join(b"%.2f,%.2f\n" % (15 - i, 0.1 * i) for i in range(32)), "tiny")
+    # robosense_packet, M1 (model 6): a 1210-byte MSOP (id, counter, Unix time, 25 blocks of 5
+    # points at 4 m) and a 256-byte DIFOP.
+    m1 = bytearray(1210)
+    m1[0:4] = b"\x55\xaa\x5a\xa5"
+    m1[4:6] = struct.pack(">H", 1)
+    m1[10:20] = struct.pack(">Q", 1_700_000_000)[2:] + struct.pack(">I", 1234)
+    for blk in range(25):
+        o = 32 + 47 * blk
+        m1[o] = 6 * blk
+        for c in range(5):
+            m1[o + 2 + 9 * c : o + 8 + 9 * c] = struct.pack(">HHH", 800, 32768 + 100 * c, 32768 - 500 * c)
+    m1d = bytearray(256)
+    m1d[0:8] = b"\xa5\xff\x00\x5a\x11\x11\x55\x55"
+    for i, payload in enumerate((bytes(m1), bytes(m1d))):
+        for bits in (0x00, 0x20, 0x40):
+            put("robosense_packet", bytes([6 | bits]) + payload, f"m1-{i}")
 
     # reassembly: config, then pushes of one datagram of key 2 in shuffled order, then key 0.
     for total, frag in ((1300, 400), (5000, 1480), (64000, 8000)):

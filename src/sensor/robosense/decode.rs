@@ -38,7 +38,7 @@ fn trig() -> &'static [(f32, f32)] {
 }
 
 #[inline]
-fn cs(cdeg: i32) -> (f32, f32) {
+pub(super) fn cs(cdeg: i32) -> (f32, f32) {
     let t = trig();
     t[cdeg.rem_euclid(36_000) as usize]
 }
@@ -85,6 +85,13 @@ impl RobosenseDecoder {
         angles: &RobosenseAngles,
         opts: DecodeOptions,
     ) -> Result<Self, DecodeError> {
+        if model.spec().shape == super::model::Shape::Mems {
+            // Its points carry their own angles: `super::m1::M1Decoder`.
+            return Err(DecodeError::Unsupported {
+                model: model.name(),
+                mode: "the spinning decoder (M1 packets decode with m1::M1Decoder)",
+            });
+        }
         let n = model.lasers();
         if angles.lasers() != n {
             return Err(DecodeError::LaserCount {

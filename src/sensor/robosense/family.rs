@@ -3,7 +3,8 @@
 //! A Robosense sensor is told from its datagrams alone, never from a file name: an MSOP packet
 //! is 1248 bytes starting `55 AA 05 0A 5A A5 50 A0` (RS-16 / RS-32 / Bpearl) or `55 AA 05 5A`
 //! (Helios, Ruby) with its blocks' marks where the layout puts them; a DIFOP packet is 1248
-//! bytes starting `A5 FF 00 5A 11 11 55 55`. Which model of a shared header it is comes from
+//! bytes starting `A5 FF 00 5A 11 11 55 55`; an M1 / M1 Plus MSOP packet is 1210 bytes starting
+//! `55 AA 5A A5`, its DIFOP 256 bytes with the DIFOP id. Which model of a shared header it is comes from
 //! the angle file's laser count or the DIFOP's angle table ([`super::sweep`]), or `--model`.
 
 use std::any::Any;
@@ -14,6 +15,7 @@ use std::sync::Arc;
 use serde_json::{json, Map, Value};
 
 use super::calib::{parse_csv, RobosenseAngles};
+use super::m1::{is_m1_difop, M1_MSOP_LEN};
 use super::model::{RobosenseModel, PACKET_LEN};
 use super::sweep::{RobosenseConfig, RobosenseFacts, RobosenseStream};
 use super::wire::{is_difop, msop_shape};
@@ -33,6 +35,7 @@ const MODEL_IDS: &[&str] = &[
     "rshelios",
     "rshelios16p",
     "rsruby128",
+    "rsm1",
 ];
 
 /// Reads a Robosense angle CSV; `None` for any other text.
@@ -105,14 +108,27 @@ impl Family for Robosense {
                 g("held")
             ),
             format!("    packets per port: {}", s["packets_per_port"]),
-            format!(
-                "    calibration: {}; DIFOP: motor {} rpm, field of view {}, firmware {}, serial {}",
-                st("calibration"),
-                known("motor_rpm"),
-                fov,
-                known("firmware"),
-                known("serial")
-            ),
+            if s["model_id"].as_str() == Some("rsm1") {
+                // A MEMS unit: no motor, no angle table; the header's temperature instead.
+                format!(
+                    "    calibration: {}; DIFOP: frame-rate byte {}, firmware {}, serial {}; temperature {} °C, protocol {}",
+                    st("calibration"),
+                    known("frame_rate"),
+                    known("firmware"),
+                    known("serial"),
+                    known("temperature_c"),
+                    known("protocol")
+                )
+            } else {
+                format!(
+                    "    calibration: {}; DIFOP: motor {} rpm, field of view {}, firmware {}, serial {}",
+                    st("calibration"),
+                    known("motor_rpm"),
+                    fov,
+                    known("firmware"),
+                    known("serial")
+                )
+            },
             format!("    clock: {} ({})", st("clock"), st("clock_state")),
         ]
     }
@@ -130,7 +146,7 @@ impl Family for Robosense {
     }
 
     fn lidar_sizes(&self, _calibs: &[Calibration]) -> Vec<usize> {
-        vec![PACKET_LEN]
+        vec![PACKET_LEN, M1_MSOP_LEN]
     }
 
     /// An MSOP or DIFOP packet (by its bytes). The first Robosense angle file (bound to this
@@ -141,7 +157,7 @@ impl Family for Robosense {
             Some(m) => Some(RobosenseModel::from_id(m)?),
         };
         let shape = msop_shape(d.payload);
-        if shape.is_none() && !is_difop(d.payload) {
+        if shape.is_none() && !is_difop(d.payload) && !is_m1_difop(d.payload) {
             return None;
         }
         if let (Some(m), Some(s)) = (named, shape) {
@@ -234,7 +250,8 @@ impl SensorStream for RobosenseStream {
     }
 
     fn ready(&self) -> bool {
-        self.decoder().is_some()
+        // The M1 needs nothing beyond its packets.
+        self.decoder().is_some() || RobosenseStream::facts(self).model == Some(RobosenseModel::M1)
     }
 
     fn facts(&self) -> &dyn Facts {
@@ -266,6 +283,8 @@ impl SensorStream for RobosenseStream {
             "serial": f.serial,
             "firmware": f.firmware,
             "protocol": f.protocol,
+            "frame_rate": f.frame_rate,
+            "temperature_c": f.temperature_c,
             "clock": f.clock.name(),
             "clock_state": f.clock_words(),
             "data_packets": st.packets,

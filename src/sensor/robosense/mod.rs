@@ -1,4 +1,5 @@
-//! Robosense: RS-16, RS-32, RS-Bpearl, RS-Helios (32), RS-Helios-16P, RS-Ruby (128).
+//! Robosense: RS-16, RS-32, RS-Bpearl, RS-Helios (32), RS-Helios-16P, RS-Ruby (128), and the
+//! MEMS RS-LiDAR-M1 / M1 Plus ([`m1`]: its own 1210-byte packet, points with their own angles).
 //!
 //! The family's whole data flow in one folder: [`wire`] (views of the 1248-byte MSOP point
 //! packet in its two header forms and of the 1248-byte DIFOP device-information packet) →
@@ -14,6 +15,7 @@
 pub mod calib;
 pub mod decode;
 pub mod family;
+pub mod m1;
 pub mod model;
 #[cfg(feature = "sim")]
 pub mod sim;

@@ -1,4 +1,5 @@
-//! Per-model facts of the Robosense spinning sensors, as data.
+//! Per-model facts of the Robosense spinning sensors, as data (and the M1's few, whose layout
+//! lives in [`super::m1`]).
 //!
 //! Every model sends 1248-byte MSOP packets. Two packet shapes exist:
 //!
@@ -36,6 +37,10 @@ pub enum Shape {
     Helios,
     /// 80-byte header, 3 × 128 slots.
     Ruby,
+    /// The M1's 1210-byte packet: 32-byte header, 25 blocks of 5 self-contained points
+    /// ([`super::m1`]; the spinning accessors below give its counts, the spinning decoder
+    /// refuses it).
+    Mems,
 }
 
 impl Shape {
@@ -44,6 +49,7 @@ impl Shape {
         match self {
             Self::V1 | Self::Helios => 42,
             Self::Ruby => 80,
+            Self::Mems => super::m1::M1_HEADER_LEN,
         }
     }
     /// Blocks per packet.
@@ -51,6 +57,7 @@ impl Shape {
         match self {
             Self::V1 | Self::Helios => 12,
             Self::Ruby => 3,
+            Self::Mems => super::m1::M1_BLOCKS,
         }
     }
     /// Channel slots per block.
@@ -58,21 +65,35 @@ impl Shape {
         match self {
             Self::V1 | Self::Helios => 32,
             Self::Ruby => 128,
+            Self::Mems => super::m1::M1_CHANNELS,
         }
     }
-    /// Bytes of a block's prefix (flag and azimuth).
+    /// Bytes of a block's prefix (flag and azimuth; the M1's time offset and return byte).
     pub const fn block_prefix(self) -> usize {
-        4
+        match self {
+            Self::Mems => 2,
+            _ => 4,
+        }
     }
     /// Bytes of one block.
     pub const fn block_len(self) -> usize {
-        self.block_prefix() + 3 * self.slots()
+        match self {
+            Self::Mems => super::m1::M1_BLOCK_LEN,
+            _ => self.block_prefix() + 3 * self.slots(),
+        }
     }
     /// Offset of the Unix or calendar time in the header.
     pub const fn time_offset(self) -> usize {
         match self {
             Self::V1 | Self::Helios => 20,
-            Self::Ruby => 10,
+            Self::Ruby | Self::Mems => 10,
+        }
+    }
+    /// Packet length.
+    pub const fn packet_len(self) -> usize {
+        match self {
+            Self::Mems => super::m1::M1_MSOP_LEN,
+            _ => PACKET_LEN,
         }
     }
 }
@@ -199,16 +220,19 @@ pub enum RobosenseModel {
     Helios16P,
     /// RS-Ruby (128 lasers).
     Ruby128,
+    /// RS-LiDAR-M1 and M1 Plus (MEMS, 5 channels; one MSOP layout, [`super::m1`]).
+    M1,
 }
 
 /// Every model, in `--model` order.
-pub const ALL_MODELS: [RobosenseModel; 6] = [
+pub const ALL_MODELS: [RobosenseModel; 7] = [
     RobosenseModel::Rs16,
     RobosenseModel::Rs32,
     RobosenseModel::Bpearl,
     RobosenseModel::Helios,
     RobosenseModel::Helios16P,
     RobosenseModel::Ruby128,
+    RobosenseModel::M1,
 ];
 
 impl RobosenseModel {
@@ -221,6 +245,7 @@ impl RobosenseModel {
             Self::Helios => &HELIOS,
             Self::Helios16P => &HELIOS16P,
             Self::Ruby128 => &RUBY128,
+            Self::M1 => &M1,
         }
     }
 
@@ -268,6 +293,9 @@ impl RobosenseModel {
             (Shape::Helios, 6) => "nearest",
             (Shape::Ruby, 1) => "last",
             (Shape::Ruby, 2) => "strongest",
+            (Shape::Mems, 4) => "strongest",
+            (Shape::Mems, 5) => "last",
+            (Shape::Mems, 6) => "first",
             _ => "unknown",
         }
     }
@@ -388,6 +416,29 @@ const RUBY128: ModelSpec = ModelSpec {
     difop_angles: Some((468, 128)),
 };
 
+/// The M1: only the fields that apply to it are meaningful (name, id, channels, shape, unit,
+/// range, return-mode byte, clock); the firing fields are zero because each M1 block carries
+/// its own time offset, and the spinning decoder refuses the model.
+const M1: ModelSpec = ModelSpec {
+    name: "RS-LiDAR-M1",
+    id: "rsm1",
+    lasers: super::m1::M1_CHANNELS,
+    shape: Shape::Mems,
+    distance_unit_m: super::m1::M1_RADIUS_UNIT_M,
+    min_range_m: super::m1::M1_MIN_RANGE_M,
+    max_range_m: super::m1::M1_MAX_RANGE_M,
+    lens_rx_m: 0.0,
+    lens_rz_m: 0.0,
+    firing_us: &[0.0; super::m1::M1_CHANNELS],
+    block_us: 0.0,
+    az_span_us: 0.0,
+    dual_block_us: 0.0,
+    dual: DualForm::BlockPairs,
+    dual_mode_byte: 0,
+    clock: ClockForm::Unix,
+    difop_angles: None,
+};
+
 /// One block's place in time: its firing index in the packet and the return it holds
 /// (`None` for [`DualForm::SlotHalves`], where the slot says).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -441,6 +492,11 @@ impl ModelSpec {
 
     /// Time a packet covers, ns.
     pub fn packet_period_ns(&self, dual: bool) -> f64 {
+        if self.shape == Shape::Mems {
+            let per_frame =
+                f64::from(super::m1::M1_PACKETS_PER_FRAME) * if dual { 2.0 } else { 1.0 };
+            return super::m1::M1_FRAME_NS as f64 / per_frame;
+        }
         f64::from(self.firing_period_us(dual)) * 1_000.0 * self.firings(dual) as f64
     }
 }
@@ -458,10 +514,14 @@ mod tests {
     fn blocks_fill_the_packet() {
         for m in ALL_MODELS {
             let s = m.spec().shape;
-            let tail = if s == Shape::Ruby { 4 } else { 6 };
+            let tail = match s {
+                Shape::Ruby => 4,
+                Shape::Mems => 3,
+                _ => 6,
+            };
             assert_eq!(
                 s.header_len() + s.blocks() * s.block_len() + tail,
-                PACKET_LEN
+                s.packet_len()
             );
             assert_eq!(m.spec().firing_us.len(), s.slots());
         }

@@ -1,5 +1,5 @@
-//! Robosense packet encoders (MSOP and DIFOP, byte-exact) and a spinning-sensor simulator over
-//! a [`Scene`], with ground truth.
+//! Robosense packet encoders (MSOP and DIFOP, byte-exact) and simulators over a [`Scene`], with
+//! ground truth: [`RobosenseSim`] for the spinning models, [`M1Sim`] for the M1 (at the end).
 //!
 //! [`RobosenseSim`] fires every slot of every block at the model's firing time relative to the
 //! packet's header time; the block azimuth is the head's azimuth at the firing, rounded to
@@ -14,6 +14,11 @@
 use nalgebra::{Point3, Vector3};
 
 use super::calib::RobosenseAngles;
+use super::m1::{
+    M1Channel, M1_ANGLE_OFFSET, M1_BLOCKS, M1_BLOCK_LEN, M1_CHANNELS, M1_DIFOP_LEN, M1_FRAME_NS,
+    M1_HEADER_LEN, M1_MAX_RANGE_M, M1_MIN_RANGE_M, M1_MSOP_ID, M1_MSOP_LEN, M1_PACKETS_PER_FRAME,
+    M1_RADIUS_UNIT_M, M1_TEMPERATURE_OFFSET_C,
+};
 use super::model::{
     us_to_ns, ClockForm, DualForm, RobosenseModel, Shape, PACKET_LEN, RS16_PITCH_OFFSET,
 };
@@ -32,12 +37,15 @@ pub struct BlockData {
     pub slots: Vec<(u16, u8)>,
 }
 
-/// Writes one MSOP packet of `model` with header time `stamp_ns` (truncated to the µs).
+/// Writes one MSOP packet of a spinning `model` with header time `stamp_ns` (truncated to the
+/// µs). The M1's packet is [`encode_m1_msop`]'s (for the M1 this writes only its id into a
+/// spinning-size buffer, which no view accepts).
 pub fn encode_msop(model: RobosenseModel, blocks: &[BlockData], stamp_ns: i64) -> Vec<u8> {
     let shape = model.spec().shape;
     let mut b = vec![0u8; PACKET_LEN];
     match shape {
         Shape::V1 => b[..8].copy_from_slice(&MSOP_ID_V1),
+        Shape::Mems => b[..4].copy_from_slice(&M1_MSOP_ID),
         Shape::Helios | Shape::Ruby => {
             b[..4].copy_from_slice(&MSOP_ID_V2);
             b[4..6].copy_from_slice(&1u16.to_be_bytes());
@@ -153,7 +161,7 @@ pub struct RobosenseTruth {
     pub ret: u8,
 }
 
-/// A simulated Robosense sensor.
+/// A simulated spinning Robosense sensor (the M1's simulator is [`M1Sim`]).
 #[derive(Clone, Debug)]
 pub struct RobosenseSim {
     /// Model.
@@ -194,6 +202,7 @@ impl RobosenseSim {
             (false, Shape::V1) => 1,
             (false, Shape::Helios) => 4,
             (false, Shape::Ruby) => 2,
+            (false, Shape::Mems) => 4,
         }
     }
 
@@ -355,5 +364,202 @@ impl RobosenseSim {
         self.packet_index += 1;
         let next = self.stamp_of(self.packet_index);
         (next, encode_msop(self.model, &blocks, stamp))
+    }
+}
+
+/// One M1 block: time offset (µs), return sequence byte, 5 channels.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct M1Block {
+    /// Time offset from the packet time, µs.
+    pub time_offset_us: u8,
+    /// Return sequence byte.
+    pub return_seq: u8,
+    /// Channels.
+    pub channels: [M1Channel; M1_CHANNELS],
+}
+
+/// Writes one M1 MSOP packet: counter `seq`, time `stamp_ns` (truncated to the µs), return-mode
+/// byte, temperature and up to 25 blocks.
+pub fn encode_m1_msop(
+    seq: u16,
+    stamp_ns: i64,
+    return_mode: u8,
+    temperature_c: i16,
+    blocks: &[M1Block],
+) -> Vec<u8> {
+    let mut b = vec![0u8; M1_MSOP_LEN];
+    b[..4].copy_from_slice(&M1_MSOP_ID);
+    b[4..6].copy_from_slice(&seq.to_be_bytes());
+    b[6..8].copy_from_slice(&1u16.to_be_bytes());
+    b[8] = return_mode;
+    let secs = stamp_ns.div_euclid(1_000_000_000);
+    let us = stamp_ns.rem_euclid(1_000_000_000) / 1_000;
+    b[10..16].copy_from_slice(&secs.to_be_bytes()[2..]);
+    b[16..20].copy_from_slice(&(us as u32).to_be_bytes());
+    b[31] = (temperature_c + M1_TEMPERATURE_OFFSET_C).clamp(0, 255) as u8;
+    for (i, blk) in blocks.iter().take(M1_BLOCKS).enumerate() {
+        let o = M1_HEADER_LEN + i * M1_BLOCK_LEN;
+        b[o] = blk.time_offset_us;
+        b[o + 1] = blk.return_seq;
+        for (c, ch) in blk.channels.iter().enumerate() {
+            let u = o + 2 + 9 * c;
+            b[u..u + 2].copy_from_slice(&ch.raw_radius.to_be_bytes());
+            b[u + 2..u + 4].copy_from_slice(&ch.raw_elevation.to_be_bytes());
+            b[u + 4..u + 6].copy_from_slice(&ch.raw_azimuth.to_be_bytes());
+            b[u + 6] = ch.intensity;
+            b[u + 7] = ch.attribute;
+            b[u + 8] = ch.elongation;
+        }
+    }
+    b
+}
+
+/// Writes an M1 DIFOP: frame-rate byte, addresses, ports 6699 / 7788, firmware, serial.
+pub fn encode_m1_difop(frame_rate: u8, firmware: [u8; 10], serial: [u8; 6]) -> Vec<u8> {
+    let mut b = vec![0u8; M1_DIFOP_LEN];
+    b[..8].copy_from_slice(&DIFOP_ID);
+    b[9] = frame_rate;
+    b[10..14].copy_from_slice(&[192, 168, 1, 200]);
+    b[14..18].copy_from_slice(&[192, 168, 1, 102]);
+    b[24..26].copy_from_slice(&6699u16.to_be_bytes());
+    b[26..28].copy_from_slice(&7788u16.to_be_bytes());
+    b[28..38].copy_from_slice(&firmware);
+    b[38..44].copy_from_slice(&serial);
+    b
+}
+
+/// Single-return packets per second: 630 per 100 ms frame (rs_driver), which with 125 points a
+/// packet is the datasheet's 787 500 points/s.
+pub const M1_PACKETS_PER_S: u32 = 6_300;
+/// The simulated time between blocks, µs: 25 blocks in 150 of the packet's 158.7 µs.
+pub const M1_SIM_BLOCK_US: u8 = 6;
+
+/// A simulated M1 over a [`Scene`], with ground truth. The scan pattern approximates the
+/// published field of view (120° × 25°, 10 Hz, 0.2° × 0.2°): each of the 5 channels covers
+/// one 24°-wide zone of the 120°, all 25° high; a frame is 126 rows (630 packets, 5 per row)
+/// of 125 columns per zone, the mirror going back and forth, so rows alternate direction.
+/// Angles are whole 0.01° steps (what the packet carries), and the beam follows them exactly;
+/// radii are rounded to 5 mm. Single return.
+#[derive(Clone, Debug)]
+pub struct M1Sim {
+    /// Header time of the first packet, ns (a whole µs).
+    pub stamp0_ns: i64,
+    /// Packets made.
+    pub packet_index: u64,
+    /// `world_from_sensor` over time.
+    pub trajectory: Trajectory,
+}
+
+impl M1Sim {
+    /// A sensor whose first packet is at `stamp0_ns` (truncated to the µs).
+    pub fn new(stamp0_ns: i64) -> Self {
+        Self {
+            stamp0_ns: stamp0_ns - stamp0_ns.rem_euclid(1_000),
+            packet_index: 0,
+            trajectory: Trajectory::identity(),
+        }
+    }
+
+    /// Header time of packet `k`, ns (whole µs).
+    pub fn stamp_of(&self, k: u64) -> i64 {
+        let per_frame = u64::from(M1_PACKETS_PER_FRAME);
+        let (frame, q) = (k / per_frame, k % per_frame);
+        let in_frame_us = (q as f64 * M1_FRAME_NS as f64 / per_frame as f64 / 1_000.0).round();
+        self.stamp0_ns + frame as i64 * M1_FRAME_NS + in_frame_us as i64 * 1_000
+    }
+
+    /// Elevation and azimuth of channel `c` in block `b` of the frame's packet `q`, 0.01°.
+    pub fn angles_cdeg(q: u16, b: usize, c: usize) -> (i32, i32) {
+        let row = i32::from(q / 5);
+        let mut col = i32::from(q % 5) * M1_BLOCKS as i32 + b as i32;
+        if row % 2 == 1 {
+            col = 124 - col;
+        }
+        let el = (1250.0 - 2500.0 * (f64::from(row) + 0.5) / 126.0).round() as i32;
+        let az =
+            (-6000.0 + 2400.0 * c as f64 + 2400.0 * (f64::from(col) + 0.5) / 125.0).round() as i32;
+        (el, az)
+    }
+
+    /// The DIFOP of the simulated sensor.
+    pub fn difop(&self) -> Vec<u8> {
+        encode_m1_difop(
+            10,
+            [1, 2, 3, 4, 5, 6, 7, 8, 9, 10],
+            [0x31, 0x42, 0x53, 0x64, 0x75, 0x86],
+        )
+    }
+
+    /// The next packet: (host receive time, payload), appending the truth of every return the
+    /// decoder must emit (`block`, `slot` = channel).
+    pub fn next_packet(
+        &mut self,
+        scene: &dyn Scene,
+        truth: &mut Vec<RobosenseTruth>,
+    ) -> (i64, Vec<u8>) {
+        let k = self.packet_index;
+        let q = (k % u64::from(M1_PACKETS_PER_FRAME)) as u16;
+        let stamp = self.stamp_of(k);
+        let unit = f64::from(M1_RADIUS_UNIT_M);
+        let empty = M1Channel {
+            raw_radius: 0,
+            raw_elevation: M1_ANGLE_OFFSET,
+            raw_azimuth: M1_ANGLE_OFFSET,
+            intensity: 0,
+            attribute: 0,
+            elongation: 0,
+        };
+        let mut blocks = Vec::with_capacity(M1_BLOCKS);
+        for b in 0..M1_BLOCKS {
+            let off = b as u8 * M1_SIM_BLOCK_US;
+            let t_ns = stamp + i64::from(off) * 1_000;
+            let pose = self.trajectory.pose(t_ns);
+            let mut blk = M1Block {
+                time_offset_us: off,
+                return_seq: 0,
+                channels: [empty; M1_CHANNELS],
+            };
+            for (c, ch) in blk.channels.iter_mut().enumerate() {
+                let (el, az) = Self::angles_cdeg(q, b, c);
+                ch.raw_elevation = (el + i32::from(M1_ANGLE_OFFSET)) as u16;
+                ch.raw_azimuth = (az + i32::from(M1_ANGLE_OFFSET)) as u16;
+                let (se, ce) = (f64::from(el) / 100.0).to_radians().sin_cos();
+                let (sa, ca) = (f64::from(az) / 100.0).to_radians().sin_cos();
+                let dir = [ce * ca, ce * sa, se];
+                let o = pose * Point3::origin();
+                let dw = pose.rotation * Vector3::from(dir);
+                let Some(Hit {
+                    range,
+                    reflectivity,
+                    ..
+                }) = scene.cast(o.coords.into(), dw.into())
+                else {
+                    continue;
+                };
+                let raw = (range / unit).round();
+                if !(1.0..=65_535.0).contains(&raw) {
+                    continue;
+                }
+                ch.raw_radius = raw as u16;
+                ch.intensity = reflectivity.max(1);
+                let r = raw * unit;
+                if r < f64::from(M1_MIN_RANGE_M) || r > f64::from(M1_MAX_RANGE_M) {
+                    continue;
+                }
+                truth.push(RobosenseTruth {
+                    packet: k,
+                    block: b,
+                    slot: c,
+                    xyz: [r * dir[0], r * dir[1], r * dir[2]],
+                    time_ns: t_ns,
+                    intensity: ch.intensity,
+                    ret: 0,
+                });
+            }
+            blocks.push(blk);
+        }
+        self.packet_index += 1;
+        let next = self.stamp_of(self.packet_index);
+        (next, encode_m1_msop(q + 1, stamp, 4, 40, &blocks))
     }
 }

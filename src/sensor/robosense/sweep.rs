@@ -13,7 +13,8 @@
 //!
 //! **Sweeps** are cut on the block azimuth: a block whose azimuth passes the cut angle (default
 //! 0°) opens a new sweep (RoboSense's SDK and nebula cut the same way). The sweep's timestamp is
-//! its first firing, so every `t` ≥ 0.
+//! its first firing, so every `t` ≥ 0. The M1 does not spin: its sweeps are its frames (the
+//! packet counter restarting at 1, 10 Hz), never waiting for a DIFOP; see `decode_m1`.
 //!
 //! **Clock.** The header time (Unix or calendar form, [`super::model::ClockForm`]) is the
 //! packet's first firing. The stream calls the clock *synchronised* when it lies within 10 s of
@@ -27,6 +28,7 @@ use std::collections::VecDeque;
 
 use super::calib::RobosenseAngles;
 use super::decode::RobosenseDecoder;
+use super::m1::{is_m1_difop, M1Decoder, M1Difop, M1Msop, M1_BLOCKS, M1_FRAME_NS};
 use super::model::{RobosenseModel, Shape};
 use super::wire::{is_difop, msop_shape, Difop, Msop};
 use crate::sensor::{DecodeError, DecodeOptions};
@@ -35,6 +37,14 @@ use crate::time::ClockSource;
 
 /// MSOP packets held while waiting for the angles.
 pub const MAX_HELD: usize = 4096;
+
+/// M1: a packet counter at most this far below the last one is a late packet, not a new frame
+/// (rs_driver's window).
+pub const M1_REORDER: u16 = 10;
+/// M1: a header time at most this far behind the latest is a late packet (10 packets).
+const M1_REORDER_NS: i64 = 10 * M1_FRAME_NS / 630;
+/// M1: a sweep whose frame never ends (the counter does not restart) is cut at 1.5 frames.
+pub const M1_MAX_SWEEP_NS: i64 = M1_FRAME_NS * 3 / 2;
 
 /// Configuration of one stream.
 #[derive(Clone, Debug)]
@@ -109,8 +119,12 @@ pub struct RobosenseFacts {
     pub serial: String,
     /// DIFOP: firmware versions.
     pub firmware: String,
-    /// Helios / Ruby header: protocol version.
+    /// Helios / Ruby / M1 header: protocol version.
     pub protocol: Option<u16>,
+    /// M1 DIFOP: frame-rate byte.
+    pub frame_rate: Option<u8>,
+    /// M1 header: temperature, °C.
+    pub temperature_c: Option<i16>,
     /// Whether the header clock agrees with the host's.
     pub clock_synchronised: Option<bool>,
     /// Clock of the last sweep.
@@ -158,6 +172,10 @@ pub struct RobosenseStream {
     dual: bool,
     /// The last DIFOP, while the model is unknown (a DIFOP that came before any MSOP).
     last_difop: Option<Vec<u8>>,
+    /// M1: the decoder (no angles needed), the last packet counter and the largest seen.
+    m1: Option<M1Decoder>,
+    m1_seq: Option<u16>,
+    m1_max_seq: u16,
 }
 
 impl RobosenseStream {
@@ -180,6 +198,9 @@ impl RobosenseStream {
             prev_stamp: None,
             dual: false,
             last_difop: None,
+            m1: None,
+            m1_seq: None,
+            m1_max_seq: 0,
         }
     }
 
@@ -219,6 +240,10 @@ impl RobosenseStream {
         }
         let file_lasers = self.cfg.angles.as_ref().map(RobosenseAngles::lasers);
         let (m, how) = match shape {
+            Shape::Mems => (
+                RobosenseModel::M1,
+                "1210-byte MSOP, id 55 AA 5A A5 (M1 / M1 Plus)".to_string(),
+            ),
             Shape::Ruby => (RobosenseModel::Ruby128, "80-byte header, FE blocks".to_string()),
             Shape::Helios => match (file_lasers, difop_angles) {
                 (Some(16), _) => (RobosenseModel::Helios16P, "Helios header; 16-laser angle file".into()),
@@ -273,11 +298,24 @@ impl RobosenseStream {
         if is_difop(payload) {
             return self.push_difop(payload, on_sweep);
         }
+        if is_m1_difop(payload) {
+            self.push_m1_difop(payload);
+            return Ok(());
+        }
         let Some(shape) = msop_shape(payload) else {
             self.stats.malformed += 1;
             return Ok(());
         };
         self.tell_model(shape, None);
+        if shape == Shape::Mems {
+            // Self-contained points: nothing to wait for, no angle table to build.
+            if self.facts.model == Some(RobosenseModel::M1) {
+                self.decode_m1(host_ns, payload, on_sweep);
+            } else {
+                self.stats.malformed += 1;
+            }
+            return Ok(());
+        }
         if self.facts.model.is_some() && self.decoder.is_none() {
             if let Some(a) = self.cfg.angles.clone() {
                 self.build_decoder(&a)?;
@@ -311,6 +349,11 @@ impl RobosenseStream {
             self.stats.malformed += 1;
             return Ok(());
         };
+        if self.facts.model == Some(RobosenseModel::M1) {
+            // A spinning model's DIFOP on an M1's stream: not this sensor's.
+            self.stats.malformed += 1;
+            return Ok(());
+        }
         self.stats.difop += 1;
         self.facts.rpm = Some(d.rpm());
         self.facts.fov = Some(d.fov());
@@ -327,7 +370,7 @@ impl RobosenseStream {
                     let probe = match shape {
                         Shape::Helios => Some(RobosenseModel::Helios),
                         Shape::V1 => Some(RobosenseModel::Rs32),
-                        Shape::Ruby => None,
+                        Shape::Ruby | Shape::Mems => None,
                     };
                     let a = probe.map(|m| d.angles(m));
                     let a16 = d.angles(RobosenseModel::Rs16).ok();
@@ -509,6 +552,139 @@ impl RobosenseStream {
             sw.columns_count += spec.firings(dual) as u32;
         }
         self.decoder = Some(dec);
+    }
+
+    /// An M1 DIFOP: device facts only (the M1 needs no angle table).
+    fn push_m1_difop(&mut self, payload: &[u8]) {
+        let Ok(d) = M1Difop::new(payload) else {
+            self.stats.malformed += 1;
+            return;
+        };
+        if self.facts.model.is_some_and(|m| m != RobosenseModel::M1) {
+            self.stats.malformed += 1;
+            return;
+        }
+        self.stats.difop += 1;
+        self.facts.frame_rate = Some(d.frame_rate());
+        self.facts.serial = d.serial();
+        self.facts.firmware = d.firmware();
+    }
+
+    /// An M1 MSOP packet into the open sweep. Sweeps follow the sensor's frames: the packet
+    /// counter restarts at 1 with each frame (rs_driver splits the same way), so a counter
+    /// more than [`M1_REORDER`] below the last one opens a new sweep; a counter a little
+    /// below it is a packet that came late, kept in the open sweep. Should the counter stop
+    /// restarting, a sweep is also cut once it spans [`M1_MAX_SWEEP_NS`]. Loss: the counter's
+    /// gaps, within a frame and across its end (up to the largest counter seen).
+    fn decode_m1(
+        &mut self,
+        host_ns: i64,
+        payload: &[u8],
+        on_sweep: &mut dyn FnMut(&Sweep, &RobosenseFacts),
+    ) {
+        let Ok(p) = M1Msop::new(payload) else {
+            self.stats.malformed += 1;
+            return;
+        };
+        let Some(stamp) = p.stamp_ns() else {
+            self.stats.malformed += 1;
+            return;
+        };
+        let dec = *self
+            .m1
+            .get_or_insert_with(|| M1Decoder::new(self.cfg.options));
+        self.facts.protocol = Some(p.protocol_version());
+        self.facts.return_mode = Some(p.return_mode());
+        self.facts.temperature_c = Some(p.temperature_c());
+        if self.facts.calibration.is_empty() || self.cfg.angles.is_some() {
+            self.facts.calibration = "none needed (M1 points carry their angles)".into();
+        }
+        let synced = (stamp - host_ns).abs() < 10_000_000_000;
+        self.facts.clock_synchronised = Some(synced);
+        let clock = if synced {
+            ClockSource::SensorPtp
+        } else {
+            ClockSource::Host
+        };
+        let seq = p.seq();
+        let mut cut = false;
+        let mut missing = 0u64;
+        if let Some(prev) = self.m1_seq {
+            if seq > prev {
+                missing = u64::from(seq - prev - 1);
+                self.m1_seq = Some(seq);
+            } else if prev - seq > M1_REORDER {
+                cut = true;
+                missing = u64::from(seq.saturating_sub(1))
+                    + u64::from(self.m1_max_seq.saturating_sub(prev));
+                self.m1_seq = Some(seq);
+            } else if seq < prev {
+                // A late packet: the gap it left was counted as lost.
+                self.stats.missing = self.stats.missing.saturating_sub(1);
+                if let Some((sw, _)) = &mut self.open {
+                    sw.missing_packets = sw.missing_packets.saturating_sub(1);
+                }
+            }
+        } else {
+            self.m1_seq = Some(seq);
+        }
+        self.m1_max_seq = self.m1_max_seq.max(seq);
+        // The latest header time seen: a late packet does not move it back.
+        self.prev_stamp = match self.prev_stamp {
+            Some(prev) if (-M1_REORDER_NS..=self.cfg.max_gap_ns).contains(&(stamp - prev)) => {
+                Some(prev.max(stamp))
+            }
+            Some(_) => {
+                self.stats.discontinuities += 1;
+                cut = true;
+                missing = 0;
+                Some(stamp)
+            }
+            None => Some(stamp),
+        };
+        if let Some((_, t0)) = &self.open {
+            if stamp - *t0 >= M1_MAX_SWEEP_NS {
+                cut = true;
+            }
+        }
+        self.stats.missing += missing;
+        if cut {
+            self.emit(on_sweep);
+        }
+        self.stats.packets += 1;
+        if self.open.is_none() {
+            let mut sw = self.spare.take().unwrap_or_default();
+            sw.clear();
+            sw.index = self.next_index;
+            self.next_index += 1;
+            sw.device_time_ns = stamp;
+            sw.timestamp_ns = if clock == ClockSource::Host {
+                host_ns
+            } else {
+                stamp
+            };
+            sw.clock = clock;
+            sw.first_host_ns = host_ns;
+            self.open = Some((sw, stamp));
+        }
+        let keep_columns = self.cfg.keep_columns;
+        if let Some((sw, t0)) = &mut self.open {
+            // Counter gaps before this packet (across a frame end: counted in the new one).
+            sw.missing_packets += missing;
+            sw.packets += 1;
+            sw.last_host_ns = host_ns;
+            let col_base = sw.columns_count;
+            let t0 = *t0;
+            dec.decode(&p, |d| {
+                let mut pt = d.point;
+                pt.t = (stamp + d.offset_ns - t0).clamp(0, i64::from(u32::MAX)) as u32;
+                sw.points.push(pt);
+                if keep_columns {
+                    sw.columns.push(col_base + d.block as u32);
+                }
+            });
+            sw.columns_count += M1_BLOCKS as u32;
+        }
     }
 
     #[allow(clippy::too_many_arguments)]

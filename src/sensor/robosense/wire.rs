@@ -33,9 +33,12 @@ pub fn is_difop(payload: &[u8]) -> bool {
 }
 
 /// The header family of an MSOP packet from its bytes: V1 (8-byte id, calendar clock), Helios
-/// (`55 AA 05 5A`, `FF EE` blocks from byte 42) or Ruby (`55 AA 05 5A`, `FE` blocks from byte
-/// 80). `None` for anything else.
+/// (`55 AA 05 5A`, `FF EE` blocks from byte 42), Ruby (`55 AA 05 5A`, `FE` blocks from byte
+/// 80) or the M1 (1210 bytes, `55 AA 5A A5`). `None` for anything else.
 pub fn msop_shape(payload: &[u8]) -> Option<Shape> {
+    if super::m1::is_m1_msop(payload) {
+        return Some(Shape::Mems);
+    }
     if payload.len() != PACKET_LEN {
         return None;
     }
@@ -65,6 +68,14 @@ impl<'a> Msop<'a> {
     /// Checks length, id and every block's flag and azimuth for `model`'s layout.
     pub fn new(bytes: &'a [u8], model: RobosenseModel) -> Result<Self, WireError> {
         let shape = model.spec().shape;
+        if shape == Shape::Mems {
+            // The M1's view is `super::m1::M1Msop`; none of this view's accessors fit it.
+            return Err(WireError::Length {
+                what: "Robosense spinning MSOP packet (the M1's is m1::M1Msop)",
+                expected: PACKET_LEN,
+                found: bytes.len(),
+            });
+        }
         if bytes.len() != PACKET_LEN {
             return Err(WireError::Length {
                 what: "Robosense MSOP packet",
@@ -75,6 +86,7 @@ impl<'a> Msop<'a> {
         let id_ok = match shape {
             Shape::V1 => bytes.starts_with(&MSOP_ID_V1),
             Shape::Helios | Shape::Ruby => bytes.starts_with(&MSOP_ID_V2),
+            Shape::Mems => false,
         };
         if !id_ok {
             return Err(WireError::BlockFlag {
@@ -271,6 +283,9 @@ impl<'a> Difop<'a> {
     /// used (a sign byte other than 0 / 1 — an unprogrammed table reads `FF` — or an angle
     /// outside −90°..180°).
     pub fn angles(&self, model: RobosenseModel) -> Result<Vec<(f64, f64)>, String> {
+        if model.spec().shape == Shape::Mems {
+            return Err("the M1 has no angle table (its points carry their angles)".into());
+        }
         let n = model.lasers();
         let Some((start, entries)) = model.spec().difop_angles else {
             let mut v = Vec::with_capacity(16);
