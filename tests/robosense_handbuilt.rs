@@ -436,7 +436,7 @@ fn m1_through_the_family_interface() {
     let mut s = claim(&first, &mut pool).expect("claimed").expect("stream");
     assert!(s.is_lidar_datagram(&p300));
     let mut sweeps: Vec<(i64, Vec<Point>, u64)> = Vec::new();
-    let mut on = |sw: &ringscan::sweep::Sweep, _: &dyn ringscan::sensor::Facts| {
+    let mut on = |sw: &mut ringscan::sweep::Sweep, _: &dyn ringscan::sensor::Facts| {
         sweeps.push((sw.device_time_ns, sw.points.clone(), sw.missing_packets))
     };
     s.push(STAMP, &p300, &mut on).unwrap();

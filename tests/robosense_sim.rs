@@ -200,7 +200,7 @@ fn m1_within_1cm_and_1us() {
     let mut stream = RobosenseStream::new(RobosenseConfig::new(None));
     let mut sweeps: Vec<(i64, usize, u32)> = Vec::new();
     let mut streamed = Vec::new();
-    let mut on_sweep = |sw: &ringscan::sweep::Sweep,
+    let mut on_sweep = |sw: &mut ringscan::sweep::Sweep,
                         f: &ringscan::sensor::robosense::RobosenseFacts| {
         assert_eq!(f.model, Some(RobosenseModel::M1));
         for p in &sw.points {

@@ -147,7 +147,7 @@ fn m1_decoder_pass(dec: &M1Decoder, packets: &[&[u8]], out: &mut Vec<Point>) -> 
 fn m1_stream_pass(input: &[(i64, Vec<u8>)]) -> u64 {
     let mut stream = RobosenseStream::new(RobosenseConfig::new(None));
     let mut points = 0u64;
-    let mut cb = |s: &ringscan::sweep::Sweep, _: &_| points += s.points.len() as u64;
+    let mut cb = |s: &mut ringscan::sweep::Sweep, _: &_| points += s.points.len() as u64;
     for (t, p) in input {
         stream.push(*t, p, &mut cb).expect("stream");
     }

@@ -580,7 +580,7 @@ impl RobosenseStream {
         &mut self,
         host_ns: i64,
         payload: &[u8],
-        on_sweep: &mut dyn FnMut(&Sweep, &RobosenseFacts),
+        on_sweep: &mut dyn FnMut(&mut Sweep, &RobosenseFacts),
     ) {
         let Ok(p) = M1Msop::new(payload) else {
             self.stats.malformed += 1;
