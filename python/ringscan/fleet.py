@@ -100,9 +100,24 @@ def _fetch(capture: str, scratch: str) -> str:
         return capture
     import pyarrow.fs as pafs
 
+    import ringscan
+
     local = os.path.join(scratch, _name(capture))
-    pafs.copy_files(capture, local)
+    try:
+        pafs.copy_files(capture, local)
+    except FileNotFoundError as e:
+        # The capture's own fault (a row), as a missing local file is.
+        raise ringscan.InputError(f"{capture}: {e}") from e
     return local
+
+
+def _make_dir_uri(uri: str) -> None:
+    """Creates the folder ``uri`` where the file system has folders (local, HDFS); a no-op on
+    object stores, whose "folders" are key prefixes."""
+    import pyarrow.fs as pafs
+
+    fs, path = pafs.FileSystem.from_uri(uri)
+    fs.create_dir(path, recursive=True)
 
 
 def _publish(local: str, out: str, sub: str) -> str:
@@ -110,7 +125,9 @@ def _publish(local: str, out: str, sub: str) -> str:
     if _is_uri(out):
         import pyarrow.fs as pafs
 
-        dest = f"{out.rstrip('/')}/{sub}/{os.path.basename(local)}"
+        folder = f"{out.rstrip('/')}/{sub}"
+        _make_dir_uri(folder)
+        dest = f"{folder}/{os.path.basename(local)}"
         pafs.copy_files(local, dest)
         return dest
     d = os.path.join(out, sub)
@@ -160,7 +177,10 @@ def _write_parquet(src, path: str) -> None:
         writer.write_table(pa.table(cols, schema=schema))
         pending, n_pending = [], 0
 
-    with pq.ParquetWriter(path, schema, compression="zstd") as writer:
+    # Dictionary pages only for the columns that repeat: on the float and time columns Parquet
+    # would hash every value, then give up past the dictionary page limit.
+    dictionary = ["sensor", "sweep", "timestamp_ns", "ring", "return"]
+    with pq.ParquetWriter(path, schema, compression="zstd", use_dictionary=dictionary) as writer:
         for sweep in src:
             p = sweep.points
             if p.dtype.itemsize != 24:
@@ -231,7 +251,7 @@ def decode_one(
             duration_s=summary["capture"]["duration_s"],
             sensors=len(summary["sensors"]),
         )
-    except (ringscan.RingscanError, FileNotFoundError, TypeError, ValueError) as e:
+    except (ringscan.RingscanError, TypeError, ValueError) as e:
         row.update(status="error", error_type=type(e).__name__, error=str(e), parquet=None, mcap=None)
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
@@ -305,7 +325,7 @@ def decode_ray(
 
 def decode(captures, out: str, *, engine: str = "pool", workers: Optional[int] = None, **kw):
     """``captures``: a list, or one directory / prefix to list. ``engine``: ``"ray"`` or
-    ``"pool"``. Also writes the table to ``out/summary.parquet``."""
+    ``"pool"``. Also writes the table to ``out/summary.parquet`` (``out`` a path or a URI)."""
     import pyarrow.parquet as pq
 
     if isinstance(captures, (str, os.PathLike)):
@@ -321,7 +341,10 @@ def decode(captures, out: str, *, engine: str = "pool", workers: Optional[int] =
         table = decode_pool(captures, out, processes=workers, **kw)
     else:
         raise ValueError(f"engine={engine!r}: expected 'ray' or 'pool'")
-    if not _is_uri(out):
+    if _is_uri(out):
+        _make_dir_uri(out.rstrip("/"))
+        pq.write_table(table, f"{out.rstrip('/')}/summary.parquet")
+    else:
         os.makedirs(out, exist_ok=True)
         pq.write_table(table, os.path.join(out, "summary.parquet"))
     return table

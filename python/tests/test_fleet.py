@@ -124,3 +124,40 @@ def test_ray_matches_the_pool(tmp_path):
     for r_ray, r_pool in zip(sorted(t_ray.to_pylist(), key=lambda r: r["capture"]), sorted(t_pool.to_pylist(), key=lambda r: r["capture"])):
         if r_ray["status"] == "ok":
             assert pq.read_table(r_ray["parquet"]).equals(pq.read_table(r_pool["parquet"]))
+
+
+def test_object_store_uris(tmp_path):
+    """Inputs and outputs as URIs (``file://``: the same pyarrow.fs code paths an ``s3://`` or
+    ``gs://`` prefix takes): the prefix is listed, each capture copied to the task's scratch
+    space, its outputs and the summary uploaded under the output URI; the points are the CLI's."""
+    import shutil
+
+    good, corrupt = inputs(tmp_path)
+    bucket = tmp_path / "bucket" / "drives"
+    (bucket / "day1").mkdir(parents=True)
+    for c in good + corrupt:
+        if c.endswith("sqlite3-message"):
+            continue  # a rosbag2 directory: an object store holds its files, not a directory
+        shutil.copy(c, bucket / "day1" / c.rsplit("/", 1)[-1])
+    prefix = "file://" + str(bucket)
+    listed = fleet.list_captures(prefix)
+    assert listed and all(u.startswith("file://") for u in listed)
+    out = "file://" + str(tmp_path / "bucket" / "decoded")
+    table = fleet.decode(prefix, out, engine="pool", workers=2)
+    rows = {r["capture"]: r for r in table.to_pylist()}
+    assert sorted(rows) == listed
+    for uri, r in rows.items():
+        local = uri.removeprefix("file://")
+        if "corrupt" in uri:
+            # The message names the task's local copy; the CLI's words otherwise.
+            name = local.rsplit("/", 1)[-1]
+            assert (r["status"], r["error_type"], r["parquet"]) == ("error", "InputError", None)
+            assert r["error"].split(name, 1)[-1] == cli_error(local).split(name, 1)[-1], r["error"]
+            continue
+        assert r["status"] == "ok", r
+        assert r["parquet"].startswith(out + "/points/")
+        parquet_equals_cli_mcap({**r, "capture": local, "parquet": r["parquet"].removeprefix("file://")}, tmp_path)
+    assert pq.read_table(str(tmp_path / "bucket" / "decoded" / "summary.parquet")).num_rows == len(listed)
+    # An object that is not there: the capture's error (a row), not the task's.
+    gone = fleet.decode_one(prefix + "/day1/gone.pcap", out)
+    assert (gone["status"], gone["error_type"]) == ("error", "InputError"), gone
