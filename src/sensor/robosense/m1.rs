@@ -122,21 +122,7 @@ pub struct M1Msop<'a> {
 impl<'a> M1Msop<'a> {
     /// Checks length and id.
     pub fn new(bytes: &'a [u8]) -> Result<Self, WireError> {
-        if bytes.len() != M1_MSOP_LEN {
-            return Err(WireError::Length {
-                what: "Robosense M1 MSOP packet",
-                expected: M1_MSOP_LEN,
-                found: bytes.len(),
-            });
-        }
-        if !bytes.starts_with(&M1_MSOP_ID) {
-            return Err(WireError::BlockFlag {
-                block: 0,
-                offset: 0,
-                found: bytes[0],
-                found2: bytes[1],
-            });
-        }
+        super::wire::check_len_and_id(bytes, "Robosense M1 MSOP packet", M1_MSOP_LEN, &M1_MSOP_ID)?;
         Ok(Self { bytes })
     }
 
@@ -239,21 +225,12 @@ pub struct M1Difop<'a> {
 impl<'a> M1Difop<'a> {
     /// Checks length and id.
     pub fn new(bytes: &'a [u8]) -> Result<Self, WireError> {
-        if bytes.len() != M1_DIFOP_LEN {
-            return Err(WireError::Length {
-                what: "Robosense M1 DIFOP packet",
-                expected: M1_DIFOP_LEN,
-                found: bytes.len(),
-            });
-        }
-        if !bytes.starts_with(&super::wire::DIFOP_ID) {
-            return Err(WireError::BlockFlag {
-                block: 0,
-                offset: 0,
-                found: bytes[0],
-                found2: bytes[1],
-            });
-        }
+        super::wire::check_len_and_id(
+            bytes,
+            "Robosense M1 DIFOP packet",
+            M1_DIFOP_LEN,
+            &super::wire::DIFOP_ID,
+        )?;
         Ok(Self { bytes })
     }
 

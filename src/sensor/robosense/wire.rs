@@ -212,6 +212,31 @@ pub fn calendar_ns(t: &[u8]) -> Option<i64> {
     Some(secs * 1_000_000_000 + i64::from(ms) * 1_000_000 + i64::from(us) * 1_000)
 }
 
+/// A fixed-size packet's length and leading id, checked: a wrong length, then a wrong id.
+pub(crate) fn check_len_and_id(
+    bytes: &[u8],
+    what: &'static str,
+    len: usize,
+    id: &[u8],
+) -> Result<(), WireError> {
+    if bytes.len() != len {
+        return Err(WireError::Length {
+            what,
+            expected: len,
+            found: bytes.len(),
+        });
+    }
+    if !bytes.starts_with(id) {
+        return Err(WireError::BlockFlag {
+            block: 0,
+            offset: 0,
+            found: bytes.first().copied().unwrap_or(0),
+            found2: bytes.get(1).copied().unwrap_or(0),
+        });
+    }
+    Ok(())
+}
+
 /// A DIFOP packet.
 #[derive(Clone, Copy, Debug)]
 pub struct Difop<'a> {
@@ -221,21 +246,7 @@ pub struct Difop<'a> {
 impl<'a> Difop<'a> {
     /// Checks length and id.
     pub fn new(bytes: &'a [u8]) -> Result<Self, WireError> {
-        if bytes.len() != PACKET_LEN {
-            return Err(WireError::Length {
-                what: "Robosense DIFOP packet",
-                expected: PACKET_LEN,
-                found: bytes.len(),
-            });
-        }
-        if !bytes.starts_with(&DIFOP_ID) {
-            return Err(WireError::BlockFlag {
-                block: 0,
-                offset: 0,
-                found: bytes[0],
-                found2: bytes[1],
-            });
-        }
+        check_len_and_id(bytes, "Robosense DIFOP packet", PACKET_LEN, &DIFOP_ID)?;
         Ok(Self { bytes })
     }
 
