@@ -156,8 +156,20 @@ impl FrameDecoder {
         let mut next_col: i64 = 0;
         let mut slot_seen: Vec<(usize, u16, usize)> = Vec::new();
         for p in packets {
-            let Some(mode) = ReturnMode::from_byte(p.bytes[1204]) else {
-                continue;
+            // The HDL-64E has no return-mode byte (bytes 1204-1205 are its status cycle):
+            // velodyne_decoder takes two blocks of one azimuth as dual return, and so does this.
+            let mode = if self.model.is_hdl64() {
+                let az = |b: usize| [p.bytes[b * 100 + 2], p.bytes[b * 100 + 3]];
+                if az(0) == az(2) {
+                    ReturnMode::Dual
+                } else {
+                    ReturnMode::Strongest
+                }
+            } else {
+                match ReturnMode::from_byte(p.bytes[1204]) {
+                    Some(m) => m,
+                    None => continue,
+                }
             };
             let Ok(packet) = DataPacket::new(&p.bytes[..]) else {
                 continue;
