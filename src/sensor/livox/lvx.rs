@@ -32,7 +32,10 @@
 //! file holds no CRC to check.
 
 use super::model::LivoxModel;
-use super::wire::{crc32, Record, MAX_DATAGRAM, SDK1_HEADER_LEN, SDK2_HEADER_LEN};
+use super::wire::{
+    crc32, sdk1_timestamp_ns, u32_at, u64_at, Record, MAX_DATAGRAM, SDK1_HEADER_LEN,
+    SDK2_HEADER_LEN,
+};
 
 /// The signature's text (the rest of its 16 bytes are NULs).
 pub const SIGNATURE: &[u8; 10] = b"livox_tech";
@@ -147,35 +150,17 @@ fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(&b[..end]).into_owned()
 }
 
-fn le_u32(b: &[u8], o: usize) -> u32 {
-    match b.get(o..o + 4) {
-        Some(s) => u32::from_le_bytes([s[0], s[1], s[2], s[3]]),
-        None => 0,
-    }
-}
-
-fn le_u64(b: &[u8], o: usize) -> u64 {
-    match b.get(o..o + 8) {
-        Some(s) => {
-            let mut a = [0u8; 8];
-            a.copy_from_slice(s);
-            u64::from_le_bytes(a)
-        }
-        None => 0,
-    }
-}
-
 /// Reads a device info block of `version` (`b` holds at least its length, else `None`).
 pub fn device_info(version: LvxVersion, b: &[u8]) -> Option<LvxDevice> {
     let b = b.get(..version.device_info_len())?;
     let (id, device_type, ext_at) = match version {
         LvxVersion::Lvx1 => (u32::from(b[32]), b[33], 34),
-        LvxVersion::Lvx2 => (le_u32(b, 32), b[37], 38),
+        LvxVersion::Lvx2 => (u32_at(b, 32), b[37], 38),
     };
     let extrinsic = (b[ext_at] != 0).then(|| {
         let mut e = [0f32; 6];
         for (k, v) in e.iter_mut().enumerate() {
-            *v = f32::from_bits(le_u32(b, ext_at + 1 + 4 * k));
+            *v = f32::from_bits(u32_at(b, ext_at + 1 + 4 * k));
         }
         e
     });
@@ -204,9 +189,9 @@ pub struct FrameHeader {
 pub fn frame_header(b: &[u8]) -> Option<FrameHeader> {
     b.get(..FRAME_HEADER_LEN)?;
     Some(FrameHeader {
-        current_offset: le_u64(b, 0),
-        next_offset: le_u64(b, 8),
-        frame_index: le_u64(b, 16),
+        current_offset: u64_at(b, 0),
+        next_offset: u64_at(b, 8),
+        frame_index: u64_at(b, 16),
     })
 }
 
@@ -252,12 +237,12 @@ pub fn package_header(
             }
         }
         LvxVersion::Lvx2 => {
-            let len = le_u32(b, 18);
+            let len = u32_at(b, 18);
             if len as usize > MAX_DATAGRAM - SDK2_HEADER_LEN {
                 Err(PackageError::Length(u64::from(len)))
             } else {
                 Ok(PackageHeader {
-                    device: le_u32(b, 1),
+                    device: u32_at(b, 1),
                     data_type: b[17],
                     data_len: len as usize,
                 })
@@ -324,28 +309,13 @@ pub fn package_time_ns(version: LvxVersion, pkg: &[u8]) -> i64 {
         LvxVersion::Lvx1 => pkg
             .get(1..)
             .and_then(|p| {
-                // The SDK1 view needs the whole packet; the header alone gives the time.
+                // The header alone gives the time (the SDK1 view needs the whole packet).
                 let ty = *p.get(8)?;
-                let ts = le_u64(p, 10);
-                if ty == 3 {
-                    utc_ns(p.get(10..18)?)
-                } else {
-                    Some(ts)
-                }
+                sdk1_timestamp_ns(ty, p.get(10..18)?.try_into().ok()?)
             })
             .map_or(0, |t| i64::try_from(t).unwrap_or(i64::MAX)),
-        LvxVersion::Lvx2 => i64::try_from(le_u64(pkg, 7)).unwrap_or(i64::MAX),
+        LvxVersion::Lvx2 => i64::try_from(u64_at(pkg, 7)).unwrap_or(i64::MAX),
     }
-}
-
-fn utc_ns(t: &[u8]) -> Option<u64> {
-    // The SDK1 UTC form through the one converter the wire view has: a minimal packet.
-    let mut p = [0u8; SDK1_HEADER_LEN + 24];
-    p[0] = 5;
-    p[8] = 3;
-    p[9] = 6;
-    p[10..18].copy_from_slice(t.get(..8)?);
-    super::wire::Sdk1Packet::new(&p).ok()?.timestamp_ns()
 }
 
 #[cfg(test)]

@@ -193,6 +193,26 @@ pub struct RawImu {
     pub acc: [f32; 3],
 }
 
+/// An SDK1 timestamp of type `ty`, ns: nanoseconds as sent for types 0, 1, 4; for type 3 the
+/// UTC form (year − 2000, month, day, hour, then µs within the hour, u32) converted to ns since
+/// the Unix epoch. `None` for an impossible UTC date.
+pub fn sdk1_timestamp_ns(ty: u8, t: [u8; 8]) -> Option<u64> {
+    if ty != 3 {
+        return Some(u64::from_le_bytes(t));
+    }
+    let (y, mo, d, h) = (2000 + i64::from(t[0]), t[1], t[2], t[3]);
+    if !(1..=12).contains(&mo) || !(1..=31).contains(&d) || h > 23 {
+        return None;
+    }
+    let us = u64::from(u32::from_le_bytes([t[4], t[5], t[6], t[7]]));
+    if us >= 3_600_000_000 {
+        return None;
+    }
+    let days = days_from_civil(y, u32::from(mo), u32::from(d));
+    let secs = u64::try_from(days * 86_400 + i64::from(h) * 3600).ok()?;
+    Some(secs * 1_000_000_000 + us * 1_000)
+}
+
 #[inline]
 fn u16_at(b: &[u8], o: usize) -> u16 {
     match b.get(o..o + 2) {
@@ -202,7 +222,7 @@ fn u16_at(b: &[u8], o: usize) -> u16 {
 }
 
 #[inline]
-fn u32_at(b: &[u8], o: usize) -> u32 {
+pub(crate) fn u32_at(b: &[u8], o: usize) -> u32 {
     match b.get(o..o + 4) {
         Some(s) => u32::from_le_bytes([s[0], s[1], s[2], s[3]]),
         None => 0,
@@ -220,7 +240,7 @@ fn f32_at(b: &[u8], o: usize) -> f32 {
 }
 
 #[inline]
-fn u64_at(b: &[u8], o: usize) -> u64 {
+pub(crate) fn u64_at(b: &[u8], o: usize) -> u64 {
     match b.get(o..o + 8) {
         Some(s) => {
             let mut a = [0u8; 8];
@@ -503,21 +523,7 @@ impl<'a> Sdk1Packet<'a> {
     /// the UTC form (year − 2000, month, day, hour, then µs within the hour, u32) converted to
     /// ns since the Unix epoch. `None` for an impossible UTC date.
     pub fn timestamp_ns(&self) -> Option<u64> {
-        let t = self.timestamp_bytes();
-        if self.timestamp_type() != 3 {
-            return Some(u64::from_le_bytes(t));
-        }
-        let (y, mo, d, h) = (2000 + i64::from(t[0]), t[1], t[2], t[3]);
-        if !(1..=12).contains(&mo) || !(1..=31).contains(&d) || h > 23 {
-            return None;
-        }
-        let us = u64::from(u32::from_le_bytes([t[4], t[5], t[6], t[7]]));
-        if us >= 3_600_000_000 {
-            return None;
-        }
-        let days = days_from_civil(y, u32::from(mo), u32::from(d));
-        let secs = u64::try_from(days * 86_400 + i64::from(h) * 3600).ok()?;
-        Some(secs * 1_000_000_000 + us * 1_000)
+        sdk1_timestamp_ns(self.timestamp_type(), self.timestamp_bytes())
     }
     /// Number of records.
     pub fn records(&self) -> usize {
