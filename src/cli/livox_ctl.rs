@@ -189,10 +189,12 @@ fn configure_sdk2(
     interface: Ipv4Addr,
     bound: &BTreeSet<u16>,
 ) -> Result<Configured, RunError> {
-    let port = args.control_port.unwrap_or(match named {
-        Some(LivoxModel::Hap) => 56_000,
-        _ => 56_101,
-    });
+    // Without --model, the MID-360's default: discovery tells the model only afterwards.
+    let port = args
+        .control_port
+        .or_else(|| named.and_then(LivoxModel::sdk2_host_command_port))
+        .or(LivoxModel::Mid360.sdk2_host_command_port())
+        .unwrap_or_default();
     let sock = bind(interface, port)?;
     let mut seq = 1u32;
     let to = SocketAddrV4::new(device, c::SDK2_DISCOVERY_PORT);
@@ -230,9 +232,12 @@ fn configure_sdk2(
     );
     let host = host_ip(interface, device);
     let (pp, ip) = dest_ports(model, bound);
-    let (lidar_point, lidar_imu) = match model {
-        LivoxModel::Hap => (57_000, 58_000),
-        _ => (56_300, 56_400),
+    // `sdk2_model` names SDK2 sensors only, each with its ports in the model table.
+    let Some((lidar_point, lidar_imu)) = model.sdk2_device_data_ports() else {
+        return Err(live(format!(
+            "{device}: {} is not an SDK2 sensor",
+            model.name()
+        )));
     };
     let mut kv = vec![(c::key::POINT_DEST, c::sdk2_dest(host, pp, lidar_point))];
     if model.has_imu() {

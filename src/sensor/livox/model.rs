@@ -136,6 +136,27 @@ impl LivoxModel {
         }
     }
 
+    /// SDK2: the host port the sensor sends its command answers to by default (MID-360 and HAP
+    /// communication protocols: 56101 and 56000); `None` for SDK1 sensors.
+    pub const fn sdk2_host_command_port(self) -> Option<u16> {
+        match self {
+            Self::Mid360 => Some(56_101),
+            Self::Hap => Some(56_000),
+            _ => None,
+        }
+    }
+
+    /// SDK2: the sensor's own ports its point and IMU packets leave from (MID-360 56300 /
+    /// 56400, HAP 57000 / 58000), which the point and IMU destination commands carry; `None`
+    /// for SDK1 sensors.
+    pub const fn sdk2_device_data_ports(self) -> Option<(u16, u16)> {
+        match self {
+            Self::Mid360 => Some((56_300, 56_400)),
+            Self::Hap => Some((57_000, 58_000)),
+            _ => None,
+        }
+    }
+
     /// Whether it has a built-in IMU.
     pub const fn has_imu(self) -> bool {
         self.imu_port().is_some()
