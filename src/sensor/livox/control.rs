@@ -35,6 +35,8 @@ use std::net::Ipv4Addr;
 
 use thiserror::Error;
 
+use super::wire::{u16_at, u32_at};
+
 /// Start of frame of both protocols.
 pub const SOF: u8 = 0xAA;
 /// SDK2 header length.
@@ -238,20 +240,6 @@ pub fn crc32_sdk1(bytes: &[u8]) -> u32 {
     h.finalize()
 }
 
-fn u16_le(b: &[u8], o: usize) -> u16 {
-    match b.get(o..o + 2) {
-        Some(&[a, c]) => u16::from_le_bytes([a, c]),
-        _ => 0,
-    }
-}
-
-fn u32_le(b: &[u8], o: usize) -> u32 {
-    match b.get(o..o + 4) {
-        Some(&[a, c, d, e]) => u32::from_le_bytes([a, c, d, e]),
-        _ => 0,
-    }
-}
-
 /// A checked SDK2 control frame.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Sdk2Frame<'a> {
@@ -312,7 +300,7 @@ pub fn sdk2_parse(b: &[u8]) -> Result<Sdk2Frame<'_>, ControlError> {
             found: b[1],
         });
     }
-    let len = u16_le(b, 2);
+    let len = u16_at(b, 2);
     if usize::from(len) != b.len() {
         return Err(ControlError::Length {
             what: SDK2,
@@ -320,7 +308,7 @@ pub fn sdk2_parse(b: &[u8]) -> Result<Sdk2Frame<'_>, ControlError> {
             found: b.len(),
         });
     }
-    let (stored, computed) = (u16_le(b, 18), crc16_ccitt_false(&b[..18]));
+    let (stored, computed) = (u16_at(b, 18), crc16_ccitt_false(&b[..18]));
     if stored != computed {
         return Err(ControlError::Crc {
             what: SDK2,
@@ -331,7 +319,7 @@ pub fn sdk2_parse(b: &[u8]) -> Result<Sdk2Frame<'_>, ControlError> {
     }
     let data = &b[SDK2_HEADER..];
     let (stored, computed) = (
-        u32_le(b, 20),
+        u32_at(b, 20),
         if data.is_empty() {
             0
         } else {
@@ -347,8 +335,8 @@ pub fn sdk2_parse(b: &[u8]) -> Result<Sdk2Frame<'_>, ControlError> {
         });
     }
     Ok(Sdk2Frame {
-        seq: u32_le(b, 4),
-        cmd_id: u16_le(b, 8),
+        seq: u32_at(b, 4),
+        cmd_id: u16_at(b, 8),
         cmd_type: b[10],
         sender_type: b[11],
         data,
@@ -421,7 +409,7 @@ pub fn sdk2_discovery_ack(d: &[u8]) -> Result<DiscoveryAck, ControlError> {
         dev_type,
         serial,
         ip: Ipv4Addr::new(d[18], d[19], d[20], d[21]),
-        cmd_port: u16_le(d, 22),
+        cmd_port: u16_at(d, 22),
     })
 }
 
@@ -517,7 +505,7 @@ pub fn sdk1_parse(b: &[u8]) -> Result<Sdk1Frame<'_>, ControlError> {
             found: b[1],
         });
     }
-    let len = u16_le(b, 2);
+    let len = u16_at(b, 2);
     if usize::from(len) != b.len() {
         return Err(ControlError::Length {
             what: SDK1,
@@ -525,7 +513,7 @@ pub fn sdk1_parse(b: &[u8]) -> Result<Sdk1Frame<'_>, ControlError> {
             found: b.len(),
         });
     }
-    let (stored, computed) = (u16_le(b, 7), crc16_mcrf4xx(0x4C49, &b[..7]));
+    let (stored, computed) = (u16_at(b, 7), crc16_mcrf4xx(0x4C49, &b[..7]));
     if stored != computed {
         return Err(ControlError::Crc {
             what: SDK1,
@@ -535,7 +523,7 @@ pub fn sdk1_parse(b: &[u8]) -> Result<Sdk1Frame<'_>, ControlError> {
         });
     }
     let end = b.len() - 4;
-    let (stored, computed) = (u32_le(b, end), crc32_sdk1(&b[..end]));
+    let (stored, computed) = (u32_at(b, end), crc32_sdk1(&b[..end]));
     if stored != computed {
         return Err(ControlError::Crc {
             what: SDK1,
@@ -546,7 +534,7 @@ pub fn sdk1_parse(b: &[u8]) -> Result<Sdk1Frame<'_>, ControlError> {
     }
     Ok(Sdk1Frame {
         cmd_type: b[4],
-        seq: u16_le(b, 5),
+        seq: u16_at(b, 5),
         cmd_set: b[9],
         cmd_id: b[10],
         payload: &b[11..end],

@@ -18,6 +18,8 @@
 //! | 17 | 4 | point count `n` (u32) |
 //! | 21 | 19 · n | per point: `offset_time` u32 ns after `timebase`, x y z f32 m, reflectivity, tag, line |
 
+use super::wire::{u32_at, u64_at};
+
 /// First bytes of a frame.
 pub const MAGIC: [u8; 8] = [0xFF, b'R', b'S', b'L', b'X', b'P', b'T', 1];
 /// Header length.
@@ -64,13 +66,6 @@ pub struct PointsFrame<'a> {
     bytes: &'a [u8],
 }
 
-fn u32_at(b: &[u8], o: usize) -> u32 {
-    match b.get(o..o + 4) {
-        Some(s) => u32::from_le_bytes([s[0], s[1], s[2], s[3]]),
-        None => 0,
-    }
-}
-
 impl<'a> PointsFrame<'a> {
     /// `None` when `bytes` is not a whole frame.
     pub fn new(bytes: &'a [u8]) -> Option<Self> {
@@ -88,9 +83,7 @@ impl<'a> PointsFrame<'a> {
 
     /// Device time of the frame, ns.
     pub fn timebase_ns(&self) -> u64 {
-        let mut a = [0u8; 8];
-        a.copy_from_slice(&self.bytes[8..16]);
-        u64::from_le_bytes(a)
+        u64_at(self.bytes, 8)
     }
 
     /// `lidar_id`.

@@ -214,7 +214,7 @@ pub fn sdk1_timestamp_ns(ty: u8, t: [u8; 8]) -> Option<u64> {
 }
 
 #[inline]
-fn u16_at(b: &[u8], o: usize) -> u16 {
+pub(crate) fn u16_at(b: &[u8], o: usize) -> u16 {
     match b.get(o..o + 2) {
         Some(s) => u16::from_le_bytes([s[0], s[1]]),
         None => 0,

@@ -47,6 +47,7 @@
 //! return mode from the MSOP header (byte 8), which both agree on.
 
 use super::decode::cs;
+use super::wire::be16;
 use crate::point::Point;
 use crate::sensor::{DecodeOptions, WireError};
 
@@ -78,13 +79,6 @@ pub const M1_PACKETS_PER_FRAME: u16 = 630;
 pub const M1_FRAME_NS: i64 = 100_000_000;
 /// Temperature byte offset, °C.
 pub const M1_TEMPERATURE_OFFSET_C: i16 = 80;
-
-fn be16(b: &[u8], o: usize) -> u16 {
-    match b.get(o..o + 2) {
-        Some(&[a, c]) => u16::from_be_bytes([a, c]),
-        _ => 0,
-    }
-}
 
 /// Whether `payload` is an M1 MSOP packet (length and id).
 pub fn is_m1_msop(payload: &[u8]) -> bool {

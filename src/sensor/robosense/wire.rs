@@ -20,7 +20,7 @@ pub const MSOP_ID_V2: [u8; 4] = [0x55, 0xAA, 0x05, 0x5A];
 /// DIFOP id.
 pub const DIFOP_ID: [u8; 8] = [0xA5, 0xFF, 0x00, 0x5A, 0x11, 0x11, 0x55, 0x55];
 
-fn be16(b: &[u8], o: usize) -> u16 {
+pub(crate) fn be16(b: &[u8], o: usize) -> u16 {
     match b.get(o..o + 2) {
         Some(s) => u16::from_be_bytes([s[0], s[1]]),
         None => 0,
