@@ -355,43 +355,23 @@ fn configure_sdk1(
     let (dp, ip) = dest_ports(model, bound);
     let to = SocketAddrV4::new(dev, c::SDK1_DEVICE_CMD_PORT);
     let mut seq: u16 = 1;
-    let ret = request(
+    sdk1_command(
         &sock,
         to,
+        seq,
         &c::sdk1_handshake(seq, host, dp, cmd_port, ip),
-        "Livox handshake",
-        |b| {
-            let f = c::sdk1_parse(b).ok()?;
-            (f.seq == seq)
-                .then(|| c::sdk1_ack_code(&f, c::sdk1_cmd::HANDSHAKE))
-                .flatten()
-        },
+        c::sdk1_cmd::HANDSHAKE,
+        "handshake",
     )?;
-    if ret != 0 {
-        return Err(live(format!(
-            "{dev}: handshake refused: {} ({ret})",
-            c::sdk1_return_name(ret)
-        )));
-    }
     seq += 1;
-    let ret = request(
+    sdk1_command(
         &sock,
         to,
+        seq,
         &c::sdk1_sampling(seq, true),
-        "Livox start sampling",
-        |b| {
-            let f = c::sdk1_parse(b).ok()?;
-            (f.seq == seq)
-                .then(|| c::sdk1_ack_code(&f, c::sdk1_cmd::SAMPLING))
-                .flatten()
-        },
+        c::sdk1_cmd::SAMPLING,
+        "start sampling",
     )?;
-    if ret != 0 {
-        return Err(live(format!(
-            "{dev}: start sampling refused: {} ({ret})",
-            c::sdk1_return_name(ret)
-        )));
-    }
     tracing::info!(
         "{dev}: handshake done, sampling: points to {host}:{dp}, IMU to {host}:{ip}, commands at {cmd_port}"
     );
@@ -414,6 +394,30 @@ fn configure_sdk1(
         }),
         heartbeat: Some((stop, t)),
     })
+}
+
+/// Sends an SDK1 command (`frame`, sequence `seq`) and waits for its ACK (`cmd`): an error
+/// naming the return code when the device refuses.
+fn sdk1_command(
+    sock: &UdpSocket,
+    to: SocketAddrV4,
+    seq: u16,
+    frame: &[u8],
+    cmd: u8,
+    what: &str,
+) -> Result<(), RunError> {
+    let ret = request(sock, to, frame, &format!("Livox {what}"), |b| {
+        let f = c::sdk1_parse(b).ok()?;
+        (f.seq == seq).then(|| c::sdk1_ack_code(&f, cmd)).flatten()
+    })?;
+    if ret != 0 {
+        return Err(live(format!(
+            "{}: {what} refused: {} ({ret})",
+            to.ip(),
+            c::sdk1_return_name(ret)
+        )));
+    }
+    Ok(())
 }
 
 /// The SDK1 heartbeat: one a second until `stop`, each ACK counted; a device silent for
