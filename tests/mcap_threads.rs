@@ -12,6 +12,7 @@ use ringscan::sink::mcap::{
     Behind, Compression, Format, McapSink, PointFields, SensorInfo, SinkOptions, SinkSummary,
     SweepMsg,
 };
+use ringscan::sink::mcap_write::in_flight_limit;
 
 /// A `Write + Seek` over a shared buffer, so the bytes outlive the sink that wrote them.
 #[derive(Clone, Default)]
@@ -226,7 +227,8 @@ fn a_writer_that_must_not_wait_stores_late_chunks_uncompressed_and_counts_them()
     );
     assert!(summary.chunks_uncompressed > 0, "the fallback was taken");
     assert_eq!(summary.chunks_uncompressed as usize, stored);
-    assert!(stored < compressions.len(), "some chunks were compressed");
+    // How many of them the workers finished in time depends on the CPU they got (on a loaded
+    // machine, none): the test below shows they are compressed when there is room.
     assert!(compressions.iter().all(|c| c.is_empty() || c == "zstd"));
     assert_eq!(summary.chunks, compressions.len());
     // Nothing dropped, nothing reordered.
@@ -235,6 +237,30 @@ fn a_writer_that_must_not_wait_stores_late_chunks_uncompressed_and_counts_them()
     let (bytes, summary) = write(slow(Behind::Wait));
     assert_eq!(summary.chunks_uncompressed, 0);
     assert!(check_crcs(&bytes).iter().all(|c| c == "zstd"));
+    assert_eq!(messages(&bytes), messages(&reference));
+}
+
+#[test]
+fn a_writer_that_must_not_wait_compresses_every_chunk_while_it_has_room() {
+    // The same slow compression, but chunks so large that the file is fewer chunks than the
+    // in-flight limit: the fallback is never due, so however slow the workers (or starved of
+    // CPU), every chunk is compressed, the last ones waited for at the end.
+    let roomy = SinkOptions {
+        zstd_level: 19,
+        behind: Behind::WriteUncompressed,
+        chunk_size: 4 << 20,
+        ..opts(Format::Foxglove, 2, Compression::Zstd)
+    };
+    let (reference, _) = write(opts(Format::Foxglove, 1, Compression::None));
+    let (bytes, summary) = write(roomy);
+    let compressions = check_crcs(&bytes);
+    assert!(
+        compressions.len() >= 2 && compressions.len() < in_flight_limit(2),
+        "{} chunks",
+        compressions.len()
+    );
+    assert_eq!(summary.chunks_uncompressed, 0);
+    assert!(compressions.iter().all(|c| c == "zstd"), "{compressions:?}");
     assert_eq!(messages(&bytes), messages(&reference));
 }
 
