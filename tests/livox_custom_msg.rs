@@ -26,6 +26,19 @@ const T0: i64 = 1_714_564_800_000_000_000;
 
 /// The sweeps of decoding a simulated MID-360's packets (what `decode` of its pcap gives).
 fn decoded_sweeps() -> Vec<Sweep> {
+    decoded_run().0
+}
+
+/// One IMU sample: sensor time (ns), gyro (rad/s), acceleration (m/s²).
+type Sample = (u64, [f64; 3], [f64; 3]);
+
+/// An IMU packet's stamp (ns) and values as sent: gyro rad/s, acceleration g.
+type RawImu = (i64, [f32; 6]);
+
+/// The same run: its sweeps, its IMU packets' stamps and values as sent (gyro rad/s,
+/// acceleration g; read here from the SDK2 layout: u64 ns timestamp at byte 28, six f32 from
+/// byte 36), and the IMU samples the stream decoded from them.
+fn decoded_run() -> (Vec<Sweep>, Vec<RawImu>, Vec<Sample>) {
     let mut sim = LivoxSim::new(LivoxModel::Mid360, T0);
     sim.trajectory = Trajectory::route(T0, Route::urban());
     let (mut truth, mut imu) = (Vec::new(), Vec::new());
@@ -34,9 +47,15 @@ fn decoded_sweeps() -> Vec<Sweep> {
         Some(LivoxModel::Mid360),
         LivoxModel::Mid360.protocol(),
     ));
-    let mut out = Vec::new();
-    for (host, _, b) in &packets {
+    let (mut out, mut raw, mut samples) = (Vec::new(), Vec::new(), Vec::new());
+    for (host, port, b) in &packets {
         s.push(*host, b, &mut |sw, _| out.push(sw.clone()));
+        samples.extend(s.drain_imu().map(|m| (m.sensor_ns, m.gyro, m.accel)));
+        if *port == 56_401 {
+            let f = |k: usize| f32::from_le_bytes(b[36 + 4 * k..40 + 4 * k].try_into().unwrap());
+            let t = i64::from_le_bytes(b[28..36].try_into().unwrap());
+            raw.push((t, [f(0), f(1), f(2), f(3), f(4), f(5)]));
+        }
     }
     s.finish(&mut |sw, _| out.push(sw.clone()));
     assert!(out.len() >= 3);
@@ -44,7 +63,39 @@ fn decoded_sweeps() -> Vec<Sweep> {
     for (i, p) in out.iter_mut().flat_map(|w| w.points.iter_mut()).enumerate() {
         p.pad = [0, 0x10, 0x24, 0x3f][i % 4];
     }
-    out
+    assert!(raw.len() >= 50, "{} IMU packets", raw.len());
+    (out, raw, samples)
+}
+
+/// A `sensor_msgs/Imu` as the Livox drivers fill it (ROS 1 or CDR): the header stamp is the
+/// IMU packet's, orientation and covariances zero, angular velocity and linear acceleration the
+/// packet's values as they are (acceleration in g), or × 9.80665 when `mps2`.
+fn imu_msg(cdr: bool, stamp: i64, v: &[f32; 6], mps2: bool) -> Vec<u8> {
+    let mut m: Vec<u8> = if cdr { vec![0, 1, 0, 0] } else { Vec::new() };
+    if !cdr {
+        m.extend_from_slice(&9u32.to_le_bytes()); // seq
+    }
+    m.extend_from_slice(&((stamp / 1_000_000_000) as u32).to_le_bytes());
+    m.extend_from_slice(&((stamp % 1_000_000_000) as u32).to_le_bytes());
+    let frame_id = "livox_frame";
+    m.extend_from_slice(&((frame_id.len() + usize::from(cdr)) as u32).to_le_bytes());
+    m.extend_from_slice(frame_id.as_bytes());
+    if cdr {
+        m.push(0);
+        while (m.len() - 4) % 8 != 0 {
+            m.push(0);
+        }
+    }
+    let scale = if mps2 { 9.806_65 } else { 1.0 };
+    let mut put = |x: f64| m.extend_from_slice(&x.to_le_bytes());
+    for _ in 0..4 + 9 {
+        put(0.0);
+    }
+    (0..3).for_each(|k| put(f64::from(v[k])));
+    (0..9).for_each(|_| put(0.0));
+    (3..6).for_each(|k| put(f64::from(v[k]) * scale));
+    (0..9).for_each(|_| put(0.0));
+    m
 }
 
 /// Serialization of one CustomMsg: ROS 1 (no alignment, Header with seq) or CDR (4-byte
@@ -109,31 +160,41 @@ fn record(header: &[Vec<u8>], data: &[u8]) -> Vec<u8> {
 
 /// An uncompressed, unindexed ROS 1 bag: one chunk, one connection, the messages.
 fn ros1_bag(topic: &str, type_name: &str, msgs: &[(i64, Vec<u8>)]) -> Vec<u8> {
+    let msgs: Vec<_> = msgs.iter().map(|(t, b)| (0, *t, b.clone())).collect();
+    ros1_bag_of(&[(topic, type_name)], &msgs)
+}
+
+/// The same with several connections (topic, type), written first in the chunk, and messages
+/// (connection index, record time, body).
+fn ros1_bag_of(conns: &[(&str, &str)], msgs: &[(usize, i64, Vec<u8>)]) -> Vec<u8> {
     let mut b = b"#ROSBAG V2.0\n".to_vec();
     b.extend(record(
         &[field("op", &[3]), field("index_pos", &0u64.to_le_bytes())],
         &[b' '; 32],
     ));
-    let conn = [
-        field("topic", topic.as_bytes()),
-        field("type", type_name.as_bytes()),
-    ]
-    .concat();
-    let mut chunk = record(
-        &[
-            field("op", &[7]),
-            field("conn", &0u32.to_le_bytes()),
+    let mut chunk = Vec::new();
+    for (i, (topic, type_name)) in conns.iter().enumerate() {
+        let conn = [
             field("topic", topic.as_bytes()),
-        ],
-        &conn,
-    );
-    for (t, body) in msgs {
+            field("type", type_name.as_bytes()),
+        ]
+        .concat();
+        chunk.extend(record(
+            &[
+                field("op", &[7]),
+                field("conn", &(i as u32).to_le_bytes()),
+                field("topic", topic.as_bytes()),
+            ],
+            &conn,
+        ));
+    }
+    for (c, t, body) in msgs {
         let mut time = ((t / 1_000_000_000) as u32).to_le_bytes().to_vec();
         time.extend_from_slice(&((t % 1_000_000_000) as u32).to_le_bytes());
         chunk.extend(record(
             &[
                 field("op", &[2]),
-                field("conn", &0u32.to_le_bytes()),
+                field("conn", &(*c as u32).to_le_bytes()),
                 field("time", &time),
             ],
             body,
@@ -166,21 +227,33 @@ fn mcap_str(s: &str) -> Vec<u8> {
 /// An unchunked MCAP with a `ros2msg` schema and a `cdr` channel: header, schema, channel,
 /// messages, footer (no summary).
 fn cdr_mcap(topic: &str, type_name: &str, msgs: &[(i64, Vec<u8>)]) -> Vec<u8> {
+    let msgs: Vec<_> = msgs.iter().map(|(t, b)| (0, *t, b.clone())).collect();
+    cdr_mcap_of(&[(topic, type_name)], &msgs)
+}
+
+/// The same with several channels (topic, type), their schema and channel records first (as
+/// a recorder that subscribed to every topic at its start writes them); messages (channel
+/// index, log time, body).
+fn cdr_mcap_of(chans: &[(&str, &str)], msgs: &[(usize, i64, Vec<u8>)]) -> Vec<u8> {
     let mut f = b"\x89MCAP0\r\n".to_vec();
     f.extend(mcap_record(0x01, &[mcap_str(""), mcap_str("t")].concat()));
-    let mut schema = 1u16.to_le_bytes().to_vec();
-    schema.extend(mcap_str(type_name));
-    schema.extend(mcap_str("ros2msg"));
-    schema.extend(mcap_str("")); // data: not needed to read the fixed layout
-    f.extend(mcap_record(0x03, &schema));
-    let mut channel = 1u16.to_le_bytes().to_vec();
-    channel.extend_from_slice(&1u16.to_le_bytes());
-    channel.extend(mcap_str(topic));
-    channel.extend(mcap_str("cdr"));
-    channel.extend_from_slice(&0u32.to_le_bytes()); // metadata: empty map
-    f.extend(mcap_record(0x04, &channel));
-    for (seq, (t, body)) in msgs.iter().enumerate() {
-        let mut m = 1u16.to_le_bytes().to_vec();
+    for (i, (topic, type_name)) in chans.iter().enumerate() {
+        let id = i as u16 + 1;
+        let mut schema = id.to_le_bytes().to_vec();
+        schema.extend(mcap_str(type_name));
+        schema.extend(mcap_str("ros2msg"));
+        schema.extend(mcap_str("")); // data: not needed to read the fixed layout
+        f.extend(mcap_record(0x03, &schema));
+        let mut channel = id.to_le_bytes().to_vec();
+        channel.extend_from_slice(&id.to_le_bytes());
+        channel.extend(mcap_str(topic));
+        channel.extend(mcap_str("cdr"));
+        channel.extend_from_slice(&0u32.to_le_bytes()); // metadata: empty map
+        f.extend(mcap_record(0x04, &channel));
+    }
+    for (seq, (c, t, body)) in msgs.iter().enumerate() {
+        let id = *c as u16 + 1;
+        let mut m = id.to_le_bytes().to_vec();
         m.extend_from_slice(&(seq as u32).to_le_bytes());
         m.extend_from_slice(&(*t as u64).to_le_bytes());
         m.extend_from_slice(&(*t as u64).to_le_bytes());
@@ -203,10 +276,17 @@ fn temp_file(name: &str, bytes: &[u8]) -> PathBuf {
 /// The bag's sweeps, through the bag source, the family registry and `Demux` as `decode`
 /// does it (no `--model`: the messages do not name one).
 fn bag_sweeps(path: &std::path::Path) -> (Vec<Sweep>, BagSource) {
+    let (sweeps, _, src) = bag_run(path);
+    (sweeps, src)
+}
+
+/// The same, with the IMU samples the streams hand on after each datagram (as `decode`
+/// drains them for the deskew and `/imu`).
+fn bag_run(path: &std::path::Path) -> (Vec<Sweep>, Vec<Sample>, BagSource) {
     let mut src = BagSource::open(path, BagOptions::default()).unwrap();
     let mut pool = CalibrationPool::new(Vec::new(), StreamSettings::default());
     let mut demux = Demux::new(Box::new(move |d| sensor::claim(d, &mut pool)), None);
-    let mut out = Vec::new();
+    let (mut out, mut imu) = (Vec::new(), Vec::new());
     while let Some(d) = src.next_datagram().unwrap() {
         demux
             .push(
@@ -217,6 +297,11 @@ fn bag_sweeps(path: &std::path::Path) -> (Vec<Sweep>, BagSource) {
                 &mut |_, s, _| out.push(s.clone()),
             )
             .unwrap();
+        for i in 0..demux.sensors().count() {
+            if let Some(s) = demux.stream_mut(i) {
+                s.drain_imu(&mut |m, _| imu.push((m.sensor_ns, m.gyro, m.accel)));
+            }
+        }
     }
     demux.finish(&mut |_, s, _| out.push(s.clone())).unwrap();
     assert_eq!(
@@ -225,7 +310,7 @@ fn bag_sweeps(path: &std::path::Path) -> (Vec<Sweep>, BagSource) {
         "{:?}",
         src.stats().first_malformed
     );
-    (out, src)
+    (out, imu, src)
 }
 
 fn abs_points(sweeps: &[Sweep]) -> Vec<(i64, Point)> {
@@ -292,6 +377,135 @@ fn cdr_mcap_gives_the_decoded_points() {
     check("CDR MCAP", &sweeps, &got);
 }
 
+/// A driver's bag as recorded: `/livox/lidar` CustomMsgs (each once its frame is complete),
+/// `/livox/imu` with a `sensor_msgs/Imu` per IMU packet (stamp and values as the packet sent
+/// them; acceleration in g as the drivers publish it, or in m/s²), and a vehicle's IMU on
+/// `/vehicle/imu`. The IMU samples the Livox stream hands on (what deskew and `/imu` get) must
+/// be exactly those of decoding the IMU packets, the vehicle's IMU not read but counted, and
+/// the sweeps unchanged.
+#[test]
+fn the_drivers_imu_topic_gives_the_imu_packets_samples() {
+    let (sweeps, raw, samples) = decoded_run();
+    let build = |cdr: bool, mps2: bool| {
+        let mut msgs = Vec::new();
+        for s in &sweeps {
+            let last = s.points.iter().map(|p| i64::from(p.t)).max().unwrap_or(0);
+            msgs.push((
+                0,
+                s.device_time_ns + last,
+                custom_msg(cdr, s, "livox_frame"),
+            ));
+        }
+        for (t, v) in &raw {
+            msgs.push((1, *t, imu_msg(cdr, *t, v, mps2)));
+        }
+        for k in 0..3 {
+            let t = T0 + k * 1_000_000;
+            let v = [0.5, 0.0, 0.0, 0.0, 0.0, 1.0];
+            msgs.push((2, t, imu_msg(cdr, t, &v, false)));
+        }
+        msgs.sort_by_key(|m| m.1);
+        msgs
+    };
+    let ros1 = [
+        ("/livox/lidar", "livox_ros_driver2/CustomMsg"),
+        ("/livox/imu", "sensor_msgs/Imu"),
+        ("/vehicle/imu", "sensor_msgs/Imu"),
+    ];
+    let ros2 = [
+        ("/livox/lidar", "livox_ros_driver2/msg/CustomMsg"),
+        ("/livox/imu", "sensor_msgs/msg/Imu"),
+        ("/vehicle/imu", "sensor_msgs/msg/Imu"),
+    ];
+    for (what, name, bytes) in [
+        (
+            "ROS 1, g",
+            "imu.bag",
+            ros1_bag_of(&ros1, &build(false, false)),
+        ),
+        (
+            "ROS 1, m/s²",
+            "imu-mps2.bag",
+            ros1_bag_of(&ros1, &build(false, true)),
+        ),
+        (
+            "CDR MCAP, g",
+            "imu.mcap",
+            cdr_mcap_of(&ros2, &build(true, false)),
+        ),
+        (
+            "CDR MCAP, m/s²",
+            "imu-mps2.mcap",
+            cdr_mcap_of(&ros2, &build(true, true)),
+        ),
+    ] {
+        let (got, imu, src) = bag_run(&temp_file(name, &bytes));
+        check(what, &sweeps, &got);
+        assert_eq!(imu.len(), raw.len(), "{what}: every IMU message a sample");
+        assert_eq!(imu, samples, "{what}: the IMU packets' samples");
+        assert_eq!(src.stats().unknown_type, 3, "{what}: the vehicle's IMU");
+        let s = src.sensors();
+        assert_eq!(s.len(), 1, "{what}");
+        assert_eq!(s[0].topics, ["/livox/lidar", "/livox/imu"], "{what}");
+    }
+    // Through `decode`: the samples reach the IMU deskew and `/imu`; the same CustomMsgs
+    // without their IMU topic leave `--deskew imu` nothing to deskew with.
+    #[cfg(feature = "cli")]
+    {
+        let lidar_only: Vec<_> = build(false, false)
+            .into_iter()
+            .filter(|m| m.0 == 0)
+            .collect();
+        for (name, bytes, imu, skipped) in [
+            (
+                "cli-imu.bag",
+                ros1_bag_of(&ros1, &build(false, false)),
+                raw.len(),
+                0,
+            ),
+            (
+                "cli-no-imu.bag",
+                ros1_bag_of(&ros1[..1], &lidar_only),
+                0,
+                sweeps.len(),
+            ),
+        ] {
+            let path = temp_file(name, &bytes);
+            let mcap = path.with_extension("mcap");
+            let out = std::process::Command::new(env!("CARGO_BIN_EXE_ringscan"))
+                .arg("decode")
+                .arg(&path)
+                .args([
+                    "--pipeline",
+                    "default",
+                    "--deskew",
+                    "imu",
+                    "--json",
+                    "--out",
+                ])
+                .arg(&mcap)
+                .output()
+                .unwrap();
+            assert!(
+                out.status.success(),
+                "{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+            let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+            assert_eq!(j["sweeps"], sweeps.len(), "{name}");
+            assert_eq!(j["imu_samples"], imu, "{name}");
+            let imu_msgs = j["output"]["topics"]["/imu"].as_u64().unwrap_or(0);
+            assert_eq!(imu_msgs, imu as u64, "{name}");
+            assert_eq!(j["pipeline"]["deskew"], "imu", "{name}");
+            assert_eq!(
+                j["pipeline"]["deskew_skipped"], skipped,
+                "{name}: {}",
+                j["pipeline"]
+            );
+        }
+    }
+}
+
 #[test]
 fn a_cut_or_inconsistent_message_is_counted_not_read() {
     use ringscan::source::bag::messages::{livox_custom, Encoding};
@@ -318,13 +532,19 @@ fn a_cut_or_inconsistent_message_is_counted_not_read() {
 
 /// Runs `tools/make_livox_custommsg_bag.py`; `None` (after a SKIP line) when Python or its
 /// venv (`rosbags` from PyPI) cannot be had.
-fn make_custommsg_bags(truth: &std::path::Path, out: &std::path::Path) -> Option<Vec<PathBuf>> {
+fn make_custommsg_bags(
+    truth: &std::path::Path,
+    imu: &std::path::Path,
+    out: &std::path::Path,
+) -> Option<Vec<PathBuf>> {
     let script =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tools/make_livox_custommsg_bag.py");
     match std::process::Command::new("python3")
         .arg(&script)
         .arg("--truth")
         .arg(truth)
+        .arg("--imu")
+        .arg(imu)
         .arg("--out")
         .arg(out)
         .output()
@@ -380,26 +600,42 @@ fn rosbags_written_bags_give_the_truth_and_the_packets_points() {
         .unwrap();
     }
     w.into_inner().unwrap();
-    let Some(bags) = make_custommsg_bags(&truth_path, &dir) else {
-        return;
-    };
-    assert_eq!(bags.len(), 4, "{bags:?}");
-    // The packets, decoded.
+    // The packets, decoded; the IMU packets' values (gyro rad/s, acceleration g, from the SDK2
+    // layout: u64 ns timestamp at byte 28, six f32 from byte 36) for the script's /livox/imu.
     let mut s = LivoxStream::new(LivoxConfig::new(
         Some(LivoxModel::Mid360),
         LivoxModel::Mid360.protocol(),
     ));
-    let mut decoded = Vec::new();
-    for (host, _, b) in &packets {
+    let (mut decoded, mut samples, mut imu_file) = (Vec::new(), Vec::new(), Vec::new());
+    for (host, port, b) in &packets {
         s.push(*host, b, &mut |sw, _| decoded.push(sw.clone()));
+        samples.extend(s.drain_imu().map(|m| (m.sensor_ns, m.gyro, m.accel)));
+        if *port == 56_401 {
+            imu_file.extend_from_slice(&b[28..36]);
+            for k in 0..6 {
+                let v = f32::from_le_bytes(b[36 + 4 * k..40 + 4 * k].try_into().unwrap());
+                imu_file.extend_from_slice(&f64::from(v).to_le_bytes());
+            }
+        }
     }
     s.finish(&mut |sw, _| decoded.push(sw.clone()));
+    assert!(samples.len() >= 50, "{} IMU samples", samples.len());
+    let imu_path = dir.join("run.imu");
+    std::fs::write(&imu_path, &imu_file).unwrap();
+    let Some(bags) = make_custommsg_bags(&truth_path, &imu_path, &dir) else {
+        return;
+    };
+    assert_eq!(bags.len(), 4, "{bags:?}");
     let decoded = abs_points(&decoded);
     assert_eq!(decoded.len(), truth.len());
     for bag in &bags {
         let what = bag.display().to_string();
-        let (sweeps, _) = bag_sweeps(bag);
+        let (sweeps, imu, src) = bag_run(bag);
         assert!(sweeps.len() >= 4, "{what}: {} sweeps", sweeps.len());
+        // rosbags' sensor_msgs/Imu (acceleration in g, as the drivers publish it): every one
+        // of the IMU packets' samples, exactly.
+        assert_eq!(imu, samples, "{what}: IMU samples");
+        assert_eq!(src.stats().unknown_type, 0, "{what}");
         let got = abs_points(&sweeps);
         assert_eq!(got.len(), truth.len(), "{what}: points");
         for (i, ((t, p), tr)) in got.iter().zip(&truth).enumerate() {

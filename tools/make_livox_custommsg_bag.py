@@ -2,7 +2,7 @@
 """Write Livox CustomMsg bags from a simulator truth file, with `rosbags` (PyPI).
 
 Usage:
-    tools/make_livox_custommsg_bag.py --truth RUN.truth --out DIR [--period-ms 100]
+    tools/make_livox_custommsg_bag.py --truth RUN.truth --out DIR [--period-ms 100] [--imu SAMPLES]
 
 The truth file is what `simulate --model mid360 --truth FILE` (or `ringscan::sim::truth`)
 writes: one record per simulated return, sensor-frame x y z (f32 m), firing time (ns), ring
@@ -17,6 +17,11 @@ the same rule). Output, topic /livox/lidar, record time = the header stamp:
     DIR/custom.ros1-driver2.bag ROS 1, livox_ros_driver2/CustomMsg
     DIR/custom.sqlite3/        rosbag2 sqlite3, livox_ros_driver2/msg/CustomMsg (CDR)
     DIR/custom.mcap/           rosbag2 MCAP, livox_ros_driver2/msg/CustomMsg (CDR)
+
+With --imu, every bag also holds /livox/imu: one sensor_msgs/Imu per record of SAMPLES
+(little-endian i64 stamp in ns, then gyro x y z and acceleration x y z as f64: the values the
+driver publishes, acceleration in g), header stamp = record time = the stamp, orientation and
+covariances zero, written in stamp order among the CustomMsgs.
 
 The paths are printed one per line. Run as a script, it uses tools/.venv-bags (python3 -m venv,
 pip install rosbags at the pin tools/make_test_bags.py uses), made on first use, and re-runs
@@ -119,12 +124,46 @@ def messages(truth, groups, store, pkg, ros2):
     return out
 
 
+def read_imu(path):
+    with open(path, "rb") as f:
+        data = f.read()
+    rec = struct.Struct("<q6d")
+    if len(data) % rec.size:
+        sys.exit(f"{path}: not whole IMU records of {rec.size} bytes")
+    return [(r[0], r[1:]) for r in rec.iter_unpack(data)]
+
+
+def imu_msg(store, t, v, ros2):
+    """A sensor_msgs/Imu as the Livox drivers fill it."""
+    import numpy as np
+
+    m = store.types
+    Time = m["builtin_interfaces/msg/Time"]
+    Header = m["std_msgs/msg/Header"]
+    Quaternion = m["geometry_msgs/msg/Quaternion"]
+    Vector3 = m["geometry_msgs/msg/Vector3"]
+    Imu = m["sensor_msgs/msg/Imu"]
+    stamp = Time(sec=t // 1_000_000_000, nanosec=t % 1_000_000_000)
+    header = Header(stamp=stamp, frame_id="livox_frame") if ros2 else Header(seq=0, stamp=stamp, frame_id="livox_frame")
+    zeros = np.zeros(9, dtype=np.float64)
+    return Imu(
+        header=header,
+        orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=0.0),
+        orientation_covariance=zeros,
+        angular_velocity=Vector3(x=v[0], y=v[1], z=v[2]),
+        angular_velocity_covariance=zeros,
+        linear_acceleration=Vector3(x=v[3], y=v[4], z=v[5]),
+        linear_acceleration_covariance=zeros,
+    )
+
+
 def main():
     ensure_venv()
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--truth", required=True)
     ap.add_argument("--out", required=True)
     ap.add_argument("--period-ms", type=float, default=100.0)
+    ap.add_argument("--imu", help="IMU samples to write on /livox/imu (see above)")
     args = ap.parse_args()
 
     from rosbags.rosbag1 import Writer as Writer1
@@ -136,6 +175,15 @@ def main():
     groups = windows(truth, int(args.period_ms * 1e6))
     os.makedirs(args.out, exist_ok=True)
     topic = "/livox/lidar"
+    samples = read_imu(args.imu) if args.imu else []
+
+    def with_imu(store, conn, imu_conn, lidar_msgs, ros2):
+        """(conn, time, message, type) of the CustomMsgs and the IMU samples, in time order."""
+        out = [(t, 0, conn, msg) for t, msg in lidar_msgs]
+        for t, v in samples:
+            out.append((t, 1, imu_conn, imu_msg(store, t, v, ros2)))
+        out.sort(key=lambda m: (m[0], m[1]))
+        return out
 
     for name, pkg in [("custom.ros1.bag", "livox_ros_driver"), ("custom.ros1-driver2.bag", "livox_ros_driver2")]:
         store = get_typestore(Stores.ROS1_NOETIC)
@@ -148,8 +196,9 @@ def main():
         w = Writer1(path)
         w.open()
         conn = w.add_connection(topic, f"{pkg}/msg/CustomMsg", typestore=store)
-        for t, msg in messages(truth, groups, store, pkg, ros2=False):
-            w.write(conn, t, store.serialize_ros1(msg, f"{pkg}/msg/CustomMsg"))
+        imu_conn = w.add_connection("/livox/imu", "sensor_msgs/msg/Imu", typestore=store) if samples else None
+        for t, _, c, msg in with_imu(store, conn, imu_conn, messages(truth, groups, store, pkg, ros2=False), False):
+            w.write(c, t, store.serialize_ros1(msg, c.msgtype))
         w.close()
         print(path)
 
@@ -165,8 +214,9 @@ def main():
         w = Writer2(path, version=9, storage_plugin=plugin)
         w.open()
         conn = w.add_connection(topic, f"{pkg}/msg/CustomMsg", typestore=store)
-        for t, msg in msgs:
-            w.write(conn, t, store.serialize_cdr(msg, f"{pkg}/msg/CustomMsg"))
+        imu_conn = w.add_connection("/livox/imu", "sensor_msgs/msg/Imu", typestore=store) if samples else None
+        for t, _, c, msg in with_imu(store, conn, imu_conn, msgs, True):
+            w.write(c, t, store.serialize_cdr(msg, c.msgtype))
         w.close()
         print(path)
 

@@ -116,7 +116,7 @@ pub fn replay_command(args: &ReplayArgs) -> Result<ExitCode, RunError> {
     };
     let started = Instant::now();
     let (mut sent, mut bytes, mut errors, mut skipped) = (0u64, 0u64, 0u64, 0u64);
-    let mut points_frames = 0u64;
+    let mut decoded_frames = 0u64;
     // Where each loop starts on the replay clock.
     let mut loop_base_ns: i64 = 0;
     let mut last_rel_ns: i64 = 0;
@@ -139,9 +139,11 @@ pub fn replay_command(args: &ReplayArgs) -> Result<ExitCode, RunError> {
                     std::thread::sleep(due - now);
                 }
             }
-            // Points a ROS driver decoded (a CustomMsg bag's frames) were never on the wire.
-            if crate::sensor::livox::frame::PointsFrame::is_frame(d.payload) {
-                points_frames += 1;
+            // Points and IMU samples a ROS driver decoded (a CustomMsg bag's frames) were
+            // never on the wire.
+            use crate::sensor::livox::frame::{ImuFrame, PointsFrame};
+            if PointsFrame::is_frame(d.payload) || ImuFrame::is_frame(d.payload) {
+                decoded_frames += 1;
                 continue;
             }
             let port = i32::from(d.dst.port()) + args.port_offset;
@@ -179,7 +181,7 @@ pub fn replay_command(args: &ReplayArgs) -> Result<ExitCode, RunError> {
         "bytes": bytes,
         "send_errors": errors,
         "skipped_port_out_of_range": skipped,
-        "skipped_decoded_points_messages": points_frames,
+        "skipped_decoded_messages": decoded_frames,
         "sources": senders.by_source.len(),
         "elapsed_s": elapsed,
         "datagrams_per_s": if elapsed > 0.0 { sent as f64 / elapsed } else { 0.0 },

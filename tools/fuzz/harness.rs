@@ -2195,10 +2195,21 @@ fn bag_check_packets(
         }
         Err(_) => assert!(frame.is_empty(), "frame left after an error"),
     }
+    // sensor_msgs/Imu: the IMU frame the bag source makes of it reads back the same sample.
+    if let Ok(m) = messages::imu(enc, msg) {
+        use ringscan::sensor::livox::frame::{write_imu, ImuFrame};
+        let t = u64::try_from(m.stamp_ns).unwrap_or(0);
+        write_imu(&mut frame, t, m.angular_velocity, m.linear_acceleration);
+        let f = ImuFrame::new(&frame).expect("an IMU frame written is whole");
+        assert_eq!(f.time_ns(), t);
+        let same =
+            |a: [f64; 3], b: [f64; 3]| a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits());
+        assert!(same(f.gyro(), m.angular_velocity) && same(f.accel(), m.linear_acceleration));
+    }
 }
 
 /// `bag_messages`: byte 0 picks the type and the encoding, the rest is one message (every
-/// message is also read as a Livox CustomMsg).
+/// message is also read as a Livox CustomMsg and as a sensor_msgs/Imu).
 pub fn bag_messages(data: &[u8]) {
     use ringscan::source::bag::messages::{Encoding, MsgKind};
     let Some((&sel, msg)) = data.split_first() else {
@@ -2704,10 +2715,21 @@ pub fn livox_packet(data: &[u8]) {
             s.push(pushed as i64, d, &mut |sw, _| check(sw));
             pushed += 1;
         }
+        // The same bytes as the values of an IMU frame (a CustomMsg bag's IMU topic): any
+        // values, NaN and infinities included, are a sample or skipped, never a panic.
+        if let Some(v) = d.get(..56) {
+            let mut f = ringscan::sensor::livox::frame::IMU_MAGIC.to_vec();
+            f.extend_from_slice(v);
+            s.push(pushed as i64, &f, &mut |sw, _| check(sw));
+            pushed += 1;
+        }
     }
     s.finish(&mut |sw, _| check(sw));
     let st = s.stats();
-    assert_eq!(st.packets + st.imu_packets + st.malformed, pushed);
+    assert_eq!(
+        st.packets + st.imu_packets + st.frames + st.malformed,
+        pushed
+    );
     assert!(s.drain_imu().count() <= LIVOX_MAX_IMU_QUEUE);
 }
 

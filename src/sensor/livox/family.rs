@@ -15,7 +15,7 @@ use std::sync::Arc;
 
 use serde_json::{json, Map, Value};
 
-use super::frame::PointsFrame;
+use super::frame::{ImuFrame, PointsFrame};
 #[cfg(test)]
 use super::model::ALL_MODELS;
 use super::model::{LivoxModel, Protocol};
@@ -47,7 +47,7 @@ pub fn detect_protocol(payload: &[u8]) -> Option<Protocol> {
 
 /// Builds the stream configuration for a first datagram, or `None` when it is not Livox's.
 pub fn config_for(d: &FirstDatagram<'_>, named: Option<LivoxModel>) -> Option<LivoxConfig> {
-    if PointsFrame::is_frame(d.payload) {
+    if PointsFrame::is_frame(d.payload) || ImuFrame::is_frame(d.payload) {
         // Points a ROS driver decoded (a bag's CustomMsg): no packet says the model.
         let mut cfg = LivoxConfig::new(named, Protocol::Sdk2);
         cfg.detection = "livox_ros_driver CustomMsg points (decoded by the driver)".to_string();

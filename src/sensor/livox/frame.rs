@@ -17,6 +17,17 @@
 //! | 16 | 1 | `lidar_id` |
 //! | 17 | 4 | point count `n` (u32) |
 //! | 21 | 19 · n | per point: `offset_time` u32 ns after `timebase`, x y z f32 m, reflectivity, tag, line |
+//!
+//! The driver's IMU topic (`sensor_msgs/Imu` beside the `CustomMsg` one) travels the same way,
+//! one sample a frame ([`ImuFrame`]), to the same stream, so its samples join the IMU path
+//! the sensor's own IMU packets take (deskew, `/imu`):
+//!
+//! | offset | bytes | field |
+//! |---|---|---|
+//! | 0 | 8 | magic `FF 'R' 'S' 'L' 'X' 'I' 'M' 01` |
+//! | 8 | 8 | time, ns (u64): the message's header stamp |
+//! | 16 | 24 | angular velocity x y z, f64 rad/s |
+//! | 40 | 24 | linear acceleration x y z, f64 m/s² (the bag source converts from g) |
 
 use super::wire::{u32_at, u64_at};
 
@@ -26,6 +37,58 @@ pub const MAGIC: [u8; 8] = [0xFF, b'R', b'S', b'L', b'X', b'P', b'T', 1];
 pub const HEADER_LEN: usize = 21;
 /// Bytes per point.
 pub const POINT_LEN: usize = 19;
+
+/// First bytes of an IMU frame.
+pub const IMU_MAGIC: [u8; 8] = [0xFF, b'R', b'S', b'L', b'X', b'I', b'M', 1];
+/// An IMU frame's length.
+pub const IMU_LEN: usize = 64;
+
+/// Writes one IMU sample as a frame into `out` (cleared).
+pub fn write_imu(out: &mut Vec<u8>, time_ns: u64, gyro: [f64; 3], accel_mps2: [f64; 3]) {
+    out.clear();
+    out.extend_from_slice(&IMU_MAGIC);
+    out.extend_from_slice(&time_ns.to_le_bytes());
+    for v in gyro.iter().chain(&accel_mps2) {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+}
+
+/// A checked IMU frame: the magic and exactly [`IMU_LEN`] bytes.
+#[derive(Clone, Copy, Debug)]
+pub struct ImuFrame<'a> {
+    bytes: &'a [u8],
+}
+
+impl<'a> ImuFrame<'a> {
+    /// `None` when `bytes` is not a whole IMU frame.
+    pub fn new(bytes: &'a [u8]) -> Option<Self> {
+        (bytes.len() == IMU_LEN && Self::is_frame(bytes)).then_some(Self { bytes })
+    }
+
+    /// Whether `bytes` starts with the IMU magic (a frame, whole or not).
+    pub fn is_frame(bytes: &[u8]) -> bool {
+        bytes.get(..8) == Some(&IMU_MAGIC[..])
+    }
+
+    /// The sample's time, ns.
+    pub fn time_ns(&self) -> u64 {
+        u64_at(self.bytes, 8)
+    }
+
+    fn vec3(&self, at: usize) -> [f64; 3] {
+        [0, 8, 16].map(|k| f64::from_bits(u64_at(self.bytes, at + k)))
+    }
+
+    /// Angular velocity, rad/s.
+    pub fn gyro(&self) -> [f64; 3] {
+        self.vec3(16)
+    }
+
+    /// Linear acceleration, m/s².
+    pub fn accel(&self) -> [f64; 3] {
+        self.vec3(40)
+    }
+}
 
 /// One point of a frame.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -141,5 +204,20 @@ mod tests {
         assert!(f.points().all(|q| q == p));
         assert!(PointsFrame::new(&b[..b.len() - 1]).is_none());
         assert!(PointsFrame::is_frame(&b[..9]));
+        assert!(ImuFrame::new(&b).is_none());
+    }
+
+    #[test]
+    fn an_imu_frame_reads_back_and_a_cut_one_is_refused() {
+        let mut b = Vec::new();
+        write_imu(&mut b, 1_234, [0.5, -1.0, 2.25], [0.1, 0.2, 9.8]);
+        assert_eq!(b.len(), IMU_LEN);
+        let f = ImuFrame::new(&b).unwrap();
+        assert_eq!(f.time_ns(), 1_234);
+        assert_eq!(f.gyro(), [0.5, -1.0, 2.25]);
+        assert_eq!(f.accel(), [0.1, 0.2, 9.8]);
+        assert!(ImuFrame::new(&b[..IMU_LEN - 1]).is_none());
+        assert!(ImuFrame::is_frame(&b[..8]));
+        assert!(PointsFrame::new(&b).is_none() && !PointsFrame::is_frame(&b));
     }
 }

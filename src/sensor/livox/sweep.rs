@@ -22,7 +22,7 @@
 use std::collections::VecDeque;
 
 use super::decode::{LivoxDecoder, Spacing};
-use super::frame::PointsFrame;
+use super::frame::{ImuFrame, PointsFrame};
 use super::model::{LivoxModel, Protocol, STANDARD_GRAVITY};
 use super::wire::{read_imu, LivoxWireError, Record, Sdk1Packet, Sdk2Packet};
 use crate::point::Point;
@@ -267,6 +267,13 @@ impl LivoxStream {
         if PointsFrame::is_frame(payload) {
             match PointsFrame::new(payload) {
                 Some(f) => self.push_frame(host_ns, f, on_sweep),
+                None => self.stats.malformed += 1,
+            }
+            return;
+        }
+        if ImuFrame::is_frame(payload) {
+            match ImuFrame::new(payload) {
+                Some(f) => self.push_imu_frame(host_ns, f),
                 None => self.stats.malformed += 1,
             }
             return;
@@ -519,6 +526,21 @@ impl LivoxStream {
         let last = ts.saturating_add(step.saturating_mul(n.saturating_sub(1) as i64));
         self.after_packet(host_ns, ts, last);
         Ok(())
+    }
+
+    /// A sample of the driver's IMU topic (a bag's `sensor_msgs/Imu`): counted and queued as
+    /// an IMU packet's sample is, so sweeps of `CustomMsg` frames wait for it as packets' do.
+    fn push_imu_frame(&mut self, host_ns: i64, f: ImuFrame<'_>) {
+        self.stats.imu_packets += 1;
+        let (g, a) = (f.gyro(), f.accel());
+        if g.iter().chain(a.iter()).all(|v| v.is_finite()) {
+            self.queue_imu(ImuSample {
+                sensor_ns: f.time_ns(),
+                host_ns,
+                accel: a,
+                gyro: g,
+            });
+        }
     }
 
     fn push_imu_record(&mut self, rec: &[u8], ts: i64, host_ns: i64) {

@@ -18,6 +18,7 @@
 //! | `rslidar_msg/msg/RslidarPacket` | Header, uint8 is_difop, uint8 is_frame_begin, uint8\[\] data | its header's |
 //! | `std_msgs/msg/String` | string data (Ouster metadata JSON) | — |
 //! | `livox_ros_driver2/msg/CustomMsg`, `livox_ros_driver/CustomMsg` | Header, uint64 timebase, uint32 point_num, uint8 lidar_id, uint8\[3\] rsvd, `CustomPoint[]` = {uint32 offset_time, float32 x y z, uint8 reflectivity, tag, line}: points, not packets ([`livox_custom`]) | its header's |
+//! | `sensor_msgs/msg/Imu` (a Livox driver's IMU topic beside its `CustomMsg` one) | Header, orientation {float64 x y z w}, float64\[9\] covariance, angular_velocity {float64 x y z}, float64\[9\], linear_acceleration {float64 x y z}, float64\[9\]: one sample ([`imu`]) | its header's |
 //!
 //! ROS 1 serialization: little-endian, no padding, `time` = u32 sec + u32 nsec, Header = u32
 //! seq + time + string, strings and arrays prefixed by a u32 count. CDR (ROS 2): a 4-byte
@@ -61,6 +62,8 @@ pub enum MsgKind {
     StdString,
     /// `livox_ros_driver/CustomMsg`, `livox_ros_driver2/CustomMsg`: decoded points.
     LivoxCustomMsg,
+    /// `sensor_msgs/Imu`: one IMU sample (read for a Livox `CustomMsg` sensor's IMU topic).
+    Imu,
 }
 
 impl MsgKind {
@@ -81,14 +84,15 @@ impl MsgKind {
             ("rslidar_msg" | "rslidar_msgs", "RslidarPacket") => Self::RslidarPacket,
             ("std_msgs", "String") => Self::StdString,
             ("livox_ros_driver" | "livox_ros_driver2", "CustomMsg") => Self::LivoxCustomMsg,
+            ("sensor_msgs", "Imu") => Self::Imu,
             _ => return None,
         })
     }
 
-    /// Whether messages of this kind carry packets (all but `std_msgs/String` and the
-    /// decoded points of `CustomMsg`).
+    /// Whether messages of this kind carry packets (all but `std_msgs/String`, the decoded
+    /// points of `CustomMsg` and `sensor_msgs/Imu`).
     pub fn carries_packets(self) -> bool {
-        !matches!(self, Self::StdString | Self::LivoxCustomMsg)
+        !matches!(self, Self::StdString | Self::LivoxCustomMsg | Self::Imu)
     }
 }
 
@@ -215,6 +219,10 @@ impl<'a> Cursor<'a> {
         })
     }
 
+    fn f64(&mut self) -> Result<f64, MsgError> {
+        Ok(f64::from_bits(self.u64()?))
+    }
+
     fn u32(&mut self) -> Result<u32, MsgError> {
         self.align_to(4);
         let b: [u8; 4] = self.take(4)?.try_into().unwrap_or([0; 4]);
@@ -297,7 +305,7 @@ pub fn packets(
         MsgKind::HesaiUdpFrame => scan_var(enc, msg, true, out),
         MsgKind::RobosenseScan => robosense(enc, msg, out),
         MsgKind::RslidarPacket => rslidar(enc, msg, out),
-        MsgKind::StdString | MsgKind::LivoxCustomMsg => Ok(()),
+        MsgKind::StdString | MsgKind::LivoxCustomMsg | MsgKind::Imu => Ok(()),
     };
     if r.is_err() {
         out.clear();
@@ -355,6 +363,47 @@ pub fn livox_custom(enc: Encoding, msg: &[u8], out: &mut Vec<u8>) -> Result<i64,
         out.clear();
     }
     r
+}
+
+/// One `sensor_msgs/Imu` sample, as recorded (units are the writer's: see [`imu`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ImuMsg {
+    /// Header stamp, ns.
+    pub stamp_ns: i64,
+    /// `angular_velocity` (x, y, z).
+    pub angular_velocity: [f64; 3],
+    /// `linear_acceleration` (x, y, z).
+    pub linear_acceleration: [f64; 3],
+}
+
+/// Reads a `sensor_msgs/Imu`. The orientation and the three covariances are read past, not
+/// kept: the Livox drivers send none (zeros). The type says rad/s and m/s²; the Livox drivers
+/// publish the acceleration in g as the sensor sends it, so the caller decides the unit.
+pub fn imu(enc: Encoding, msg: &[u8]) -> Result<ImuMsg, MsgError> {
+    let mut c = Cursor::new(msg, enc)?;
+    let stamp_ns = c.header()?;
+    let vec3 =
+        |c: &mut Cursor<'_>| -> Result<[f64; 3], MsgError> { Ok([c.f64()?, c.f64()?, c.f64()?]) };
+    for _ in 0..4 {
+        c.f64()?; // orientation
+    }
+    for _ in 0..9 {
+        c.f64()?;
+    }
+    let angular_velocity = vec3(&mut c)?;
+    for _ in 0..9 {
+        c.f64()?;
+    }
+    let linear_acceleration = vec3(&mut c)?;
+    for _ in 0..9 {
+        c.f64()?;
+    }
+    c.end()?;
+    Ok(ImuMsg {
+        stamp_ns,
+        angular_velocity,
+        linear_acceleration,
+    })
 }
 
 /// Header + Packet[] where a packet is {time, uint8[N] data[, uint32 size]}.
@@ -485,6 +534,7 @@ impl fmt::Display for MsgKind {
             Self::RslidarPacket => "rslidar_msg/RslidarPacket",
             Self::StdString => "std_msgs/String",
             Self::LivoxCustomMsg => "livox_ros_driver CustomMsg",
+            Self::Imu => "sensor_msgs/Imu",
         };
         f.write_str(s)
     }
@@ -531,7 +581,15 @@ mod tests {
             MsgKind::from_type_name("ouster_sensor_msgs/msg/PacketMsg"),
             Some(MsgKind::OusterPacket)
         );
-        assert_eq!(MsgKind::from_type_name("sensor_msgs/msg/Imu"), None);
+        assert_eq!(
+            MsgKind::from_type_name("sensor_msgs/msg/Imu"),
+            Some(MsgKind::Imu)
+        );
+        assert_eq!(
+            MsgKind::from_type_name("sensor_msgs/Imu"),
+            Some(MsgKind::Imu)
+        );
+        assert_eq!(MsgKind::from_type_name("sensor_msgs/msg/PointCloud2"), None);
         assert_eq!(MsgKind::from_type_name("garbage"), None);
     }
 
@@ -585,6 +643,58 @@ mod tests {
         assert_eq!(string(Encoding::Ros1, &m), Ok((4, 5)));
         let cdr = [0, 1, 0, 0, 3, 0, 0, 0, b'{', b'}', 0];
         assert_eq!(string(Encoding::Cdr, &cdr), Ok((8, 2)));
+    }
+
+    /// A `sensor_msgs/Imu` written field by field from its definition: orientation,
+    /// angular velocity and linear acceleration, each followed by a 3 × 3 covariance.
+    fn imu_msg(cdr: bool, frame_id: &str) -> Vec<u8> {
+        let mut m: Vec<u8> = if cdr { vec![0, 1, 0, 0] } else { Vec::new() };
+        if !cdr {
+            m.extend_from_slice(&3_u32.to_le_bytes()); // seq
+        }
+        m.extend_from_slice(&1_700_000_000_u32.to_le_bytes());
+        m.extend_from_slice(&250_000_000_u32.to_le_bytes());
+        m.extend_from_slice(&((frame_id.len() + usize::from(cdr)) as u32).to_le_bytes());
+        m.extend_from_slice(frame_id.as_bytes());
+        if cdr {
+            m.push(0);
+            while (m.len() - 4) % 8 != 0 {
+                m.push(0);
+            }
+        }
+        let mut put = |vals: &[f64]| {
+            for v in vals {
+                m.extend_from_slice(&v.to_le_bytes());
+            }
+        };
+        put(&[0.0, 0.0, 0.0, 1.0]);
+        put(&[-1.0; 9]);
+        put(&[0.125, -0.5, 2.0]);
+        put(&[7.0; 9]);
+        put(&[0.01, -0.02, 0.998]);
+        put(&[9.0; 9]);
+        m
+    }
+
+    #[test]
+    fn imu_samples_of_both_encodings() {
+        // "imu_link" + NUL leaves the CDR doubles 3 bytes of padding to skip.
+        for (enc, m) in [
+            (Encoding::Ros1, imu_msg(false, "imu_link")),
+            (Encoding::Cdr, imu_msg(true, "imu_link")),
+            (Encoding::Cdr, imu_msg(true, "livox_frame")),
+        ] {
+            let got = imu(enc, &m).unwrap();
+            assert_eq!(got.stamp_ns, 1_700_000_000_250_000_000);
+            assert_eq!(got.angular_velocity, [0.125, -0.5, 2.0]);
+            assert_eq!(got.linear_acceleration, [0.01, -0.02, 0.998]);
+            for cut in 0..m.len() {
+                assert!(imu(enc, &m[..cut]).is_err(), "{enc:?} cut at {cut}");
+            }
+            let mut long = m.clone();
+            long.extend_from_slice(&[1; 8]);
+            assert_eq!(imu(enc, &long), Err(MsgError::Trailing { extra: 8 }));
+        }
     }
 
     #[test]

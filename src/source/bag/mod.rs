@@ -33,7 +33,18 @@
 //! - Livox `CustomMsg` (`livox_ros_driver2`, `livox_ros_driver`): points the driver decoded,
 //!   not packets. Each topic is one sensor; each message becomes one points frame
 //!   ([`crate::sensor::livox::frame`], the one "datagram" of that message, to 56301) that the
-//!   Livox stream turns into one sweep.
+//!   Livox stream turns into one sweep. The driver's IMU topic (`sensor_msgs/Imu`) belongs to
+//!   the `CustomMsg` topic of the same name with `imu` for `lidar` in its last segment
+//!   (`/livox/imu` → `/livox/lidar`; `/livox/imu_192_168_1_3` → `/livox/lidar_192_168_1_3`, as
+//!   both drivers name them), from its first message when the bag lists that topic up front
+//!   (ROS 1 index, sqlite3), else from the first after that topic's channel (MCAP); each
+//!   message becomes one IMU frame to 56401, so the samples reach
+//!   the Livox stream's IMU path (deskew, `/imu`) as the sensor's own IMU packets do. The
+//!   drivers publish the acceleration in g, as the sensor sends it, where the type says m/s²:
+//!   a topic whose first sample's magnitude is below √9.80665 ≈ 3.13 is read as g (a sensor
+//!   at rest reads 1 g; 3.13 m/s² would be a free fall of 68 %), the others as m/s². An `Imu`
+//!   topic with no such `CustomMsg` topic (a vehicle's IMU) is not read: counted in
+//!   [`BagStats::unknown_type`].
 //!
 //! The source port equals the destination port; the destination address is 127.0.0.1.
 //! [`BagSource::sensors`] lists the assignment.
@@ -80,6 +91,7 @@ use self::messages::{Encoding, MsgKind, PacketRef};
 use self::ros1::Ros1Reader;
 use self::rosbag2::{Compression, Metadata, SqliteReader};
 use super::Datagram;
+use crate::sensor::livox::frame;
 
 /// Largest chunk (ROS 1 compressed or uncompressed; MCAP record) accepted.
 pub const MAX_CHUNK_BYTES: usize = 256 << 20;
@@ -586,6 +598,24 @@ impl Messages {
         Ok(m)
     }
 
+    /// The global id of a connection of `topic` and of `kind` that the storage has told of,
+    /// whether or not a message of it has been read yet (the current file's connection
+    /// records so far: all of an indexed ROS 1 bag's, sqlite3's topics table, the MCAP
+    /// channels read).
+    fn known_connection(&mut self, topic: &str, kind: MsgKind) -> Option<u64> {
+        let is = |c: &Connection| {
+            c.topic == topic && MsgKind::from_type_name(&c.type_name) == Some(kind)
+        };
+        if let Some(g) = self.conns.iter().position(is) {
+            return Some(g as u64);
+        }
+        let (_, inner) = self.current.as_ref()?;
+        let (id, c) = inner.connections().into_iter().find(|(_, c)| is(c))?;
+        let g = self.localize(c);
+        self.local.insert(id, g);
+        Some(g)
+    }
+
     /// The global id of a connection (by topic name and type).
     fn global(&mut self, c: Connection) -> u64 {
         let key = (c.topic.clone(), c.type_name.clone());
@@ -891,6 +921,9 @@ enum Role {
     },
     /// Ouster metadata of a namespace.
     Metadata,
+    /// A `sensor_msgs/Imu` topic whose Livox `CustomMsg` topic has not been seen (yet): not
+    /// read, and asked again at its next message (the drivers' IMU often starts first).
+    Unpaired,
     Unselected,
     Unknown,
     /// Over the sensor limit.
@@ -927,15 +960,39 @@ pub struct BagSource {
     /// Ouster metadata by namespace (from the pre-scan and the stream).
     metadata: HashMap<String, String>,
     packets: Vec<PacketRef>,
-    /// The points frame of the current message when it is a Livox `CustomMsg`: its one
-    /// "packet" is this, not a range of the message.
+    /// The points frame of the current message when it is a Livox `CustomMsg` (or the IMU
+    /// frame of a `sensor_msgs/Imu`): its one "packet" is this, not a range of the message.
     frame: Vec<u8>,
+    /// Per sensor: the factor from its `Imu` messages' acceleration to m/s², once its first
+    /// sample has told the unit.
+    imu_accel_scale: HashMap<usize, f64>,
     frame_current: bool,
     cursor: usize,
     current: (usize, i64, bool),
     first_message_ns: Option<i64>,
     bounds: Option<(i64, i64)>,
     stats: BagStats,
+}
+
+/// The Livox `CustomMsg` topic an IMU topic belongs to: its last segment's leading `imu`
+/// replaced by `lidar` (the drivers' `/livox/imu[_<id>]` beside `/livox/lidar[_<id>]`).
+fn livox_lidar_topic(imu_topic: &str) -> Option<String> {
+    let (ns, leaf) = imu_topic.rsplit_once('/').unwrap_or(("", imu_topic));
+    let rest = leaf.strip_prefix("imu")?;
+    Some(format!("{ns}/lidar{rest}"))
+}
+
+/// The factor from a Livox driver's `Imu` acceleration to m/s², told by its first sample:
+/// the drivers publish g (the sensor's unit) where `sensor_msgs/Imu` says m/s². Below
+/// √g₀ ≈ 3.13 in magnitude it is g (at rest: 1), else m/s² (at rest: 9.8).
+fn accel_scale(a: [f64; 3]) -> f64 {
+    let g0 = crate::sensor::livox::model::STANDARD_GRAVITY;
+    let norm = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+    if norm < g0.sqrt() {
+        g0
+    } else {
+        1.0
+    }
 }
 
 /// The namespace of a topic (`/a/b/lidar_packets` → `/a/b`; `/lidar_packets` → `/`).
@@ -991,6 +1048,7 @@ impl BagSource {
             packets: Vec::new(),
             frame: Vec::new(),
             frame_current: false,
+            imu_accel_scale: HashMap::new(),
             cursor: 0,
             current: (0, 0, false),
             first_message_ns: None,
@@ -1041,7 +1099,9 @@ impl BagSource {
             },
             Some(c) => self.new_route(&c),
         };
-        self.routes.insert(g, route);
+        if route.role != Role::Unpaired {
+            self.routes.insert(g, route);
+        }
         route
     }
 
@@ -1075,6 +1135,38 @@ impl BagSource {
                 kind: Some(kind),
                 encoding,
                 role: Role::Unselected,
+            };
+        }
+        if kind == MsgKind::Imu {
+            let lidar = livox_lidar_topic(&c.topic).unwrap_or_default();
+            let find = |me: &Self| {
+                me.sensors
+                    .iter()
+                    .position(|s| s.family == Family::Livox && s.namespace == lidar)
+            };
+            if find(self).is_none() {
+                // The CustomMsg topic may be known before its first message (a ROS 1 index,
+                // the sqlite3 topics table): its sensor is made now, so the IMU samples that
+                // come first (the drivers publish a frame only once it is complete) are kept.
+                if let Some(g) = self
+                    .messages
+                    .known_connection(&lidar, MsgKind::LivoxCustomMsg)
+                {
+                    self.route(g);
+                }
+            }
+            let Some(sensor) = find(self) else {
+                return Route {
+                    kind: Some(kind),
+                    encoding,
+                    role: Role::Unpaired,
+                };
+            };
+            self.sensors[sensor].topics.push(c.topic.clone());
+            return Route {
+                kind: Some(kind),
+                encoding,
+                role: Role::Packets { sensor, imu: true },
             };
         }
         let (key, family) = match kind {
@@ -1204,7 +1296,7 @@ impl BagSource {
                 )
             });
             match route.role {
-                Role::Unknown => self.stats.unknown_type += 1,
+                Role::Unknown | Role::Unpaired => self.stats.unknown_type += 1,
                 Role::Unselected => self.stats.unselected += 1,
                 Role::Metadata => {
                     self.stats.metadata_messages += 1;
@@ -1226,19 +1318,37 @@ impl BagSource {
                 Role::Packets { sensor, imu } => {
                     let kind = route.kind.unwrap_or(MsgKind::StdString);
                     let msg = self.messages.message();
-                    self.frame_current = kind == MsgKind::LivoxCustomMsg;
-                    let read = if self.frame_current {
-                        messages::livox_custom(route.encoding, msg, &mut self.frame).map(|stamp| {
+                    self.frame_current = matches!(kind, MsgKind::LivoxCustomMsg | MsgKind::Imu);
+                    let stamp = match kind {
+                        MsgKind::LivoxCustomMsg => {
+                            messages::livox_custom(route.encoding, msg, &mut self.frame).map(Some)
+                        }
+                        MsgKind::Imu => messages::imu(route.encoding, msg).map(|m| {
+                            let scale = *self
+                                .imu_accel_scale
+                                .entry(sensor)
+                                .or_insert_with(|| accel_scale(m.linear_acceleration));
+                            frame::write_imu(
+                                &mut self.frame,
+                                u64::try_from(m.stamp_ns).unwrap_or(0),
+                                m.angular_velocity,
+                                m.linear_acceleration.map(|a| a * scale),
+                            );
+                            Some(m.stamp_ns)
+                        }),
+                        _ => messages::packets(kind, route.encoding, msg, &mut self.packets)
+                            .map(|()| None),
+                    };
+                    let read = stamp.map(|stamp| {
+                        if let Some(stamp) = stamp {
                             self.packets.push(PacketRef {
                                 start: 0,
                                 len: self.frame.len(),
                                 stamp_ns: Some(stamp),
                                 difop: false,
                             });
-                        })
-                    } else {
-                        messages::packets(kind, route.encoding, msg, &mut self.packets)
-                    };
+                        }
+                    });
                     match read {
                         Ok(()) => {
                             self.stats.packet_messages += 1;
