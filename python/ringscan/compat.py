@@ -6,7 +6,9 @@ a cut angle, unless ``cut_angle`` is set; a packet more than 0.3 s after the fra
 a new one), same ``(stamp, points)`` tuples: ``stamp`` a ``TimePair(host, device)`` of the
 frame's last packet (first with ``timestamp_first_packet``), ``points`` an ``(N, 8)`` float32
 array ``x, y, z, intensity, time, column, ring, return_type`` (time in seconds relative to the
-stamp; return type 1 strongest, 2 last, 3 both), or with ``as_pcl_structs=True`` the
+stamp; return type 1 strongest, 2 last, 3 both; with an advanced calibration, the HDL-64E's,
+``intensity`` is velodyne_decoder's focal correction of the raw one), or with
+``as_pcl_structs=True`` the
 PCL-compatible structured array. Decoded by ringscan's Velodyne decoder; points agree with
 velodyne_decoder 3.1.0 within its azimuth quantisation (see python/tests/test_compat.py).
 """

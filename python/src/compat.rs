@@ -5,7 +5,8 @@
 //! half a turn; a packet more than 0.3 s (capture time) after the frame's first one starts the
 //! next frame. Its record: 8 float32 per point, `x, y, z, intensity, time, column, ring,
 //! return_type` (time in s relative to the frame's stamp, return type 1 strongest, 2 last,
-//! 3 both).
+//! 3 both; with an advanced calibration, the HDL-64E's, intensity is the focal correction of
+//! the raw one, as velodyne_decoder's `unpackPoint` gives it).
 
 use std::path::PathBuf;
 use std::sync::mpsc::{self, Receiver, SyncSender};
@@ -16,6 +17,7 @@ use pyo3::prelude::*;
 
 use ringscan::sensor::velodyne::calib::builtin::builtin;
 use ringscan::sensor::velodyne::calib::parse_velodyne;
+use ringscan::sensor::velodyne::decode::corrected_intensity;
 use ringscan::sensor::velodyne::model::{BLOCKS, DATA_PACKET_LEN};
 use ringscan::sensor::velodyne::wire::DataPacket;
 use ringscan::sensor::velodyne::{ReturnMode, VelodyneCalibration, VelodyneDecoder, VelodyneModel};
@@ -193,16 +195,22 @@ impl FrameDecoder {
                 .window
                 .map(|w| Window::new(w, self.model, mode, &packet));
             let laser_of_ring = &self.laser_of_ring;
+            let (model, calib, bytes) = (self.model, &self.calib, &p.bytes[..]);
             decoder.decode_with(&packet, 0..BLOCKS, 0, |pt, col| {
+                let laser = laser_of_ring
+                    .get(usize::from(pt.ring))
+                    .copied()
+                    .unwrap_or(0);
                 if let Some(w) = &window {
-                    let laser = laser_of_ring
-                        .get(usize::from(pt.ring))
-                        .copied()
-                        .unwrap_or(0);
                     if !w.keeps(&packet, col, laser, pt.t) {
                         return;
                     }
                 }
+                let intensity = if calib.advanced {
+                    advanced_intensity(model, calib, bytes, dual, col, laser, pt.ret, pt.intensity)
+                } else {
+                    pt.intensity
+                };
                 let ret_type = if pt.ret == 0 { 1.0 } else { 2.0 };
                 if dual {
                     slot_seen.push((col, pt.ring, data.len()));
@@ -211,7 +219,7 @@ impl FrameDecoder {
                     pt.x,
                     pt.y,
                     pt.z,
-                    pt.intensity,
+                    intensity,
                     (dt_s + f64::from(pt.t) * 1e-9) as f32,
                     (base + col as i64) as f32,
                     f32::from(pt.ring),
@@ -227,7 +235,7 @@ impl FrameDecoder {
                     start,
                     &p.bytes[..],
                     &self.laser_of_ring,
-                    self.model.lasers(),
+                    self.model,
                 );
             }
             if let Some(c) = last_col {
@@ -335,29 +343,93 @@ impl Window {
     }
 }
 
+/// The blocks holding the last and the strongest return of laser `laser` in firing column
+/// `col` of a dual-return packet, and the laser's slot in them (velodyne_decoder 3.1.0's
+/// pairing, from the manuals' dual-return layouts): VLP-16 / 32-laser models, blocks `2k`
+/// (last) and `2k + 1` (strongest); HDL-64E, the strongest in block `4c + bank` and the last two
+/// blocks later (upper, lower, upper, lower); VLS-128, one column a packet, bank `b`'s last in
+/// block `2b` and its strongest in `2b + 1`.
+fn dual_pair(model: VelodyneModel, col: usize, laser: usize) -> (usize, usize, usize) {
+    match model {
+        VelodyneModel::Hdl64eS2 | VelodyneModel::Hdl64eS3 => {
+            let strongest = 4 * col + laser / 32;
+            (strongest + 2, strongest, laser % 32)
+        }
+        VelodyneModel::Vls128 => (2 * (laser / 32), 2 * (laser / 32) + 1, laser % 32),
+        _ => {
+            let lasers = model.lasers().max(1);
+            let firings = (32 / lasers).max(1);
+            let (pair, seq) = (col / firings, col % firings);
+            (2 * pair, 2 * pair + 1, seq * lasers + laser)
+        }
+    }
+}
+
+/// The block and slot of laser `laser`'s measurement in firing column `col` of a
+/// single-return packet: VLP-16 two firings a block, 32-laser models one, HDL-64E an upper and
+/// a lower block a column, VLS-128 four banks a column.
+fn single_slot(model: VelodyneModel, col: usize, laser: usize) -> (usize, usize) {
+    match model {
+        VelodyneModel::Hdl64eS2 | VelodyneModel::Hdl64eS3 => (2 * col + laser / 32, laser % 32),
+        VelodyneModel::Vls128 => (4 * col + laser / 32, laser % 32),
+        _ => {
+            let lasers = model.lasers().max(1);
+            let firings = (32 / lasers).max(1);
+            (col / firings, (col % firings) * lasers + laser)
+        }
+    }
+}
+
+/// velodyne_decoder's intensity with an advanced calibration (the HDL-64E's): the focal
+/// formula on the point's raw reflectivity and raw distance ([`corrected_intensity`]), read
+/// from the block and slot that hold the point (`ret` 0: the strongest or only return).
+#[allow(clippy::too_many_arguments)]
+fn advanced_intensity(
+    model: VelodyneModel,
+    calib: &VelodyneCalibration,
+    bytes: &[u8],
+    dual: bool,
+    col: usize,
+    laser: usize,
+    ret: u8,
+    raw_intensity: f32,
+) -> f32 {
+    let (block, slot) = if dual {
+        let (last, strongest, slot) = dual_pair(model, col, laser);
+        (if ret == 0 { strongest } else { last }, slot)
+    } else {
+        single_slot(model, col, laser)
+    };
+    let o = block * 100 + 4 + slot * 3;
+    match (bytes.get(o..o + 2), calib.lasers.get(laser)) {
+        (Some(d), Some(l)) => {
+            corrected_intensity(l, raw_intensity as u8, u16::from_le_bytes([d[0], d[1]]))
+        }
+        _ => raw_intensity,
+    }
+}
+
 /// Sets return type 3 on the points of a dual packet whose firing had equal last and
-/// strongest distances (the decoder then gives one point): blocks `2k` (last) and `2k + 1`
-/// (strongest) hold the same measurement.
+/// strongest distances (the decoder then gives one point, the strongest's, as
+/// velodyne_decoder does).
 fn mark_both(
     records: &mut [f32],
     seen: &[(usize, u16, usize)],
     start: usize,
     bytes: &[u8],
     laser_of_ring: &[usize],
-    lasers: usize,
+    model: VelodyneModel,
 ) {
-    let firings = (32 / lasers.max(1)).max(1);
     for &(col, ring, at) in seen {
         let Some(&laser) = laser_of_ring.get(usize::from(ring)) else {
             continue;
         };
-        let (pair, seq) = (col / firings, col % firings);
-        let slot = seq * lasers + laser;
+        let (last_block, strongest_block, slot) = dual_pair(model, col, laser);
         let at_block = |b: usize| {
             let o = b * 100 + 4 + slot * 3;
             bytes.get(o..o + 2)
         };
-        let (last, strongest) = (at_block(2 * pair), at_block(2 * pair + 1));
+        let (last, strongest) = (at_block(last_block), at_block(strongest_block));
         if last.is_some() && last == strongest {
             if let Some(v) = records.get_mut(at - start + 7) {
                 *v = 3.0;
