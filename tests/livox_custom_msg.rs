@@ -228,16 +228,17 @@ fn mcap_str(s: &str) -> Vec<u8> {
 /// messages, footer (no summary).
 fn cdr_mcap(topic: &str, type_name: &str, msgs: &[(i64, Vec<u8>)]) -> Vec<u8> {
     let msgs: Vec<_> = msgs.iter().map(|(t, b)| (0, *t, b.clone())).collect();
-    cdr_mcap_of(&[(topic, type_name)], &msgs)
+    cdr_mcap_of(&[(topic, type_name)], &msgs, true)
 }
 
 /// The same with several channels (topic, type), their schema and channel records first (as
-/// a recorder that subscribed to every topic at its start writes them); messages (channel
-/// index, log time, body).
-fn cdr_mcap_of(chans: &[(&str, &str)], msgs: &[(usize, i64, Vec<u8>)]) -> Vec<u8> {
+/// a recorder that subscribed to every topic at its start writes them), or, `!upfront`, each
+/// just before its channel's first message; messages (channel index, log time, body).
+fn cdr_mcap_of(chans: &[(&str, &str)], msgs: &[(usize, i64, Vec<u8>)], upfront: bool) -> Vec<u8> {
     let mut f = b"\x89MCAP0\r\n".to_vec();
     f.extend(mcap_record(0x01, &[mcap_str(""), mcap_str("t")].concat()));
-    for (i, (topic, type_name)) in chans.iter().enumerate() {
+    let channel = |f: &mut Vec<u8>, i: usize| {
+        let (topic, type_name) = chans[i];
         let id = i as u16 + 1;
         let mut schema = id.to_le_bytes().to_vec();
         schema.extend(mcap_str(type_name));
@@ -250,8 +251,16 @@ fn cdr_mcap_of(chans: &[(&str, &str)], msgs: &[(usize, i64, Vec<u8>)]) -> Vec<u8
         channel.extend(mcap_str("cdr"));
         channel.extend_from_slice(&0u32.to_le_bytes()); // metadata: empty map
         f.extend(mcap_record(0x04, &channel));
+    };
+    let mut written = vec![upfront; chans.len()];
+    if upfront {
+        (0..chans.len()).for_each(|i| channel(&mut f, i));
     }
     for (seq, (c, t, body)) in msgs.iter().enumerate() {
+        if !written[*c] {
+            written[*c] = true;
+            channel(&mut f, *c);
+        }
         let id = *c as u16 + 1;
         let mut m = id.to_le_bytes().to_vec();
         m.extend_from_slice(&(seq as u32).to_le_bytes());
@@ -431,12 +440,12 @@ fn the_drivers_imu_topic_gives_the_imu_packets_samples() {
         (
             "CDR MCAP, g",
             "imu.mcap",
-            cdr_mcap_of(&ros2, &build(true, false)),
+            cdr_mcap_of(&ros2, &build(true, false), true),
         ),
         (
             "CDR MCAP, m/s²",
             "imu-mps2.mcap",
-            cdr_mcap_of(&ros2, &build(true, true)),
+            cdr_mcap_of(&ros2, &build(true, true), true),
         ),
     ] {
         let (got, imu, src) = bag_run(&temp_file(name, &bytes));
@@ -448,6 +457,27 @@ fn the_drivers_imu_topic_gives_the_imu_packets_samples() {
         assert_eq!(s.len(), 1, "{what}");
         assert_eq!(s[0].topics, ["/livox/lidar", "/livox/imu"], "{what}");
     }
+    // An MCAP whose CustomMsg channel is written only before its first message: the IMU
+    // messages before that cannot be paired (counted), and every one from there on is read.
+    let msgs = build(true, false);
+    let first_frame = msgs.iter().find(|m| m.0 == 0).map(|m| m.1).unwrap();
+    let (got, imu, src) = bag_run(&temp_file(
+        "imu-late.mcap",
+        &cdr_mcap_of(&ros2, &msgs, false),
+    ));
+    check("late channel", &sweeps, &got);
+    let after: Vec<Sample> = samples
+        .iter()
+        .filter(|m| m.0 as i64 >= first_frame)
+        .copied()
+        .collect();
+    assert!(!after.is_empty() && after.len() < samples.len());
+    assert_eq!(
+        imu, after,
+        "late channel: the samples from the first frame on"
+    );
+    let before = (samples.len() - after.len()) as u64;
+    assert_eq!(src.stats().unknown_type, 3 + before, "late channel");
     // Through `decode`: the samples reach the IMU deskew and `/imu`; the same CustomMsgs
     // without their IMU topic leave `--deskew imu` nothing to deskew with.
     #[cfg(feature = "cli")]

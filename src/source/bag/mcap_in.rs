@@ -109,6 +109,11 @@ impl<R: Read> McapReader<R> {
         u16::try_from(id).ok().and_then(|i| self.channels.get(&i))
     }
 
+    /// How many channels [`Self::connections`] lists (it only grows).
+    pub fn connection_count(&self) -> usize {
+        self.order.len()
+    }
+
     /// Every channel known so far, in order of appearance.
     pub fn connections(&self) -> Vec<(u64, Connection)> {
         self.order

@@ -37,7 +37,9 @@
 //!   the `CustomMsg` topic of the same name with `imu` for `lidar` in its last segment
 //!   (`/livox/imu` → `/livox/lidar`; `/livox/imu_192_168_1_3` → `/livox/lidar_192_168_1_3`, as
 //!   both drivers name them), from its first message when the bag lists that topic up front
-//!   (ROS 1 index, sqlite3), else from the first after that topic's channel (MCAP); each
+//!   (ROS 1 index, sqlite3, an MCAP whose channels come first), else from the first after that
+//!   topic's connection record (the question is asked again only when a sensor or a
+//!   connection has been added, not at every message); each
 //!   message becomes one IMU frame to 56401, so the samples reach
 //!   the Livox stream's IMU path (deskew, `/imu`) as the sensor's own IMU packets do. The
 //!   drivers publish the acceleration in g, as the sensor sends it, where the type says m/s²:
@@ -466,6 +468,14 @@ impl Inner {
         }
     }
 
+    fn connection_count(&self) -> usize {
+        match self {
+            Self::Ros1(r) => r.connection_count(),
+            Self::Sqlite(r, _) => r.connection_count(),
+            Self::Mcap(r) => r.connection_count(),
+        }
+    }
+
     fn connections(&self) -> Vec<(u64, Connection)> {
         match self {
             Self::Ros1(r) => r.connections(),
@@ -596,6 +606,16 @@ impl Messages {
         }
         m.next_file()?;
         Ok(m)
+    }
+
+    /// What the storage has told of connections so far: it changes when a connection or a
+    /// file is added, so a question about them need not be asked again before.
+    fn connections_seen(&self) -> (usize, usize) {
+        let inner = self
+            .current
+            .as_ref()
+            .map_or(0, |(_, i)| i.connection_count());
+        (self.conns.len(), inner)
     }
 
     /// The global id of a connection of `topic` and of `kind` that the storage has told of,
@@ -922,8 +942,11 @@ enum Role {
     /// Ouster metadata of a namespace.
     Metadata,
     /// A `sensor_msgs/Imu` topic whose Livox `CustomMsg` topic has not been seen (yet): not
-    /// read, and asked again at its next message (the drivers' IMU often starts first).
-    Unpaired,
+    /// read, and asked again once the sensors or the connections known have changed since
+    /// `seen` (sensor count, [`Messages::connections_seen`]).
+    Unpaired {
+        seen: (usize, (usize, usize)),
+    },
     Unselected,
     Unknown,
     /// Over the sensor limit.
@@ -963,9 +986,9 @@ pub struct BagSource {
     /// The points frame of the current message when it is a Livox `CustomMsg` (or the IMU
     /// frame of a `sensor_msgs/Imu`): its one "packet" is this, not a range of the message.
     frame: Vec<u8>,
-    /// Per sensor: the factor from its `Imu` messages' acceleration to m/s², once its first
-    /// sample has told the unit.
-    imu_accel_scale: HashMap<usize, f64>,
+    /// Per sensor (by index): the factor from its `Imu` messages' acceleration to m/s², once
+    /// its first sample has told the unit.
+    imu_accel_scale: Vec<Option<f64>>,
     frame_current: bool,
     cursor: usize,
     current: (usize, i64, bool),
@@ -1048,7 +1071,7 @@ impl BagSource {
             packets: Vec::new(),
             frame: Vec::new(),
             frame_current: false,
-            imu_accel_scale: HashMap::new(),
+            imu_accel_scale: Vec::new(),
             cursor: 0,
             current: (0, 0, false),
             first_message_ns: None,
@@ -1088,7 +1111,10 @@ impl BagSource {
     /// their addresses.
     fn route(&mut self, g: u64) -> Route {
         if let Some(r) = self.routes.get(&g) {
-            return *r;
+            match r.role {
+                Role::Unpaired { seen } if seen != self.pairing_state() => {}
+                _ => return *r,
+            }
         }
         let conn = self.messages.connection(g).cloned();
         let route = match conn {
@@ -1099,10 +1125,13 @@ impl BagSource {
             },
             Some(c) => self.new_route(&c),
         };
-        if route.role != Role::Unpaired {
-            self.routes.insert(g, route);
-        }
+        self.routes.insert(g, route);
         route
+    }
+
+    /// What an unpaired `Imu` topic's answer depends on.
+    fn pairing_state(&self) -> (usize, (usize, usize)) {
+        (self.sensors.len(), self.messages.connections_seen())
     }
 
     fn new_route(&mut self, c: &Connection) -> Route {
@@ -1159,7 +1188,9 @@ impl BagSource {
                 return Route {
                     kind: Some(kind),
                     encoding,
-                    role: Role::Unpaired,
+                    role: Role::Unpaired {
+                        seen: self.pairing_state(),
+                    },
                 };
             };
             self.sensors[sensor].topics.push(c.topic.clone());
@@ -1296,7 +1327,7 @@ impl BagSource {
                 )
             });
             match route.role {
-                Role::Unknown | Role::Unpaired => self.stats.unknown_type += 1,
+                Role::Unknown | Role::Unpaired { .. } => self.stats.unknown_type += 1,
                 Role::Unselected => self.stats.unselected += 1,
                 Role::Metadata => {
                     self.stats.metadata_messages += 1;
@@ -1324,10 +1355,11 @@ impl BagSource {
                             messages::livox_custom(route.encoding, msg, &mut self.frame).map(Some)
                         }
                         MsgKind::Imu => messages::imu(route.encoding, msg).map(|m| {
-                            let scale = *self
-                                .imu_accel_scale
-                                .entry(sensor)
-                                .or_insert_with(|| accel_scale(m.linear_acceleration));
+                            if self.imu_accel_scale.len() <= sensor {
+                                self.imu_accel_scale.resize(sensor + 1, None);
+                            }
+                            let scale = *self.imu_accel_scale[sensor]
+                                .get_or_insert_with(|| accel_scale(m.linear_acceleration));
                             frame::write_imu(
                                 &mut self.frame,
                                 u64::try_from(m.stamp_ns).unwrap_or(0),

@@ -238,6 +238,11 @@ impl<R: Read> Ros1Reader<R> {
             .and_then(|i| self.connections.get(&i))
     }
 
+    /// How many connections [`Self::connections`] lists (it only grows).
+    pub fn connection_count(&self) -> usize {
+        self.order.len()
+    }
+
     /// Every connection known so far, in order of appearance.
     pub fn connections(&self) -> Vec<(u64, Connection)> {
         self.order

@@ -294,6 +294,11 @@ impl SqliteReader {
         i64::try_from(id).ok().and_then(|i| self.topics.get(&i))
     }
 
+    /// How many topics [`Self::connections`] lists.
+    pub fn connection_count(&self) -> usize {
+        self.order.len()
+    }
+
     /// Every topic, in id order.
     pub fn connections(&self) -> Vec<(u64, Connection)> {
         self.order
