@@ -307,25 +307,12 @@ impl Window {
     /// Whether the point of firing column `col` (in the packet), laser `laser` and firing
     /// time `t_ns` (after the packet's first firing) is inside the window.
     fn keeps(&self, p: &DataPacket<'_>, col: usize, laser: usize, t_ns: u32) -> bool {
-        let dual = self.mode.is_dual();
-        let bank = laser / 32;
-        let block = match self.model {
-            VelodyneModel::Vlp16 | VelodyneModel::PuckHiRes => (col / 2) * if dual { 2 } else { 1 },
-            VelodyneModel::Vlp32c | VelodyneModel::Hdl32e => col * if dual { 2 } else { 1 },
-            VelodyneModel::Hdl64eS2 | VelodyneModel::Hdl64eS3 => {
-                if dual {
-                    4 * col + bank
-                } else {
-                    2 * col + bank
-                }
-            }
-            VelodyneModel::Vls128 => {
-                if dual {
-                    2 * bank
-                } else {
-                    4 * col + bank
-                }
-            }
+        // The block that holds the point; in dual return, the first of its pair.
+        let block = if self.mode.is_dual() {
+            let (last, strongest, _) = dual_pair(self.model, col, laser);
+            last.min(strongest)
+        } else {
+            single_slot(self.model, col, laser).0
         };
         if block >= BLOCKS {
             return false;
