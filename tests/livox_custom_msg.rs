@@ -527,6 +527,34 @@ fn the_drivers_imu_topic_gives_the_imu_packets_samples() {
             let imu_msgs = j["output"]["topics"]["/imu"].as_u64().unwrap_or(0);
             assert_eq!(imu_msgs, imu as u64, "{name}");
             assert_eq!(j["pipeline"]["deskew"], "imu", "{name}");
+            // `replay` sends none of it: points and IMU samples a driver decoded were never
+            // on the wire.
+            let out = std::process::Command::new(env!("CARGO_BIN_EXE_ringscan"))
+                .arg("replay")
+                .arg(&path)
+                .args([
+                    "--to",
+                    "127.0.0.1",
+                    "--port-offset",
+                    "1000",
+                    "--rate",
+                    "max",
+                    "--json",
+                ])
+                .output()
+                .unwrap();
+            assert!(
+                out.status.success(),
+                "{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+            let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+            assert_eq!(r["sent"], 0, "{name}: {r}");
+            assert_eq!(
+                r["skipped_decoded_messages"],
+                sweeps.len() + imu,
+                "{name}: {r}"
+            );
             assert_eq!(
                 j["pipeline"]["deskew_skipped"], skipped,
                 "{name}: {}",

@@ -139,10 +139,8 @@ pub fn replay_command(args: &ReplayArgs) -> Result<ExitCode, RunError> {
                     std::thread::sleep(due - now);
                 }
             }
-            // Points and IMU samples a ROS driver decoded (a CustomMsg bag's frames) were
-            // never on the wire.
-            use crate::sensor::livox::frame::{ImuFrame, PointsFrame};
-            if PointsFrame::is_frame(d.payload) || ImuFrame::is_frame(d.payload) {
+            // Data a ROS driver decoded (a bag's points or IMU frames) was never on the wire.
+            if crate::sensor::is_decoded_frame(d.payload) {
                 decoded_frames += 1;
                 continue;
             }

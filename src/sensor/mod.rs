@@ -75,6 +75,12 @@ pub fn claim(d: &FirstDatagram<'_>, pool: &mut CalibrationPool) -> Option<Claime
     FAMILIES.iter().find_map(|f| f.claim(d, pool))
 }
 
+/// Whether some family says `payload` is data a driver decoded, not a packet
+/// ([`Family::is_decoded_frame`]).
+pub fn is_decoded_frame(payload: &[u8]) -> bool {
+    FAMILIES.iter().any(|f| f.is_decoded_frame(payload))
+}
+
 /// Reads a calibration file with the first family that recognises its format.
 pub fn parse_calibration(
     bytes: &[u8],
@@ -132,6 +138,13 @@ pub trait Family: Sync {
     /// datagram to the next family. An error is a sensor the family recognised but cannot
     /// decode with what it was given.
     fn claim(&self, datagram: &FirstDatagram<'_>, pool: &mut CalibrationPool) -> Option<Claimed>;
+
+    /// Whether `payload` is not a packet but data a ROS driver decoded already, handed on by
+    /// a bag source in a layout of the family's own (Livox `CustomMsg` points and IMU samples):
+    /// it was never on the wire, so `replay` does not send it.
+    fn is_decoded_frame(&self, _payload: &[u8]) -> bool {
+        false
+    }
 
     /// The lines `ringscan info` prints for one of its sensors, from the sensor's entry in the
     /// summary ([`SensorStream::summary`]). The family words them because only it knows which

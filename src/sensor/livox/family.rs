@@ -47,7 +47,7 @@ pub fn detect_protocol(payload: &[u8]) -> Option<Protocol> {
 
 /// Builds the stream configuration for a first datagram, or `None` when it is not Livox's.
 pub fn config_for(d: &FirstDatagram<'_>, named: Option<LivoxModel>) -> Option<LivoxConfig> {
-    if PointsFrame::is_frame(d.payload) || ImuFrame::is_frame(d.payload) {
+    if Livox.is_decoded_frame(d.payload) {
         // Points a ROS driver decoded (a bag's CustomMsg): no packet says the model.
         let mut cfg = LivoxConfig::new(named, Protocol::Sdk2);
         cfg.detection = "livox_ros_driver CustomMsg points (decoded by the driver)".to_string();
@@ -100,6 +100,10 @@ impl Family for Livox {
         _file_name: &str,
     ) -> Option<Result<Arc<dyn Any + Send + Sync>, CalibError>> {
         None
+    }
+
+    fn is_decoded_frame(&self, payload: &[u8]) -> bool {
+        PointsFrame::is_frame(payload) || ImuFrame::is_frame(payload)
     }
 
     /// MID-360 points / IMU, HAP points / IMU, and the SDK1 data ports Livox-SDK hands the
