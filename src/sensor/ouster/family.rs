@@ -127,11 +127,17 @@ impl Family for Ouster {
             .candidates(self.name(), d.src, true)
             .find_map(|(i, c)| {
                 let oc = c.get::<OusterCalibration>()?;
-                oc.fits(d)
-                    .then(|| (i, oc.info.clone(), c.file_name.clone()))
+                oc.fits(d).then(|| {
+                    (
+                        i,
+                        (oc.info.clone(), oc.decoder.clone()),
+                        c.file_name.clone(),
+                    )
+                })
             })?;
         pool.mark_used(idx);
         let s = &pool.settings;
+        let (cal, decoder) = cal;
         let cfg = OusterStreamConfig {
             info: cal,
             metadata_name: name,
@@ -141,7 +147,7 @@ impl Family for Ouster {
             keep_columns: s.keep_columns,
         };
         Some(
-            OusterStream::new(cfg)
+            OusterStream::with_decoder(cfg, decoder)
                 .map(|s| Box::new(s) as Box<dyn SensorStream>)
                 .map_err(StreamError::Decode),
         )

@@ -166,6 +166,20 @@ impl OusterStream {
     /// A new stream; fails if the metadata cannot make a decoder.
     pub fn new(cfg: OusterStreamConfig) -> Result<Self, DecodeError> {
         let decoder = Self::make_decoder(&cfg, &cfg.info)?;
+        Self::with_decoder(cfg, decoder)
+    }
+
+    /// A new stream around `decoder`, already made from `cfg.info` (the one a calibration
+    /// built when its file was read: the stream then does not compute its XYZ table again);
+    /// `cfg.crc` still applies.
+    pub fn with_decoder(
+        cfg: OusterStreamConfig,
+        decoder: OusterDecoder,
+    ) -> Result<Self, DecodeError> {
+        let decoder = match cfg.crc {
+            Some(on) => decoder.with_crc_check(on),
+            None => decoder,
+        };
         let info = &cfg.info;
         let clock = if info.timestamp_mode == TimestampMode::Ptp1588 {
             ClockSource::SensorPtp
