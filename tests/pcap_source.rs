@@ -13,6 +13,7 @@ use std::path::{Path, PathBuf};
 use ringscan::source::pcap::{
     FileFormat, PcapSource, SourceError, SourceStats, DEFAULT_RECORD_LIMIT, MAX_RECORD_LIMIT,
 };
+use ringscan::source::read_ahead::{ReadAhead, BLOCK};
 use ringscan::source::reassembly::ReassemblyConfig;
 
 // ----- allocation accounting (this thread only, so parallel tests do not disturb it) ---------
@@ -1727,5 +1728,125 @@ fn real_ouster_captures() {
     for (file, fragments) in [("same_ports.pcap", 21), ("same_ports_nonlegacy.pcap", 24)] {
         let (_, _, stats) = census(&dir.join(file));
         assert_eq!(stats.fragments, fragments, "{file}");
+    }
+}
+
+// ----- read ahead -----------------------------------------------------------------------------
+
+/// The same file through [`PcapSource::read_ahead`]: records parsed inside the reading
+/// thread's blocks, the ones that straddle two blocks copied.
+fn read_ahead_bytes(file: Vec<u8>) -> (Vec<Got>, SourceStats) {
+    let ahead = ReadAhead::spawn(Cursor::new(file), "test-read-ahead").expect("thread");
+    read_all(PcapSource::<Cursor<Vec<u8>>>::read_ahead(ahead).expect("valid header"))
+}
+
+/// Over three blocks of records of every size (whole, fragmented, not UDP, cut short by the
+/// snaplen), so that records straddle each block boundary at varied offsets.
+fn many_records() -> Vec<u8> {
+    let mut recs = Vec::new();
+    let mut bytes = 0;
+    let mut i = 0usize;
+    while bytes < 3 * BLOCK + 100_000 {
+        let (src, dst, _) = sample(i);
+        let payload = pattern(1 + (i * 7919) % 9000, i as u8);
+        let t = 1_700_000_000_000_000_000 + i as i64 * 1000;
+        match i % 11 {
+            3 => {
+                for f in fragments(src, dst, i as u16, &payload, 1480) {
+                    recs.push(rec(t, ethernet(&f, &[])));
+                }
+            }
+            7 => recs.push(rec(t, ethernet_type(0x0806, &pattern(28, 1)))),
+            9 => {
+                let mut r = rec(t, ethernet(&udp_ipv4(src, dst, i as u16, &payload), &[]));
+                let keep = r.data.len() / 2;
+                r.origlen = Some(r.data.len() as u32);
+                r.data.truncate(keep);
+                recs.push(r);
+            }
+            _ => recs.push(rec(
+                t,
+                ethernet(&udp_ipv4(src, dst, i as u16, &payload), &[]),
+            )),
+        }
+        bytes = recs.iter().map(|r| r.data.len() + 16).sum::<usize>();
+        i += 1;
+    }
+    classic(false, true, 1, &recs)
+}
+
+#[test]
+fn read_ahead_gives_the_datagrams_and_counts_of_the_record_buffer() {
+    let file = many_records();
+    let (want, want_stats) = read_bytes(&file);
+    assert!(want.len() > 500 && want_stats.reassembled > 0 && want_stats.non_udp > 0);
+    assert!(want_stats.truncated_records > 0, "{want_stats:?}");
+    let (got, got_stats) = read_ahead_bytes(file.clone());
+    assert_eq!(got_stats, want_stats);
+    assert!(got == want, "datagrams differ");
+    // A file cut anywhere (inside a record header, a body, at a block boundary) ends the same
+    // way: the same datagrams, the same truncated tail.
+    for cut in [
+        BLOCK - 7,
+        BLOCK,
+        BLOCK + 9,
+        2 * BLOCK + 3333,
+        file.len() - 1,
+        30,
+    ] {
+        let part = file[..cut].to_vec();
+        let (want, want_stats) = read_bytes(&part);
+        let (got, got_stats) = read_ahead_bytes(part);
+        assert_eq!(got_stats, want_stats, "cut at {cut}");
+        assert!(got == want, "cut at {cut}: datagrams differ");
+    }
+}
+
+#[test]
+fn read_ahead_reads_pcapng_through_its_copies() {
+    let (src, dst, payload) = sample(3);
+    let mut blocks = vec![Ng::Shb { big: false }, idb(1)];
+    for i in 0..400u64 {
+        let data = ethernet(
+            &udp_ipv4(src, dst, i as u16, &payload[..(i as usize % 100) + 1]),
+            &[],
+        );
+        blocks.push(epb(0, 1_000_000 + i, data));
+    }
+    let file = pcapng(&blocks);
+    let (want, want_stats) = read_bytes(&file);
+    assert_eq!(want.len(), 400);
+    let (got, got_stats) = read_ahead_bytes(file);
+    assert_eq!(got_stats, want_stats);
+    assert!(got == want);
+}
+
+#[test]
+fn read_ahead_equals_the_record_buffer_on_every_real_capture() {
+    let Some(dir) = captures() else { return };
+    let mut files = Vec::new();
+    let mut stack = vec![dir];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                stack.push(p);
+            } else if p.extension().is_some_and(|x| x == "pcap" || x == "pcapng") {
+                files.push(p);
+            }
+        }
+    }
+    files.sort();
+    assert!(files.len() >= 20, "{} captures", files.len());
+    for p in &files {
+        let Ok(source) = PcapSource::open(p) else {
+            continue; // the hostile ones are refused at the header either way
+        };
+        let (want, want_stats) = read_all(source);
+        let file = std::fs::File::open(p).unwrap();
+        let ahead = ReadAhead::spawn(file, "test-read-ahead").unwrap();
+        let (got, got_stats) = read_all(PcapSource::<std::fs::File>::read_ahead(ahead).unwrap());
+        assert_eq!(got_stats, want_stats, "{}", p.display());
+        assert!(got == want, "{}: datagrams differ", p.display());
     }
 }

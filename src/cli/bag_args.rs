@@ -49,13 +49,23 @@ impl BagArgs {
 /// Opens `path` as a bag when its bytes say so, else as a capture; the bag options on anything
 /// but a bag are a usage error.
 pub fn open(path: &Path, bag_args: &BagArgs) -> Result<Input<Box<dyn Read>>, RunError> {
+    open_with(path, bag_args, false)
+}
+
+/// [`open`], with a capture read ahead on a thread of its own when `read_ahead`
+/// ([`crate::source::input::open_with`]).
+pub fn open_with(
+    path: &Path,
+    bag_args: &BagArgs,
+    read_ahead: bool,
+) -> Result<Input<Box<dyn Read>>, RunError> {
     let not_a_bag = || {
         RunError::Usage(format!(
             "--topic / --start / --end: {} is not a bag",
             path.display()
         ))
     };
-    match crate::source::input::open(path, bag_args.options()?) {
+    match crate::source::input::open_with(path, bag_args.options()?, read_ahead) {
         Ok(input) if bag_args.given() && input.bag().is_none() => Err(not_a_bag()),
         Ok(input) => Ok(input),
         Err(InputError::Pcap(_)) if bag_args.given() => Err(not_a_bag()),

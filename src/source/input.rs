@@ -13,6 +13,7 @@ use crate::sensor::livox::lvx as lvx_format;
 use crate::source::bag::{self, BagOptions, BagSource};
 use crate::source::lvx::{self, LvxError, LvxSource};
 use crate::source::pcap::{PcapSource, SourceError};
+use crate::source::read_ahead::ReadAhead;
 use crate::source::Datagram;
 
 /// Why an input could not be read.
@@ -42,12 +43,19 @@ pub enum Input<R: Read> {
 /// Opens `path` as a bag or a Livox recording when its bytes say so (a bag read with
 /// `bag_options`), else as a capture.
 pub fn open(path: &Path, bag_options: BagOptions) -> Result<Input<Box<dyn Read>>, InputError> {
+    open_with(path, bag_options, false)
+}
+
+/// [`open`], with a capture or a Livox recording read on a thread of its own a few blocks
+/// ahead of the parser when `read_ahead` ([`super::read_ahead`]; for a caller with a spare
+/// core). Bags are read by their own readers either way.
+pub fn open_with(
+    path: &Path,
+    bag_options: BagOptions,
+    read_ahead: bool,
+) -> Result<Input<Box<dyn Read>>, InputError> {
     if is_lvx_file(path) {
-        let file = File::open(path).map_err(|source| SourceError::Open {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        let reader: Box<dyn Read> = Box::new(BufReader::with_capacity(1 << 16, file));
+        let reader = file_reader(path, read_ahead)?;
         return Ok(Input::Lvx(Box::new(LvxSource::new(reader)?)));
     }
     // A path that cannot be read gets the capture reader's error message.
@@ -55,12 +63,34 @@ pub fn open(path: &Path, bag_options: BagOptions) -> Result<Input<Box<dyn Read>>
         let source = BagSource::open(path, bag_options)?;
         return Ok(Input::Bag(Box::new(source)));
     }
-    let file = File::open(path).map_err(|source| SourceError::Open {
+    if read_ahead {
+        if let Ok(ahead) = ReadAhead::spawn(open_file(path)?, "ringscan-read-ahead") {
+            return Ok(Input::Pcap(Box::new(PcapSource::read_ahead(ahead)?)));
+        }
+    }
+    let reader = file_reader(path, false)?;
+    Ok(Input::Pcap(Box::new(PcapSource::new(reader)?)))
+}
+
+fn open_file(path: &Path) -> Result<File, SourceError> {
+    File::open(path).map_err(|source| SourceError::Open {
         path: path.to_path_buf(),
         source,
-    })?;
-    let reader: Box<dyn Read> = Box::new(BufReader::with_capacity(1 << 16, file));
-    Ok(Input::Pcap(Box::new(PcapSource::new(reader)?)))
+    })
+}
+
+/// The file's bytes, buffered, or read ahead on a thread (the buffered reader if the thread
+/// cannot be started).
+fn file_reader(path: &Path, read_ahead: bool) -> Result<Box<dyn Read>, SourceError> {
+    if read_ahead {
+        if let Ok(r) = ReadAhead::spawn(open_file(path)?, "ringscan-read-ahead") {
+            return Ok(Box::new(r));
+        }
+    }
+    Ok(Box::new(BufReader::with_capacity(
+        1 << 16,
+        open_file(path)?,
+    )))
 }
 
 /// Whether the file at `path` starts like a Livox recording.

@@ -13,6 +13,8 @@ pub mod link;
 pub mod lvx;
 #[cfg(feature = "pcap")]
 pub mod pcap;
+#[cfg(feature = "pcap")]
+pub mod read_ahead;
 pub mod reassembly;
 #[cfg(feature = "udp")]
 pub mod udp;

@@ -6,8 +6,9 @@
 //! everything that was skipped.
 //!
 //! # Contract
-//! - **Streaming, bounded memory.** The file is read record by record into one reused buffer;
-//!   nothing is read ahead and the file is never held in memory. A record or block header is
+//! - **Streaming, bounded memory.** The file is read record by record into one reused buffer
+//!   (or, with [`PcapSource::read_ahead`], parsed where it lies in a few MiB-sized blocks read
+//!   by a thread of its own); the file is never held in memory. A record or block header is
 //!   checked against the limits *before* its body is read: classic records may hold at most
 //!   max(snaplen, [`DEFAULT_RECORD_LIMIT`]) bytes, capped at [`MAX_RECORD_LIMIT`]; pcapng blocks
 //!   at most [`MAX_RECORD_LIMIT`] bytes (packet blocks: the largest interface limit plus 64 KiB of
@@ -49,9 +50,11 @@
 use std::fs::File;
 use std::io::{self, BufReader, Read};
 use std::net::SocketAddrV4;
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use super::link::{self, IpError, Ipv4Header, Link, UdpHeader, IPPROTO_UDP, UDP_HEADER_LEN};
+use super::read_ahead::ReadAhead;
 use super::reassembly::{FragmentKey, Push, Reassembler, ReassemblyConfig, ReassemblyStats};
 use super::Datagram;
 
@@ -427,10 +430,13 @@ fn read_up_to<R: Read>(reader: &mut R, out: &mut [u8]) -> io::Result<usize> {
 /// # Ok(()) }
 /// ```
 pub struct PcapSource<R: Read> {
-    reader: R,
+    reader: Feed<R>,
     format: Format,
     /// The current record or block body, at its high-water length.
     buf: Vec<u8>,
+    /// The current classic record's place in the read-ahead block when it was read there
+    /// without a copy (then `buf` does not hold it).
+    lent: Option<Range<usize>>,
     reassembler: Reassembler,
     /// `stats.bytes` is also the file offset of the next byte to read.
     stats: SourceStats,
@@ -448,6 +454,32 @@ impl PcapSource<BufReader<File>> {
     }
 }
 
+/// Where a capture's bytes come from.
+enum Feed<R> {
+    Reader(R),
+    /// Read on a thread of its own; classic records are parsed where they lie in its blocks.
+    Ahead(Box<ReadAhead>),
+}
+
+impl<R: Read> Read for Feed<R> {
+    fn read(&mut self, out: &mut [u8]) -> io::Result<usize> {
+        match self {
+            Feed::Reader(r) => r.read(out),
+            Feed::Ahead(a) => a.read(out),
+        }
+    }
+}
+
+/// The bytes `Packet::start` and `Loc::Record` index: the lent range of the read-ahead block,
+/// or the record buffer. (A function of the fields, not a method, so that the caller can
+/// still change the counters while holding the slice.)
+fn record_bytes<'a, R>(lent: &Option<Range<usize>>, feed: &'a Feed<R>, buf: &'a [u8]) -> &'a [u8] {
+    match (lent, feed) {
+        (Some(r), Feed::Ahead(a)) => a.block().get(r.clone()).unwrap_or(&[]),
+        _ => buf,
+    }
+}
+
 impl<R: Read> PcapSource<R> {
     /// Reads and checks the file header (classic pcap µs / ns in either byte order, or a pcapng
     /// section header block), with the default [`ReassemblyConfig`].
@@ -457,8 +489,20 @@ impl<R: Read> PcapSource<R> {
 
     /// As [`new`](Self::new), with the given fragment reassembly limits.
     pub fn with_reassembly(reader: R, config: ReassemblyConfig) -> Result<Self, SourceError> {
+        Self::with_feed(Feed::Reader(reader), config)
+    }
+
+    /// As [`new`](Self::new), the file read ahead on a thread ([`ReadAhead`]): classic pcap
+    /// records whole inside one of its blocks are parsed there, without the copy into the
+    /// record buffer (`R` is then not used).
+    pub fn read_ahead(ahead: ReadAhead) -> Result<Self, SourceError> {
+        Self::with_feed(Feed::Ahead(Box::new(ahead)), ReassemblyConfig::default())
+    }
+
+    fn with_feed(reader: Feed<R>, config: ReassemblyConfig) -> Result<Self, SourceError> {
         let mut source = Self {
             reader,
+            lent: None,
             format: Format::PcapNg {
                 endian: Endian::Little,
                 interfaces: Vec::new(),
@@ -497,7 +541,7 @@ impl<R: Read> PcapSource<R> {
         };
         self.stats.datagrams += 1;
         let payload = match found.loc {
-            Loc::Record(a, b) => self.buf.get(a..b),
+            Loc::Record(a, b) => record_bytes(&self.lent, &self.reader, &self.buf).get(a..b),
             Loc::Reassembled(a, b) => self.reassembler.completed().get(a..b),
         };
         Ok(Some(Datagram {
@@ -600,6 +644,23 @@ impl<R: Read> PcapSource<R> {
         Ok(filled == n)
     }
 
+    /// [`Self::read_body`], or the record's place in the read-ahead block when it lies whole
+    /// there (`lent`).
+    fn read_record_body(&mut self, n: usize) -> Result<bool, SourceError> {
+        if let Feed::Ahead(a) = &mut self.reader {
+            let offset = self.stats.bytes;
+            if let Some(r) = a
+                .lend(n)
+                .map_err(|source| SourceError::Io { offset, source })?
+            {
+                self.stats.bytes += n as u64;
+                self.lent = Some(r);
+                return Ok(true);
+            }
+        }
+        self.read_body(n)
+    }
+
     /// Skips `n` bytes; false if the file ended first.
     fn skip(&mut self, n: u64) -> Result<bool, SourceError> {
         let offset = self.offset();
@@ -687,6 +748,7 @@ impl<R: Read> PcapSource<R> {
     fn next_packet(&mut self) -> Result<Option<Packet>, SourceError> {
         loop {
             let start = self.offset();
+            self.lent = None;
             let block = match &self.format {
                 Format::Pcap { .. } => self.read_classic_record(start)?,
                 Format::PcapNg { .. } => self.read_block(start)?,
@@ -737,7 +799,7 @@ impl<R: Read> PcapSource<R> {
                 limit: limit as u64,
             });
         }
-        if !self.read_body(len)? {
+        if !self.read_record_body(len)? {
             return Ok(self.tail(start));
         }
         let frac_ns = if nanosecond {
@@ -1103,8 +1165,7 @@ impl<R: Read> PcapSource<R> {
             self.stats.malformed += 1;
             return None;
         }
-        let frame = self
-            .buf
+        let frame = record_bytes(&self.lent, &self.reader, &self.buf)
             .get(packet.start..packet.start + packet.len)
             .unwrap_or(&[]);
         let ip_start = match link::ipv4_in_frame(packet.linktype, frame) {

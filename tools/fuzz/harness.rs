@@ -45,6 +45,7 @@ use ringscan::sink::mcap::{
     Compression, Format, McapSink, SensorId, SensorInfo, SinkError, SinkOptions, SweepMsg,
 };
 use ringscan::source::pcap::PcapSource;
+use ringscan::source::read_ahead::ReadAhead;
 use ringscan::source::reassembly::{
     FragmentKey, Push, Reassembler, ReassemblyConfig, MAX_IPV4_PAYLOAD,
 };
@@ -228,6 +229,36 @@ pub fn pcap(data: &[u8]) {
         // The end of the file expires every incomplete set.
         assert_eq!(src.reassembler().pending_sets(), 0);
         assert_eq!(src.reassembler().pending_bytes(), 0);
+    }
+    // The same bytes read ahead on a thread (classic records parsed inside its block instead
+    // of copied): the same datagrams, the same error, the same counts.
+    let Ok(ahead) = ReadAhead::spawn(Cursor::new(data.to_vec()), "fuzz-read-ahead") else {
+        return;
+    };
+    let Ok(mut fast) = PcapSource::<Cursor<Vec<u8>>>::read_ahead(ahead) else {
+        panic!("read ahead refused a header the record buffer took");
+    };
+    let Ok(mut slow) = PcapSource::new(data) else {
+        return;
+    };
+    assert_eq!(drain_datagrams(&mut fast), drain_datagrams(&mut slow));
+    assert_eq!(fast.stats(), slow.stats());
+}
+
+type Drained = (
+    Vec<(i64, SocketAddrV4, SocketAddrV4, Vec<u8>)>,
+    Option<String>,
+);
+
+/// Every datagram until the end or the first error (its message).
+fn drain_datagrams<R: std::io::Read>(src: &mut PcapSource<R>) -> Drained {
+    let mut out = Vec::new();
+    loop {
+        match src.next_datagram() {
+            Ok(Some(d)) => out.push((d.time_ns, d.src, d.dst, d.payload.to_vec())),
+            Ok(None) => return (out, None),
+            Err(e) => return (out, Some(e.to_string())),
+        }
     }
 }
 
