@@ -282,6 +282,9 @@ class Source:
     reads the file again from the start).
 
     Decoding runs on a thread of its own without the GIL; at most a few sweeps wait in memory.
+    With ``read_ahead`` (the default) a capture's bytes are read on one more thread, a few
+    MiB ahead of the decoding, so a machine with a spare core overlaps the two (a fleet task
+    that should keep to one core passes ``read_ahead=False``).
     """
 
     def __init__(
@@ -302,8 +305,11 @@ class Source:
         dual_return_threshold: Optional[float] = None,
         fov: Optional["tuple[float, float]"] = None,
         integration_ms: Optional[float] = None,
+        read_ahead: bool = True,
     ):
         self.path = _path(path, "path")
+        if not isinstance(read_ahead, bool):
+            raise TypeError(f"read_ahead: expected True or False, got {type(read_ahead).__name__}")
         if model is not None and not isinstance(model, str):
             raise TypeError(f"model: expected a string such as 'vlp16', got {type(model).__name__}")
         if fields not in ("default", "all"):
@@ -332,11 +338,12 @@ class Source:
             fov=fov,
             integration_ms=_number(integration_ms, "integration_ms"),
         )
+        self._read_ahead = read_ahead
         self._readers: List[Any] = []
         self._summary: Optional[dict] = None
 
     def __iter__(self) -> Iterator[Sweep]:
-        reader = _ringscan.Reader(self.path, **self._kwargs)
+        reader = _ringscan.Reader(self.path, read_ahead=self._read_ahead, **self._kwargs)
         self._readers.append(reader)
         try:
             while True:
@@ -386,7 +393,8 @@ def open(path: PathLike, calib=None, model=None, topics=None, **options: Any) ->
     ``topics``: bag topics to read. Other options are the CLI's flags: ``start``, ``end``
     (bags, seconds), ``port``, ``cut_angle``, ``min_range``, ``max_range``, ``fields``
     (``"default"`` or ``"all"``), ``crc``, ``dual_return_threshold``, ``fov``,
-    ``integration_ms``.
+    ``integration_ms``; and ``read_ahead`` (default ``True``: the capture is read on a thread
+    of its own, ahead of the decoding).
     """
     return Source(path, calib=calib, model=model, topics=topics, **options)
 

@@ -219,7 +219,8 @@ def decode_one(
         local = _fetch(capture, scratch)
         summary = None
         if parquet:
-            src = ringscan.open(local, **options)
+            # One core per task: the capture is read on the decoding thread unless asked.
+            src = ringscan.open(local, **{"read_ahead": False, **options})
             pq_local = os.path.join(scratch, name + ".parquet")
             _write_parquet(src, pq_local)
             summary = src.summary

@@ -9,7 +9,7 @@
 
 use std::path::PathBuf;
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, SyncSender};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use pyo3::create_exception;
@@ -18,7 +18,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use ringscan::cli::bag_args::BagArgs;
-use ringscan::cli::run::{decode_capture, DecodeArgs, RunError, SweepReader};
+use ringscan::cli::run::{decode_capture, BufferPool, DecodeArgs, RunError, SweepReader};
 use ringscan::point::{interleave_extended, Point, EXTENDED_STRIDE, POINT_STRIDE};
 
 mod compat;
@@ -92,6 +92,21 @@ pub struct Buffer {
     data: BufData,
     len: usize,
     typestr: &'static str,
+    /// Where the points or columns go back when numpy lets go of them (a reader's sweeps).
+    pool: Option<Arc<BufferPool>>,
+}
+
+impl Drop for Buffer {
+    fn drop(&mut self) {
+        let Some(pool) = self.pool.take() else {
+            return;
+        };
+        match std::mem::replace(&mut self.data, BufData::Bytes(Vec::new())) {
+            BufData::Points(v) => pool.give_points(v),
+            BufData::U32(v) => pool.give_columns(v),
+            _ => {}
+        }
+    }
 }
 
 enum BufData {
@@ -107,7 +122,14 @@ impl Buffer {
             len: p.len(),
             data: BufData::Points(p),
             typestr: "|V24",
+            pool: None,
         }
+    }
+
+    /// The buffer given back to `pool` once numpy has let go of it.
+    pub(crate) fn returning_to(mut self, pool: Option<&Arc<BufferPool>>) -> Self {
+        self.pool = pool.cloned();
+        self
     }
 
     fn records(bytes: Vec<u8>, stride: usize, typestr: &'static str) -> Self {
@@ -115,6 +137,7 @@ impl Buffer {
             len: bytes.len() / stride.max(1),
             data: BufData::Bytes(bytes),
             typestr,
+            pool: None,
         }
     }
 
@@ -123,6 +146,7 @@ impl Buffer {
             len: v.len(),
             data: BufData::U32(v),
             typestr: "<u4",
+            pool: None,
         }
     }
 
@@ -131,6 +155,7 @@ impl Buffer {
             len: v.len(),
             data: BufData::F32(v),
             typestr: "<f4",
+            pool: None,
         }
     }
 
@@ -243,6 +268,7 @@ pub(crate) fn raw_sweep(
     py: Python<'_>,
     rs: ringscan::cli::run::ReadSweep,
     desc: Option<ringscan::cli::run::SensorDesc>,
+    pool: Option<&Arc<BufferPool>>,
 ) -> PyResult<RawSweep> {
     let mut sw = rs.sweep;
     let extended = !sw.extras.is_empty() && sw.extras.len() == sw.points.len();
@@ -252,11 +278,14 @@ pub(crate) fn raw_sweep(
         Buffer::records(bytes, EXTENDED_STRIDE, "|V32")
     } else {
         debug_assert_eq!(POINT_STRIDE, 24);
-        Buffer::points(std::mem::take(&mut sw.points))
+        Buffer::points(std::mem::take(&mut sw.points)).returning_to(pool)
     };
     let n = points.len;
     let columns = if sw.columns.len() == n && n > 0 {
-        Some(Py::new(py, Buffer::u32s(std::mem::take(&mut sw.columns)))?)
+        Some(Py::new(
+            py,
+            Buffer::u32s(std::mem::take(&mut sw.columns)).returning_to(pool),
+        )?)
     } else {
         None
     };
@@ -333,18 +362,20 @@ pub(crate) fn decode_args(
 pub struct Reader {
     rx: Mutex<Option<Receiver<Msg<SweepMsg>>>>,
     summary: Mutex<Option<String>>,
+    /// Where the sweeps' arrays go back for the decoding thread to reuse.
+    pool: Arc<BufferPool>,
 }
 
-fn spawn_reader(args: DecodeArgs) -> PyResult<Receiver<Msg<SweepMsg>>> {
+fn spawn_reader(args: DecodeArgs, pool: Arc<BufferPool>) -> PyResult<Receiver<Msg<SweepMsg>>> {
     let (tx, rx) = mpsc::sync_channel::<Msg<SweepMsg>>(QUEUE);
     std::thread::Builder::new()
         .name("ringscan-read".into())
-        .spawn(move || read_thread(&args, &tx))
+        .spawn(move || read_thread(&args, pool, &tx))
         .map_err(|e| PyRuntimeError::new_err(format!("starting the decoding thread: {e}")))?;
     Ok(rx)
 }
 
-fn read_thread(args: &DecodeArgs, tx: &SyncSender<Msg<SweepMsg>>) {
+fn read_thread(args: &DecodeArgs, pool: Arc<BufferPool>, tx: &SyncSender<Msg<SweepMsg>>) {
     let mut reader = match SweepReader::open(args) {
         Ok(r) => r,
         Err(e) => {
@@ -352,6 +383,7 @@ fn read_thread(args: &DecodeArgs, tx: &SyncSender<Msg<SweepMsg>>) {
             return;
         }
     };
+    reader.use_buffer_pool(pool);
     loop {
         let msg = match reader.next_sweep() {
             Ok(Some(rs)) => {
@@ -395,7 +427,7 @@ pub(crate) fn recv<T: Send>(py: Python<'_>, slot: &mut Option<Receiver<T>>) -> P
 #[pymethods]
 impl Reader {
     #[new]
-    #[pyo3(signature = (path, model=None, calib=vec![], topics=vec![], start=None, end=None, port=None, cut_angle=0.0, min_range=None, max_range=None, fields_all=false, crc=None, dual_return_threshold=None, fov=None, integration_ms=None, keep_columns=true))]
+    #[pyo3(signature = (path, model=None, calib=vec![], topics=vec![], start=None, end=None, port=None, cut_angle=0.0, min_range=None, max_range=None, fields_all=false, crc=None, dual_return_threshold=None, fov=None, integration_ms=None, keep_columns=true, read_ahead=false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         path: PathBuf,
@@ -414,6 +446,7 @@ impl Reader {
         fov: Option<(f64, f64)>,
         integration_ms: Option<f64>,
         keep_columns: bool,
+        read_ahead: bool,
     ) -> PyResult<Self> {
         let mut args = decode_args(
             path,
@@ -433,9 +466,12 @@ impl Reader {
             integration_ms,
         );
         args.keep_columns = keep_columns;
+        args.read_ahead = read_ahead;
+        let pool = Arc::new(BufferPool::default());
         Ok(Self {
-            rx: Mutex::new(Some(spawn_reader(args)?)),
+            rx: Mutex::new(Some(spawn_reader(args, Arc::clone(&pool))?)),
             summary: Mutex::new(None),
+            pool,
         })
     }
 
@@ -444,7 +480,7 @@ impl Reader {
         match next_item(py, &self.rx, Some(&self.summary))? {
             Some(b) => {
                 let (rs, desc) = *b;
-                Ok(Some(raw_sweep(py, rs, desc)?))
+                Ok(Some(raw_sweep(py, rs, desc, Some(&self.pool))?))
             }
             None => Ok(None),
         }

@@ -134,7 +134,7 @@ impl Decoder {
             .into_iter()
             .map(|rs| {
                 let desc = self.session.sensor_desc(rs.sensor);
-                raw_sweep(py, rs, desc)
+                raw_sweep(py, rs, desc, None)
             })
             .collect()
     }
@@ -254,7 +254,7 @@ impl Listener {
             return Ok(None);
         }
         match recv(py, &mut guard) {
-            Ok(Some((rs, desc))) => Ok(Some(raw_sweep(py, rs, desc)?)),
+            Ok(Some((rs, desc))) => Ok(Some(raw_sweep(py, rs, desc, None)?)),
             Ok(None) => {
                 *guard = None;
                 self.join(py);

@@ -486,6 +486,7 @@ where
                 },
                 json: c.json,
                 input_bytes: None,
+                read_ahead: false,
                 pipeline: c.pipeline,
                 odometry: c.odometry,
                 serve: c.serve,

@@ -4,8 +4,10 @@ use std::io::{IsTerminal, Read, Write};
 use std::net::Ipv4Addr;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
+use crate::point::Point;
 use crate::sensor::DecodeOptions;
 use crate::sensor::StreamError;
 use crate::sensor::{Calibration, Facts, FirstDatagram, StreamSettings};
@@ -28,8 +30,13 @@ use super::FormatArg;
 /// `cargo run --release --example simulate -- --model vlp16 --seconds 1 --out fixtures/demo-vlp16.pcap`.
 const DEMO_PCAP: &[u8] = include_bytes!("../../fixtures/demo-vlp16.pcap");
 
-/// Datagrams read ahead to count the sensors (for topic names) before decoding.
+/// Datagrams read ahead to count the sensors (for topic names) before decoding...
 const PRESCAN_DATAGRAMS: usize = 4_000;
+/// ... or input bytes, whichever comes first: 4,000 datagrams are 5 MB of Velodyne or Hesai
+/// packets but up to 100 MB of Ouster ones, read twice (about half of a 200 MB capture).
+/// 8 MiB still hold a third of a second of the largest Ouster mode, by which every sensor
+/// of a recording has spoken.
+const PRESCAN_BYTES: u64 = 8 << 20;
 /// Raw datagrams held per sensor until its model is known (for `--raw`).
 const RAW_HOLD: usize = 256;
 
@@ -68,6 +75,9 @@ pub struct DecodeArgs {
     pub json: bool,
     /// Decode these bytes instead of reading `input` (the demo).
     pub input_bytes: Option<&'static [u8]>,
+    /// Read a capture on a thread of its own, ahead of the decoding ([`input::open_with`]):
+    /// for callers whose decoding thread has a spare core beside it (the Python package).
+    pub read_ahead: bool,
     /// `--serve`: the live view.
     pub serve: super::serve::ServeArgs,
     /// `--serve-rate`: publishing speed of the live view.
@@ -160,6 +170,53 @@ struct Output {
     live: Option<super::serve::SharedPublisher>,
     /// A copy of every decoded sweep (before the pipeline), for [`SweepReader`].
     tap: Option<Vec<(usize, Sweep)>>,
+    /// Buffers the tap's consumer gives back, for the next tapped sweeps.
+    pool: Option<Arc<BufferPool>>,
+}
+
+/// Point and column buffers that the consumer of handed-out sweeps gives back (the Python
+/// package, once numpy lets go of an array), reused for the next sweeps: otherwise every sweep
+/// lands in memory the allocator has just returned to the kernel, and its page faults cost
+/// about a tenth of reading an Ouster capture from Python. At most [`BufferPool::KEEP`] of
+/// each are kept, so memory stays bounded whatever the consumer does.
+#[derive(Debug, Default)]
+pub struct BufferPool {
+    points: Mutex<Vec<Vec<Point>>>,
+    columns: Mutex<Vec<Vec<u32>>>,
+}
+
+impl BufferPool {
+    /// Buffers of each kind kept at most (the sweeps a reader has in flight, and one more).
+    pub const KEEP: usize = 6;
+
+    /// Gives a point buffer back.
+    pub fn give_points(&self, v: Vec<Point>) {
+        Self::give(&self.points, v);
+    }
+
+    /// Gives a column buffer back.
+    pub fn give_columns(&self, v: Vec<u32>) {
+        Self::give(&self.columns, v);
+    }
+
+    fn give<T>(pool: &Mutex<Vec<Vec<T>>>, mut v: Vec<T>) {
+        if v.capacity() == 0 {
+            return;
+        }
+        v.clear();
+        if let Ok(mut p) = pool.lock() {
+            if p.len() < Self::KEEP {
+                p.push(v);
+            }
+        }
+    }
+
+    fn take<T>(pool: &Mutex<Vec<Vec<T>>>) -> Vec<T> {
+        pool.lock()
+            .ok()
+            .and_then(|mut p| p.pop())
+            .unwrap_or_default()
+    }
 }
 
 impl Output {
@@ -270,7 +327,14 @@ impl Output {
                 && self.live.is_none()
                 && self.odometry.is_none();
             if only_tap {
-                tap.push((idx, sweep.take_buffers()));
+                let taken = match &self.pool {
+                    Some(p) => sweep.take_buffers_with(
+                        BufferPool::take(&p.points),
+                        BufferPool::take(&p.columns),
+                    ),
+                    None => sweep.take_buffers(),
+                };
+                tap.push((idx, taken));
                 return;
             }
             tap.push((idx, sweep.clone()));
@@ -391,9 +455,33 @@ pub struct Summary {
     pub lost: u64,
 }
 
-fn prescan<R: Read>(mut src: Input<R>, port: Option<u16>, sizes: &[usize]) -> usize {
+/// Datagrams read by [`prescan`], kept to be decoded before the rest of the same input, so that
+/// the input is read once (at most [`PRESCAN_BYTES`] of payload).
+#[derive(Default)]
+struct Held {
+    payloads: Vec<u8>,
+    datagrams: std::collections::VecDeque<HeldDatagram>,
+    /// The input ended within them: it is not read again.
+    ended: bool,
+}
+
+/// Capture time, source, destination port, payload range in [`Held::payloads`].
+type HeldDatagram = (i64, std::net::SocketAddrV4, u16, std::ops::Range<usize>);
+
+/// Counts the sensors in the first datagrams of `src` (keeping them in `held` when given);
+/// also says whether reading them failed (the input must then be read again from the start
+/// for the error to surface where decoding meets it).
+fn prescan<R: Read>(
+    src: &mut Input<R>,
+    port: Option<u16>,
+    sizes: &[usize],
+    mut held: Option<&mut Held>,
+) -> (usize, bool) {
     let mut addrs: Vec<Ipv4Addr> = Vec::new();
     for _ in 0..PRESCAN_DATAGRAMS {
+        if src.bytes() > PRESCAN_BYTES {
+            break;
+        }
         match src.next_datagram() {
             Ok(Some(d)) => {
                 if sizes.contains(&d.payload.len())
@@ -402,11 +490,24 @@ fn prescan<R: Read>(mut src: Input<R>, port: Option<u16>, sizes: &[usize]) -> us
                 {
                     addrs.push(*d.src.ip());
                 }
+                if let Some(h) = held.as_deref_mut() {
+                    let start = h.payloads.len();
+                    h.payloads.extend_from_slice(d.payload);
+                    let range = start..h.payloads.len();
+                    h.datagrams
+                        .push_back((d.time_ns, d.src, d.dst.port(), range));
+                }
             }
-            _ => break,
+            Ok(None) => {
+                if let Some(h) = held {
+                    h.ended = true;
+                }
+                break;
+            }
+            Err(_) => return (addrs.len(), true),
         }
     }
-    addrs.len()
+    (addrs.len(), false)
 }
 
 /// Settings of a [`Session`], whatever the datagrams come from.
@@ -464,6 +565,7 @@ impl DecodeArgs {
             crc: None,
             json: false,
             input_bytes: None,
+            read_ahead: false,
             pipeline: PipelineArgs::default(),
             odometry: OdometryArgs::default(),
             serve: Default::default(),
@@ -611,6 +713,7 @@ impl Session {
             odometry,
             live: None,
             tap: None,
+            pool: None,
         };
         Ok(Self {
             demux,
@@ -1083,7 +1186,22 @@ impl std::str::FromStr for ChunkCompression {
 /// The session of a capture or bag and its input, ready to pump: the bag's metadata added and
 /// the sensors counted (topic names).
 fn start_session(args: &DecodeArgs) -> Result<(Session, Input<Box<dyn Read>>), RunError> {
-    let open = || -> Result<Input<Box<dyn Read>>, RunError> {
+    let (session, src, _) = start_session_holding(args, false)?;
+    Ok((session, src))
+}
+
+/// An opened input, as the decoding reads it.
+type Capture = Input<Box<dyn Read>>;
+
+/// [`start_session`]; with `hold`, the datagrams read to count the sensors are kept and the
+/// same input is returned to be read on from there (the caller decodes the held datagrams
+/// first), instead of the input opened again and read from the start.
+fn start_session_holding(
+    args: &DecodeArgs,
+    hold: bool,
+) -> Result<(Session, Capture, Held), RunError> {
+    // Without `hold`, the first reading only looks for the sensors: no thread for it.
+    let open = |read_ahead: bool| -> Result<Input<Box<dyn Read>>, RunError> {
         match args.input_bytes {
             Some(b) => Ok(Input::Pcap(Box::new(
                 PcapSource::new(Box::new(b) as Box<dyn Read>).map_err(|err| RunError::Source {
@@ -1091,10 +1209,10 @@ fn start_session(args: &DecodeArgs) -> Result<(Session, Input<Box<dyn Read>>), R
                     err: err.into(),
                 })?,
             ))),
-            None => input::open(&args.input, &args.bag),
+            None => input::open_with(&args.input, &args.bag, read_ahead),
         }
     };
-    let first = open()?;
+    let mut first = open(hold && args.read_ahead)?;
     let mut options = args.session_options();
     // A Livox recording names its devices' model, which SDK1 packets do not.
     if options.model.is_none() {
@@ -1105,12 +1223,18 @@ fn start_session(args: &DecodeArgs) -> Result<(Session, Input<Box<dyn Read>>), R
         add_bag_metadata(&mut session, b, &args.calib);
     }
     let sizes = session.lidar_sizes();
-    let n_sensors_hint = prescan(first, args.port, &sizes);
+    let mut held = Held::default();
+    let (n_sensors_hint, failed) =
+        prescan(&mut first, args.port, &sizes, hold.then_some(&mut held));
     if args.name.is_some() && n_sensors_hint > 1 {
         return Err(RunError::Usage(format!("--name: the capture holds {n_sensors_hint} sensors; names are given per sensor automatically")));
     }
     session.set_sensor_hint(n_sensors_hint);
-    Ok((session, open()?))
+    if hold && !failed {
+        return Ok((session, first, held));
+    }
+    drop(first);
+    Ok((session, open(args.read_ahead)?, Held::default()))
 }
 
 /// The `--json` summary of a finished run, and the packets lost.
@@ -1244,6 +1368,8 @@ pub struct SensorDesc {
 /// calibrations, the bag's metadata), without an output; the Python package's `open`.
 pub struct SweepReader {
     src: Input<Box<dyn Read>>,
+    /// The datagrams read to count the sensors, decoded first.
+    held: Held,
     session: Session,
     path: String,
     queue: std::collections::VecDeque<ReadSweep>,
@@ -1255,16 +1381,23 @@ impl SweepReader {
     /// Opens `args.input` (or `args.input_bytes`) with `args`' decoding options; `out`, the
     /// pipeline and odometry options are not used.
     pub fn open(args: &DecodeArgs) -> Result<Self, RunError> {
-        let (mut session, src) = start_session(args)?;
+        let (mut session, src, held) = start_session_holding(args, true)?;
         session.enable_tap();
         Ok(Self {
             src,
+            held,
             session,
             path: args.input.display().to_string(),
             queue: std::collections::VecDeque::new(),
             finished: false,
             started: Instant::now(),
         })
+    }
+
+    /// Takes the buffers of the sweeps it hands out from `pool`, where their consumer gives
+    /// them back (see [`BufferPool`]).
+    pub fn use_buffer_pool(&mut self, pool: Arc<BufferPool>) {
+        self.session.out.pool = Some(pool);
     }
 
     /// The next sweep of any sensor, in the order the streams finish them; `None` at the end.
@@ -1276,7 +1409,29 @@ impl SweepReader {
             if self.finished {
                 return Ok(None);
             }
-            let pumped = match self.src.next_datagram() {
+            if let Some((t, from, port, range)) = self.held.datagrams.pop_front() {
+                let payload = self.held.payloads.get(range).unwrap_or(&[]);
+                if let Err(e) = self.session.push(t, from, port, payload) {
+                    self.finished = true;
+                    return Err(self.session.run_error(e, &self.path));
+                }
+                if self.held.datagrams.is_empty() {
+                    // Its memory back; an input that ended within it is not read again.
+                    let ended = self.held.ended;
+                    self.held = Held {
+                        ended,
+                        ..Held::default()
+                    };
+                }
+                self.queue.extend(self.session.take_sweeps());
+                continue;
+            }
+            let next = if self.held.ended {
+                Ok(None)
+            } else {
+                self.src.next_datagram()
+            };
+            let pumped = match next {
                 Ok(Some(d)) => self.session.push(d.time_ns, d.src, d.dst.port(), d.payload),
                 Ok(None) => {
                     self.finished = true;

@@ -67,9 +67,20 @@ impl Sweep {
     /// capacity in their place: what a consumer that keeps a sweep handed out by a stream takes
     /// instead of a clone (the stream's next sweep refills the fresh buffers without growing).
     pub fn take_buffers(&mut self) -> Sweep {
+        self.take_buffers_with(Vec::new(), Vec::new())
+    }
+
+    /// [`Self::take_buffers`], the replacement buffers made from `points` and `columns`
+    /// (vectors a consumer gave back, emptied here and grown only if smaller): a steady
+    /// stream of handed-out sweeps then reuses the same memory instead of new pages.
+    pub fn take_buffers_with(&mut self, mut points: Vec<Point>, mut columns: Vec<u32>) -> Sweep {
         let (np, nc, ne) = (self.points.len(), self.columns.len(), self.extras.len());
-        let points = std::mem::replace(&mut self.points, Vec::with_capacity(np));
-        let columns = std::mem::replace(&mut self.columns, Vec::with_capacity(nc));
+        points.clear();
+        points.reserve(np);
+        columns.clear();
+        columns.reserve(nc);
+        let points = std::mem::replace(&mut self.points, points);
+        let columns = std::mem::replace(&mut self.columns, columns);
         let extras = std::mem::replace(&mut self.extras, Vec::with_capacity(ne));
         Sweep {
             points,
