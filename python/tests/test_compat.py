@@ -95,7 +95,7 @@ def test_azimuth_window_equals_velodyne_decoder(rel, cfg, tmp_path):
         assert_same_frames(ref, ours)
 
 
-def assert_same_frames(ref, ours):
+def assert_same_frames(ref, ours, time_tol=1e-6):
     assert len(ours) == len(ref) > 0
     for k, ((s_ref, p_ref), (s_our, p_our)) in enumerate(zip(ref, ours)):
         assert abs(s_our.host - s_ref.host) < 1e-6 and abs(s_our.device - s_ref.device) < 1e-6, k
@@ -106,7 +106,7 @@ def assert_same_frames(ref, ours):
         # column, ring, return type, intensity: exact
         np.testing.assert_array_equal(p_our[:, 5:8], p_ref[:, 5:8], err_msg=f"frame {k}")
         np.testing.assert_array_equal(p_our[:, 3], p_ref[:, 3], err_msg=f"frame {k}")
-        assert np.abs(p_our[:, 4] - p_ref[:, 4]).max() < 1e-6, f"frame {k}: time"
+        assert np.abs(p_our[:, 4] - p_ref[:, 4]).max() < time_tol, f"frame {k}: time"
         r = np.linalg.norm(p_ref[:, :3].astype(np.float64), axis=1)
         d = np.linalg.norm((p_our[:, :3] - p_ref[:, :3]).astype(np.float64), axis=1)
         tol = 1e-3 + r * SIN_001_DEG
@@ -224,3 +224,91 @@ def test_hdl64e_equals_velodyne_decoder(model, calib, dual, tmp_path):
     raw_like = np.concatenate([p[:, 3] for _, p in ref])
     assert (raw_like != np.round(raw_like)).mean() > 0.5
     assert_same_frames(ref, ours)
+
+
+def vls128_pcap(path, dual, packets=2400, seed=11):
+    """VLS-128 packets built here from the manual's layout, not by ringscan's encoder: 12 blocks
+    of a bank id (``FF EE``, ``FF DD``, ``FF CC``, ``FF BB`` for lasers 0-31, 32-63, 64-95,
+    96-127), an azimuth and 32 x (distance u16 in 4 mm, intensity u8); the time in us at byte
+    1200, the return mode at 1204 (0x37 strongest, 0x39 dual) and the product id 0xA1 at 1205.
+    Single return: three columns a packet, four blocks each (one per bank), every 173 us.
+    Dual return: one column a packet, bank b's last return in block 2b and its strongest in
+    2b + 1, blocks 8-11 empty, every 58 us. About a third of the dual firings have equal last
+    and strongest distances with different intensities."""
+    rng = np.random.default_rng(seed)
+    out = [struct.pack("<IHHiIII", 0xA1B2C3D4, 2, 4, 0, 0, 65535, 1)]
+    ids = (0xEEFF, 0xDDFF, 0xCCFF, 0xBBFF)
+    az, t_us = 0, 0
+    step = 58 if dual else 173
+    for k in range(packets):
+        body = bytearray()
+        if not dual:
+            for _ in range(3):
+                dist = rng.integers(500, 30000, size=128)
+                dist[rng.random(128) < 0.05] = 0
+                inten = rng.integers(0, 256, size=128)
+                for bank in range(4):
+                    body += struct.pack("<HH", ids[bank], az)
+                    for j in range(32):
+                        body += struct.pack("<HB", int(dist[32 * bank + j]), int(inten[32 * bank + j]))
+                az = (az + 20) % 36000
+        else:
+            strongest = rng.integers(500, 30000, size=128)
+            last = rng.integers(500, 30000, size=128)
+            equal = rng.random(128) < 0.35
+            last[equal] = strongest[equal]
+            strongest[rng.random(128) < 0.05] = 0
+            last[rng.random(128) < 0.05] = 0
+            i_s = rng.integers(0, 256, size=128)
+            i_l = (i_s + 1 + rng.integers(0, 254, size=128)) % 256
+            for bank in range(4):
+                for dist, inten in ((last, i_l), (strongest, i_s)):
+                    body += struct.pack("<HH", ids[bank], az)
+                    for j in range(32):
+                        body += struct.pack("<HB", int(dist[32 * bank + j]), int(inten[32 * bank + j]))
+            for bank in range(4):
+                body += struct.pack("<HH", ids[bank], az) + bytes(96)
+            az = (az + 20) % 36000
+        body += struct.pack("<IBB", t_us, 0x39 if dual else 0x37, 0xA1)
+        assert len(body) == 1206
+        udp = struct.pack("!HHHH", 2368, 2368, 8 + len(body), 0) + bytes(body)
+        ip = struct.pack("!BBHHHBBH4s4s", 0x45, 0, 20 + len(udp), k & 0xFFFF, 0, 64, 17, 0,
+                         bytes([192, 168, 1, 201]), bytes([255, 255, 255, 255]))
+        frame = b"\xff" * 6 + b"\x00\x01\x02\x03\x04\x05" + b"\x08\x00" + ip + udp
+        ts = 1_700_000_000_000_000 + k * step
+        out.append(struct.pack("<IIII", ts // 1_000_000, ts % 1_000_000, len(frame), len(frame)) + frame)
+        t_us = (t_us + step) % 3_600_000_000
+    open(path, "wb").write(b"".join(out))
+
+
+@pytest.mark.skipif(CAPTURES is None, reason="SKIP: ../shared/captures is missing")
+def test_vls128_equals_velodyne_decoder(tmp_path):
+    """The VLS-128's single-return layout (four banks a column, one azimuth per column) through
+    both readers, from hand-built packets, with nebula's VLS128.yaml at the packet format's
+    4 mm: velodyne_decoder 3.1.0 takes the yaml's ``distance_resolution`` (0.007 there, ranges
+    1.75x too long), ringscan the fixed 4 mm (BENCHMARKS.md, VLS-128 verdict). Times agree to
+    9 us, not 1 us: at this 173 us packet period velodyne_decoder switches to the manual's Rev 4
+    group duration (2.89 us), ringscan keeps Rev 3's 2.665 us (same verdict). Dual return is
+    not read by ringscan's VLS-128 decoder (a clear DecodeError)."""
+    pcap = str(tmp_path / "vls128.pcap")
+    vls128_pcap(pcap, False)
+    yaml = (CAPTURES / "tier4__nebula/src/nebula_velodyne/nebula_velodyne_decoders/calibration/VLS128.yaml").read_text()
+    four_mm = yaml.replace("distance_resolution: 0.007", "distance_resolution: 0.004")
+    assert four_mm != yaml
+    calib = tmp_path / "VLS128-4mm.yaml"
+    calib.write_text(four_mm)
+    ref = list(vd.read_pcap(pcap, vd.Config(model=vd.Model.VLS128, calibration=vd.Calibration.read(str(calib)))))
+    ours = list(rc.read_pcap(pcap, rc.Config(model=rc.Model.VLS128, calibration=rc.Calibration.read(str(calib)))))
+    assert sum(len(p) for _, p in ref) > 500_000 and len(ref) == len(ours) > 2
+    # velodyne_decoder rotates a VLS-128 packet's later firings by the rate measured from the
+    # previous packet, so it leaves the capture's first packet unrotated: frame 0 is compared
+    # without positions, the others whole.
+    (s0, p0), (t0, q0) = ref[0], ours[0]
+    assert abs(s0.host - t0.host) < 1e-6 and p0.shape == q0.shape
+    np.testing.assert_array_equal(q0[:, 3], p0[:, 3])
+    np.testing.assert_array_equal(q0[:, 5:8], p0[:, 5:8])
+    assert_same_frames(ref[1:], ours[1:], time_tol=9e-6)
+    dual = str(tmp_path / "vls128-dual.pcap")
+    vls128_pcap(dual, True, packets=50)
+    with pytest.raises(ringscan_errors().DecodeError, match="VLS-128 in dual return mode"):
+        list(rc.read_pcap(dual, rc.Config(model=rc.Model.VLS128, calibration=rc.Calibration.read(str(calib)))))
