@@ -149,6 +149,17 @@ def ringscan_errors():
     return ringscan
 
 
+def pcap_record(k, body, ts_us):
+    """A classic pcap record (us) of an Ethernet / IPv4 / UDP frame from 192.168.1.201 to port
+    2368 carrying the 1206-byte Velodyne data packet ``body``; ``k`` is the IPv4 id."""
+    assert len(body) == 1206
+    udp = struct.pack("!HHHH", 2368, 2368, 8 + len(body), 0) + bytes(body)
+    ip = struct.pack("!BBHHHBBH4s4s", 0x45, 0, 20 + len(udp), k & 0xFFFF, 0, 64, 17, 0,
+                     bytes([192, 168, 1, 201]), bytes([255, 255, 255, 255]))
+    frame = b"\xff" * 6 + b"\x00\x01\x02\x03\x04\x05" + b"\x08\x00" + ip + udp
+    return struct.pack("<IIII", ts_us // 1_000_000, ts_us % 1_000_000, len(frame), len(frame)) + frame
+
+
 def hdl64e_pcap(path, dual, packets=1500, seed=5):
     """HDL-64E packets built here from the manual's layout, not by ringscan's encoder; 32 x
     (distance u16 in 2 mm, intensity u8) a 100-byte block after its bank id (upper ``FF EE``,
@@ -187,14 +198,8 @@ def hdl64e_pcap(path, dual, packets=1500, seed=5):
                         body += struct.pack("<HB", int(dist[32 * bank + j]), int(inten[32 * bank + j]))
             az = (az + 17) % 36000
         body += struct.pack("<IBB", t_us, 0, 0)
-        assert len(body) == 1206
-        udp = struct.pack("!HHHH", 2368, 2368, 8 + len(body), 0) + bytes(body)
-        ip = struct.pack("!BBHHHBBH4s4s", 0x45, 0, 20 + len(udp), k & 0xFFFF, 0, 64, 17, 0,
-                         bytes([192, 168, 1, 201]), bytes([255, 255, 255, 255]))
-        frame = b"\xff" * 6 + b"\x00\x01\x02\x03\x04\x05" + b"\x08\x00" + ip + udp
         step = 417 if dual else 834
-        ts = 1_700_000_000_000_000 + k * step
-        out.append(struct.pack("<IIII", ts // 1_000_000, ts % 1_000_000, len(frame), len(frame)) + frame)
+        out.append(pcap_record(k, body, 1_700_000_000_000_000 + k * step))
         t_us = (t_us + step) % 3_600_000_000
     open(path, "wb").write(b"".join(out))
 
@@ -270,13 +275,7 @@ def vls128_pcap(path, dual, packets=2400, seed=11):
                 body += struct.pack("<HH", ids[bank], az) + bytes(96)
             az = (az + 20) % 36000
         body += struct.pack("<IBB", t_us, 0x39 if dual else 0x37, 0xA1)
-        assert len(body) == 1206
-        udp = struct.pack("!HHHH", 2368, 2368, 8 + len(body), 0) + bytes(body)
-        ip = struct.pack("!BBHHHBBH4s4s", 0x45, 0, 20 + len(udp), k & 0xFFFF, 0, 64, 17, 0,
-                         bytes([192, 168, 1, 201]), bytes([255, 255, 255, 255]))
-        frame = b"\xff" * 6 + b"\x00\x01\x02\x03\x04\x05" + b"\x08\x00" + ip + udp
-        ts = 1_700_000_000_000_000 + k * step
-        out.append(struct.pack("<IIII", ts // 1_000_000, ts % 1_000_000, len(frame), len(frame)) + frame)
+        out.append(pcap_record(k, body, 1_700_000_000_000_000 + k * step))
         t_us = (t_us + step) % 3_600_000_000
     open(path, "wb").write(b"".join(out))
 

@@ -1,7 +1,7 @@
 //! `decode`, `info` and `demo`: capture → demultiplexer → streams → sink, and the summary.
 
 use std::io::{IsTerminal, Read, Write};
-use std::net::Ipv4Addr;
+use std::net::{Ipv4Addr, SocketAddrV4};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::{Arc, Mutex};
@@ -17,6 +17,7 @@ use crate::sink::mcap::{
 };
 use crate::sink::{McapSink, SinkError};
 use crate::source::pcap::PcapSource;
+use crate::source::Datagram;
 use crate::sweep::{Demux, Sweep};
 use serde_json::{json, Value};
 
@@ -465,8 +466,8 @@ struct Held {
     ended: bool,
 }
 
-/// Capture time, source, destination port, payload range in [`Held::payloads`].
-type HeldDatagram = (i64, std::net::SocketAddrV4, u16, std::ops::Range<usize>);
+/// Capture time, source, destination, payload range in [`Held::payloads`].
+type HeldDatagram = (i64, SocketAddrV4, SocketAddrV4, std::ops::Range<usize>);
 
 /// Counts the sensors in the first datagrams of `src` (keeping them in `held` when given);
 /// also says whether reading them failed (the input must then be read again from the start
@@ -494,8 +495,7 @@ fn prescan<R: Read>(
                     let start = h.payloads.len();
                     h.payloads.extend_from_slice(d.payload);
                     let range = start..h.payloads.len();
-                    h.datagrams
-                        .push_back((d.time_ns, d.src, d.dst.port(), range));
+                    h.datagrams.push_back((d.time_ns, d.src, d.dst, range));
                 }
             }
             Ok(None) => {
@@ -1185,7 +1185,7 @@ impl std::str::FromStr for ChunkCompression {
 
 /// The session of a capture or bag and its input, ready to pump: the bag's metadata added and
 /// the sensors counted (topic names).
-fn start_session(args: &DecodeArgs) -> Result<(Session, Input<Box<dyn Read>>), RunError> {
+fn start_session(args: &DecodeArgs) -> Result<(Session, Capture), RunError> {
     let (session, src, _) = start_session_holding(args, false)?;
     Ok((session, src))
 }
@@ -1201,7 +1201,7 @@ fn start_session_holding(
     hold: bool,
 ) -> Result<(Session, Capture, Held), RunError> {
     // Without `hold`, the first reading only looks for the sensors: no thread for it.
-    let open = |read_ahead: bool| -> Result<Input<Box<dyn Read>>, RunError> {
+    let open = |read_ahead: bool| -> Result<Capture, RunError> {
         match args.input_bytes {
             Some(b) => Ok(Input::Pcap(Box::new(
                 PcapSource::new(Box::new(b) as Box<dyn Read>).map_err(|err| RunError::Source {
@@ -1409,27 +1409,20 @@ impl SweepReader {
             if self.finished {
                 return Ok(None);
             }
-            if let Some((t, from, port, range)) = self.held.datagrams.pop_front() {
-                let payload = self.held.payloads.get(range).unwrap_or(&[]);
-                if let Err(e) = self.session.push(t, from, port, payload) {
-                    self.finished = true;
-                    return Err(self.session.run_error(e, &self.path));
+            // The datagrams the sensor count read come first; an input that ended within
+            // them is not read again.
+            let next = match self.held.datagrams.pop_front() {
+                Some((time_ns, src, dst, range)) => Ok(Some(Datagram {
+                    time_ns,
+                    src,
+                    dst,
+                    payload: self.held.payloads.get(range).unwrap_or(&[]),
+                })),
+                None if self.held.ended => Ok(None),
+                None => {
+                    self.held.payloads = Vec::new(); // its memory back
+                    self.src.next_datagram()
                 }
-                if self.held.datagrams.is_empty() {
-                    // Its memory back; an input that ended within it is not read again.
-                    let ended = self.held.ended;
-                    self.held = Held {
-                        ended,
-                        ..Held::default()
-                    };
-                }
-                self.queue.extend(self.session.take_sweeps());
-                continue;
-            }
-            let next = if self.held.ended {
-                Ok(None)
-            } else {
-                self.src.next_datagram()
             };
             let pumped = match next {
                 Ok(Some(d)) => self.session.push(d.time_ns, d.src, d.dst.port(), d.payload),
