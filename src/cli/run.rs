@@ -1,7 +1,7 @@
 //! `decode`, `info` and `demo`: capture → demultiplexer → streams → sink, and the summary.
 
 use std::io::{IsTerminal, Read, Write};
-use std::net::{Ipv4Addr, SocketAddrV4};
+use std::net::Ipv4Addr;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::{Arc, Mutex};
@@ -136,6 +136,16 @@ fn parse_model(m: Option<&str>) -> Result<Option<String>, RunError> {
     }
 }
 
+/// The topic prefix of sensor `idx` named `name` among `n_sensors` counted: none for the
+/// first of a single sensor.
+fn topic_prefix(n_sensors: usize, idx: usize, name: &str) -> String {
+    if n_sensors <= 1 && idx == 0 {
+        String::new()
+    } else {
+        format!("/{name}")
+    }
+}
+
 /// Per-sensor output state.
 struct SensorOut {
     addr: Ipv4Addr,
@@ -246,7 +256,6 @@ impl Output {
         facts: &dyn Facts,
         ports: &[u16],
     ) -> Result<(), SinkError> {
-        let single = self.n_sensors_hint <= 1 && idx == 0;
         let mut name = match &self.name {
             Some(n) => n.clone(),
             None => facts.default_name(addr),
@@ -263,11 +272,7 @@ impl Output {
             .find(|(a, n, _)| (a.is_none() || *a == Some(addr)) && calib_name == *n)
             .map(|(_, n, b)| (n.clone(), b.clone()));
         let md = sensors::channel_metadata(facts, addr, ports);
-        let topic_prefix = if single {
-            String::new()
-        } else {
-            format!("/{name}")
-        };
+        let topic_prefix = topic_prefix(self.n_sensors_hint, idx, &name);
         let s = self.sensor(idx, addr);
         s.name = name.clone();
         s.topic = format!("{topic_prefix}/points");
@@ -456,58 +461,55 @@ pub struct Summary {
     pub lost: u64,
 }
 
-/// Datagrams read by [`prescan`], kept to be decoded before the rest of the same input, so that
-/// the input is read once (at most [`PRESCAN_BYTES`] of payload).
-#[derive(Default)]
-struct Held {
-    payloads: Vec<u8>,
-    datagrams: std::collections::VecDeque<HeldDatagram>,
-    /// The input ended within them: it is not read again.
-    ended: bool,
+/// Counts the sensors of an input from its first datagrams (at most [`PRESCAN_DATAGRAMS`],
+/// within its first [`PRESCAN_BYTES`]): the sources of datagrams of a main-stream size (and
+/// port, if given). The count decides the topic names.
+struct SensorCount {
+    sizes: Vec<usize>,
+    port: Option<u16>,
+    addrs: Vec<Ipv4Addr>,
+    seen: usize,
 }
 
-/// Capture time, source, destination, payload range in [`Held::payloads`].
-type HeldDatagram = (i64, SocketAddrV4, SocketAddrV4, std::ops::Range<usize>);
-
-/// Counts the sensors in the first datagrams of `src` (keeping them in `held` when given);
-/// also says whether reading them failed (the input must then be read again from the start
-/// for the error to surface where decoding meets it).
-fn prescan<R: Read>(
-    src: &mut Input<R>,
-    port: Option<u16>,
-    sizes: &[usize],
-    mut held: Option<&mut Held>,
-) -> (usize, bool) {
-    let mut addrs: Vec<Ipv4Addr> = Vec::new();
-    for _ in 0..PRESCAN_DATAGRAMS {
-        if src.bytes() > PRESCAN_BYTES {
-            break;
-        }
-        match src.next_datagram() {
-            Ok(Some(d)) => {
-                if sizes.contains(&d.payload.len())
-                    && port.is_none_or(|p| p == d.dst.port())
-                    && !addrs.contains(d.src.ip())
-                {
-                    addrs.push(*d.src.ip());
-                }
-                if let Some(h) = held.as_deref_mut() {
-                    let start = h.payloads.len();
-                    h.payloads.extend_from_slice(d.payload);
-                    let range = start..h.payloads.len();
-                    h.datagrams.push_back((d.time_ns, d.src, d.dst, range));
-                }
-            }
-            Ok(None) => {
-                if let Some(h) = held {
-                    h.ended = true;
-                }
-                break;
-            }
-            Err(_) => return (addrs.len(), true),
+impl SensorCount {
+    fn new(sizes: Vec<usize>, port: Option<u16>) -> Self {
+        Self {
+            sizes,
+            port,
+            addrs: Vec::new(),
+            seen: 0,
         }
     }
-    (addrs.len(), false)
+
+    /// Whether the next datagram, read from input offset `bytes`, is still counted.
+    fn counts_next(&self, bytes: u64) -> bool {
+        self.seen < PRESCAN_DATAGRAMS && bytes <= PRESCAN_BYTES
+    }
+
+    fn see(&mut self, d: &Datagram<'_>) {
+        self.seen += 1;
+        if self.sizes.contains(&d.payload.len())
+            && self.port.is_none_or(|p| p == d.dst.port())
+            && !self.addrs.contains(d.src.ip())
+        {
+            self.addrs.push(*d.src.ip());
+        }
+    }
+
+    fn sensors(&self) -> usize {
+        self.addrs.len()
+    }
+}
+
+/// Counts the sensors of `src` by reading its first datagrams; an error ends the count (the
+/// decoding, reading the input again, meets it where it is).
+fn prescan<R: Read>(src: &mut Input<R>, count: &mut SensorCount) {
+    while count.counts_next(src.bytes()) {
+        match src.next_datagram() {
+            Ok(Some(d)) => count.see(&d),
+            Ok(None) | Err(_) => break,
+        }
+    }
 }
 
 /// Settings of a [`Session`], whatever the datagrams come from.
@@ -727,9 +729,19 @@ impl Session {
         self.chooser.borrow().lidar_sizes()
     }
 
-    /// How many sensors are expected (one: topics without a sensor prefix).
+    /// How many sensors are expected (one: topics without a sensor prefix). Sensors already
+    /// registered without an output (a [`SweepReader`] counts while it decodes) take the
+    /// topics the count gives; with an output, topics are written once and stay.
     pub fn set_sensor_hint(&mut self, n: usize) {
         self.out.n_sensors_hint = n;
+        if self.out.sink.is_none() {
+            for (idx, s) in self.out.sensors.iter_mut().enumerate() {
+                if let Some(info) = s.info.as_mut() {
+                    info.topic_prefix = topic_prefix(n, idx, &s.name);
+                    s.topic = format!("{}/points", info.topic_prefix);
+                }
+            }
+        }
     }
 
     /// Where sweeps go from now on (`None`: decode and count only).
@@ -1186,33 +1198,43 @@ impl std::str::FromStr for ChunkCompression {
 /// The session of a capture or bag and its input, ready to pump: the bag's metadata added and
 /// the sensors counted (topic names).
 fn start_session(args: &DecodeArgs) -> Result<(Session, Capture), RunError> {
-    let (session, src, _) = start_session_holding(args, false)?;
-    Ok((session, src))
+    let (mut session, mut first, mut count) = open_session(args, false)?;
+    prescan(&mut first, &mut count);
+    let n = count.sensors();
+    if args.name.is_some() && n > 1 {
+        return Err(RunError::Usage(format!(
+            "--name: the capture holds {n} sensors; names are given per sensor automatically"
+        )));
+    }
+    session.set_sensor_hint(n);
+    // The topics are named before anything is written: the input is read again from the
+    // start.
+    drop(first);
+    Ok((session, open_input(args, args.read_ahead)?))
 }
 
 /// An opened input, as the decoding reads it.
 type Capture = Input<Box<dyn Read>>;
 
-/// [`start_session`]; with `hold`, the datagrams read to count the sensors are kept and the
-/// same input is returned to be read on from there (the caller decodes the held datagrams
-/// first), instead of the input opened again and read from the start.
-fn start_session_holding(
+fn open_input(args: &DecodeArgs, read_ahead: bool) -> Result<Capture, RunError> {
+    match args.input_bytes {
+        Some(b) => Ok(Input::Pcap(Box::new(
+            PcapSource::new(Box::new(b) as Box<dyn Read>).map_err(|err| RunError::Source {
+                path: args.input.display().to_string(),
+                err: err.into(),
+            })?,
+        ))),
+        None => input::open_with(&args.input, &args.bag, read_ahead),
+    }
+}
+
+/// The input opened (read ahead if `read_ahead` and the options ask for it), its session (the
+/// bag's metadata added), and a sensor count not yet started.
+fn open_session(
     args: &DecodeArgs,
-    hold: bool,
-) -> Result<(Session, Capture, Held), RunError> {
-    // Without `hold`, the first reading only looks for the sensors: no thread for it.
-    let open = |read_ahead: bool| -> Result<Capture, RunError> {
-        match args.input_bytes {
-            Some(b) => Ok(Input::Pcap(Box::new(
-                PcapSource::new(Box::new(b) as Box<dyn Read>).map_err(|err| RunError::Source {
-                    path: args.input.display().to_string(),
-                    err: err.into(),
-                })?,
-            ))),
-            None => input::open_with(&args.input, &args.bag, read_ahead),
-        }
-    };
-    let mut first = open(hold && args.read_ahead)?;
+    read_ahead: bool,
+) -> Result<(Session, Capture, SensorCount), RunError> {
+    let first = open_input(args, read_ahead && args.read_ahead)?;
     let mut options = args.session_options();
     // A Livox recording names its devices' model, which SDK1 packets do not.
     if options.model.is_none() {
@@ -1222,19 +1244,8 @@ fn start_session_holding(
     if let Some(b) = first.bag() {
         add_bag_metadata(&mut session, b, &args.calib);
     }
-    let sizes = session.lidar_sizes();
-    let mut held = Held::default();
-    let (n_sensors_hint, failed) =
-        prescan(&mut first, args.port, &sizes, hold.then_some(&mut held));
-    if args.name.is_some() && n_sensors_hint > 1 {
-        return Err(RunError::Usage(format!("--name: the capture holds {n_sensors_hint} sensors; names are given per sensor automatically")));
-    }
-    session.set_sensor_hint(n_sensors_hint);
-    if hold && !failed {
-        return Ok((session, first, held));
-    }
-    drop(first);
-    Ok((session, open(args.read_ahead)?, Held::default()))
+    let count = SensorCount::new(session.lidar_sizes(), args.port);
+    Ok((session, first, count))
 }
 
 /// The `--json` summary of a finished run, and the packets lost.
@@ -1368,8 +1379,10 @@ pub struct SensorDesc {
 /// calibrations, the bag's metadata), without an output; the Python package's `open`.
 pub struct SweepReader {
     src: Input<Box<dyn Read>>,
-    /// The datagrams read to count the sensors, decoded first.
-    held: Held,
+    /// The sensors counted while the first datagrams are decoded (`decode` counts them
+    /// before, reading them twice: it names its topics before writing; here they are only
+    /// the summary's, named again once the count is known).
+    count: Option<SensorCount>,
     session: Session,
     path: String,
     queue: std::collections::VecDeque<ReadSweep>,
@@ -1381,11 +1394,11 @@ impl SweepReader {
     /// Opens `args.input` (or `args.input_bytes`) with `args`' decoding options; `out`, the
     /// pipeline and odometry options are not used.
     pub fn open(args: &DecodeArgs) -> Result<Self, RunError> {
-        let (mut session, src, held) = start_session_holding(args, true)?;
+        let (mut session, src, count) = open_session(args, true)?;
         session.enable_tap();
         Ok(Self {
             src,
-            held,
+            count: Some(count),
             session,
             path: args.input.display().to_string(),
             queue: std::collections::VecDeque::new(),
@@ -1409,21 +1422,19 @@ impl SweepReader {
             if self.finished {
                 return Ok(None);
             }
-            // The datagrams the sensor count read come first; an input that ended within
-            // them is not read again.
-            let next = match self.held.datagrams.pop_front() {
-                Some((time_ns, src, dst, range)) => Ok(Some(Datagram {
-                    time_ns,
-                    src,
-                    dst,
-                    payload: self.held.payloads.get(range).unwrap_or(&[]),
-                })),
-                None if self.held.ended => Ok(None),
-                None => {
-                    self.held.payloads = Vec::new(); // its memory back
-                    self.src.next_datagram()
+            let counting = self
+                .count
+                .as_ref()
+                .is_some_and(|c| c.counts_next(self.src.bytes()));
+            let next = self.src.next_datagram();
+            match (&next, self.count.as_mut()) {
+                (Ok(Some(d)), Some(c)) if counting => c.see(d),
+                (_, Some(c)) => {
+                    self.session.set_sensor_hint(c.sensors());
+                    self.count = None;
                 }
-            };
+                _ => {}
+            }
             let pumped = match next {
                 Ok(Some(d)) => self.session.push(d.time_ns, d.src, d.dst.port(), d.payload),
                 Ok(None) => {
