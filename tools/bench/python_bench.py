@@ -13,7 +13,9 @@ non-zero distance is a point: the point counts must agree). Ouster: an OS-2-128 
 flat in capture size: ringscan.open on a quarter-size Velodyne capture too.
 
 Timed inside each child, from the open call to the last array (interpreter start-up and imports
-excluded); rounds alternate between tools; the best and median rounds are reported. Each round
+excluded, and the SETTLE_S after them: importing numpy starts OpenBLAS's worker threads, which
+spin for ~0.1 s (perf: `blas_thread_server`) on whichever core is free, so a tool timed at
+once shares a core with them); rounds alternate between tools; the best and median rounds are reported. Each round
 runs every tool pinned to one core (`--pin`) and again free to use every core: ringscan.open
 reads the capture on a thread of its own (`read_ahead`), which only a second core can overlap
 with the decoding; the references use one thread either way.
@@ -39,6 +41,7 @@ READ_PCAP = r"""
 import json, sys, time, MODULE as vd
 path, calib = sys.argv[1], sys.argv[2]
 cfg = vd.Config(model=vd.Model.HDL32E, calibration=vd.Calibration.read(calib), min_range=0.0, max_range=1000.0)
+time.sleep(SETTLE_S)
 t0 = time.perf_counter()
 frames = points = 0; check = 0.0
 for stamp, p in vd.read_pcap(path, cfg):
@@ -47,10 +50,14 @@ for stamp, p in vd.read_pcap(path, cfg):
 print(json.dumps({"frames": frames, "points": points, "elapsed_s": time.perf_counter() - t0, "check": check}))
 """
 
+# BENCH_SETTLE_S=0 measures without the pause (its effect is in BENCHMARKS.md).
+SETTLE = f"SETTLE_S = {float(os.environ.get('BENCH_SETTLE_S', '0.5'))}\n"
+
 CHILD = {
     "ringscan.open": r"""
 import json, sys, time, numpy as np, ringscan
 path, calib = sys.argv[1], sys.argv[2]
+time.sleep(SETTLE_S)
 t0 = time.perf_counter()
 frames = points = 0; check = 0.0
 for s in ringscan.open(path, calib=calib, min_range=0.0, max_range=1000.0):
@@ -65,6 +72,7 @@ print(json.dumps({"frames": frames, "points": points, "elapsed_s": time.perf_cou
     "ringscan.open (Ouster)": r"""
 import json, sys, time, numpy as np, ringscan
 path, meta = sys.argv[1], sys.argv[2]
+time.sleep(SETTLE_S)
 t0 = time.perf_counter()
 frames = points = 0; check = 0.0
 for s in ringscan.open(path, calib=meta):
@@ -77,6 +85,7 @@ print(json.dumps({"frames": frames, "points": points, "elapsed_s": time.perf_cou
 import json, sys, time, numpy as np
 from ouster.sdk import open_source, core
 path, meta = sys.argv[1], sys.argv[2]
+time.sleep(SETTLE_S)
 t0 = time.perf_counter()
 src = open_source(path, meta=[meta])
 info = src.sensor_info[0]
@@ -97,7 +106,7 @@ print(json.dumps({"frames": frames, "points": points, "elapsed_s": time.perf_cou
 
 
 def run_child(python, tool, path, extra, pin):
-    cmd = (pin.split() if pin else []) + [python, "-c", CHILD[tool], path, extra]
+    cmd = (pin.split() if pin else []) + [python, "-c", SETTLE + CHILD[tool], path, extra]
     t0 = time.perf_counter()
     p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     _pid, status, ru = os.wait4(p.pid, 0)
