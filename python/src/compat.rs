@@ -17,7 +17,7 @@ use pyo3::prelude::*;
 
 use ringscan::sensor::velodyne::calib::builtin::builtin;
 use ringscan::sensor::velodyne::calib::parse_velodyne;
-use ringscan::sensor::velodyne::decode::corrected_intensity;
+use ringscan::sensor::velodyne::decode::{corrected_intensity, ColumnRate};
 use ringscan::sensor::velodyne::model::{BLOCKS, DATA_PACKET_LEN};
 use ringscan::sensor::velodyne::wire::DataPacket;
 use ringscan::sensor::velodyne::{ReturnMode, VelodyneCalibration, VelodyneDecoder, VelodyneModel};
@@ -132,6 +132,9 @@ struct FrameDecoder {
     calib: VelodyneCalibration,
     opts: DecodeOptions,
     decoders: Vec<(ReturnMode, VelodyneDecoder)>,
+    /// Rotation rate of one-column packets (VLS-128 dual), from the packet before, across
+    /// frames as velodyne_decoder keeps it.
+    column_rate: ColumnRate,
     stamp_first: bool,
     window: Option<(u16, u16)>,
 }
@@ -196,7 +199,8 @@ impl FrameDecoder {
                 .map(|w| Window::new(w, self.model, mode, &packet));
             let laser_of_ring = &self.laser_of_ring;
             let (model, calib, bytes) = (self.model, &self.calib, &p.bytes[..]);
-            decoder.decode_with(&packet, 0..BLOCKS, 0, |pt, col| {
+            let rate = self.column_rate.next(decoder, &packet);
+            decoder.decode_with_rate(&packet, 0..BLOCKS, 0, rate, |pt, col| {
                 let laser = laser_of_ring
                     .get(usize::from(pt.ring))
                     .copied()
@@ -493,6 +497,7 @@ fn run(s: &Settings, tx: &SyncSender<Msg<Frame>>) -> Result<(), (ErrKind, String
                 calib,
                 opts: s.opts,
                 decoders: Vec::new(),
+                column_rate: ColumnRate::default(),
                 stamp_first: s.stamp_first,
                 window: s.window,
             });

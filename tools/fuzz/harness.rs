@@ -536,7 +536,23 @@ fn expected_measurements(
         1
     };
     let mut out = Vec::new();
-    if mode.is_dual() {
+    if mode.is_dual() && model == VelodyneModel::Vls128 {
+        // One column: bank b's last return in block 2b, its strongest in 2b + 1; blocks
+        // 8-11 empty (velodyne_decoder 3.1.0 `unpack_vls128`).
+        for bank in 0..4 {
+            let (lb, sb) = (2 * bank, 2 * bank + 1);
+            for s in 0..SLOTS {
+                let laser = 32 * bank + s;
+                let (dl, ds) = (p.distance(lb, s), p.distance(sb, s));
+                if dl == ds {
+                    out.push((ds, p.reflectivity(sb, s), laser, 0));
+                } else {
+                    out.push((dl, p.reflectivity(lb, s), laser, 1));
+                    out.push((ds, p.reflectivity(sb, s), laser, 0));
+                }
+            }
+        }
+    } else if mode.is_dual() {
         let half = bpf / 2;
         let mut g = 0;
         while g < BLOCKS {
@@ -601,7 +617,12 @@ fn fix_layout(buf: &mut [u8; DATA_PACKET_LEN], model: VelodyneModel, mode: Retur
         1
     };
     for b in 0..BLOCKS {
-        let flag = [FLAG_UPPER, FLAG_LOWER, FLAG_BANK2, FLAG_BANK3][(b % bpf) % banks];
+        let bank = if model == VelodyneModel::Vls128 && mode.is_dual() {
+            (b / 2) % 4
+        } else {
+            (b % bpf) % banks
+        };
+        let flag = [FLAG_UPPER, FLAG_LOWER, FLAG_BANK2, FLAG_BANK3][bank];
         buf[b * 100..b * 100 + 2].copy_from_slice(&flag.to_le_bytes());
     }
 }
@@ -611,7 +632,7 @@ fn fix_layout(buf: &mut [u8; DATA_PACKET_LEN], model: VelodyneModel, mode: Retur
 /// `velodyne_packet`: byte 0 chooses the calibration variant (bits 0–2), the range filter
 /// (bit 3) and whether to repair the block flags (bit 5) / azimuths (bit 6); the rest is a payload (data packet: 1206 bytes, zero-padded
 /// or cut; the raw rest is also tried as a position packet and an NMEA sentence). The payload is
-/// decoded with every model in every return mode it supports: at most 384 points, every
+/// decoded with every model in every return mode: at most 384 points, every
 /// coordinate finite and within the largest encodable range, `t` within the packet span, and —
 /// for tables without HDL-64E corrections — each point at the distance its measurement encodes.
 pub fn velodyne_packet(data: &[u8]) {
@@ -675,9 +696,6 @@ pub fn velodyne_packet(data: &[u8]) {
             .unwrap_or(model.distance_resolution());
         let rings = calib.rings();
         for mode in MODES {
-            if !model.supports(mode) {
-                continue;
-            }
             let dec = VelodyneDecoder::new(model, mode, &calib, opts).expect("decoder builds");
             let _ = dec.check_layout(&p);
             let t_max = packet_span_ns(model, mode);
@@ -1102,7 +1120,7 @@ pub fn check_calibration(c: &VelodyneCalibration) {
     let mut buf = [0u8; DATA_PACKET_LEN];
     let mut points = Vec::new();
     for model in ALL_MODELS.into_iter().filter(|m| m.lasers() == n) {
-        for mode in MODES.into_iter().filter(|&m| model.supports(m)) {
+        for mode in MODES {
             fix_layout(&mut buf, model, mode);
             for blk in 0..BLOCKS {
                 let o = blk * 100;

@@ -117,6 +117,8 @@ pub struct VelodyneDecoder {
     opts: DecodeOptions,
     blocks_per_firing: usize,
     columns_per_packet: usize,
+    /// Blocks holding measurements ([`VelodyneModel::blocks_used`]).
+    blocks_used: usize,
 }
 
 /// What one call decoded.
@@ -126,6 +128,47 @@ pub struct Decoded {
     pub points: usize,
     /// Measurements with no return (distance 0) or outside the range filter.
     pub empty: usize,
+}
+
+/// The rotation rate of packets that hold one firing column (the VLS-128 in dual return mode),
+/// which a packet cannot give by itself: the azimuth advance since the previous packet over one
+/// nominal column period. The firing times within the column use the same nominal period, so
+/// their rotation is the same fraction of the advance whatever the firmware's real period
+/// (velodyne_decoder 3.1.0 `unpack_vls128` measures it so too). The first packet gets 0 (no
+/// rotation within its column, as the reference); a rate above 1.8 × the last one (a packet
+/// lost in between) keeps the last.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ColumnRate {
+    prev_azimuth: Option<u16>,
+    rate: f64,
+}
+
+impl ColumnRate {
+    /// The rate for packet `p` (0.01° per ns), `None` when the decoder does not need one.
+    pub fn next(&mut self, dec: &VelodyneDecoder, p: &DataPacket<'_>) -> Option<f64> {
+        if !dec.needs_rate() {
+            return None;
+        }
+        let az = p.azimuth(0);
+        let period = dec.model().column_period_ns();
+        let measured = match self.prev_azimuth {
+            Some(prev) => {
+                f64::from((u32::from(az) + 36_000 - u32::from(prev) % 36_000) % 36_000) / period
+            }
+            None => 0.0,
+        };
+        self.prev_azimuth = Some(az);
+        if self.rate > 0.0 && measured > self.rate * 1.8 {
+            return Some(self.rate);
+        }
+        self.rate = measured;
+        Some(measured)
+    }
+
+    /// Forgets the previous packet (after a discontinuity).
+    pub fn reset(&mut self) {
+        *self = Self::default();
+    }
 }
 
 impl VelodyneDecoder {
@@ -141,12 +184,6 @@ impl VelodyneDecoder {
                 model: model.name(),
                 expected: model.lasers(),
                 found: calib.num_lasers(),
-            });
-        }
-        if !model.supports(mode) {
-            return Err(DecodeError::Unsupported {
-                model: model.name(),
-                mode: mode.name(),
             });
         }
         if opts.min_range.is_nan() || opts.max_range.is_nan() || opts.min_range > opts.max_range {
@@ -190,6 +227,7 @@ impl VelodyneDecoder {
                 .collect()
         });
         let bpf = model.blocks_per_firing(mode);
+        let used = model.blocks_used(mode);
         let banks = if model.is_hdl64() {
             2
         } else if model == VelodyneModel::Vls128 {
@@ -200,10 +238,7 @@ impl VelodyneDecoder {
         let mut slots = Box::new([[Slot::default(); SLOTS]; BLOCKS]);
         let mut expected_bank = [0u8; BLOCKS];
         for (b, row) in slots.iter_mut().enumerate() {
-            // Banks cycle within a firing group; dual return repeats the banks once more
-            // (HDL-64E dual: upper, lower, upper, lower).
-            let bank = (b % bpf) % banks;
-            expected_bank[b] = bank as u8;
+            expected_bank[b] = model.bank_of_block(mode, b) as u8;
             for (s, slot) in row.iter_mut().enumerate() {
                 let (t, column) = model.firing(mode, b, s);
                 *slot = Slot {
@@ -215,12 +250,12 @@ impl VelodyneDecoder {
         let mut lanes = Box::new([Lane::default(); LANES]);
         for bank in 0..banks {
             // A block of this bank: the first one in the packet whose bank it is.
-            let Some(b) = (0..BLOCKS).find(|&b| usize::from(expected_bank[b]) == bank) else {
+            let Some(b) = (0..used).find(|&b| usize::from(expected_bank[b]) == bank) else {
                 continue;
             };
             let (t0, c0) = model.firing(mode, b, 0);
             // The firing at which the block's azimuth was read.
-            let t_az = model.firing(mode, model.azimuth_block(b), 0).0;
+            let t_az = model.firing(mode, model.azimuth_block(mode, b), 0).0;
             for s in 0..SLOTS {
                 let (t, c) = model.firing(mode, b, s);
                 let id = model.laser_of(bank, s);
@@ -235,7 +270,10 @@ impl VelodyneDecoder {
         }
         let n_lanes = banks * SLOTS;
         let t0 = model.firing(mode, 0, 0).0;
-        let rate_span_ns = model.firing(mode, model.azimuth_block(BLOCKS - 1), 0).0 - t0;
+        let rate_span_ns = model
+            .firing(mode, model.azimuth_block(mode, BLOCKS - 1), 0)
+            .0
+            - t0;
         let resolution = model
             .fixed_distance_resolution()
             .or(calib.distance_resolution)
@@ -254,6 +292,7 @@ impl VelodyneDecoder {
             opts,
             blocks_per_firing: bpf,
             columns_per_packet: model.columns_per_packet(mode),
+            blocks_used: used,
         })
     }
 
@@ -277,6 +316,18 @@ impl VelodyneDecoder {
         self.columns_per_packet
     }
 
+    /// Blocks of a packet that hold measurements (12, or 8 for the VLS-128 in dual return
+    /// mode, whose blocks 8–11 are empty and not read).
+    pub fn blocks_used(&self) -> usize {
+        self.blocks_used
+    }
+
+    /// Whether a packet holds a single firing column, so that the rotation rate must come from
+    /// the packets before it ([`ColumnRate`]; the VLS-128 in dual return mode).
+    pub fn needs_rate(&self) -> bool {
+        self.rate_span_ns <= 0.0
+    }
+
     /// Firing time of the first measurement of `block`, from the packet's first firing, ns.
     pub fn block_time_ns(&self, block: usize) -> u32 {
         self.slots[block.min(BLOCKS - 1)][0].t_ns
@@ -294,7 +345,7 @@ impl VelodyneDecoder {
 
     /// Checks that the packet's block flags follow this model's layout.
     pub fn check_layout(&self, p: &DataPacket<'_>) -> Result<(), DecodeError> {
-        for b in 0..BLOCKS {
+        for b in 0..self.blocks_used {
             let bank = p.bank(b).unwrap_or(usize::MAX);
             if bank != usize::from(self.expected_bank[b]) {
                 let expected =
@@ -331,28 +382,43 @@ impl VelodyneDecoder {
     /// Decodes blocks of a packet, handing every point and its firing column (within the
     /// packet) to `emit`. The order is the reference's: block by block, slot by slot; in dual
     /// mode the last return of a slot before its strongest, one point when they are equal.
+    /// A packet of one firing column ([`Self::needs_rate`]) is decoded without rotation
+    /// within its column: use [`Self::decode_with_rate`].
     #[inline]
     pub fn decode_with<F: FnMut(Point, usize)>(
         &self,
         p: &DataPacket<'_>,
         blocks: Range<usize>,
         t_base_ns: i64,
+        emit: F,
+    ) -> Decoded {
+        self.decode_with_rate(p, blocks, t_base_ns, None, emit)
+    }
+
+    /// [`Self::decode_with`], with the rotation rate (0.01° per ns, [`ColumnRate`]) for a
+    /// packet that cannot give its own ([`Self::needs_rate`]); ignored for every other packet.
+    #[inline]
+    pub fn decode_with_rate<F: FnMut(Point, usize)>(
+        &self,
+        p: &DataPacket<'_>,
+        blocks: Range<usize>,
+        t_base_ns: i64,
+        column_rate: Option<f64>,
         mut emit: F,
     ) -> Decoded {
         let mut n = Decoded::default();
-        let end = blocks.end.min(BLOCKS);
+        let end = blocks.end.min(self.blocks_used);
         let start = blocks.start.min(end);
         if start == end {
             return n;
         }
         // Packet-mean rotation rate, 0.01° per ns (velodyne_decoder's rule).
-        let az0 = f64::from(p.azimuth(0));
-        let az_last = f64::from(p.azimuth(BLOCKS - 1));
-        let span = (az_last - az0).rem_euclid(36_000.0);
         let rate = if self.rate_span_ns > 0.0 {
-            span / self.rate_span_ns
+            let az0 = f64::from(p.azimuth(0));
+            let az_last = f64::from(p.azimuth(BLOCKS - 1));
+            (az_last - az0).rem_euclid(36_000.0) / self.rate_span_ns
         } else {
-            0.0
+            column_rate.filter(|r| r.is_finite()).unwrap_or(0.0)
         };
         // Per lane: rotation of the lane's firing after the firing its block's azimuth was read
         // at, minus the laser's rotational correction, as one (cos, sin) pair.
@@ -370,15 +436,11 @@ impl VelodyneDecoder {
         let mut b = start;
         while b < end {
             if dual {
-                // Blocks [b, b+half) and [b+half, b+2·half) carry the two returns: last then
-                // strongest, or strongest then last (HDL-64E, `dual_strongest_first`).
+                // The group's blocks carry the two returns of each bank in the model's
+                // order (`VelodyneModel::dual_pair`).
                 for k in 0..half {
-                    if b + half + k < BLOCKS {
-                        let (last, strongest) = if self.model.dual_strongest_first() {
-                            (b + half + k, b + k)
-                        } else {
-                            (b + k, b + half + k)
-                        };
+                    let (last, strongest) = self.model.dual_pair(b, k);
+                    if last.max(strongest) < self.blocks_used {
                         self.block_dual(p, last, strongest, &rot, t_base_ns, &mut n, &mut emit);
                     }
                 }

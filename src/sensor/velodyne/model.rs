@@ -42,7 +42,7 @@ pub enum VelodyneModel {
     Hdl64eS2,
     /// HDL-64E S3.
     Hdl64eS3,
-    /// VLS-128 (Alpha Prime), single return only.
+    /// VLS-128 (Alpha Prime).
     Vls128,
 }
 
@@ -216,9 +216,41 @@ impl VelodyneModel {
         }
     }
 
-    /// Whether the model supports this return mode in ringscan.
-    pub fn supports(self, mode: ReturnMode) -> bool {
-        !(self == Self::Vls128 && mode == ReturnMode::Dual)
+    /// Blocks of a packet that carry measurements: all 12, except the VLS-128 in dual return
+    /// mode, whose one firing column fills blocks 0–7 (two per bank) and leaves 8–11 empty
+    /// (velodyne_decoder 3.1.0 `unpack_vls128`: "The last 4 blocks are empty in dual-return
+    /// mode"; their content is not read).
+    pub fn blocks_used(self, mode: ReturnMode) -> usize {
+        if self == Self::Vls128 && mode.is_dual() {
+            8
+        } else {
+            BLOCKS
+        }
+    }
+
+    /// The bank (position in its firing: HDL-64E upper 0 / lower 1, VLS-128 banks 0–3, 0 for
+    /// every other model) of block `block` in a packet of this return mode.
+    pub fn bank_of_block(self, mode: ReturnMode, block: usize) -> usize {
+        match self {
+            Self::Hdl64eS2 | Self::Hdl64eS3 => block % 2,
+            // Single: four banks a column. Dual: bank b's last and strongest returns in
+            // blocks 2b and 2b + 1.
+            Self::Vls128 if mode.is_dual() => (block / 2) % 4,
+            Self::Vls128 => block % 4,
+            _ => 0,
+        }
+    }
+
+    /// In dual return mode, the blocks of the last and of the strongest return of pair `k` of
+    /// the firing group that starts at block `group` (`k` < half the group's blocks).
+    pub fn dual_pair(self, group: usize, k: usize) -> (usize, usize) {
+        let half = self.blocks_per_firing(ReturnMode::Dual) / 2;
+        match self {
+            // Bank by bank: last, strongest (velodyne_decoder `unpack_vls128`).
+            Self::Vls128 => (group + 2 * k, group + 2 * k + 1),
+            _ if self.dual_strongest_first() => (group + half + k, group + k),
+            _ => (group + k, group + half + k),
+        }
     }
 
     /// Blocks that belong to one firing (same azimuth): the unit sweeps are cut on.
@@ -290,8 +322,13 @@ impl VelodyneModel {
                 )
             }
             Self::Vls128 => {
-                let seq = block / 4;
-                let laser = (block % 4) * SLOTS + slot;
+                // Dual: one column a packet (sequence 0), blocks 2b and 2b + 1 of bank b.
+                let (seq, bank) = if dual {
+                    (0, (block / 2) % 4)
+                } else {
+                    (block / 4, block % 4)
+                };
+                let laser = bank * SLOTS + slot;
                 let group = laser / 8 + laser / 64;
                 (53_300.0 * seq as f64 + 2_665.0 * group as f64, seq)
             }
@@ -304,8 +341,10 @@ impl VelodyneModel {
     /// run of four blocks has one azimuth). Interpolating from a bank's own first firing would
     /// lose its offset in the sequence: up to 13 firing groups, 35 µs, 0.12° at 600 rpm.
     #[inline]
-    pub fn azimuth_block(self, block: usize) -> usize {
+    pub fn azimuth_block(self, mode: ReturnMode, block: usize) -> usize {
         match self {
+            // Dual: the packet's one column starts at block 0.
+            Self::Vls128 if mode.is_dual() => 0,
             Self::Vls128 => block - block % 4,
             _ => block,
         }
@@ -386,6 +425,40 @@ mod tests {
             VelodyneModel::Hdl64eS3.packet_period_ns(ReturnMode::Dual),
             172_800.0
         );
+        // VLS-128: three 53.3 µs sequences a packet; in dual return one, in blocks 0-7.
+        let v = VelodyneModel::Vls128;
+        assert_eq!(v.packet_period_ns(ReturnMode::Strongest), 159_900.0);
+        assert_eq!(v.packet_period_ns(ReturnMode::Dual), 53_300.0);
+        assert_eq!(v.columns_per_packet(ReturnMode::Dual), 1);
+        assert_eq!(v.blocks_used(ReturnMode::Dual), 8);
+        assert_eq!(v.blocks_used(ReturnMode::Strongest), 12);
+    }
+
+    #[test]
+    fn vls128_dual_return_pairs_blocks_bank_by_bank() {
+        let v = VelodyneModel::Vls128;
+        let d = ReturnMode::Dual;
+        for bank in 0..4 {
+            // Last return in block 2·bank, strongest in 2·bank + 1, both of that bank.
+            assert_eq!(v.dual_pair(0, bank), (2 * bank, 2 * bank + 1));
+            assert_eq!(v.bank_of_block(d, 2 * bank), bank);
+            assert_eq!(v.bank_of_block(d, 2 * bank + 1), bank);
+            for slot in [0, 7, 8, 31] {
+                // Laser 32·bank + slot fires in group laser/8 + laser/64, 2.665 µs apart,
+                // in the packet's one sequence: as in the first column of a single-return
+                // packet.
+                let laser = 32 * bank + slot;
+                let t = 2_665.0 * (laser / 8 + laser / 64) as f64;
+                assert_eq!(v.firing(d, 2 * bank, slot), (t, 0));
+                assert_eq!(v.firing(d, 2 * bank + 1, slot), (t, 0));
+                assert_eq!(v.firing(ReturnMode::Strongest, bank, slot), (t, 0));
+            }
+        }
+        // Every block's azimuth is the sequence start's.
+        assert!((0..12).all(|b| v.azimuth_block(d, b) == 0));
+        // Other models: the two halves of a group (HDL-64E: strongest first).
+        assert_eq!(VelodyneModel::Hdl32e.dual_pair(4, 0), (4, 5));
+        assert_eq!(VelodyneModel::Hdl64eS3.dual_pair(4, 1), (7, 5));
     }
 
     #[test]

@@ -20,11 +20,13 @@ use crate::sensor::nmea::parse_rmc;
 use crate::sensor::nmea::Rmc;
 use crate::sensor::velodyne::calib::builtin;
 use crate::sensor::velodyne::calib::VelodyneCalibration;
+use crate::sensor::velodyne::decode::ColumnRate;
 use crate::sensor::velodyne::model::ReturnMode;
 use crate::sensor::velodyne::model::VelodyneModel;
 use crate::sensor::velodyne::model::BLOCKS;
 use crate::sensor::velodyne::model::DATA_PACKET_LEN;
 use crate::sensor::velodyne::model::POSITION_PACKET_LEN;
+use crate::sensor::velodyne::model::SLOTS;
 use crate::sensor::velodyne::wire::DataPacket;
 use crate::sensor::velodyne::wire::PositionPacket;
 use crate::sensor::velodyne::wire::PpsState;
@@ -176,6 +178,10 @@ pub struct VelodyneStream {
     /// later packets of the sweep are timed from it by their stamp difference, so a clock that
     /// changes source mid-sweep (the first GPS fix) cannot shift the points' `t`.
     anchor: (u32, i64),
+    /// Rotation rate of one-column packets (VLS-128 dual), from the packets before.
+    column_rate: ColumnRate,
+    /// The rate [`Self::column_rate`] gave the packet being decoded.
+    packet_rate: Option<f64>,
 }
 
 impl VelodyneStream {
@@ -193,6 +199,8 @@ impl VelodyneStream {
             next_index: 0,
             sweep_open: false,
             anchor: (0, 0),
+            column_rate: ColumnRate::default(),
+            packet_rate: None,
         }
     }
 
@@ -395,6 +403,7 @@ impl VelodyneStream {
         self.facts.model = Some(model);
         self.facts.mode = Some(mode);
         self.decoder = Some(dec);
+        self.column_rate.reset();
         Ok(())
     }
 
@@ -447,6 +456,7 @@ impl VelodyneStream {
         }
         let mode = dec.mode();
         let bpf = dec.blocks_per_firing().max(1);
+        let used = dec.blocks_used().clamp(1, BLOCKS);
         let block_t: [u32; BLOCKS] = core::array::from_fn(|b| dec.block_time_ns(b));
         let toh = p.timestamp_us();
         let (stamp_ns, clock) = self.device_time(toh, host_ns);
@@ -463,6 +473,7 @@ impl VelodyneStream {
                 self.stats.discontinuities += 1;
                 self.emit(on_sweep);
                 self.prev = None;
+                self.column_rate.reset();
             } else if period_ns > 0.0 {
                 let missing = ((d_ns as f64 / period_ns).round() as i64 - 1).max(0) as u64;
                 if missing > 0 {
@@ -473,6 +484,10 @@ impl VelodyneStream {
                 }
             }
         }
+        self.packet_rate = match self.decoder.as_ref() {
+            Some(d) => self.column_rate.next(d, p),
+            None => None,
+        };
         let continued = |this: &Self| {
             let (toh0, ff0) = this.anchor;
             ff0.saturating_add(toh_delta_us(toh0, toh).saturating_mul(1_000))
@@ -489,7 +504,7 @@ impl VelodyneStream {
         let mut last_rel = self.prev.map(|p| p.rel_az);
         let mut seg_start = 0usize;
         let mut g = 0usize;
-        while g < BLOCKS {
+        while g < used {
             let r = rel(p.azimuth(g));
             let wrapped = matches!(last_rel, Some(l) if u32::from(l) > u32::from(r) + 18_000);
             let too_long = self.sweep_open
@@ -510,10 +525,10 @@ impl VelodyneStream {
             last_rel = Some(r);
             g += bpf;
         }
-        if seg_start < BLOCKS {
-            self.add_segment_at(toh, host_ns, p, seg_start..BLOCKS, first_firing_ns, clock);
+        if seg_start < used {
+            self.add_segment_at(toh, host_ns, p, seg_start..used, first_firing_ns, clock);
         }
-        self.cur.last_azimuth = p.azimuth(BLOCKS - 1);
+        self.cur.last_azimuth = p.azimuth(used - 1);
         self.stats.data_packets += 1;
         self.prev = Some(Prev {
             toh_us: toh,
@@ -570,12 +585,16 @@ impl VelodyneStream {
         if self.cfg.keep_columns {
             let first_col = dec.block_column(blocks.start) as u32;
             let (points, columns) = (&mut self.cur.points, &mut self.cur.columns);
-            dec.decode_with(p, blocks.clone(), t_base, |pt, col| {
+            dec.decode_with_rate(p, blocks.clone(), t_base, self.packet_rate, |pt, col| {
                 points.push(pt);
                 columns.push(col_base + col as u32 - first_col);
             });
         } else {
-            dec.decode_blocks(p, blocks.clone(), t_base, &mut self.cur.points);
+            let points = &mut self.cur.points;
+            points.reserve(blocks.len() * SLOTS);
+            dec.decode_with_rate(p, blocks.clone(), t_base, self.packet_rate, |pt, _| {
+                points.push(pt)
+            });
         }
         let cols = dec.block_column(blocks.end - 1) + 1 - dec.block_column(blocks.start);
         // VLP-16: each block holds two firing columns.
@@ -625,11 +644,11 @@ fn choose_model(
         // (manual Rev 3, FW 5.1.7.1), 173.3 µs (Rev 4, FW ≥ 5.2.3.0; VeloView, velodyne_decoder),
         // and 165–166 µs on nebula's real capture.
         let slack = if m == VelodyneModel::Vls128 {
-            (173.3 - p) * 1.03
+            p * (173.3 / 160.0 - 1.0) * 1.03
         } else {
             0.0
         };
-        m.supports(mode) && d >= p * 0.97 && d <= p * 1.03 + slack
+        d >= p * 0.97 && d <= p * 1.03 + slack
     };
     match period_us {
         Some(d) => {
@@ -698,6 +717,18 @@ mod tests {
             .unwrap();
             assert_eq!(m, VelodyneModel::Vls128);
             assert!(why.contains("confirmed"), "{period}: {why}");
+        }
+        // Dual return: one sequence a packet, a third of each.
+        for period in [53.3, 55.3, 57.8] {
+            let (m, why) = choose_model(
+                Some(VelodyneModel::Vls128),
+                false,
+                ReturnMode::Dual,
+                Some(period),
+            )
+            .unwrap();
+            assert_eq!(m, VelodyneModel::Vls128);
+            assert!(why.contains("confirmed"), "dual {period}: {why}");
         }
     }
 

@@ -251,28 +251,24 @@ impl VelodyneSim {
             .distance_resolution
             .unwrap_or(self.model.distance_resolution());
         let bpf = self.model.blocks_per_firing(self.mode);
-        let banks = if self.model.is_hdl64() {
-            2
-        } else if self.model == VelodyneModel::Vls128 {
-            4
-        } else {
-            1
-        };
+        let used = self.model.blocks_used(self.mode);
         let dual = self.mode.is_dual();
         let mut blocks = [Block::default(); BLOCKS];
-        for (b, blk) in blocks.iter_mut().enumerate() {
-            let bank = (b % bpf) % banks;
+        // Blocks past `used` (VLS-128 dual: 8-11) stay empty: flag, azimuth and data all zero.
+        for (b, blk) in blocks.iter_mut().enumerate().take(used) {
+            let bank = self.model.bank_of_block(self.mode, b);
             blk.flag = [FLAG_UPPER, FLAG_LOWER, FLAG_BANK2, FLAG_BANK3][bank];
             // The azimuth the sensor reads for this block (VLS-128: the firing sequence's).
             let t_block = t_packet_ns
                 + self
                     .model
-                    .firing(self.mode, self.model.azimuth_block(b), 0)
+                    .firing(self.mode, self.model.azimuth_block(self.mode, b), 0)
                     .0;
             blk.azimuth = azimuth_cdeg(self.azimuth_at(t_block));
-            // In dual mode, blocks [g, g+half) hold the last return, [g+half, g+bpf) the
-            // strongest; the other way round where the model sends the strongest first (HDL-64E).
-            let is_last_block = dual && ((b % bpf) < bpf / 2) != self.model.dual_strongest_first();
+            // In dual mode, which block of its firing group's pairs holds the last return
+            // (`VelodyneModel::dual_pair`).
+            let group = b - b % bpf;
+            let is_last_block = dual && (0..bpf / 2).any(|k| self.model.dual_pair(group, k).0 == b);
             for s in 0..SLOTS {
                 let (t_rel, _) = self.model.firing(self.mode, b, s);
                 let laser = self.model.laser_of(bank, s);
