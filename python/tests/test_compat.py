@@ -290,34 +290,30 @@ def test_vls128_equals_velodyne_decoder(tmp_path):
     group duration (2.89 us), ringscan keeps Rev 3's 2.665 us (same verdict). Dual return (one
     column a packet, bank b's last return in block 2b, its strongest in 2b + 1): the same, the
     rotation within a packet's column from the azimuth advance since the packet before."""
-    pcap = str(tmp_path / "vls128.pcap")
-    vls128_pcap(pcap, False)
     yaml = (CAPTURES / "tier4__nebula/src/nebula_velodyne/nebula_velodyne_decoders/calibration/VLS128.yaml").read_text()
     four_mm = yaml.replace("distance_resolution: 0.007", "distance_resolution: 0.004")
     assert four_mm != yaml
     calib = tmp_path / "VLS128-4mm.yaml"
     calib.write_text(four_mm)
-    ref = list(vd.read_pcap(pcap, vd.Config(model=vd.Model.VLS128, calibration=vd.Calibration.read(str(calib)))))
-    ours = list(rc.read_pcap(pcap, rc.Config(model=rc.Model.VLS128, calibration=rc.Calibration.read(str(calib)))))
-    assert sum(len(p) for _, p in ref) > 500_000 and len(ref) == len(ours) > 2
-    # velodyne_decoder rotates a VLS-128 packet's later firings by the rate measured from the
-    # previous packet, so it leaves the capture's first packet unrotated: frame 0 is compared
-    # without positions, the others whole.
-    (s0, p0), (t0, q0) = ref[0], ours[0]
-    assert abs(s0.host - t0.host) < 1e-6 and p0.shape == q0.shape
-    np.testing.assert_array_equal(q0[:, 3], p0[:, 3])
-    np.testing.assert_array_equal(q0[:, 5:8], p0[:, 5:8])
-    assert_same_frames(ref[1:], ours[1:], time_tol=9e-6)
-    dual = str(tmp_path / "vls128-dual.pcap")
-    vls128_pcap(dual, True, packets=5400)
-    ref = list(vd.read_pcap(dual, vd.Config(model=vd.Model.VLS128, calibration=vd.Calibration.read(str(calib)))))
-    ours = list(rc.read_pcap(dual, rc.Config(model=rc.Model.VLS128, calibration=rc.Calibration.read(str(calib)))))
-    assert sum(len(p) for _, p in ref) > 500_000 and len(ref) == len(ours) > 2
-    (s0, p0), (t0, q0) = ref[0], ours[0]
-    assert abs(s0.host - t0.host) < 1e-6 and p0.shape == q0.shape
-    np.testing.assert_array_equal(q0[:, 3], p0[:, 3])
-    np.testing.assert_array_equal(q0[:, 5:8], p0[:, 5:8])
-    assert_same_frames(ref[1:], ours[1:], time_tol=9e-6)
+
+    def both_readers(dual, packets):
+        pcap = str(tmp_path / f"vls128-{dual}.pcap")
+        vls128_pcap(pcap, dual, packets=packets)
+        ref = list(vd.read_pcap(pcap, vd.Config(model=vd.Model.VLS128, calibration=vd.Calibration.read(str(calib)))))
+        ours = list(rc.read_pcap(pcap, rc.Config(model=rc.Model.VLS128, calibration=rc.Calibration.read(str(calib)))))
+        assert sum(len(p) for _, p in ref) > 500_000 and len(ref) == len(ours) > 2
+        # velodyne_decoder rotates a VLS-128 packet's later firings by the rate measured from
+        # the previous packet, so it leaves the capture's first packet unrotated: frame 0 is
+        # compared without positions, the others whole.
+        (s0, p0), (t0, q0) = ref[0], ours[0]
+        assert abs(s0.host - t0.host) < 1e-6 and p0.shape == q0.shape
+        np.testing.assert_array_equal(q0[:, 3], p0[:, 3])
+        np.testing.assert_array_equal(q0[:, 5:8], p0[:, 5:8])
+        assert_same_frames(ref[1:], ours[1:], time_tol=9e-6)
+        return ours
+
+    both_readers(False, 2400)
+    ours = both_readers(True, 5400)
     # Last (1), strongest (2) and both (3) returns are all there.
     types = np.concatenate([p[:, 7] for _, p in ours])
     assert set(np.unique(types)) == {1.0, 2.0, 3.0}

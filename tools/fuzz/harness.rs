@@ -536,13 +536,34 @@ fn expected_measurements(
         1
     };
     let mut out = Vec::new();
-    if mode.is_dual() && model == VelodyneModel::Vls128 {
-        // One column: bank b's last return in block 2b, its strongest in 2b + 1; blocks
-        // 8-11 empty (velodyne_decoder 3.1.0 `unpack_vls128`).
-        for bank in 0..4 {
-            let (lb, sb) = (2 * bank, 2 * bank + 1);
+    if mode.is_dual() {
+        // (last-return block, strongest-return block, bank) of every pair, in packet order.
+        let mut pairs = Vec::new();
+        if model == VelodyneModel::Vls128 {
+            // One column: bank b's last return in block 2b, its strongest in 2b + 1; blocks
+            // 8-11 empty (velodyne_decoder 3.1.0 `unpack_vls128`).
+            pairs.extend((0..4).map(|bank| (2 * bank, 2 * bank + 1, bank)));
+        } else {
+            let half = bpf / 2;
+            for g in (0..BLOCKS).step_by(bpf) {
+                for k in 0..half {
+                    if g + half + k >= BLOCKS {
+                        continue;
+                    }
+                    // Which block of the pair holds the last return is the model's documented
+                    // convention (HDL-64E: the strongest comes first).
+                    let (lb, sb) = if model.dual_strongest_first() {
+                        (g + half + k, g + k)
+                    } else {
+                        (g + k, g + half + k)
+                    };
+                    pairs.push((lb, sb, (lb % bpf) % banks));
+                }
+            }
+        }
+        for (lb, sb, bank) in pairs {
             for s in 0..SLOTS {
-                let laser = 32 * bank + s;
+                let laser = model.laser_of(bank, s);
                 let (dl, ds) = (p.distance(lb, s), p.distance(sb, s));
                 if dl == ds {
                     out.push((ds, p.reflectivity(sb, s), laser, 0));
@@ -551,35 +572,6 @@ fn expected_measurements(
                     out.push((ds, p.reflectivity(sb, s), laser, 0));
                 }
             }
-        }
-    } else if mode.is_dual() {
-        let half = bpf / 2;
-        let mut g = 0;
-        while g < BLOCKS {
-            for k in 0..half {
-                if g + half + k >= BLOCKS {
-                    continue;
-                }
-                // Which block of the pair holds the last return is the model's documented
-                // convention (HDL-64E: the strongest comes first).
-                let (lb, sb) = if model.dual_strongest_first() {
-                    (g + half + k, g + k)
-                } else {
-                    (g + k, g + half + k)
-                };
-                let laser_bank = (lb % bpf) % banks;
-                for s in 0..SLOTS {
-                    let laser = model.laser_of(laser_bank, s);
-                    let (dl, ds) = (p.distance(lb, s), p.distance(sb, s));
-                    if dl == ds {
-                        out.push((ds, p.reflectivity(sb, s), laser, 0));
-                    } else {
-                        out.push((dl, p.reflectivity(lb, s), laser, 1));
-                        out.push((ds, p.reflectivity(sb, s), laser, 0));
-                    }
-                }
-            }
-            g += bpf;
         }
     } else {
         for b in 0..BLOCKS {

@@ -228,13 +228,7 @@ impl VelodyneDecoder {
         });
         let bpf = model.blocks_per_firing(mode);
         let used = model.blocks_used(mode);
-        let banks = if model.is_hdl64() {
-            2
-        } else if model == VelodyneModel::Vls128 {
-            4
-        } else {
-            1
-        };
+        let banks = model.banks();
         let mut slots = Box::new([[Slot::default(); SLOTS]; BLOCKS]);
         let mut expected_bank = [0u8; BLOCKS];
         for (b, row) in slots.iter_mut().enumerate() {

@@ -228,6 +228,16 @@ impl VelodyneModel {
         }
     }
 
+    /// Banks of 32 slots in one firing: HDL-64E upper and lower, the VLS-128's four, one for
+    /// every other model ([`Self::bank_of_block`] gives each block's).
+    pub fn banks(self) -> usize {
+        match self {
+            Self::Hdl64eS2 | Self::Hdl64eS3 => 2,
+            Self::Vls128 => 4,
+            _ => 1,
+        }
+    }
+
     /// The bank (position in its firing: HDL-64E upper 0 / lower 1, VLS-128 banks 0–3, 0 for
     /// every other model) of block `block` in a packet of this return mode.
     pub fn bank_of_block(self, mode: ReturnMode, block: usize) -> usize {
