@@ -155,6 +155,9 @@ pub struct HesaiDecoder {
     /// Firing offsets (ns, relative to the tail time) for the current (returns, flags),
     /// `block × channels + channel`.
     firing: Vec<i32>,
+    /// Per block: the earliest of `firing` over the return group starting there (the stream
+    /// asks for it once per group; a scan of the group's rows cost as much as its points).
+    group_earliest: Vec<i32>,
     firing_key: Option<(usize, TailFlags)>,
 }
 
@@ -260,6 +263,7 @@ impl HesaiDecoder {
             raw_bounds: (0..=255u8).map(|u| raw_bounds(u, min_m, max_m)).collect(),
             fov_udeg,
             firing: Vec::new(),
+            group_earliest: Vec::new(),
             firing_key: None,
         })
     }
@@ -299,6 +303,14 @@ impl HesaiDecoder {
                     .push(self.model.firing_offset_ns(b, c, n_returns, flags) as i32);
             }
         }
+        let rows = &self.firing;
+        self.group_earliest = (0..blocks)
+            .map(|b| {
+                rows.get(b * n..((b + n_returns.max(1)) * n).min(rows.len()))
+                    .and_then(|s| s.iter().min().copied())
+                    .unwrap_or(0)
+            })
+            .collect();
         self.firing_key = Some((n_returns, flags));
     }
 
@@ -314,13 +326,11 @@ impl HesaiDecoder {
         )
     }
 
-    /// Earliest firing of the group starting at `block` (`n` blocks), relative to the tail.
-    pub fn group_earliest_ns(&self, block: usize, n: usize) -> i64 {
-        let nc = self.channels.len();
-        self.firing
-            .get(block * nc..((block + n) * nc).min(self.firing.len()))
-            .and_then(|s| s.iter().min().copied())
-            .map_or(0, i64::from)
+    /// Earliest firing of the return group starting at `block`, relative to the tail (the
+    /// group of the return count given to [`Self::prepare`]).
+    #[inline]
+    pub fn group_earliest_ns(&self, block: usize) -> i64 {
+        i64::from(self.group_earliest.get(block).copied().unwrap_or(0))
     }
 
     /// Corrected azimuth of channel `c` for a block azimuth (packet units), µ° in `[0, 360°)`;

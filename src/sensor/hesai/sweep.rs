@@ -182,6 +182,10 @@ pub struct HesaiStream {
     facts: HesaiFacts,
     /// Per channel: sweep generation and last corrected azimuth (µ°).
     gen: Vec<u64>,
+    /// The least and greatest of `gen`, kept with it ([`Self::gens_changed`]): asked for at
+    /// every group, they change only at the cut.
+    gen_lo: u64,
+    gen_hi: u64,
     last_az: Vec<i64>,
     base_gen: u64,
     open: VecDeque<Open>,
@@ -210,6 +214,8 @@ impl HesaiStream {
             stats: HesaiStats::default(),
             facts,
             gen: Vec::new(),
+            gen_lo: 0,
+            gen_hi: 0,
             last_az: Vec::new(),
             base_gen: 0,
             open: VecDeque::new(),
@@ -268,6 +274,7 @@ impl HesaiStream {
         };
         self.cut_udeg = i64::from(cut % 36_000) * 10_000;
         self.gen = vec![0; n];
+        self.gens_changed();
         self.last_az = vec![i64::MIN; n];
         let Some(calib) = &self.cfg.calibration else {
             return Ok(());
@@ -406,6 +413,7 @@ impl HesaiStream {
                         .is_some_and(|a| rel(a) < TURN_UDEG / 2);
                     self.gen[c] = self.base_gen + u64::from(straddles && after);
                 }
+                self.gens_changed();
             }
             if let Some((th, w_start, w_width)) = &self.thresholds {
                 // Angle-correction CSV: channel c's azimuth is the block azimuth + a constant,
@@ -427,12 +435,16 @@ impl HesaiStream {
                                         *g_c += 1;
                                     }
                                 }
+                                self.gens_changed();
                             }
                             self.last_block_udeg = Some(cur);
                         }
                     }
                 }
-                self.last_az.iter_mut().for_each(|a| *a = 0);
+                if let Some(first) = self.last_az.first_mut() {
+                    // Only the first channel's marks "past the first group" in this mode.
+                    *first = 0;
+                }
             } else {
                 for c in 0..nc {
                     let Some(az) = dec.channel_azimuth_udeg(block_az, c) else {
@@ -454,11 +466,12 @@ impl HesaiStream {
                     }
                     self.last_az[c] = az;
                 }
+                self.gens_changed();
             }
-            let group_t0 = stamp + dec.group_earliest_ns(g, n);
+            let group_t0 = stamp + dec.group_earliest_ns(g);
             // Keep at most two sweeps open: a channel two sweeps ahead closes the oldest.
-            let max_gen = self.gen.iter().copied().max().unwrap_or(0);
-            while max_gen >= self.base_gen + 2 {
+            let (lo, hi) = (self.gen_lo, self.gen_hi);
+            while hi >= self.base_gen + 2 {
                 self.emit_front(on_sweep);
             }
             let clock = if synced {
@@ -468,9 +481,9 @@ impl HesaiStream {
             };
             let host_t0 = host_ns + (group_t0 - stamp);
             let packet_no = self.packet_no;
-            // Open the sweeps this group's channels need.
-            for c in 0..nc {
-                let idx = (self.gen[c].saturating_sub(self.base_gen)) as usize;
+            // Open the sweeps this group's channels need (up to the greatest generation's).
+            {
+                let idx = hi.saturating_sub(self.base_gen) as usize;
                 while self.open.len() <= idx {
                     let mut sw = self.spare.pop().unwrap_or_default();
                     sw.clear();
@@ -489,9 +502,6 @@ impl HesaiStream {
                 }
             }
             let (gens, base, open) = (&self.gen, self.base_gen, &mut self.open);
-            let (lo, hi) = gens
-                .iter()
-                .fold((u64::MAX, 0), |(a, b), &g| (a.min(g), b.max(g)));
             if lo == hi {
                 // Every channel in one sweep (all but the groups at the cut): straight in.
                 if let Some(o) = open.get_mut(lo.saturating_sub(base) as usize) {
@@ -530,7 +540,7 @@ impl HesaiStream {
                 o.sweep.columns_count += 1;
             }
             // Every channel past the cut: the oldest sweep is complete.
-            let min_gen = self.gen.iter().copied().min().unwrap_or(0);
+            let min_gen = lo;
             while min_gen > self.base_gen && !self.open.is_empty() {
                 self.emit_front(on_sweep);
             }
@@ -575,7 +585,19 @@ impl HesaiStream {
             .unwrap_or(0)
             .max(self.base_gen);
         self.gen.iter_mut().for_each(|g| *g = top);
+        self.gens_changed();
         self.base_gen = top;
+    }
+
+    /// Recomputes [`Self::gen_lo`] and [`Self::gen_hi`] after `gen` changed.
+    fn gens_changed(&mut self) {
+        (self.gen_lo, self.gen_hi) = self
+            .gen
+            .iter()
+            .fold((u64::MAX, 0), |(a, b), &g| (a.min(g), b.max(g)));
+        if self.gen.is_empty() {
+            self.gen_lo = 0;
+        }
     }
 
     /// Emits the sweeps still open, at the end of the input.
