@@ -472,10 +472,20 @@ fn listen_fetches_a_hesai_correction_over_ptc_and_decodes() {
         ptc_port.to_string(),
     ]);
     server.join().unwrap();
+    // The fetched file is held in a folder of the run while it listens, and removed after.
+    let fetched = std::env::temp_dir()
+        .join(format!("ringscan-hesai-ptc-{}", l.child.id()))
+        .join("hesai-ptc-127.0.0.1.csv");
+    assert!(fetched.is_file(), "{} while listening", fetched.display());
     replay(&pcap, offset, "1", &["--per-source-loopback"]);
     std::thread::sleep(std::time::Duration::from_millis(500));
     let (code, out, err) = l.stop("INT");
     assert_eq!(code, Some(0), "{err}");
+    assert!(
+        !fetched.parent().unwrap().exists(),
+        "{} left behind after the run",
+        fetched.display()
+    );
     let live: serde_json::Value =
         serde_json::from_str(&out).unwrap_or_else(|e| panic!("{e}: {out:?} {err}"));
     let s = &live["sensors"][0];

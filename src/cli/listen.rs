@@ -269,13 +269,29 @@ fn listen_sink_options(args: &ListenArgs) -> SinkOptions {
     }
 }
 
+/// The folder of the angle corrections fetched over PTC, removed with its files when the run
+/// ends (they are copies of what the sensor holds; the output attaches them).
+struct FetchedCorrections(PathBuf);
+
+impl Drop for FetchedCorrections {
+    fn drop(&mut self) {
+        if let Err(e) = std::fs::remove_dir_all(&self.0) {
+            if e.kind() != std::io::ErrorKind::NotFound {
+                tracing::warn!("{}: {e}", self.0.display());
+            }
+        }
+    }
+}
+
 /// `args` with the angle correction of every `--sensor` that has no `--calib ADDR=FILE` of its
-/// own, fetched over Hesai's PTC at `port` and bound to its address (written next to the run
-/// in the temporary folder, so that the run reads and attaches it like any `--calib` file). A
-/// sensor that does not answer is left as it was (it may not be a Hesai).
-fn with_hesai_corrections(args: &ListenArgs, port: u16) -> ListenArgs {
+/// own, fetched over Hesai's PTC at `port` and bound to its address (written to a folder of
+/// the run in the temporary folder, so that the run reads and attaches it like any `--calib`
+/// file; the folder goes when the returned guard is dropped). A sensor that does not answer is
+/// left as it was (it may not be a Hesai).
+fn with_hesai_corrections(args: &ListenArgs, port: u16) -> (ListenArgs, FetchedCorrections) {
     let mut out = args.clone();
     let dir = std::env::temp_dir().join(format!("ringscan-hesai-ptc-{}", std::process::id()));
+    let guard = FetchedCorrections(dir.clone());
     let mut seen = BTreeSet::new();
     for (ip, _) in &args.sensors {
         let bound = args
@@ -311,7 +327,7 @@ fn with_hesai_corrections(args: &ListenArgs, port: u16) -> ListenArgs {
             Err(e) => tracing::warn!("--hesai-ptc: {e}"),
         }
     }
-    out
+    (out, guard)
 }
 
 /// Parses fetched Ouster metadata into a calibration bound to `addr`.
@@ -847,11 +863,12 @@ pub fn listen_run_with(
         return Err(RunError::Usage("--split-every needs --out".into()));
     }
     let started = Instant::now();
-    let fetched;
+    // The fetched files live as long as this run (`_fetched` is dropped on every return).
+    let (fetched, _fetched);
     let args = match args.hesai_ptc {
         None => args,
         Some(port) => {
-            fetched = with_hesai_corrections(args, port);
+            (fetched, _fetched) = with_hesai_corrections(args, port);
             &fetched
         }
     };
