@@ -1,8 +1,11 @@
 //! Bad input through the whole `ringscan decode` path: a clear message naming the position,
 //! a counted drop where the stream can go on, never a panic, never a corrupt output file.
 
+mod common;
+use common::Scratch;
+
 use std::net::{Ipv4Addr, SocketAddrV4};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 use ringscan::sensor::velodyne::calib::builtin::builtin;
@@ -17,10 +20,8 @@ fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_ringscan")
 }
 
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("ringscan-bad-{}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d.join(name)
+fn tmp(name: &str) -> Scratch {
+    Scratch::file("bad", name)
 }
 
 /// A valid VLP-16 capture of `n` packets, with `edit(i, payload)` applied to each payload.
@@ -90,7 +91,7 @@ fn assert_not_corrupt(path: &Path) {
     mcap::Summary::read(&bytes).unwrap().expect("summary");
 }
 
-fn write(name: &str, bytes: &[u8]) -> PathBuf {
+fn write(name: &str, bytes: &[u8]) -> Scratch {
     let p = tmp(name);
     std::fs::write(&p, bytes).unwrap();
     p

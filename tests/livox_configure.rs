@@ -18,6 +18,9 @@
 //!   0x22): the error names it.
 #![cfg(feature = "sim")]
 
+mod common;
+use common::Scratch;
+
 mod listen_util;
 
 use std::fs::File;
@@ -199,15 +202,9 @@ fn write_pcap(path: &Path, sent: &[Sent]) {
     w.into_inner().unwrap();
 }
 
-/// A fresh folder of this test run.
-fn scratch(name: &str) -> std::path::PathBuf {
-    let d = std::env::temp_dir().join(format!(
-        "ringscan-livox-configure-{name}-{}",
-        std::process::id()
-    ));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh folder of this test, removed when it ends.
+fn scratch(name: &str) -> Scratch {
+    Scratch::dir(&format!("livox-configure-{name}"))
 }
 
 fn points_of(path: &Path) -> std::collections::BTreeMap<String, Vec<Vec<u8>>> {

@@ -10,6 +10,9 @@
 //! `tools/ci_livox_custommsg_check.sh` (`tools/make_livox_custommsg_bag.py`).
 #![cfg(all(feature = "sim", feature = "bag"))]
 
+mod common;
+use common::Scratch;
+
 use std::path::PathBuf;
 
 use ringscan::point::Point;
@@ -274,10 +277,8 @@ fn cdr_mcap_of(chans: &[(&str, &str)], msgs: &[(usize, i64, Vec<u8>)], upfront: 
     f
 }
 
-fn temp_file(name: &str, bytes: &[u8]) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("ringscan-custommsg-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let p = dir.join(name);
+fn temp_file(name: &str, bytes: &[u8]) -> Scratch {
+    let p = Scratch::file("custommsg", name);
     std::fs::write(&p, bytes).unwrap();
     p
 }
@@ -641,8 +642,7 @@ fn rosbags_written_bags_give_the_truth_and_the_packets_points() {
     sim.trajectory = Trajectory::route(T0, Route::urban());
     let (mut truth, mut imu) = (Vec::new(), Vec::new());
     let packets = sim.run_until(&scenes::urban(), T0 + 350_000_000, &mut truth, &mut imu);
-    let dir = std::env::temp_dir().join(format!("ringscan-custommsg-py-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::dir("custommsg-py");
     let truth_path = dir.join("run.truth");
     let mut w = TruthWriter::new(std::fs::File::create(&truth_path).unwrap()).unwrap();
     for t in &truth {

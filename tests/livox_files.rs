@@ -8,7 +8,8 @@
 //! error or a counted drop, never a panic.
 #![cfg(all(feature = "sim", feature = "pcap", feature = "bag"))]
 
-use std::path::PathBuf;
+mod common;
+use common::Scratch;
 
 use ringscan::point::Point;
 use ringscan::sensor::livox::model::LivoxModel;
@@ -152,10 +153,8 @@ fn lvx1_file(devices: &[Vec<u8>], frame_list: &[Vec<Vec<u8>>]) -> Vec<u8> {
     f
 }
 
-fn temp_file(name: &str, bytes: &[u8]) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("ringscan-lvx-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let p = dir.join(name);
+fn temp_file(name: &str, bytes: &[u8]) -> Scratch {
+    let p = Scratch::file("lvx", name);
     std::fs::write(&p, bytes).unwrap();
     p
 }

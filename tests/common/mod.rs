@@ -65,3 +65,60 @@ pub fn bag_datagrams(path: &Path) -> Vec<(i64, u16, Vec<u8>)> {
     }
     out
 }
+
+/// A path in a folder of its own in the temporary folder; the folder and everything in it are
+/// removed when this is dropped, at the end of the test that holds it, passed or failed (tests
+/// of one binary run at once, so each gets its own folder rather than a shared one).
+pub struct Scratch {
+    dir: PathBuf,
+    path: PathBuf,
+}
+
+impl Scratch {
+    /// A fresh, empty folder `ringscan-{prefix}-{pid}-{n}`.
+    pub fn dir(prefix: &str) -> Self {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        static NEXT: AtomicUsize = AtomicUsize::new(0);
+        let n = NEXT.fetch_add(1, Ordering::Relaxed);
+        let dir =
+            std::env::temp_dir().join(format!("ringscan-{prefix}-{}-{n}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
+        Self {
+            path: dir.clone(),
+            dir,
+        }
+    }
+
+    /// The path `name` in a fresh folder (the file itself is not created).
+    pub fn file(prefix: &str, name: &str) -> Self {
+        let mut s = Self::dir(prefix);
+        s.path = s.dir.join(name);
+        s
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+impl std::ops::Deref for Scratch {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl AsRef<Path> for Scratch {
+    fn as_ref(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl AsRef<std::ffi::OsStr> for Scratch {
+    fn as_ref(&self) -> &std::ffi::OsStr {
+        self.path.as_os_str()
+    }
+}
