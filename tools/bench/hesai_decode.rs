@@ -7,7 +7,8 @@
 //! Inputs (from `../shared/captures`; the benchmark needs them): the nebula PandarXT32 capture
 //! (2 000 packets, dual return) repeated 10 times, with `PandarXT32.csv`; for comparison the
 //! nebula VLP-16 and VLS-128 captures with nebula's VLP16.yaml / VLS128.yaml, through the
-//! Velodyne decoder. Every payload is loaded before timing; throughput is in elements = points
+//! Velodyne decoder. The AT128, of which no real capture exists, on 0.5 s of the simulator's
+//! packets (urban scene, single return) with the real `PandarAT128.dat`. Every payload is loaded before timing; throughput is in elements = points
 //! produced (`decoder/*`: the packet view and the decoder into one reused buffer, cleared every
 //! 500 packets; `stream/*`: the whole stream — `HesaiStream` / `VelodyneStream` — sweeps cut
 //! and handed to a callback that counts their points).
@@ -16,6 +17,7 @@ use std::path::{Path, PathBuf};
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
 use ringscan::sensor::hesai::family::parse_hesai_calibration;
+use ringscan::sensor::hesai::sim::HesaiSim;
 use ringscan::sensor::hesai::{
     HesaiCalibration, HesaiConfig, HesaiDecoder, HesaiModel, HesaiOptions, HesaiPacket, HesaiStream,
 };
@@ -23,6 +25,8 @@ use ringscan::sensor::velodyne::calib::parse_velodyne;
 use ringscan::sensor::velodyne::wire::DataPacket;
 use ringscan::sensor::velodyne::{ReturnMode, VelodyneDecoder, VelodyneModel};
 use ringscan::sensor::DecodeOptions;
+use ringscan::sim::motion::Trajectory;
+use ringscan::sim::scenes;
 use ringscan::source::pcap::PcapSource;
 use ringscan::Point;
 
@@ -69,11 +73,42 @@ fn hesai_input(shared: &Path) -> (HesaiCalibration, Vec<(i64, Vec<u8>)>) {
     (parse_hesai_calibration(&csv).unwrap().unwrap(), v)
 }
 
-fn hesai_decoder_pass(dec: &mut HesaiDecoder, packets: &[&[u8]], out: &mut Vec<Point>) -> usize {
+fn at128_input(shared: &Path) -> (HesaiCalibration, Vec<(i64, Vec<u8>)>) {
+    let dat =
+        std::fs::read(shared.join(
+            "tier4__nebula/src/nebula_hesai/nebula_hesai_decoders/calibration/PandarAT128.dat",
+        ))
+        .unwrap();
+    let calib = parse_hesai_calibration(&dat).unwrap().unwrap();
+    let t0 = 1_714_564_800_000_000_000;
+    let mut sim = HesaiSim::new(HesaiModel::PandarAt128, calib.clone(), t0);
+    sim.trajectory = Trajectory::fixed(nalgebra::Isometry3::translation(
+        40.0,
+        0.0,
+        scenes::SENSOR_HEIGHT_M,
+    ));
+    let scene = scenes::named("urban").unwrap();
+    let n = (500_000_000 / sim.period_ns()) as usize;
+    let mut truth = Vec::new();
+    let v = (0..n)
+        .map(|_| {
+            truth.clear();
+            sim.next_packet(&scene, &mut truth)
+        })
+        .collect();
+    (calib, v)
+}
+
+fn hesai_decoder_pass(
+    model: HesaiModel,
+    dec: &mut HesaiDecoder,
+    packets: &[&[u8]],
+    out: &mut Vec<Point>,
+) -> usize {
     let mut n = 0;
     out.clear();
     for (i, p) in packets.iter().enumerate() {
-        let p = HesaiPacket::new(p, HesaiModel::PandarXt32).expect("XT32 packet");
+        let p = HesaiPacket::new(p, model).expect("packet of the model");
         n += dec.decode_packet(&p, 0, 0, out).unwrap_or(0);
         if i % 500 == 499 {
             black_box(&*out);
@@ -84,7 +119,7 @@ fn hesai_decoder_pass(dec: &mut HesaiDecoder, packets: &[&[u8]], out: &mut Vec<P
 }
 
 fn hesai_stream_pass(calib: &HesaiCalibration, input: &[(i64, Vec<u8>)]) -> u64 {
-    let mut stream = HesaiStream::new(HesaiConfig::new(Some(calib.clone()), "PandarXT32.csv"));
+    let mut stream = HesaiStream::new(HesaiConfig::new(Some(calib.clone()), "bench"));
     let mut points = 0u64;
     let mut cb = |s: &mut ringscan::sweep::Sweep, _: &_| points += s.points.len() as u64;
     for (t, p) in input {
@@ -132,26 +167,36 @@ fn bench(c: &mut Criterion) {
     let shared = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/captures");
     assert!(shared.is_dir(), "{} is needed", shared.display());
 
-    // Hesai XT32.
-    let (calib, input) = hesai_input(&shared);
-    let packets: Vec<&[u8]> = input.iter().map(|(_, p)| p.as_slice()).collect();
-    let mut dec =
-        HesaiDecoder::new(HesaiModel::PandarXt32, &calib, HesaiOptions::default()).unwrap();
     let mut out = Vec::with_capacity(100_000);
-    let points = hesai_decoder_pass(&mut dec, &packets, &mut out) as u64;
-    let mut g = c.benchmark_group("decoder");
-    g.throughput(Throughput::Elements(points));
-    g.bench_function("hesai-xt32", |b| {
-        b.iter(|| black_box(hesai_decoder_pass(&mut dec, black_box(&packets), &mut out)))
-    });
-    g.finish();
-    let stream_points = hesai_stream_pass(&calib, &input);
-    let mut g = c.benchmark_group("stream");
-    g.throughput(Throughput::Elements(stream_points));
-    g.bench_function("hesai-xt32", |b| {
-        b.iter(|| black_box(hesai_stream_pass(&calib, black_box(&input))))
-    });
-    g.finish();
+    // Hesai XT32 (real packets) and AT128 (simulated).
+    for (name, model, (calib, input)) in [
+        ("hesai-xt32", HesaiModel::PandarXt32, hesai_input(&shared)),
+        ("hesai-at128", HesaiModel::PandarAt128, at128_input(&shared)),
+    ] {
+        let packets: Vec<&[u8]> = input.iter().map(|(_, p)| p.as_slice()).collect();
+        let mut dec = HesaiDecoder::new(model, &calib, HesaiOptions::default()).unwrap();
+        let points = hesai_decoder_pass(model, &mut dec, &packets, &mut out) as u64;
+        let mut g = c.benchmark_group("decoder");
+        g.throughput(Throughput::Elements(points));
+        g.bench_function(name, |b| {
+            b.iter(|| {
+                black_box(hesai_decoder_pass(
+                    model,
+                    &mut dec,
+                    black_box(&packets),
+                    &mut out,
+                ))
+            })
+        });
+        g.finish();
+        let stream_points = hesai_stream_pass(&calib, &input);
+        let mut g = c.benchmark_group("stream");
+        g.throughput(Throughput::Elements(stream_points));
+        g.bench_function(name, |b| {
+            b.iter(|| black_box(hesai_stream_pass(&calib, black_box(&input))))
+        });
+        g.finish();
+    }
 
     // Velodyne, same harness.
     let vel = shared.join("tier4__nebula/src/nebula_velodyne");
