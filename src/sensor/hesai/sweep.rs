@@ -482,24 +482,22 @@ impl HesaiStream {
             let host_t0 = host_ns + (group_t0 - stamp);
             let packet_no = self.packet_no;
             // Open the sweeps this group's channels need (up to the greatest generation's).
-            {
-                let idx = hi.saturating_sub(self.base_gen) as usize;
-                while self.open.len() <= idx {
-                    let mut sw = self.spare.pop().unwrap_or_default();
-                    sw.clear();
-                    sw.index = self.next_index;
-                    self.next_index += 1;
-                    sw.timestamp_ns = if synced { group_t0 } else { host_t0 };
-                    sw.clock = clock;
-                    sw.device_time_ns = group_t0;
-                    sw.first_host_ns = host_ns;
-                    sw.first_azimuth = (block_az % 36_000) as u16;
-                    self.open.push_back(Open {
-                        sweep: sw,
-                        t0_ns: group_t0,
-                        last_packet: 0,
-                    });
-                }
+            let idx = hi.saturating_sub(self.base_gen) as usize;
+            while self.open.len() <= idx {
+                let mut sw = self.spare.pop().unwrap_or_default();
+                sw.clear();
+                sw.index = self.next_index;
+                self.next_index += 1;
+                sw.timestamp_ns = if synced { group_t0 } else { host_t0 };
+                sw.clock = clock;
+                sw.device_time_ns = group_t0;
+                sw.first_host_ns = host_ns;
+                sw.first_azimuth = (block_az % 36_000) as u16;
+                self.open.push_back(Open {
+                    sweep: sw,
+                    t0_ns: group_t0,
+                    last_packet: 0,
+                });
             }
             let (gens, base, open) = (&self.gen, self.base_gen, &mut self.open);
             if lo == hi {
@@ -540,12 +538,11 @@ impl HesaiStream {
                 o.sweep.columns_count += 1;
             }
             // Every channel past the cut: the oldest sweep is complete.
-            let min_gen = lo;
-            while min_gen > self.base_gen && !self.open.is_empty() {
+            while lo > self.base_gen && !self.open.is_empty() {
                 self.emit_front(on_sweep);
             }
-            if min_gen > self.base_gen && self.open.is_empty() {
-                self.base_gen = min_gen;
+            if lo > self.base_gen && self.open.is_empty() {
+                self.base_gen = lo;
             }
             g += n;
         }
