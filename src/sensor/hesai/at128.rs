@@ -270,41 +270,85 @@ impl At128Correction {
             })
     }
 
-    fn adjust(row: &[i32], a: i64) -> i64 {
+    /// What every channel's angles share at encoder azimuth `a` (1/25600°): the mirror field
+    /// and the adjustment grid's position. A block's 128 channels share its encoder azimuth,
+    /// so the field search and the grid position are done once per block, not per point.
+    /// `None` outside every mirror's field.
+    #[inline]
+    pub fn block(&self, a: i64) -> Option<At128Block> {
+        let f = self.field(a)?;
+        let base = 2 * (a - self.start_frame.get(f)?);
         let a = a.rem_euclid(TURN);
-        let i = (a / ADJ_STEP) as usize;
-        let frac = (a - i as i64 * ADJ_STEP) as f64 / ADJ_STEP as f64;
-        let v0 = f64::from(row.get(i).copied().unwrap_or(0));
-        let v1 = f64::from(row.get(i + 1).copied().unwrap_or(0));
-        round_half_away((1.0 - frac) * v0 + frac * v1)
-    }
-
-    /// Azimuth and elevation adjustments of channel `ch` at encoder azimuth `a`, 0.01°.
-    fn adjustments(&self, ch: usize, a: i64) -> (i64, i64) {
-        match self.grid {
+        let grid = match self.grid {
             AdjustGrid::PerChannel2Deg => {
-                let rows = ch * 180..ch * 180 + 180;
-                let az_row = self.azimuth_adjust.get(rows.clone()).unwrap_or(&[]);
-                let el_row = self.elevation_adjust.get(rows).unwrap_or(&[]);
-                (Self::adjust(az_row, a), Self::adjust(el_row, a))
+                let i = (a / ADJ_STEP) as usize;
+                let frac = (a - i as i64 * ADJ_STEP) as f64 / ADJ_STEP as f64;
+                BlockGrid::PerChannel { i, frac }
             }
             AdjustGrid::Shared001Deg => {
-                let i = (a.rem_euclid(TURN) / 256) as usize;
+                let i = (a / 256) as usize;
                 let at = |g: &[i32]| i64::from(g.get(i).copied().unwrap_or(0));
-                (at(&self.azimuth_adjust), at(&self.elevation_adjust))
+                BlockGrid::Shared {
+                    az: at(&self.azimuth_adjust),
+                    el: at(&self.elevation_adjust),
+                }
             }
-        }
+        };
+        Some(At128Block { base, grid })
+    }
+
+    /// Channel `ch`'s adjustment from its row of a 1.5 grid: linear between entries `i` and
+    /// `i + 1` (0 past the row's end), rounded to 0.01°.
+    #[inline]
+    fn adjust(&self, grid: &[i32], ch: usize, i: usize, frac: f64) -> i64 {
+        let at = |k: usize| f64::from(grid.get(ch * 180 + k).copied().unwrap_or(0));
+        let v1 = if i + 1 < 180 { at(i + 1) } else { 0.0 };
+        round_half_away((1.0 - frac) * at(i) + frac * v1)
+    }
+
+    /// Corrected azimuth of channel `ch` in block `b`, 1/25600° in `[0, TURN)`.
+    #[inline]
+    pub fn block_azimuth(&self, b: &At128Block, ch: usize) -> Option<i64> {
+        let adj = match b.grid {
+            BlockGrid::PerChannel { i, frac } => self.adjust(&self.azimuth_adjust, ch, i, frac),
+            BlockGrid::Shared { az, .. } => az,
+        };
+        Some((b.base - self.azimuth.get(ch)? + 256 * adj).rem_euclid(TURN))
+    }
+
+    /// Corrected (azimuth, elevation) of channel `ch` in block `b`, 1/25600°: azimuth in
+    /// `[0, TURN)`, elevation signed.
+    #[inline]
+    pub fn block_angles(&self, b: &At128Block, ch: usize) -> Option<(i64, i64)> {
+        let adj_el = match b.grid {
+            BlockGrid::PerChannel { i, frac } => self.adjust(&self.elevation_adjust, ch, i, frac),
+            BlockGrid::Shared { el, .. } => el,
+        };
+        let el = self.elevation.get(ch)? + 256 * adj_el;
+        Some((self.block_azimuth(b, ch)?, el))
     }
 
     /// Corrected (azimuth, elevation) of channel `ch` at encoder azimuth `a`, 1/25600°:
     /// azimuth in `[0, TURN)`, elevation signed. `None` outside every mirror's field.
     pub fn angles(&self, ch: usize, a: i64) -> Option<(i64, i64)> {
-        let f = self.field(a)?;
-        let (adj_az, adj_el) = self.adjustments(ch, a);
-        let az = 2 * (a - self.start_frame[f]) - self.azimuth.get(ch)? + 256 * adj_az;
-        let el = self.elevation.get(ch)? + 256 * adj_el;
-        Some((az.rem_euclid(TURN), el))
+        self.block_angles(&self.block(a)?, ch)
     }
+}
+
+/// The per-block part of the AT128 angles ([`At128Correction::block`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct At128Block {
+    /// `2·(a − start_m)`: the mirror doubles the encoder angle.
+    base: i64,
+    grid: BlockGrid,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum BlockGrid {
+    /// 1.5: entry `i` of each channel's row and the fraction of the way to `i + 1`.
+    PerChannel { i: usize, frac: f64 },
+    /// 1.3: the adjustments every channel shares.
+    Shared { az: i64, el: i64 },
 }
 
 /// `x.round() as i64` for |x| < 2^52, without the libm call `round` is on x86-64's baseline

@@ -19,7 +19,7 @@
 //! return that is not the group's last is also dropped when within that distance of another
 //! return of the group (nebula's `dual_return_distance_threshold`).
 
-use super::at128::{At128Correction, TURN as AT128_TURN, UNITS_PER_DEG};
+use super::at128::{At128Block, At128Correction, TURN as AT128_TURN, UNITS_PER_DEG};
 use super::calib::HesaiCalibration;
 use super::model::{return_index, returns_of_mode, HesaiModel, TailFlags};
 use super::wire::HesaiPacket;
@@ -117,6 +117,29 @@ fn at128_cos_sin(units: i64) -> (f32, f32) {
         .copied()
         .unwrap_or((1.0, 0.0));
     (c0 + (c1 - c0) * frac, s0 + (s1 - s0) * frac)
+}
+
+/// The corrected azimuths of one block's channels ([`HesaiDecoder::block_azimuths`]).
+pub struct BlockAzimuths<'a> {
+    dec: &'a HesaiDecoder,
+    block_az: u32,
+    at128: Option<(&'a At128Correction, At128Block)>,
+}
+
+impl BlockAzimuths<'_> {
+    /// Corrected azimuth of channel `c`, µ° in `[0, 360°)`; `None` for an AT128 block outside
+    /// every mirror field.
+    #[inline]
+    pub fn channel_udeg(&self, c: usize) -> Option<i64> {
+        match (&self.dec.at128, &self.at128) {
+            (None, _) => {
+                let off = self.dec.channels.get(c).map_or(0, |ch| ch.off_udeg);
+                Some((i64::from(self.block_az) * 10_000 + off).rem_euclid(TURN_UDEG))
+            }
+            (Some(_), Some((a, b))) => Some(a.block_azimuth(b, c)? * 1_000_000 / UNITS_PER_DEG),
+            (Some(_), None) => None,
+        }
+    }
 }
 
 /// Raw distances `lo..=hi` whose distance (raw × unit in f64, rounded to f32: nebula's
@@ -355,17 +378,21 @@ impl HesaiDecoder {
 
     /// Corrected azimuth of channel `c` for a block azimuth (packet units), µ° in `[0, 360°)`;
     /// `None` for an AT128 block outside every mirror field.
-    #[inline]
     pub fn channel_azimuth_udeg(&self, block_az: u32, c: usize) -> Option<i64> {
-        match &self.at128 {
-            None => {
-                let off = self.channels.get(c).map_or(0, |ch| ch.off_udeg);
-                Some((i64::from(block_az) * 10_000 + off).rem_euclid(TURN_UDEG))
-            }
-            Some(a) => {
-                let (az, _) = a.angles(c, i64::from(block_az))?;
-                Some(az * 1_000_000 / UNITS_PER_DEG)
-            }
+        self.block_azimuths(block_az).channel_udeg(c)
+    }
+
+    /// The corrected azimuths of a block's channels, with what they share (the AT128's mirror
+    /// field and grid position) worked out once for the block.
+    #[inline]
+    pub fn block_azimuths(&self, block_az: u32) -> BlockAzimuths<'_> {
+        BlockAzimuths {
+            dec: self,
+            block_az,
+            at128: self
+                .at128
+                .as_ref()
+                .and_then(|a| Some((a, a.block(i64::from(block_az))?))),
         }
     }
 
@@ -442,6 +469,17 @@ impl HesaiDecoder {
                 .copied()
                 .unwrap_or((1.0, 0.0))
         };
+        // AT128: what the block's channels share (mirror field, grid position); a block
+        // outside every mirror's field has no point.
+        let at128 = if AT128 {
+            let Some(a) = &self.at128 else { return };
+            let Some(b) = a.block(i64::from(block_az)) else {
+                return;
+            };
+            Some((a, b))
+        } else {
+            None
+        };
         let rets: [u8; N] = core::array::from_fn(|k| return_index(self.model, mode, k));
         let thr = self.opts.dual_return_threshold_m;
         // Distances as nebula computes them, for the dual-return threshold.
@@ -464,11 +502,10 @@ impl HesaiDecoder {
                 continue;
             }
             // Angles of this channel (AT128: per point).
-            let (cos_az, sin_az, cos_el, sin_el) = if AT128 {
-                let Some(a) = &self.at128 else { return };
-                match a.angles(c, i64::from(block_az)) {
+            let (cos_az, sin_az, cos_el, sin_el) = if let Some((a, b)) = &at128 {
+                match a.block_angles(b, c) {
                     Some((az, el)) => {
-                        if !self.in_fov(az.rem_euclid(AT128_TURN) * 1_000_000 / UNITS_PER_DEG) {
+                        if fov && !self.in_fov(az * 1_000_000 / UNITS_PER_DEG) {
                             continue;
                         }
                         let (co, s) = at128_cos_sin(az);

@@ -396,20 +396,19 @@ impl HesaiStream {
         let mut g = 0;
         while g < blocks {
             let block_az = p.azimuth(g);
+            let azimuths = dec.block_azimuths(block_az);
             // Per-channel cut. The first group after a start or a discontinuity may straddle
             // the cut: its channels already past it (within a quarter turn) open the next
             // sweep (nebula's `initialize_state`).
             if self.last_az.first() == Some(&i64::MIN) {
                 let q = TURN_UDEG / 4;
                 let rel = |az: i64| (az - self.cut_udeg).rem_euclid(TURN_UDEG);
-                let azs: Vec<i64> = (0..nc)
-                    .filter_map(|c| dec.channel_azimuth_udeg(block_az, c))
-                    .collect();
+                let azs: Vec<i64> = (0..nc).filter_map(|c| azimuths.channel_udeg(c)).collect();
                 let straddles =
                     azs.iter().any(|&a| rel(a) < q) && azs.iter().any(|&a| rel(a) >= TURN_UDEG - q);
                 for c in 0..nc {
-                    let after = dec
-                        .channel_azimuth_udeg(block_az, c)
+                    let after = azimuths
+                        .channel_udeg(c)
                         .is_some_and(|a| rel(a) < TURN_UDEG / 2);
                     self.gen[c] = self.base_gen + u64::from(straddles && after);
                 }
@@ -447,7 +446,7 @@ impl HesaiStream {
                 }
             } else {
                 for c in 0..nc {
-                    let Some(az) = dec.channel_azimuth_udeg(block_az, c) else {
+                    let Some(az) = azimuths.channel_udeg(c) else {
                         continue;
                     };
                     let last = self.last_az[c];
