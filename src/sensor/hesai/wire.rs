@@ -11,34 +11,11 @@ use crate::sensor::WireError;
 /// CRC-32/MPEG-2: polynomial 0x04C11DB7, initial value 0xFFFFFFFF, not reflected, no final
 /// XOR (the check value of "123456789" is 0x0376E6E7). Hesai's body and tail CRCs.
 pub fn crc32_mpeg2(bytes: &[u8]) -> u32 {
-    let mut crc = !0u32;
-    for &b in bytes {
-        crc = (crc << 8) ^ CRC32_MPEG2_TABLE[usize::from(((crc >> 24) as u8) ^ b)];
-    }
-    crc
+    CRC32_MPEG2.checksum(bytes)
 }
 
-const fn crc32_mpeg2_table() -> [u32; 256] {
-    let mut t = [0u32; 256];
-    let mut i = 0;
-    while i < 256 {
-        let mut c = (i as u32) << 24;
-        let mut k = 0;
-        while k < 8 {
-            c = if c & 0x8000_0000 != 0 {
-                (c << 1) ^ 0x04C1_1DB7
-            } else {
-                c << 1
-            };
-            k += 1;
-        }
-        t[i] = c;
-        i += 1;
-    }
-    t
-}
-
-static CRC32_MPEG2_TABLE: [u32; 256] = crc32_mpeg2_table();
+static CRC32_MPEG2: crc::Crc<u32, crc::Table<16>> =
+    crc::Crc::<u32, crc::Table<16>>::new(&crc::CRC_32_MPEG_2);
 
 fn le_u16(b: &[u8], o: usize) -> u16 {
     match b.get(o..o + 2) {

@@ -145,34 +145,14 @@ pub fn write_field(pixel: &mut [u8], f: Field, value: u32) {
     dst[..n].copy_from_slice(&word.to_le_bytes()[..n]);
 }
 
-const fn crc64_xz_table() -> [u64; 256] {
-    const POLY: u64 = 0xC96C_5795_D787_0F42;
-    let mut t = [0u64; 256];
-    let mut i = 0;
-    while i < 256 {
-        let mut c = i as u64;
-        let mut j = 0;
-        while j < 8 {
-            c = if c & 1 != 0 { (c >> 1) ^ POLY } else { c >> 1 };
-            j += 1;
-        }
-        t[i] = c;
-        i += 1;
-    }
-    t
-}
-
-static CRC64_XZ_TABLE: [u64; 256] = crc64_xz_table();
+static CRC64_XZ: crc::Crc<u64, crc::Table<16>> =
+    crc::Crc::<u64, crc::Table<16>>::new(&crc::CRC_64_XZ);
 
 /// CRC-64/XZ (a.k.a. CRC-64/GO-ECMA): reflected polynomial 0xC96C5795D7870F42, initial value
 /// and final xor all ones. The check value of `b"123456789"` is `0x995DC9BBDF1939FA`. Ouster
 /// lidar packets carry it over all bytes but the last 8 (ouster-sdk `crc64_compute`).
 pub fn crc64_xz(bytes: &[u8]) -> u64 {
-    let mut crc = !0u64;
-    for &b in bytes {
-        crc = CRC64_XZ_TABLE[usize::from((crc as u8) ^ b)] ^ (crc >> 8);
-    }
-    !crc
+    CRC64_XZ.checksum(bytes)
 }
 
 /// Thermal-shutdown status nibble (header byte 18), as the SDK names it.
