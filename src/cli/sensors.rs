@@ -6,7 +6,7 @@ use std::net::Ipv4Addr;
 use std::path::Path;
 
 use crate::sensor::{
-    self, Calibration, CalibrationPool, Claimed, Facts, FirstDatagram, StreamSettings,
+    self, CalibError, Calibration, CalibrationPool, Claimed, Facts, FirstDatagram, StreamSettings,
     MAX_CALIB_BYTES,
 };
 
@@ -48,16 +48,22 @@ pub fn load_calibs(list: &[String]) -> Result<Vec<Calibration>, RunError> {
     Ok(out)
 }
 
-/// Reads one calibration (a file's bytes, or metadata fetched from a sensor).
+/// Reads one calibration (a file's bytes, or metadata fetched from a sensor). Not only text:
+/// the AT128's angle correction is a binary `.dat`; each family's reader checks what it claims.
 pub fn calibration(
     bytes: &[u8],
     file_name: &str,
     addr: Option<Ipv4Addr>,
 ) -> Result<Calibration, String> {
-    if let Err(e) = std::str::from_utf8(bytes) {
-        return Err(format!("not UTF-8 text (byte {})", e.valid_up_to()));
-    }
-    sensor::parse_calibration(bytes, file_name, addr).map_err(|e| e.to_string())
+    sensor::parse_calibration(bytes, file_name, addr).map_err(|e| {
+        match std::str::from_utf8(bytes) {
+            Err(u) if matches!(e, CalibError::UnknownFormat(_)) => format!(
+                "{e} (binary from byte {}, and not the AT128's .dat, the one binary form read)",
+                u.valid_up_to()
+            ),
+            _ => e.to_string(),
+        }
+    })
 }
 
 /// Chooses the stream of a new source address from its first datagram: the calibrations and
