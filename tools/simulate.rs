@@ -21,12 +21,15 @@
 //! - `--model M`: vlp16, puck-hires, hdl32e, vlp32c, hdl64e-s2, hdl64e-s3, vls128, `mid360` /
 //!   `hap` / `avia` (Livox; `--data-type 1|2|3` for the MID-360 and the HAP, `--imu` adds
 //!   their 200 Hz IMU packets; with `--udp ADDR:PORT` an SDK2 model's IMU goes to PORT + 100),
-//!   or `ouster`
-//!   (needs `--metadata FILE.json`; `--profile NAME` overrides its lidar profile, e.g.
+//!   or `ouster` (needs `--metadata FILE.json`; `--profile NAME` overrides its lidar profile, e.g.
 //!   `RNG15_RFL8_NIR8`; `--columns W --fps F` its mode). Velodyne: `--mode
 //!   strongest|last|dual`, `--hz F` (rotation rate), `--calib FILE` (required for HDL-64E /
 //!   VLS-128 unless `--spread`), `--gps` (position packets with PPS locked and a GPRMC sentence),
 //!   `--drop-every N` (drop every N-th data packet).
+//! - `--model` a Hesai model: `pandar40p`, `pandar64`, `pandarqt64`, `pandarqt128`, `pandarxt16`,
+//!   `pandarxt32`, `pandarxt32m`, `pandarat128`, `pandarot128`; `--calib FILE` (required: its
+//!   angle correction CSV, or the AT128's `.dat`), `--mode strongest|dual`, `--hz F` (turns per
+//!   second; AT128: frames per second). Packets from 192.168.1.201 to port 2368.
 //! - `--imu`: Ouster IMU packets (the metadata's IMU profile, 100 Hz samples) consistent with
 //!   the motion.
 //! - `--out FILE.pcap` or `--udp ADDR:PORT` (data to PORT; Velodyne position packets to 8308,
@@ -61,6 +64,9 @@ use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4, UdpSocket};
 use std::time::{Duration, Instant};
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use ringscan::sensor::hesai::family::parse_hesai_calibration;
+use ringscan::sensor::hesai::sim::HesaiSim;
+use ringscan::sensor::hesai::{HesaiCalibration, HesaiModel};
 use ringscan::sensor::livox::model::{LivoxModel, Protocol};
 use ringscan::sensor::livox::sim::LivoxSim;
 use ringscan::sensor::ouster::calib::OusterInfo;
@@ -329,6 +335,74 @@ fn main() -> Res<()> {
             }
         }
         records += truth.len() as u64;
+        eprintln!(
+            "{n} {} packets, {seconds} s, scene {scene_name}, {records} returns",
+            model.name()
+        );
+    } else if let Some(model) = HesaiModel::from_id(&model_name) {
+        // Hesai: from 192.168.1.201 to port 2368, the beams from the sensor's own angle
+        // correction (the CSV, or the AT128's .dat).
+        let path = arg(&args, "--calib").ok_or_else(|| {
+            format!("--model {model_name} needs --calib FILE (its angle correction CSV or .dat)")
+        })?;
+        let calib = parse_hesai_calibration(&std::fs::read(&path)?)
+            .ok_or_else(|| format!("{path}: not a Hesai angle correction"))?
+            .map_err(|e| format!("{path}: {e}"))?;
+        // Ring = rank of the channel's elevation (0 = lowest), as the decoder numbers them.
+        let elevations: Vec<f64> = match &calib {
+            HesaiCalibration::Csv(rows) => rows.iter().map(|r| r.elevation_deg).collect(),
+            HesaiCalibration::At128(a) => a.elevation.iter().map(|&e| e as f64).collect(),
+        };
+        let ring = |c: usize| {
+            let e = elevations.get(c).copied().unwrap_or(0.0);
+            elevations
+                .iter()
+                .enumerate()
+                .filter(|&(k, &x)| x < e || (x == e && k < c))
+                .count() as u8
+        };
+        let mut sim = HesaiSim::new(model, calib, t0_ns);
+        sim.trajectory = trajectory.clone();
+        match arg(&args, "--mode").as_deref() {
+            None | Some("strongest") => {}
+            Some("dual") => sim.return_mode = 0x39,
+            Some(m) => return Err(format!("--mode {m}: strongest or dual for Hesai").into()),
+        }
+        if let Some(hz) = num::<f64>(&args, "--hz")? {
+            // The AT128's encoder turns a third of a turn per frame (three mirrors).
+            let per_frame = if model == HesaiModel::PandarAt128 {
+                120.0
+            } else {
+                360.0
+            };
+            sim.deg_per_s = hz * per_frame;
+        }
+        let src = SocketAddrV4::new(Ipv4Addr::new(192, 168, 1, 201), 2368);
+        let mut truth = Vec::new();
+        let mut n = 0u64;
+        loop {
+            truth.clear();
+            let (host_ns, bytes) = sim.next_packet(scene.as_ref(), &mut truth);
+            if host_ns > end_ns {
+                break;
+            }
+            sink.send(host_ns, src, udp_port.unwrap_or(2368), n as u16, &bytes)?;
+            n += 1;
+            if let Some(w) = truth_out.as_mut() {
+                for t in &truth {
+                    w.write(&TruthRecord {
+                        sensor: t.xyz.map(|v| v as f32),
+                        world: t.world.map(|v| v as f32),
+                        time_ns: t.time_ns,
+                        label: t.label,
+                        channel: t.channel as u16,
+                        ring: ring(t.channel),
+                        ret: t.ret,
+                    })?;
+                }
+            }
+            records += truth.len() as u64;
+        }
         eprintln!(
             "{n} {} packets, {seconds} s, scene {scene_name}, {records} returns",
             model.name()

@@ -236,6 +236,10 @@ pub struct HesaiTruth {
     pub reflectivity: u8,
     /// ringscan return index the decoder must give.
     pub ret: u8,
+    /// The point in the world frame (the trajectory's pose at its firing time), metres.
+    pub world: [f64; 3],
+    /// The scene's label of the surface hit (0 = ground).
+    pub label: u32,
 }
 
 /// A simulated Hesai sensor.
@@ -367,6 +371,7 @@ impl HesaiSim {
                 let Some(Hit {
                     range,
                     reflectivity,
+                    label,
                     ..
                 }) = scene.cast(o.coords.into(), d.into())
                 else {
@@ -414,6 +419,8 @@ impl HesaiSim {
                         range: r,
                         reflectivity: refl,
                         ret,
+                        world: (o + d * r).coords.into(),
+                        label,
                     });
                 }
             }
