@@ -7,7 +7,10 @@
 //!   once: a capture merged in the test from the XT32 and the nebula VLP-16 captures (the
 //!   Velodyne re-addressed to 192.168.1.202 and shifted in time onto the Hesai), replayed on
 //!   loopback (one 127.0.0.k per source); the live run must receive every datagram and give
-//!   the same sweeps and points as `ringscan decode` of the merged file, one sensor per family.
+//!   the same sweeps and points as `ringscan decode` of the merged file, one sensor per family;
+//! - the angle correction fetched over PTC (`hesai-calib`, `listen --hesai-ptc`), the CSV and
+//!   the AT128's binary `.dat`, which `decode --calib` also reads (simulated AT128 packets with
+//!   the real file decode to exactly the simulator's returns).
 
 mod common;
 mod listen_util;
@@ -446,10 +449,19 @@ fn nebula_filters_are_command_line_options() {
 
 #[test]
 fn listen_fetches_a_hesai_correction_over_ptc_and_decodes() {
-    use std::io::{Read, Write};
     let Some(c) = common::captures() else { return };
     let _guard = serial();
     let csv = std::fs::read(c.join(CALIB).join("PandarXT32.csv")).unwrap();
+    let pcap = pcap_in(&c.join(GT).join("xt32"));
+    let live = listen_with_ptc(csv, &pcap, "hesai-ptc-127.0.0.1.csv");
+    assert!(live["points"].as_u64().unwrap() > 200_000, "{live}");
+}
+
+/// `listen --hesai-ptc` with a fake sensor whose PTC port serves `served` and the replay of
+/// `pcap` from 127.0.0.1: the fetched file (named `file`) exists while listening and its folder
+/// is gone after; the run's `--json`, whose one sensor is a Hesai decoded with that file.
+fn listen_with_ptc(served: Vec<u8>, pcap: &Path, file: &str) -> serde_json::Value {
+    use std::io::{Read, Write};
     // The fake sensor's PTC port, on the address the replay sends from (127.0.0.1).
     let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     let ptc_port = l.local_addr().unwrap().port();
@@ -459,11 +471,10 @@ fn listen_fetches_a_hesai_correction_over_ptc_and_decodes() {
         s.read_exact(&mut head).unwrap();
         assert_eq!(head[2], 0x05);
         let mut r = vec![0x47, 0x74, 0x05, 0];
-        r.extend_from_slice(&(csv.len() as u32).to_be_bytes());
-        r.extend_from_slice(&csv);
+        r.extend_from_slice(&(served.len() as u32).to_be_bytes());
+        r.extend_from_slice(&served);
         s.write_all(&r).unwrap();
     });
-    let pcap = pcap_in(&c.join(GT).join("xt32"));
     let offset = free_offset(&[2368]);
     let l = start_listen(&[
         "--sensor".into(),
@@ -475,9 +486,9 @@ fn listen_fetches_a_hesai_correction_over_ptc_and_decodes() {
     // The fetched file is held in a folder of the run while it listens, and removed after.
     let fetched = std::env::temp_dir()
         .join(format!("ringscan-hesai-ptc-{}", l.child.id()))
-        .join("hesai-ptc-127.0.0.1.csv");
+        .join(file);
     assert!(fetched.is_file(), "{} while listening", fetched.display());
-    replay(&pcap, offset, "1", &["--per-source-loopback"]);
+    replay(pcap, offset, "1", &["--per-source-loopback"]);
     std::thread::sleep(std::time::Duration::from_millis(500));
     let (code, out, err) = l.stop("INT");
     assert_eq!(code, Some(0), "{err}");
@@ -490,24 +501,20 @@ fn listen_fetches_a_hesai_correction_over_ptc_and_decodes() {
         serde_json::from_str(&out).unwrap_or_else(|e| panic!("{e}: {out:?} {err}"));
     let s = &live["sensors"][0];
     assert_eq!(s["kind"], "hesai", "{live}");
-    assert_eq!(s["calibration"], "hesai-ptc-127.0.0.1.csv", "{live}");
-    assert!(live["points"].as_u64().unwrap() > 200_000, "{live}");
+    assert_eq!(s["calibration"], file, "{live}");
+    live
 }
 
-/// The AT128's binary `.dat` through `--calib`, as the README offers it (the command line once
-/// refused every calibration that was not UTF-8 text, so only the library could read it): 0.3 s
-/// of simulated AT128 packets made with the real `PandarAT128.dat` decode to exactly the
-/// simulator's returns, and the file is attached to the MCAP as binary.
-#[test]
-fn decode_reads_the_at128_dat_through_calib() {
+/// 3,600 packets (0.15 s) of the simulated AT128, urban scene, with the real `PandarAT128.dat`:
+/// the pcap and the number of returns the decoder must give.
+fn at128_capture(c: &Path, dir: &Path) -> (std::path::PathBuf, usize) {
     use ringscan::sensor::hesai::family::parse_hesai_calibration;
     use ringscan::sensor::hesai::sim::HesaiSim;
     use ringscan::sensor::hesai::HesaiModel;
     use ringscan::sim::{motion::Trajectory, scenes};
 
-    let Some(c) = common::captures() else { return };
     let dat = c.join(CALIB).join("PandarAT128.dat");
-    let calib = parse_hesai_calibration(&std::fs::read(&dat).unwrap())
+    let calib = parse_hesai_calibration(&std::fs::read(dat).unwrap())
         .unwrap()
         .unwrap();
     let t0 = 1_714_564_800_000_000_000;
@@ -523,9 +530,41 @@ fn decode_reads_the_at128_dat_through_calib() {
         let (host_ns, payload) = sim.next_packet(&scene, &mut truth);
         datagrams.push((host_ns, [192, 168, 1, 201], payload));
     }
-    let dir = common::Scratch::dir("hesai-at128-cli");
     let pcap = dir.join("at128.pcap");
     write_pcap(&pcap, &datagrams);
+    (pcap, truth.len())
+}
+
+/// An AT128 serves its binary `.dat` over PTC; `listen --hesai-ptc` decodes with it (the
+/// command line refused binary calibrations before, so this run failed at the start).
+#[test]
+fn listen_fetches_an_at128_dat_over_ptc_and_decodes() {
+    let Some(c) = common::captures() else { return };
+    let _guard = serial();
+    let dir = common::Scratch::dir("hesai-at128-ptc");
+    let (pcap, returns) = at128_capture(&c, &dir);
+    let dat = std::fs::read(c.join(CALIB).join("PandarAT128.dat")).unwrap();
+    let live = listen_with_ptc(dat, &pcap, "hesai-ptc-127.0.0.1.dat");
+    assert_eq!(live["sensors"][0]["model"], "PandarAT128", "{live}");
+    // Loopback at the capture's own rate: every packet is expected, a few lost are tolerated
+    // on a loaded machine (the exact count is `decode`'s test below).
+    let points = live["points"].as_u64().unwrap();
+    assert!(
+        points as f64 > 0.9 * returns as f64 && points <= returns as u64,
+        "{points} of {returns}: {live}"
+    );
+}
+
+/// The AT128's binary `.dat` through `--calib`, as the README offers it (the command line once
+/// refused every calibration that was not UTF-8 text, so only the library could read it): 0.3 s
+/// of simulated AT128 packets made with the real `PandarAT128.dat` decode to exactly the
+/// simulator's returns, and the file is attached to the MCAP as binary.
+#[test]
+fn decode_reads_the_at128_dat_through_calib() {
+    let Some(c) = common::captures() else { return };
+    let dat = c.join(CALIB).join("PandarAT128.dat");
+    let dir = common::Scratch::dir("hesai-at128-cli");
+    let (pcap, returns) = at128_capture(&c, &dir);
     let out = dir.join("at128.mcap");
     let o = Command::new(BIN)
         .arg("decode")
@@ -539,7 +578,7 @@ fn decode_reads_the_at128_dat_through_calib() {
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    assert_eq!(j["points"].as_u64(), Some(truth.len() as u64), "{j}");
+    assert_eq!(j["points"].as_u64(), Some(returns as u64), "{j}");
     assert_eq!(j["packets"]["decoded"].as_u64(), Some(3_600), "{j}");
     let s = &j["sensors"][0];
     assert_eq!(s["model"], "PandarAT128", "{s}");
