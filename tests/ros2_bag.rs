@@ -99,6 +99,9 @@ enum Back {
     FromBag,
     /// The calibration file is given to the bag's decoding too.
     Given,
+    /// The bag's MCAP carries the calibration file as an attachment (ringscan attaches the
+    /// files it decodes with), which the bag's decoding uses without `--calib`.
+    Attached,
 }
 
 /// `decode --format ros2 --raw` → bag → the bag's datagrams and sweeps are the capture's;
@@ -167,6 +170,16 @@ fn round_trip(
             assert_eq!(metadata, None, "no calibration in the bag");
             given
         }
+        Back::Attached => {
+            assert_eq!(metadata, None, "no calibration topic in the bag");
+            let (name, bytes) = src
+                .attachments()
+                .iter()
+                .find(|(n, _)| *n == calib_name)
+                .unwrap_or_else(|| panic!("{calib_name} attached to the bag"));
+            assert_eq!(Some(bytes.as_slice()), calib_bytes.as_deref(), "{name}");
+            Some((bytes.as_slice(), name.as_str()))
+        }
     };
     let a = sweeps(&want, given);
     let b = sweeps(&got, back_calib);
@@ -189,6 +202,13 @@ fn round_trip(
     let again = ringscan(&again_args);
     for k in ["sweeps", "points"] {
         assert_eq!(again[k], wrote[k], "{k}: bag vs capture");
+    }
+    if back == Back::Attached {
+        assert_eq!(
+            again["sensors"][0]["calibration"],
+            calib_name.as_str(),
+            "{again}"
+        );
     }
     let _ = std::fs::remove_dir_all(&dir);
     (a.len(), points)
@@ -230,6 +250,9 @@ fn hesai_packets_round_trip_through_a_ros2_bag() {
     let (sweeps, points) = round_trip(&pcap, Some(&csv), Back::Given, |_| true);
     assert!(sweeps >= 1, "{sweeps} sweeps");
     eprintln!("XT32: {sweeps} sweeps, {points} points through the bag");
+    // The same bag decoded without --calib: the angle correction attached to it serves.
+    let (sweeps, points) = round_trip(&pcap, Some(&csv), Back::Attached, |_| true);
+    eprintln!("XT32: {sweeps} sweeps, {points} points through the bag, with its attachment");
 }
 
 #[test]

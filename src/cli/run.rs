@@ -1470,7 +1470,20 @@ impl SweepReader {
 
 /// A bag's Ouster metadata configures its sensor unless `--calib` binds a file to that
 /// sensor's address; an unbound `--calib` metadata that fits the sensor is matched first.
+/// Without any `--calib`, the calibration files attached to a bag's MCAP (as ringscan attaches
+/// the files it decoded with) serve its sensors, each matched as an unbound `--calib` file is.
 fn add_bag_metadata(session: &mut Session, bag: &crate::source::bag::BagSource, calib: &[String]) {
+    if calib.is_empty() {
+        for (name, bytes) in bag.attachments() {
+            match sensors::calibration(bytes, name, None) {
+                Ok(spec) => {
+                    tracing::info!("{name}: the calibration attached to the bag is used");
+                    session.add_calib(spec);
+                }
+                Err(e) => tracing::debug!("attachment {name}: not a calibration: {e}"),
+            }
+        }
+    }
     for s in bag.sensors() {
         let Some(text) = &s.metadata else { continue };
         let bound = calib.iter().any(|c| {

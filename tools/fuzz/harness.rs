@@ -2339,6 +2339,13 @@ pub fn bag_mcap(data: &[u8]) {
         _ => None,
     });
     assert!(r.offset() <= data.len() as u64);
+    // The same bytes through the summary's attachment indexes (the calibrations of a bag
+    // ringscan wrote): bounded in number and size, whatever the offsets and lengths say.
+    let found = ringscan::source::bag::mcap_in::attachments(&mut std::io::Cursor::new(data), 4096);
+    assert!(found.len() <= 16);
+    assert!(found
+        .iter()
+        .all(|(_, b)| b.len() <= 4096 && b.len() <= data.len()));
 }
 
 /// `bag_metadata`: any bytes as a rosbag2 `metadata.yaml`.

@@ -373,6 +373,100 @@ const OP_SCHEMA: u8 = 0x03;
 const OP_CHANNEL: u8 = 0x04;
 const OP_MESSAGE: u8 = 0x05;
 const OP_CHUNK: u8 = 0x06;
+const OP_ATTACHMENT: u8 = 0x09;
+const OP_ATTACHMENT_INDEX: u8 = 0x0A;
+
+/// Attachments read from an MCAP file's summary at most: a bag written by ringscan holds one
+/// calibration file per sensor.
+const MAX_ATTACHMENTS: usize = 16;
+/// Summary section bytes read at most to find the attachment indexes.
+const MAX_SUMMARY_BYTES: u64 = 16 << 20;
+
+/// The attachments (name, bytes) of an MCAP file, each of at most `max_bytes`, found through
+/// the summary's attachment indexes (footer → summary → index → record) without reading the
+/// messages. ringscan attaches the calibration files it decoded with, which makes a bag it
+/// wrote decodable without them. Anything missing, damaged or too large gives fewer
+/// attachments, never an error: the main pass reports a damaged file.
+pub fn attachments<F: Read + std::io::Seek>(f: &mut F, max_bytes: usize) -> Vec<(String, Vec<u8>)> {
+    let mut out = Vec::new();
+    let _ = read_attachments(f, max_bytes, &mut out);
+    out
+}
+
+fn read_attachments<F: Read + std::io::Seek>(
+    f: &mut F,
+    max_bytes: usize,
+    out: &mut Vec<(String, Vec<u8>)>,
+) -> Option<()> {
+    use std::io::SeekFrom;
+    let file_len = f.seek(SeekFrom::End(0)).ok()?;
+    let mut read_at = |at: u64, n: u64| -> Option<Vec<u8>> {
+        f.seek(SeekFrom::Start(at)).ok()?;
+        let mut b = Vec::new();
+        f.by_ref().take(n).read_to_end(&mut b).ok()?;
+        (b.len() as u64 == n).then_some(b)
+    };
+    // Footer record (opcode, length 20, summary start, summary offset start, CRC), then magic.
+    let footer_at = file_len.checked_sub(8 + 9 + 20)?;
+    let tail = read_at(footer_at, 37)?;
+    if tail[0] != OP_FOOTER || u64_at(&tail, 1)? != 20 || &tail[29..] != MAGIC {
+        return None;
+    }
+    let summary_start = u64_at(&tail, 9)?;
+    let offsets_start = u64_at(&tail, 17)?;
+    let summary_end = if offsets_start == 0 {
+        footer_at
+    } else {
+        offsets_start
+    };
+    if summary_start == 0 || summary_start > summary_end || summary_end > footer_at {
+        return None;
+    }
+    let summary = read_at(
+        summary_start,
+        (summary_end - summary_start).min(MAX_SUMMARY_BYTES),
+    )?;
+    let string_at = |b: &[u8], at: usize| -> Option<(String, usize)> {
+        let n = u32_at(b, at)? as usize;
+        let text = b.get(at + 4..(at + 4).checked_add(n)?)?;
+        Some((String::from_utf8_lossy(text).into_owned(), at + 4 + n))
+    };
+    let mut at = 0usize;
+    while let Some((op, body)) = chunk_record(&summary, at) {
+        at = body.end;
+        if op != OP_ATTACHMENT_INDEX || out.len() >= MAX_ATTACHMENTS {
+            continue;
+        }
+        // Attachment index: offset, length (the whole record), log time, create time, data
+        // size, name, media type.
+        let b = &summary[body];
+        let (offset, length, data_size) = (u64_at(b, 0)?, u64_at(b, 8)?, u64_at(b, 32)?);
+        if data_size > max_bytes as u64 || length > data_size.saturating_add(64 << 10) {
+            continue;
+        }
+        let Some(rec) = read_at(offset, length) else {
+            continue;
+        };
+        // Attachment record: opcode, length, log time, create time, name, media type, data
+        // (u64 length + bytes), CRC.
+        let Some((name, next)) = (rec.first() == Some(&OP_ATTACHMENT))
+            .then(|| string_at(&rec, 9 + 16))
+            .flatten()
+        else {
+            continue;
+        };
+        let Some((_media, next)) = string_at(&rec, next) else {
+            continue;
+        };
+        let Some(n) = u64_at(&rec, next).filter(|&n| n == data_size) else {
+            continue;
+        };
+        if let Some(data) = rec.get(next + 8..next + 8 + n as usize) {
+            out.push((name, data.to_vec()));
+        }
+    }
+    Some(())
+}
 
 /// Little-endian integers at `at` of `b`, if they are there.
 fn u32_at(b: &[u8], at: usize) -> Option<u32> {

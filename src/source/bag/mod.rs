@@ -30,6 +30,10 @@
 //!   `nebula_msgs/NebulaPackets` by its first packet (1206 bytes: Velodyne; `EE FF`: Hesai;
 //!   `55 AA` / `A5 FF`: Robosense MSOP / DIFOP; else 2368).
 //!
+//! The attachments of an MCAP bag ([`BagSource::attachments`], through the summary's
+//! attachment indexes) are the calibration files a bag ringscan wrote carries; the command line
+//! uses them when no `--calib` is given.
+//!
 //! - Livox `CustomMsg` (`livox_ros_driver2`, `livox_ros_driver`): points the driver decoded,
 //!   not packets. Each topic is one sensor; each message becomes one points frame
 //!   ([`crate::sensor::livox::frame`], the one "datagram" of that message, to 56301) that the
@@ -982,6 +986,8 @@ pub struct BagSource {
     sensors: Vec<BagSensor>,
     /// Ouster metadata by namespace (from the pre-scan and the stream).
     metadata: HashMap<String, String>,
+    /// The MCAP attachments ([`Self::attachments`]).
+    attachments: Vec<(String, Vec<u8>)>,
     packets: Vec<PacketRef>,
     /// The points frame of the current message when it is a Livox `CustomMsg` (or the IMU
     /// frame of a `sensor_msgs/Imu`): its one "packet" is this, not a range of the message.
@@ -1060,6 +1066,7 @@ impl BagSource {
             BagError::NotABag { found }
         })?;
         let metadata = prescan_metadata(path, &kind)?;
+        let attachments = mcap_attachments(path, &kind);
         let messages = Messages::open(path, &kind)?;
         let mut s = Self {
             kind,
@@ -1068,6 +1075,7 @@ impl BagSource {
             routes: HashMap::new(),
             sensors: Vec::new(),
             metadata,
+            attachments,
             packets: Vec::new(),
             frame: Vec::new(),
             frame_current: false,
@@ -1087,6 +1095,13 @@ impl BagSource {
     /// What the path is.
     pub fn kind(&self) -> &BagKind {
         &self.kind
+    }
+
+    /// The MCAP attachments (name, bytes) of the bag's first MCAP file that has any, each of
+    /// at most [`MAX_CALIB_BYTES`](crate::sensor::MAX_CALIB_BYTES): the calibration files of a
+    /// bag ringscan wrote.
+    pub fn attachments(&self) -> &[(String, Vec<u8>)] {
+        &self.attachments
     }
 
     /// The sensors known so far, in address order.
@@ -1410,6 +1425,37 @@ impl BagSource {
 
 /// Ouster metadata (`std_msgs/String` on `<ns>/metadata`) by namespace, read from the start of
 /// the bag until every Ouster namespace known has one, or [`PRESCAN_BYTES`] of messages.
+/// The attachments of the first of a bag's MCAP files (at most four looked at) that has any;
+/// none for other storage or a zstd-compressed file.
+fn mcap_attachments(path: &Path, kind: &BagKind) -> Vec<(String, Vec<u8>)> {
+    let files: Vec<PathBuf> = match kind {
+        BagKind::File(FileKind::Mcap) => vec![path.to_path_buf()],
+        BagKind::Rosbag2(yaml) => {
+            let meta = std::fs::read_to_string(yaml)
+                .ok()
+                .and_then(|t| Metadata::parse(&t).ok());
+            let dir = yaml.parent().unwrap_or(Path::new("."));
+            match meta {
+                Some(m)
+                    if m.storage == rosbag2::Storage::Mcap
+                        && m.compression != Compression::File =>
+                {
+                    m.files.iter().map(|f| dir.join(f)).collect()
+                }
+                _ => Vec::new(),
+            }
+        }
+        _ => Vec::new(),
+    };
+    files
+        .iter()
+        .take(4)
+        .filter_map(|f| File::open(f).ok())
+        .map(|mut f| mcap_in::attachments(&mut f, crate::sensor::MAX_CALIB_BYTES))
+        .find(|a| !a.is_empty())
+        .unwrap_or_default()
+}
+
 fn prescan_metadata(path: &Path, kind: &BagKind) -> Result<HashMap<String, String>, BagError> {
     let mut m = Messages::open(path, kind)?;
     let mut found: HashMap<String, String> = HashMap::new();
