@@ -444,7 +444,10 @@ fn read_attachments<F: Read + std::io::Seek>(
         if data_size > max_bytes as u64 || length > data_size.saturating_add(64 << 10) {
             continue;
         }
-        let Some(rec) = read_at(offset, length) else {
+        // The index's length must be the record's own (opcode, length field, body).
+        let Some(rec) = read_at(offset, length)
+            .filter(|r| u64_at(r, 1).and_then(|n| n.checked_add(9)) == Some(length))
+        else {
             continue;
         };
         // Attachment record: opcode, length, log time, create time, name, media type, data
@@ -574,6 +577,115 @@ fn open_chunk(body: &[u8], inflated: &mut Vec<u8>) -> Result<Records, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn record(op: u8, body: &[u8]) -> Vec<u8> {
+        let mut r = vec![op];
+        r.extend_from_slice(&(body.len() as u64).to_le_bytes());
+        r.extend_from_slice(body);
+        r
+    }
+
+    fn string(s: &str) -> Vec<u8> {
+        let mut b = (s.len() as u32).to_le_bytes().to_vec();
+        b.extend_from_slice(s.as_bytes());
+        b
+    }
+
+    /// An MCAP file written by hand from the specification: magic, one attachment record per
+    /// `(name, data)`, a summary of their attachment indexes (each index's offset, length and
+    /// data size passed through `lie`), the footer and magic.
+    fn with_attachments(
+        files: &[(&str, &[u8])],
+        lie: impl Fn(u64, u64, u64) -> (u64, u64, u64),
+    ) -> Vec<u8> {
+        let mut out = MAGIC.to_vec();
+        let mut summary = Vec::new();
+        for (name, data) in files {
+            let mut body = [0u8; 16].to_vec();
+            body.extend(string(name));
+            body.extend(string("text/plain"));
+            body.extend_from_slice(&(data.len() as u64).to_le_bytes());
+            body.extend_from_slice(data);
+            body.extend_from_slice(&[0; 4]);
+            let rec = record(OP_ATTACHMENT, &body);
+            let (offset, length, size) = lie(out.len() as u64, rec.len() as u64, data.len() as u64);
+            let mut index = Vec::new();
+            for v in [offset, length, 0, 0, size] {
+                index.extend_from_slice(&v.to_le_bytes());
+            }
+            index.extend(string(name));
+            index.extend(string("text/plain"));
+            summary.extend(record(OP_ATTACHMENT_INDEX, &index));
+            out.extend(rec);
+        }
+        let summary_start = out.len() as u64;
+        out.extend(summary);
+        let mut footer = summary_start.to_le_bytes().to_vec();
+        footer.extend_from_slice(&[0; 12]);
+        out.extend(record(OP_FOOTER, &footer));
+        out.extend_from_slice(MAGIC);
+        out
+    }
+
+    /// What an attachment index says instead of (offset, length, data size).
+    type Lie = fn(u64, u64, u64) -> (u64, u64, u64);
+
+    fn read(bytes: &[u8], max: usize) -> Vec<(String, Vec<u8>)> {
+        attachments(&mut std::io::Cursor::new(bytes), max)
+    }
+
+    #[test]
+    fn attachments_are_read_through_the_summary() {
+        let honest = |o, l, s| (o, l, s);
+        let f = with_attachments(&[("a.csv", b"1,2,3"), ("b.dat", &[0xEE, 0xFF, 0])], honest);
+        assert_eq!(
+            read(&f, 100),
+            [
+                ("a.csv".to_string(), b"1,2,3".to_vec()),
+                ("b.dat".to_string(), vec![0xEE, 0xFF, 0])
+            ]
+        );
+        // Over the size asked: left out, the others kept.
+        assert_eq!(read(&f, 4).len(), 1);
+        // At most MAX_ATTACHMENTS, whatever the summary lists.
+        let many: Vec<(&str, &[u8])> = (0..40).map(|_| ("x", &b"x"[..])).collect();
+        assert_eq!(
+            read(&with_attachments(&many, honest), 100).len(),
+            MAX_ATTACHMENTS
+        );
+    }
+
+    #[test]
+    fn hostile_attachment_indexes_give_fewer_attachments() {
+        let one: &[(&str, &[u8])] = &[("a.csv", b"1,2,3")];
+        // Offsets past the end or into the middle of a record, lengths too short or huge, a
+        // data size that disagrees with the record's, a huge data size.
+        let lies: [Lie; 7] = [
+            |_, l, s| (u64::MAX - 3, l, s),
+            |o, l, s| (o + 1, l, s),
+            |o, l, s| (o, l - 1, s),
+            |o, _, s| (o, u64::MAX, s),
+            |o, l, s| (o, l, s + 1),
+            |o, l, _| (o, l, u64::MAX),
+            |o, l, s| (o, l + 4096, s),
+        ];
+        for (k, lie) in lies.iter().enumerate() {
+            assert!(
+                read(&with_attachments(one, lie), 1 << 20).is_empty(),
+                "lie {k}"
+            );
+        }
+        // Damaged footers and summaries: cut short, no magic, summary start beyond the footer.
+        let f = with_attachments(one, |o, l, s| (o, l, s));
+        for cut in [1, 8, 20, 37, f.len()] {
+            assert!(read(&f[..f.len() - cut], 1 << 20).is_empty(), "cut {cut}");
+        }
+        let mut g = f.clone();
+        let at = g.len() - 8 - 28;
+        g[at..at + 8].copy_from_slice(&u64::MAX.to_le_bytes());
+        assert!(read(&g, 1 << 20).is_empty());
+        assert!(read(b"", 1 << 20).is_empty());
+    }
 
     /// A chunk record body written out by hand from the MCAP specification.
     fn chunk_body(compression: &str, uncompressed: u64, crc: u32, records: &[u8]) -> Vec<u8> {

@@ -30,10 +30,6 @@
 //!   `nebula_msgs/NebulaPackets` by its first packet (1206 bytes: Velodyne; `EE FF`: Hesai;
 //!   `55 AA` / `A5 FF`: Robosense MSOP / DIFOP; else 2368).
 //!
-//! The attachments of an MCAP bag ([`BagSource::attachments`], through the summary's
-//! attachment indexes) are the calibration files a bag ringscan wrote carries; the command line
-//! uses them when no `--calib` is given.
-//!
 //! - Livox `CustomMsg` (`livox_ros_driver2`, `livox_ros_driver`): points the driver decoded,
 //!   not packets. Each topic is one sensor; each message becomes one points frame
 //!   ([`crate::sensor::livox::frame`], the one "datagram" of that message, to 56301) that the
@@ -54,6 +50,10 @@
 //!
 //! The source port equals the destination port; the destination address is 127.0.0.1.
 //! [`BagSource::sensors`] lists the assignment.
+//!
+//! The attachments of an MCAP bag ([`BagSource::attachments`], through the summary's
+//! attachment indexes) are the calibration files a bag ringscan wrote carries; the command line
+//! uses them when no `--calib` is given.
 //!
 //! # Time
 //! A datagram's time is its packet's own stamp where the message type has one
@@ -1423,8 +1423,6 @@ impl BagSource {
     }
 }
 
-/// Ouster metadata (`std_msgs/String` on `<ns>/metadata`) by namespace, read from the start of
-/// the bag until every Ouster namespace known has one, or [`PRESCAN_BYTES`] of messages.
 /// The attachments of the first of a bag's MCAP files (at most four looked at) that has any;
 /// none for other storage or a zstd-compressed file.
 fn mcap_attachments(path: &Path, kind: &BagKind) -> Vec<(String, Vec<u8>)> {
@@ -1456,6 +1454,8 @@ fn mcap_attachments(path: &Path, kind: &BagKind) -> Vec<(String, Vec<u8>)> {
         .unwrap_or_default()
 }
 
+/// Ouster metadata (`std_msgs/String` on `<ns>/metadata`) by namespace, read from the start of
+/// the bag until every Ouster namespace known has one, or [`PRESCAN_BYTES`] of messages.
 fn prescan_metadata(path: &Path, kind: &BagKind) -> Result<HashMap<String, String>, BagError> {
     let mut m = Messages::open(path, kind)?;
     let mut found: HashMap<String, String> = HashMap::new();
