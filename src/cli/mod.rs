@@ -435,7 +435,7 @@ fn parse_fov(s: &str) -> Result<(f64, f64), String> {
     Ok((num(a)?, num(b)?))
 }
 
-/// Entry point of the binary: [`run`] on the process's arguments.
+/// Entry point of the binary: [`run()`] on the process's arguments.
 pub fn main() -> ExitCode {
     ExitCode::from(run(std::env::args_os()))
 }

@@ -19,7 +19,7 @@
 //! and `FILE_<name>.tum`.
 //!
 //! With `--deskew odometry` the pipeline deskews each sweep at constant velocity from the
-//! odometry's last motion ([`PipelineRunner::set_relative_motion`]); the deskewed points are then
+//! odometry's last motion ([`super::pipeline::PipelineRunner::set_relative_motion`]); the deskewed points are then
 //! moved on to the sweep's middle and registered with the stamp of that middle, so poses (on
 //! `/tf` and in the trajectory) are those at mid-sweep. Referred to the sweep's start (or end) the
 //! fed-back velocity error alternates from sweep to sweep without decaying; at mid-sweep the

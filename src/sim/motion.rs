@@ -2,7 +2,7 @@
 //! IMU measures (velocity, acceleration, angular velocity; world and body frames).
 //!
 //! Times are ns on the simulator's clock (the clock of the packets' host timestamps and of
-//! [`super::velodyne::Truth::time_ns`]); a trajectory starts at its `t0_ns`. Kinds:
+//! [`crate::sensor::velodyne::sim::Truth::time_ns`]); a trajectory starts at its `t0_ns`. Kinds:
 //! - [`Motion::Fixed`]: a constant pose (the identity: the static sensor of the encoder tests);
 //! - [`Motion::Twist`]: a constant body-frame twist from a start pose (15 m/s forward with
 //!   60 °/s yaw is a circle of radius 14.3 m);

@@ -9,7 +9,7 @@
 //! into a reused buffer: a message of an uncompressed chunk is handed on where it lies in that
 //! buffer, not copied (the `mcap` crate's linear reader copied every byte into buffers of its
 //! own, zeroed first, which made an MCAP bag 40 % slower to decode than its pcap). A record
-//! longer than [`MAX_CHUNK_BYTES`](super::MAX_CHUNK_BYTES) is refused before anything is read
+//! longer than [`MAX_CHUNK_BYTES`] is refused before anything is read
 //! into memory, and a buffer grows only as the bytes arrive. Schema and channel records are
 //! parsed by the `mcap` crate (it checks their fields); message records and chunks are opened
 //! here, every size checked against its container first: the compressed size within the chunk

@@ -17,8 +17,8 @@
 //!
 //! # Bounds
 //! Record headers are at most [`MAX_HEADER_BYTES`]; a chunk's compressed and uncompressed sizes
-//! at most [`MAX_CHUNK_BYTES`](super::MAX_CHUNK_BYTES); any other record at most
-//! [`MAX_MESSAGE_BYTES`](super::MAX_MESSAGE_BYTES). A length beyond them is
+//! at most [`MAX_CHUNK_BYTES`]; any other record at most
+//! [`MAX_MESSAGE_BYTES`]. A length beyond them is
 //! [`BagError::RecordTooLarge`] before anything is allocated, and buffers grow only as bytes
 //! actually arrive. One chunk is held at a time (compressed and uncompressed), the buffers are
 //! reused. A chunk that does not decompress to its announced size, or whose records contradict

@@ -17,10 +17,10 @@
 //! and times, in batches of rows, resumed after the last row read); each message is read when
 //! it is asked for, by its rowid, through one incremental blob handle kept open beside the
 //! connection, straight into the one reused buffer the decoder reads, after its length is
-//! checked (one larger than [`MAX_MESSAGE_BYTES`](super::MAX_MESSAGE_BYTES) is counted and
+//! checked (one larger than [`MAX_MESSAGE_BYTES`] is counted and
 //! skipped). One message's bytes are held at a time. SQLite's own cache
 //! is its default (about 2 MiB). The file is read through a memory map (its first 2 GiB, the
-//! most SQLite maps), dropped and made afresh every [`REMAP_BYTES`] of messages so that the
+//! most SQLite maps), dropped and made afresh every 16 MiB (`REMAP_BYTES`) of messages so that the
 //! pages it touched do not pile up in the process's resident memory. The file is opened
 //! read-only and `immutable` (no journal, no lock files: bags on read-only media open).
 
