@@ -164,6 +164,7 @@ fn info_names_serial_firmware_profile_mode_window_timestamps_and_packets_per_por
                 total,
                 ours["lidar_packets"].as_u64().unwrap()
                     + ours["imu_packets"].as_u64().unwrap()
+                    + ours["zone_packets"].as_u64().unwrap()
                     + ours["malformed"].as_u64().unwrap()
                     + ours["crc_failures"].as_u64().unwrap()
                     + ours["wrong_sensor"].as_u64().unwrap()
@@ -214,4 +215,77 @@ fn crc_on_drops_and_counts_packets_whose_footer_is_not_a_crc() {
     let j = run("crc_test.pcap", "crc_test.json", "on");
     assert_eq!(j["sensors"][0]["crc_failures"], 0);
     assert_eq!(j["points"], 29_692);
+}
+
+/// The real zone-monitor packet (FW 3.2) into both MCAP formats: one `/zones` message equal to
+/// ouster-sdk 1.0.1's reading of it (`fixtures/references/`, made by
+/// `tools/ouster_zone_reference.sh`), every zone slot and field.
+#[test]
+fn zone_monitor_packet_decodes_to_ouster_sdks_zone_states() {
+    let Some(root) = common::captures() else {
+        return;
+    };
+    let dir = root.join("ouster-lidar__ouster-sdk/tests/pcaps");
+    let reference: Value = serde_json::from_slice(
+        &std::fs::read(
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("fixtures/references/ouster-zones-imu_zm_no_lidar.json"),
+        )
+        .unwrap(),
+    )
+    .unwrap();
+    assert_eq!(reference.as_array().map(Vec::len), Some(1));
+    let scratch = common::Scratch::dir("ouster-zones");
+    for format in ["foxglove", "ros2"] {
+        let out = scratch.join(format!("zones-{format}.mcap"));
+        let o = Command::new(env!("CARGO_BIN_EXE_ringscan"))
+            .arg("decode")
+            .arg(dir.join("imu_zm_no_lidar.pcap"))
+            .arg("--calib")
+            .arg(dir.join("imu_zm_no_lidar_0.json"))
+            .args(["--format", format, "--json", "--out"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let j: Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(j["zone_reports"], 1, "{format}");
+        assert_eq!(j["packets"]["malformed"], 0, "{format}");
+        assert_eq!(j["output"]["topics"]["/zones"], 1, "{format}");
+        let s = &j["sensors"][0];
+        assert_eq!(
+            (&s["zone_packets"], &s["crc_failures"]),
+            (&1.into(), &0.into())
+        );
+        assert_eq!(s["ports"], serde_json::json!([7513, 7514]));
+
+        let bytes = std::fs::read(&out).unwrap();
+        let mut got = Vec::new();
+        for m in mcap::MessageStream::new(&bytes).unwrap() {
+            let m = m.unwrap();
+            if m.channel.topic != "/zones" {
+                continue;
+            }
+            let schema = m.channel.schema.as_ref().unwrap();
+            let text = match format {
+                "foxglove" => {
+                    assert_eq!(
+                        (schema.name.as_str(), schema.encoding.as_str()),
+                        ("ringscan.ZoneStates", "jsonschema")
+                    );
+                    assert_eq!(m.channel.message_encoding, "json");
+                    String::from_utf8(m.data.to_vec()).unwrap()
+                }
+                _ => {
+                    assert_eq!(schema.name, "std_msgs/msg/String");
+                    assert_eq!(m.channel.message_encoding, "cdr");
+                    // CDR: 4-byte encapsulation header, u32 length (with the NUL), text, NUL.
+                    let n = u32::from_le_bytes(m.data[4..8].try_into().unwrap()) as usize;
+                    String::from_utf8(m.data[8..8 + n - 1].to_vec()).unwrap()
+                }
+            };
+            got.push(serde_json::from_str::<Value>(&text).unwrap());
+        }
+        assert_eq!(Value::Array(got), reference, "{format}");
+    }
 }

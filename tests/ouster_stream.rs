@@ -1,7 +1,8 @@
 //! The Ouster stream on encoded packets: every kind of bad packet is a counted drop (never a
 //! panic), frames are cut on `frame_id` across its wrap, a late packet of the previous frame
 //! is still taken (one-frame reorder window), older ones are counted, invalid columns are
-//! counted as missing, an `init_id` change starts an epoch, IMU packets come out in SI units.
+//! counted as missing, an `init_id` change starts an epoch, IMU packets come out in SI units,
+//! the real zone-monitor packet's damaged copies are counted drops and its queue is bounded.
 //! Expected numbers come from the packets the test builds, not from the decoder.
 
 use ringscan::sensor::ouster::calib::parse;
@@ -13,6 +14,7 @@ use ringscan::sensor::ouster::sim::OusterEncoder;
 use ringscan::sensor::ouster::sim::SimColumn;
 use ringscan::sensor::ouster::sim::SimHeader;
 use ringscan::sensor::ouster::sim::SimPixel;
+use ringscan::sensor::ouster::sweep::MAX_ZONE_QUEUE;
 use ringscan::sensor::ouster::OusterStream;
 use ringscan::sensor::ouster::OusterStreamConfig;
 use ringscan::sensor::DecodeOptions;
@@ -328,4 +330,88 @@ fn extras_of_a_real_capture_sum_to_the_goldens() {
     assert_eq!(sum(0, &|e| u64::from(e.signal)), g(0, "signal"));
     assert_eq!(sum(1, &|e| u64::from(e.signal)), g(1, "signal2"));
     assert_eq!(sum(0, &|e| u64::from(e.near_ir)), g(0, "nir"));
+}
+
+/// The real zone-monitor packet (FW 3.2, `imu_zm_no_lidar.pcap`) and its metadata, if present.
+fn real_zone_packet() -> Option<(OusterInfo, Vec<u8>)> {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/captures");
+    if !root.join("golden").is_dir() {
+        eprintln!("SKIP: {} is absent", root.display());
+        return None;
+    }
+    let dir = root.join("ouster-lidar__ouster-sdk/tests/pcaps");
+    let meta = std::fs::read_to_string(dir.join("imu_zm_no_lidar_0.json")).unwrap();
+    let info = parse(&meta, "imu_zm_no_lidar_0.json").unwrap();
+    let mut src =
+        ringscan::source::pcap::PcapSource::open(&dir.join("imu_zm_no_lidar.pcap")).unwrap();
+    let mut zm = None;
+    while let Some(d) = src.next_datagram().unwrap() {
+        if d.dst.port() == 7514 {
+            zm = Some(d.payload.to_vec());
+        }
+    }
+    Some((info, zm.expect("the capture's zone-monitor packet")))
+}
+
+#[test]
+fn zone_monitor_packets_are_checked_and_bad_ones_counted() {
+    let Some((info, zm)) = real_zone_packet() else {
+        return;
+    };
+    assert_eq!(info.udp_port_zm, 7514);
+    let zones = |s: &mut OusterStream| s.drain_zones().collect::<Vec<_>>();
+
+    // The real packet: its footer CRC-64 checks (FW 3.2), one report.
+    let mut s = stream(&info);
+    run(&mut s, std::slice::from_ref(&zm));
+    let got = zones(&mut s);
+    assert_eq!(got.len(), 1);
+    assert_eq!((got[0].frame_id, got[0].host_ns), (30_002, 0));
+    assert_eq!(got[0].zones.iter().filter(|z| z.live).count(), 4);
+    assert_eq!((s.stats().zone_packets, s.stats().malformed), (1, 0));
+    assert_eq!(s.stats().crc_failures, 0);
+
+    // One bit flipped in a zone record: a CRC failure, no report.
+    let mut bad = zm.clone();
+    bad[100] ^= 0x10;
+    let mut s = stream(&info);
+    run(&mut s, &[bad.clone()]);
+    assert!(zones(&mut s).is_empty());
+    assert_eq!((s.stats().zone_packets, s.stats().crc_failures), (0, 1));
+    // … taken as it is with the CRC check forced off.
+    let mut s = OusterStream::new(OusterStreamConfig {
+        info: info.clone(),
+        metadata_name: "m".into(),
+        crc: Some(false),
+        decode: DecodeOptions::default(),
+        keep_extras: false,
+        keep_columns: false,
+    })
+    .unwrap();
+    run(&mut s, &[bad]);
+    assert_eq!(zones(&mut s).len(), 1);
+
+    // Cut short, one byte long, another packet type, another sensor's serial.
+    let mut s = stream(&info);
+    let mut other_type = zm.clone();
+    other_type[0] = 1;
+    let mut other_sensor = zm.clone();
+    other_sensor[7] ^= 1;
+    let mut long = zm.clone();
+    long.push(0);
+    run(
+        &mut s,
+        &[zm[..679].to_vec(), long, other_type, other_sensor],
+    );
+    assert!(zones(&mut s).is_empty());
+    assert_eq!(s.stats().malformed, 3);
+    assert_eq!(s.stats().wrong_sensor, 1);
+
+    // A consumer that never drains: the queue stays bounded, the rest counted.
+    let mut s = stream(&info);
+    let flood = vec![zm; MAX_ZONE_QUEUE + 44];
+    run(&mut s, &flood);
+    assert_eq!(s.stats().zone_packets, (MAX_ZONE_QUEUE + 44) as u64);
+    assert_eq!(s.stats().zone_dropped, 44);
+    assert_eq!(zones(&mut s).len(), MAX_ZONE_QUEUE);
 }

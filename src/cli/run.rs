@@ -174,6 +174,8 @@ struct Output {
     sweeps: u64,
     points: u64,
     imu_samples: u64,
+    /// Zone-monitor reports (Ouster FW 3.2+), each a message on `<prefix>/zones`.
+    zone_reports: u64,
     pipeline: Option<PipelineRunner>,
     /// `--odometry` (also with `--deskew odometry`).
     odometry: Option<OdometryRunner>,
@@ -711,6 +713,7 @@ impl Session {
             sweeps: 0,
             points: 0,
             imu_samples: 0,
+            zone_reports: 0,
             pipeline,
             odometry,
             live: None,
@@ -954,6 +957,18 @@ impl Session {
             if let Some(e) = failed {
                 return Err(PumpError::Sink(e));
             }
+            stream.drain_zones(&mut |z| {
+                out.zone_reports += 1;
+                if let (Some(sink), Some(id), None) = (out.sink.as_mut(), id, &failed) {
+                    let msg = zone_report_json(z);
+                    if let Err(e) = sink.write_zones(id, z.host_ns.max(0) as u64, &msg) {
+                        failed = Some(e);
+                    }
+                }
+            });
+            if let Some(e) = failed {
+                return Err(PumpError::Sink(e));
+            }
         }
         if out.raw && out.sink.is_some() {
             let id = out.sensor(idx, addr).id;
@@ -1016,7 +1031,8 @@ impl Session {
         Ok(())
     }
 
-    /// The summary fields every command shares (`sweeps`, `points`, `imu_samples`, `packets`,
+    /// The summary fields every command shares (`sweeps`, `points`, `imu_samples`,
+    /// `zone_reports`, `packets`,
     /// `sensors`), and the number of packets lost (dropped, malformed or missing).
     pub fn summary(&self) -> (serde_json::Map<String, Value>, u64) {
         let (demux, out) = (&self.demux, &self.out);
@@ -1056,6 +1072,7 @@ impl Session {
         m.insert("sweeps".into(), json!(out.sweeps));
         m.insert("points".into(), json!(out.points));
         m.insert("imu_samples".into(), json!(out.imu_samples));
+        m.insert("zone_reports".into(), json!(out.zone_reports));
         m.insert(
             "packets".into(),
             json!({
@@ -1680,4 +1697,41 @@ fn print_text(j: &Value) {
         );
     }
     println!("  {:.3} s", j["elapsed_s"].as_f64().unwrap_or(0.0));
+}
+
+/// A zone-monitor report as the `/zones` message (`ringscan.ZoneStates`).
+fn zone_report_json(z: &crate::sensor::ZoneReport) -> Value {
+    use std::fmt::Write as _;
+    let mut hash = String::with_capacity(2 * z.zoneset_hash.len());
+    for b in z.zoneset_hash {
+        let _ = write!(hash, "{b:02x}");
+    }
+    let zones: Vec<Value> = z
+        .zones
+        .iter()
+        .map(|s| {
+            json!({
+                "live": s.live,
+                "id": s.id,
+                "error_flags": s.error_flags,
+                "trigger_type": s.trigger_type,
+                "trigger_status": s.trigger_status,
+                "triggered_frames": s.triggered_frames,
+                "count": s.count,
+                "occlusion_count": s.occlusion_count,
+                "invalid_count": s.invalid_count,
+                "max_count": s.max_count,
+                "min_range_mm": s.min_range_mm,
+                "max_range_mm": s.max_range_mm,
+                "mean_range_mm": s.mean_range_mm,
+            })
+        })
+        .collect();
+    json!({
+        "timestamp_ns": z.sensor_ns,
+        "frame_id": z.frame_id,
+        "alert_flags": z.alert_flags,
+        "live_zoneset_hash": hash,
+        "zones": zones,
+    })
 }

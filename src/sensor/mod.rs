@@ -34,6 +34,7 @@ use std::sync::Arc;
 pub use calib::{CalibError, MAX_CALIB_BYTES};
 pub use decode::{DecodeError, DecodeOptions};
 pub use ouster::sweep::ImuSample;
+pub use ouster::sweep::ZoneReport;
 pub use velodyne::sweep::StreamError;
 pub use wire::WireError;
 
@@ -395,6 +396,10 @@ pub trait SensorStream: Send + core::fmt::Debug {
     /// Hands the IMU samples decoded since the last call to `out`, with the IMU-to-sensor
     /// transform (row-major 4 × 4, mm); sensors without an IMU have none.
     fn drain_imu(&mut self, _out: &mut dyn FnMut(&ImuSample, &[f64; 16])) {}
+
+    /// Hands the zone-monitor reports decoded since the last call to `out` (sensors that
+    /// judge zones themselves: Ouster FW 3.2+); others have none.
+    fn drain_zones(&mut self, _out: &mut dyn FnMut(&ZoneReport)) {}
 
     /// Times the sensor re-initialised (a new configuration epoch), so that a live source can
     /// read its calibration again.

@@ -32,6 +32,10 @@ const IMU_SCHEMA: &str = "ringscan.Imu";
 
 /// JSON schema of the IMU messages.
 const IMU_JSON_SCHEMA: &str = r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"ringscan.Imu","description":"One IMU sample in SI units","type":"object","properties":{"timestamp_ns":{"type":"integer","description":"sensor clock, ns"},"linear_acceleration":{"type":"array","items":{"type":"number"},"minItems":3,"maxItems":3,"description":"m/s^2, x y z"},"angular_velocity":{"type":"array","items":{"type":"number"},"minItems":3,"maxItems":3,"description":"rad/s, x y z"}},"required":["timestamp_ns","linear_acceleration","angular_velocity"]}"#;
+/// Schema name of the zone-monitor reports (JSON).
+const ZONES_SCHEMA: &str = "ringscan.ZoneStates";
+/// JSON schema of the zone-monitor reports.
+const ZONES_JSON_SCHEMA: &str = r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"ringscan.ZoneStates","description":"One Ouster zone-monitor packet: the sensor's state of each of its 16 zone slots for one frame","type":"object","properties":{"timestamp_ns":{"type":"integer","description":"sensor clock, ns"},"frame_id":{"type":"integer"},"alert_flags":{"type":"integer"},"live_zoneset_hash":{"type":"string","description":"SHA-256 of the live zone set, hex"},"zones":{"type":"array","minItems":16,"maxItems":16,"items":{"type":"object","properties":{"live":{"type":"boolean"},"id":{"type":"integer"},"error_flags":{"type":"integer"},"trigger_type":{"type":"integer"},"trigger_status":{"type":"integer","description":"1 = asserted"},"triggered_frames":{"type":"integer"},"count":{"type":"integer"},"occlusion_count":{"type":"integer"},"invalid_count":{"type":"integer"},"max_count":{"type":"integer"},"min_range_mm":{"type":"integer"},"max_range_mm":{"type":"integer"},"mean_range_mm":{"type":"integer"}}}}},"required":["timestamp_ns","frame_id","zones"]}"#;
 
 /// Longest sensor name (frame id) accepted.
 const MAX_NAME_LEN: usize = 256;
@@ -170,6 +174,7 @@ pub struct SensorChannels {
     diagnostics: Channel,
     raw: Option<Channel>,
     imu: Option<Channel>,
+    zones: Option<Channel>,
     /// Constant fields of this sensor's `foxglove.PointCloud` messages.
     point_cloud_prefix: PointCloudPrefix,
     /// The same for the extended record (`--fields all`), made on first use.
@@ -262,6 +267,11 @@ impl SensorChannels {
     /// Topic of the IMU samples, `<prefix>/imu`.
     pub fn imu_topic(&self) -> String {
         format!("{}/imu", self.prefix)
+    }
+
+    /// Topic of the zone-monitor reports, `<prefix>/zones`.
+    pub fn zones_topic(&self) -> String {
+        format!("{}/zones", self.prefix)
     }
 
     /// The topic prefix: `""` for a single sensor, `"/<name>"` when there are several.
@@ -416,6 +426,7 @@ pub struct McapSink<W: Write + Seek> {
     diagnostics_schema: u16,
     raw_schema: Option<u16>,
     imu_schema: Option<u16>,
+    zones_schema: Option<u16>,
     sensors: Vec<SensorChannels>,
     /// The one message buffer, reused for every message.
     buf: Vec<u8>,
@@ -506,6 +517,7 @@ impl<W: Write + Seek> McapSink<W> {
             diagnostics_schema,
             raw_schema: None,
             imu_schema: None,
+            zones_schema: None,
             sensors: Vec::new(),
             buf: Vec::new(),
             records: Vec::new(),
@@ -602,6 +614,7 @@ impl<W: Write + Seek> McapSink<W> {
             },
             raw: None,
             imu: None,
+            zones: None,
             point_cloud_prefix: PointCloudPrefix::new(&info.name),
             extended_prefix: None,
             minimal_prefix: (self.fields == PointFields::Minimal).then(|| {
@@ -890,6 +903,64 @@ impl<W: Write + Seek> McapSink<W> {
         let header = channel.next_header(log_time_ns);
         write_known(writer, &header, &self.buf, || {
             format!("writing an IMU sample to {}", sensor.imu_topic())
+        })
+    }
+
+    /// Writes one zone-monitor report to `<prefix>/zones`, creating the channel on first use:
+    /// JSON with schema `ringscan.ZoneStates` (`--format foxglove`), or the same JSON text in a
+    /// `std_msgs/msg/String` (`--format ros2`: ROS 2 has no message for zone states).
+    pub fn write_zones(
+        &mut self,
+        s: SensorId,
+        log_time_ns: u64,
+        json: &serde_json::Value,
+    ) -> Result<(), SinkError> {
+        self.before_message(log_time_ns)?;
+        let format = self.format;
+        let sensor = sensor_at(&mut self.sensors, s)?;
+        let writer = self.writer.as_mut().ok_or_else(finished_error)?;
+        let topic = sensor.zones_topic();
+        if sensor.zones.is_none() {
+            let md = channel_metadata(format, &topic, &sensor.metadata);
+            match format {
+                Format::Foxglove => lazy_channel(
+                    writer,
+                    &mut self.zones_schema,
+                    (ZONES_SCHEMA, "jsonschema", &|| {
+                        ZONES_JSON_SCHEMA.as_bytes().to_vec()
+                    }),
+                    &mut sensor.zones,
+                    &topic,
+                    "json",
+                    &md,
+                )?,
+                Format::Ros2 => lazy_ros2_channel(
+                    writer,
+                    &mut self.extra_schemas,
+                    ros2_msgs::STRING_SCHEMA,
+                    &mut sensor.zones,
+                    &topic,
+                    &md,
+                )?,
+            }
+        }
+        let text = serde_json::to_string(json).map_err(|source| SinkError::Json {
+            topic: topic.clone(),
+            source,
+        })?;
+        match format {
+            Format::Foxglove => {
+                self.buf.clear();
+                self.buf.extend_from_slice(text.as_bytes());
+            }
+            Format::Ros2 => ros2_msgs::encode_string(&mut self.buf, &text),
+        }
+        let Some(channel) = sensor.zones.as_mut() else {
+            return Err(finished_error());
+        };
+        let header = channel.next_header(log_time_ns);
+        write_known(writer, &header, &self.buf, || {
+            format!("writing a zone-monitor report to {topic}")
         })
     }
 

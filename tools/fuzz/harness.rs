@@ -1578,6 +1578,7 @@ pub fn decode_to_mcap(data: &[u8]) {
 
 use ringscan::sensor::ouster::calib::parse as parse_ouster;
 use ringscan::sensor::ouster::calib::OusterInfo;
+use ringscan::sensor::ouster::model::HeaderKind;
 use ringscan::sensor::ouster::model::Profile;
 use ringscan::sensor::ouster::model::ALL_PROFILES;
 use ringscan::sensor::ouster::sweep::OusterStream;
@@ -1585,6 +1586,8 @@ use ringscan::sensor::ouster::sweep::OusterStreamConfig;
 use ringscan::sensor::ouster::wire::ImuPacketLegacy;
 use ringscan::sensor::ouster::wire::ImuPacketNmea;
 use ringscan::sensor::ouster::wire::LidarPacket;
+use ringscan::sensor::ouster::wire::ZonePacket;
+use ringscan::sensor::ouster::wire::ZONE_PACKET_BYTES;
 use ringscan::sensor::ouster::OusterDecoder;
 
 /// Largest range, metres, the range field of a profile can carry (its width and shift).
@@ -1811,6 +1814,23 @@ pub fn ouster_packet(data: &[u8]) {
             assert!(p.measurements().count() <= m);
         }
     }
+    // The zone-monitor view over the same bytes, with either header layout.
+    for header in [HeaderKind::Standard, HeaderKind::Fusa] {
+        if let Ok(p) = ZonePacket::new(rest, header) {
+            let _ = (p.packet_type(), p.frame_id(), p.init_id(), p.serial());
+            let _ = (p.alert_flags(), p.timestamp_ns(), p.zoneset_hash());
+            let _ = (p.crc(), p.computed_crc());
+            for i in 0..=16 {
+                if let Some(z) = p.zone(i) {
+                    assert!(z.trigger_type < 4 && z.trigger_status < 2);
+                    assert!(z.min_range_mm < 1 << 19 && z.max_range_mm < 1 << 19);
+                    assert!(z.mean_range_mm < 1 << 19);
+                } else {
+                    assert_eq!(i, 16);
+                }
+            }
+        }
+    }
     let Ok(dec) = OusterDecoder::new(&info) else {
         panic!("a parsed calibration makes a decoder");
     };
@@ -1957,17 +1977,34 @@ pub fn ouster_stream(data: &[u8]) {
                 v.resize(len, 0);
                 v
             }
+            // A zone-monitor packet of this sensor (type 3, its serial), the rest fuzzed.
+            3 if kind & 4 != 0 => {
+                let mut v = body.to_vec();
+                v.resize(ZONE_PACKET_BYTES, 0);
+                v[..2].copy_from_slice(&3u16.to_le_bytes());
+                v[7..12].copy_from_slice(&info.serial.to_le_bytes()[..5]);
+                v
+            }
             _ => body.to_vec(),
         };
         stream.push(host, &payload, &mut on_sweep);
         pushed += 1;
         let imu: Vec<_> = stream.drain_imu().collect();
         assert!(imu.len() <= ringscan::sensor::ouster::sweep::MAX_IMU_QUEUE);
+        if kind & 8 != 0 {
+            // Drained only now and then, so the queue's bound is reached too.
+            let zones = stream.drain_zones().count();
+            assert!(zones <= ringscan::sensor::ouster::sweep::MAX_ZONE_QUEUE);
+        }
     }
     stream.finish(&mut on_sweep);
     let st = stream.stats().clone();
-    let counted =
-        st.lidar_packets + st.imu_packets + st.malformed + st.crc_failures + st.wrong_sensor;
+    let counted = st.lidar_packets
+        + st.imu_packets
+        + st.zone_packets
+        + st.malformed
+        + st.crc_failures
+        + st.wrong_sensor;
     assert!(counted <= pushed, "{st:?}, {pushed} pushed");
     assert!(
         pushed - counted <= st.late,

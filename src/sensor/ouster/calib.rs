@@ -228,6 +228,8 @@ pub struct OusterInfo {
     pub udp_port_lidar: u16,
     /// UDP port of IMU packets (SDK default 7503).
     pub udp_port_imu: u16,
+    /// UDP port of zone-monitor packets (`udp_port_zm`, FW 3.2+); 0 when the file names none.
+    pub udp_port_zm: u16,
     /// IMU profile.
     pub imu_profile: ImuProfile,
     /// IMU measurements per packet (ACCEL32_GYRO32_NMEA).
@@ -336,6 +338,13 @@ impl OusterInfo {
     pub fn lidar_packets_have_crc(&self) -> bool {
         !self.lidar_off
             && self.format.profile.header() == HeaderKind::Standard
+            && self.firmware_version().is_some_and(|v| v >= (2, 5, 0))
+    }
+
+    /// Whether zone-monitor packets carry the footer CRC-64: as lidar packets, but also when
+    /// the lidar stream is off (zone monitoring runs without it).
+    pub fn zone_packets_have_crc(&self) -> bool {
+        self.format.profile.header() != HeaderKind::Fusa
             && self.firmware_version().is_some_and(|v| v >= (2, 5, 0))
     }
 }
@@ -737,6 +746,7 @@ impl<'a> Doc<'a> {
         };
         let udp_port_lidar = port("udp_port_lidar", DEFAULT_UDP_PORT_LIDAR)?;
         let udp_port_imu = port("udp_port_imu", DEFAULT_UDP_PORT_IMU)?;
+        let udp_port_zm = port("udp_port_zm", 0)?;
         let timestamp_mode = match self.string(Sec::Config, "timestamp_mode")? {
             None => TimestampMode::default(),
             Some("TIME_FROM_INTERNAL_OSC") => TimestampMode::InternalOsc,
@@ -1076,6 +1086,7 @@ impl<'a> Doc<'a> {
             imu_to_sensor,
             udp_port_lidar,
             udp_port_imu,
+            udp_port_zm,
             imu_profile,
             imu_measurements_per_packet,
             timestamp_mode,

@@ -11,10 +11,12 @@ use super::calib::{parse, OusterInfo};
 use super::decode::OusterDecoder;
 use super::model::HeaderKind;
 use super::sweep::{OusterFacts, OusterStream, OusterStreamConfig};
-use super::wire::{shot_limiting_name, thermal_shutdown_name, LidarPacket};
+use super::wire::{
+    shot_limiting_name, thermal_shutdown_name, LidarPacket, ZonePacket, PACKET_TYPE_ZONE,
+};
 use crate::sensor::{
     summary_str, CalibError, Calibration, CalibrationPool, Claimed, Facts, Family, FirstDatagram,
-    ImuSample, OnSweep, PacketCounts, SensorStream, StreamError,
+    ImuSample, OnSweep, PacketCounts, SensorStream, StreamError, ZoneReport,
 };
 
 /// The Ouster family.
@@ -61,7 +63,11 @@ impl OusterCalibration {
         let imu_only = info.udp_port_lidar == 0
             && info.udp_port_imu == d.port
             && OusterStreamConfig::imu_len_of(info) == Some(d.payload.len());
-        lidar || imu_only
+        // A zone-monitor packet names its sensor by serial, as profile-based lidar packets do.
+        let zone = info.serial != 0
+            && ZonePacket::new(d.payload, info.format.profile.header())
+                .is_ok_and(|p| p.packet_type() == PACKET_TYPE_ZONE && p.serial() == info.serial);
+        lidar || imu_only || zone
     }
 }
 
@@ -104,7 +110,13 @@ impl Family for Ouster {
 
     fn calibration_ports(&self, c: &Calibration) -> Vec<u16> {
         c.get::<OusterCalibration>()
-            .map(|o| [o.info.udp_port_lidar, o.info.udp_port_imu])
+            .map(|o| {
+                [
+                    o.info.udp_port_lidar,
+                    o.info.udp_port_imu,
+                    o.info.udp_port_zm,
+                ]
+            })
             .into_iter()
             .flatten()
             .filter(|&p| p != 0)
@@ -171,9 +183,13 @@ impl Family for Ouster {
             s["column_window"][1]
         ));
         out.push(format!(
-            "    {} lidar + {} IMU packets, {} sweeps, {} points; missing columns {}, malformed {}, CRC failures {}, late {}, other sensor {}, epochs {}",
+            "    {} lidar + {} IMU{} packets, {} sweeps, {} points; missing columns {}, malformed {}, CRC failures {}, late {}, other sensor {}, epochs {}",
             g(&s["lidar_packets"]),
             g(&s["imu_packets"]),
+            match s["zone_packets"].as_u64() {
+                Some(n) if n > 0 => format!(" + {n} zone-monitor"),
+                _ => String::new(),
+            },
             g(&s["sweeps"]),
             g(&s["points"]),
             g(&s["missing_columns"]),
@@ -279,13 +295,13 @@ impl SensorStream for OusterStream {
     fn summary(&self) -> (Value, PacketCounts) {
         let (st, f, info) = (self.stats(), OusterStream::facts(self), self.info());
         let counts = PacketCounts {
-            decoded: st.lidar_packets + st.imu_packets,
+            decoded: st.lidar_packets + st.imu_packets + st.zone_packets,
             malformed: st.malformed + st.crc_failures,
             missing: st
                 .missing_columns
                 .div_ceil(info.format.columns_per_packet.max(1) as u64),
             position: 0,
-            dropped: st.wrong_sensor + st.late + st.imu_dropped,
+            dropped: st.wrong_sensor + st.late + st.imu_dropped + st.zone_dropped,
         };
         let v = json!({
             "kind": "ouster",
@@ -306,6 +322,7 @@ impl SensorStream for OusterStream {
             "thermal_shutdown": thermal_shutdown_name(f.thermal_shutdown),
             "lidar_packets": st.lidar_packets,
             "imu_packets": st.imu_packets,
+            "zone_packets": st.zone_packets,
             "malformed": st.malformed,
             "crc_failures": st.crc_failures,
             "wrong_sensor": st.wrong_sensor,
@@ -316,6 +333,7 @@ impl SensorStream for OusterStream {
             "sweeps": st.sweeps,
             "points": st.points,
             "imu_dropped": st.imu_dropped,
+            "zone_dropped": st.zone_dropped,
             "alert_flags": {
                 "last": f.alert_flags_last,
                 "seen": f.alert_flags_seen,
@@ -332,6 +350,12 @@ impl SensorStream for OusterStream {
 
     fn channels(&self) -> Option<usize> {
         Some(self.info().format.pixels_per_column)
+    }
+
+    fn drain_zones(&mut self, out: &mut dyn FnMut(&ZoneReport)) {
+        for z in OusterStream::drain_zones(self) {
+            out(&z);
+        }
     }
 
     fn drain_imu(&mut self, out: &mut dyn FnMut(&ImuSample, &[f64; 16])) {

@@ -10,6 +10,7 @@
 //! arrives late). Missing columns = columns of the metadata's column window that never
 //! arrived with status bit 0 set. A packet whose `init_id` differs from the metadata's (the
 //! sensor re-initialised) starts a new epoch: counted, warned in the summary, the stream goes on.
+//! Zone-monitor packets (FW 3.2+) become [`ZoneReport`]s, taken with [`OusterStream::drain_zones`].
 
 use crate::point::PointExtra;
 use crate::sensor::ouster::calib::ImuProfile;
@@ -19,6 +20,12 @@ use crate::sensor::ouster::decode::OusterDecoder;
 use crate::sensor::ouster::model::HeaderKind;
 use crate::sensor::ouster::wire::ImuPacketLegacy;
 use crate::sensor::ouster::wire::ImuPacketNmea;
+use crate::sensor::ouster::wire::ZonePacket;
+use crate::sensor::ouster::wire::ZoneState;
+use crate::sensor::ouster::wire::PACKET_TYPE_ZONE;
+use crate::sensor::ouster::wire::ZONE_COUNT;
+use crate::sensor::ouster::wire::ZONE_HASH_BYTES;
+use crate::sensor::ouster::wire::ZONE_PACKET_BYTES;
 use crate::sensor::DecodeError;
 use crate::sensor::DecodeOptions;
 use crate::sensor::WireError;
@@ -29,6 +36,8 @@ use crate::time::ClockSource;
 pub const TAI_MINUS_UTC_S: u64 = 37;
 /// Most IMU samples held between two drains.
 pub const MAX_IMU_QUEUE: usize = 4096;
+/// Most zone reports held between two drains (one per frame: 25 s at 10 Hz).
+pub const MAX_ZONE_QUEUE: usize = 256;
 /// Standard gravity, m/s² per g (ouster-ros `packet_to_imu_msg`).
 const G: f64 = 9.80665;
 
@@ -90,6 +99,10 @@ pub struct OusterStats {
     pub points: u64,
     /// IMU samples dropped because the queue was not drained.
     pub imu_dropped: u64,
+    /// Zone-monitor packets decoded.
+    pub zone_packets: u64,
+    /// Zone reports dropped because the queue was not drained.
+    pub zone_dropped: u64,
 }
 
 /// One IMU sample in SI units.
@@ -103,6 +116,23 @@ pub struct ImuSample {
     pub accel: [f64; 3],
     /// Angular velocity, rad/s.
     pub gyro: [f64; 3],
+}
+
+/// One zone-monitor packet: the sensor's verdict on its configured zones for one frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ZoneReport {
+    /// Host receive time of the packet, ns.
+    pub host_ns: i64,
+    /// Timestamp of the zone states, ns (sensor clock).
+    pub sensor_ns: u64,
+    /// The frame the zones were judged on.
+    pub frame_id: u32,
+    /// The header's alert flags.
+    pub alert_flags: u8,
+    /// SHA-256 of the live zone set the states refer to.
+    pub zoneset_hash: [u8; ZONE_HASH_BYTES],
+    /// The 16 zone slots, live or not, in packet order.
+    pub zones: [ZoneState; ZONE_COUNT],
 }
 
 /// What the stream knows of its sensor, for summaries and MCAP metadata.
@@ -156,6 +186,7 @@ pub struct OusterStream {
     open: Vec<Open>,
     spare: Vec<Open>,
     imu: Vec<ImuSample>,
+    zones: Vec<ZoneReport>,
     stats: OusterStats,
     facts: OusterFacts,
     next_index: u64,
@@ -214,6 +245,7 @@ impl OusterStream {
             open: Vec::with_capacity(2),
             spare: Vec::with_capacity(2),
             imu: Vec::new(),
+            zones: Vec::new(),
             stats: OusterStats::default(),
             facts,
             next_index: 0,
@@ -252,9 +284,11 @@ impl OusterStream {
         &self.facts
     }
 
-    /// Whether a payload of this size is one this sensor sends (lidar or IMU).
+    /// Whether a payload of this size is one this sensor sends (lidar, IMU or zone monitor).
     pub fn accepts_len(&self, len: usize) -> bool {
-        len == self.cfg.info.lidar_packet_bytes() || Some(len) == self.imu_len()
+        len == self.cfg.info.lidar_packet_bytes()
+            || Some(len) == self.imu_len()
+            || len == ZONE_PACKET_BYTES
     }
 
     fn imu_len(&self) -> Option<usize> {
@@ -264,6 +298,11 @@ impl OusterStream {
     /// Takes the IMU samples decoded since the last call.
     pub fn drain_imu(&mut self) -> std::vec::Drain<'_, ImuSample> {
         self.imu.drain(..)
+    }
+
+    /// Takes the zone reports decoded since the last call.
+    pub fn drain_zones(&mut self) -> std::vec::Drain<'_, ZoneReport> {
+        self.zones.drain(..)
     }
 
     /// Pushes one UDP payload from this sensor; finished sweeps go to `on_sweep`.
@@ -277,9 +316,52 @@ impl OusterStream {
             self.push_lidar(host_ns, payload, on_sweep);
         } else if Some(payload.len()) == self.imu_len() {
             self.push_imu(host_ns, payload);
+        } else if payload.len() == ZONE_PACKET_BYTES {
+            self.push_zone(host_ns, payload);
         } else {
             self.stats.malformed += 1;
         }
+    }
+
+    fn push_zone(&mut self, host_ns: i64, payload: &[u8]) {
+        let Ok(p) = ZonePacket::new(payload, self.cfg.info.format.profile.header()) else {
+            self.stats.malformed += 1;
+            return;
+        };
+        if p.packet_type() != PACKET_TYPE_ZONE {
+            self.stats.malformed += 1;
+            return;
+        }
+        let expected = self.cfg.info.serial;
+        if expected != 0 && p.serial() != expected {
+            self.stats.wrong_sensor += 1;
+            return;
+        }
+        let crc = self
+            .cfg
+            .crc
+            .unwrap_or_else(|| self.cfg.info.zone_packets_have_crc());
+        if crc && p.crc() != p.computed_crc() {
+            self.stats.crc_failures += 1;
+            return;
+        }
+        self.stats.zone_packets += 1;
+        if self.zones.len() >= MAX_ZONE_QUEUE {
+            self.stats.zone_dropped += 1;
+            return;
+        }
+        let mut zones = [ZoneState::default(); ZONE_COUNT];
+        for (i, z) in zones.iter_mut().enumerate() {
+            *z = p.zone(i).unwrap_or_default();
+        }
+        self.zones.push(ZoneReport {
+            host_ns,
+            sensor_ns: p.timestamp_ns(),
+            frame_id: p.frame_id(),
+            alert_flags: p.alert_flags(),
+            zoneset_hash: p.zoneset_hash(),
+            zones,
+        });
     }
 
     /// Emits the sweeps still open.

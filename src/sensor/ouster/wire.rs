@@ -14,6 +14,7 @@
 //!   alert_flags u8 @8, prod_sn u40 @11, the rest as standard.
 //! - **IMU, LEGACY**: 48 bytes, see [`ImuPacketLegacy`].
 //! - **IMU, ACCEL32_GYRO32_NMEA**: see [`ImuPacketNmea`].
+//! - **Zone monitor** (FW 3.2+): see [`ZonePacket`].
 //!
 //! All multi-byte fields are little-endian. A view checks its length once in its constructor;
 //! after that no accessor can panic (column and pixel accessors return `Option` or 0 for an
@@ -705,6 +706,162 @@ impl ImuMeasurement {
     }
 }
 
+/// Zones in a zone-monitor packet (ouster-sdk `ZonePacket::zone_states`: always 16; unused
+/// slots have `live` 0 and `id` 255).
+pub const ZONE_COUNT: usize = 16;
+/// Bytes of one zone's record in a zone-monitor packet.
+pub const ZONE_RECORD_BYTES: usize = 36;
+/// Bytes of a zone-monitor packet: header, timestamp (8), live zone set hash (32), 16 zone
+/// records, footer.
+pub const ZONE_PACKET_BYTES: usize =
+    HEADER_BYTES + 8 + ZONE_HASH_BYTES + ZONE_COUNT * ZONE_RECORD_BYTES + HEADER_BYTES;
+/// Bytes of the live zone set's hash (SHA-256) in a zone-monitor packet.
+pub const ZONE_HASH_BYTES: usize = 32;
+/// Mask of the 19-bit range fields of a zone record (mm).
+const ZONE_RANGE_MASK: u32 = (1 << 19) - 1;
+
+/// One zone's state in a zone-monitor packet (FW 3.2+ zone monitoring). Field meanings as
+/// ouster-sdk's `ZoneState` gives them.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ZoneState {
+    /// The slot holds a live zone (bit 0 of byte 0), triggered or not.
+    pub live: bool,
+    /// Zone id (byte 1): the index of its configuration; 255 in unused slots.
+    pub id: u8,
+    /// Error flags (byte 2): missing data, low-confidence pixels, zone obscured.
+    pub error_flags: u8,
+    /// Trigger type (bits 2–3 of byte 3): occupancy, vacancy, ….
+    pub trigger_type: u8,
+    /// Trigger status (bit 7 of byte 3): 1 = asserted.
+    pub trigger_status: u8,
+    /// Consecutive frames triggered, saturating (u32 @4); 0 once deasserted.
+    pub triggered_frames: u32,
+    /// Points in the zone in the latest frame (u32 @8).
+    pub count: u32,
+    /// Points of the zone below the minimum range (u32 @12).
+    pub occlusion_count: u32,
+    /// Invalid points in the zone (u32 @16).
+    pub invalid_count: u32,
+    /// Most points the zone can hold (u32 @20).
+    pub max_count: u32,
+    /// Nearest point in the zone, mm (19 bits @24).
+    pub min_range_mm: u32,
+    /// Farthest point in the zone, mm (19 bits @28).
+    pub max_range_mm: u32,
+    /// Mean range of the zone's points, mm (19 bits @32).
+    pub mean_range_mm: u32,
+}
+
+/// A zone-monitor packet (`packet_type` 3, to the metadata's `udp_port_zm`): the sensor's
+/// verdict on each of up to 16 configured zones, once per frame. Layout (ouster-sdk
+/// `parsing.cpp`, `zone_*_info`): 32-byte packet header, timestamp u64 ns @32, the live zone
+/// set's SHA-256 @40, 16 records of [`ZONE_RECORD_BYTES`] @72, and a 32-byte footer whose last
+/// 8 bytes hold a CRC-64/XZ (little-endian).
+#[derive(Clone, Copy, Debug)]
+pub struct ZonePacket<'a> {
+    b: &'a [u8],
+    header: HeaderKind,
+}
+
+impl<'a> ZonePacket<'a> {
+    /// Checks the length; `header` is the sensor's header layout (the lidar profile's: FUSA
+    /// profiles move `frame_id`, `init_id` and the serial).
+    pub fn new(bytes: &'a [u8], header: HeaderKind) -> Result<Self, WireError> {
+        if bytes.len() != ZONE_PACKET_BYTES {
+            return Err(WireError::Length {
+                what: "Ouster zone-monitor packet",
+                expected: ZONE_PACKET_BYTES,
+                found: bytes.len(),
+            });
+        }
+        Ok(Self { b: bytes, header })
+    }
+
+    fn fusa(&self) -> bool {
+        self.header == HeaderKind::Fusa
+    }
+
+    /// `packet_type` (3 = zone monitor).
+    pub fn packet_type(&self) -> u16 {
+        if self.fusa() {
+            u16::from(self.b[0])
+        } else {
+            le_u16(self.b, 0)
+        }
+    }
+
+    /// `frame_id` of the frame the zones were judged on (u16; FUSA u32).
+    pub fn frame_id(&self) -> u32 {
+        if self.fusa() {
+            le_u32(self.b, 4)
+        } else {
+            u32::from(le_u16(self.b, 2))
+        }
+    }
+
+    /// `init_id` (24 bits).
+    pub fn init_id(&self) -> u32 {
+        le_uint(self.b, if self.fusa() { 1 } else { 4 }, 3) as u32
+    }
+
+    /// `prod_sn`, the serial number (40 bits).
+    pub fn serial(&self) -> u64 {
+        le_uint(self.b, if self.fusa() { 11 } else { 7 }, 5)
+    }
+
+    /// `alert_flags` of the header.
+    pub fn alert_flags(&self) -> u8 {
+        self.b[if self.fusa() { 8 } else { 12 }]
+    }
+
+    /// Timestamp of the zone states, ns, sensor clock (u64 @32).
+    pub fn timestamp_ns(&self) -> u64 {
+        le_u64(self.b, HEADER_BYTES)
+    }
+
+    /// SHA-256 of the live zone set (@40): which configuration the states refer to.
+    pub fn zoneset_hash(&self) -> [u8; ZONE_HASH_BYTES] {
+        let mut h = [0; ZONE_HASH_BYTES];
+        let start = HEADER_BYTES + 8;
+        h.copy_from_slice(&self.b[start..start + ZONE_HASH_BYTES]);
+        h
+    }
+
+    /// Zone record `i` (`None` if `i` ≥ [`ZONE_COUNT`]).
+    pub fn zone(&self, i: usize) -> Option<ZoneState> {
+        if i >= ZONE_COUNT {
+            return None;
+        }
+        let off = HEADER_BYTES + 8 + ZONE_HASH_BYTES + i * ZONE_RECORD_BYTES;
+        let r = self.b.get(off..off + ZONE_RECORD_BYTES)?;
+        Some(ZoneState {
+            live: r[0] & 1 != 0,
+            id: r[1],
+            error_flags: r[2],
+            trigger_type: (r[3] >> 2) & 0b11,
+            trigger_status: r[3] >> 7,
+            triggered_frames: le_u32(r, 4),
+            count: le_u32(r, 8),
+            occlusion_count: le_u32(r, 12),
+            invalid_count: le_u32(r, 16),
+            max_count: le_u32(r, 20),
+            min_range_mm: le_u32(r, 24) & ZONE_RANGE_MASK,
+            max_range_mm: le_u32(r, 28) & ZONE_RANGE_MASK,
+            mean_range_mm: le_u32(r, 32) & ZONE_RANGE_MASK,
+        })
+    }
+
+    /// The stored footer CRC-64 (last 8 bytes).
+    pub fn crc(&self) -> u64 {
+        le_u64(self.b, ZONE_PACKET_BYTES - 8)
+    }
+
+    /// CRC-64/XZ of every byte but the last 8.
+    pub fn computed_crc(&self) -> u64 {
+        crc64_xz(&self.b[..ZONE_PACKET_BYTES - 8])
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -854,5 +1011,89 @@ mod tests {
         assert!(c0.pixel(16).is_none());
         assert_eq!(c0.pixels().count(), 16);
         assert_eq!(p.crc_ok(), None);
+    }
+
+    /// A zone-monitor packet written byte by byte from ouster-sdk's field table (bit offsets
+    /// of `zone_*_info` in `parsing.cpp`), with the bits next to every field set, so a wrong
+    /// offset, width or mask shows.
+    #[test]
+    fn zone_packet_fields_from_the_sdk_bit_table() {
+        let mut b = vec![0u8; 680];
+        b[0..2].copy_from_slice(&3u16.to_le_bytes()); // packet_type
+        b[2..4].copy_from_slice(&30_002u16.to_le_bytes()); // frame_id
+        b[4..7].copy_from_slice(&[0xF8, 0x16, 0xE6]); // init_id 0xE616F8
+        b[7..12].copy_from_slice(&[0xD1, 0x32, 0x7D, 0x76, 0x1C]); // prod_sn 0x1C767D32D1
+        b[12] = 0x02; // alert_flags
+        b[32..40].copy_from_slice(&0x0000_0EB6_93D7_2E68u64.to_le_bytes());
+        for (i, v) in b[40..72].iter_mut().enumerate() {
+            *v = i as u8 + 1;
+        }
+        // Zone 0: live, every neighbour bit set.
+        let z = &mut b[72..108];
+        z[0] = 0xFF; // live = bit 0 only
+        z[1] = 7;
+        z[2] = 0x05;
+        z[3] = 0b1000_1000; // trigger_type (bits 26–27) = 2, trigger_status (bit 31) = 1
+        z[4..8].copy_from_slice(&161_074u32.to_le_bytes());
+        z[8..12].copy_from_slice(&742u32.to_le_bytes());
+        z[12..16].copy_from_slice(&369u32.to_le_bytes());
+        z[16..20].copy_from_slice(&5_182u32.to_le_bytes());
+        z[20..24].copy_from_slice(&6_883u32.to_le_bytes());
+        // 19-bit ranges with the 13 bits above them set.
+        z[24..28].copy_from_slice(&(0xFFF8_0000u32 | 817).to_le_bytes());
+        z[28..32].copy_from_slice(&(0xFFF8_0000u32 | 524_287).to_le_bytes());
+        z[32..36].copy_from_slice(&(0xFFF8_0000u32 | 1_161).to_le_bytes());
+        // Zone 15 (the last record, ending where the footer starts): not live, but every
+        // other bit of byte 0 and of byte 3 set.
+        let z = &mut b[72 + 15 * 36..72 + 16 * 36];
+        z[0] = 0xFE;
+        z[1] = 255;
+        z[3] = 0b0111_0011; // trigger_type = 0, trigger_status = 0
+        assert_eq!(72 + 16 * 36, 680 - 32);
+        let crc = crc64_xz(&b[..672]);
+        b[672..].copy_from_slice(&crc.to_le_bytes());
+
+        let p = ZonePacket::new(&b, HeaderKind::Standard).unwrap();
+        assert_eq!(p.packet_type(), PACKET_TYPE_ZONE);
+        assert_eq!(p.frame_id(), 30_002);
+        assert_eq!(p.init_id(), 15_079_160);
+        assert_eq!(p.serial(), 122_247_000_785);
+        assert_eq!(p.alert_flags(), 2);
+        assert_eq!(p.timestamp_ns(), 16_177_327_189_608);
+        assert_eq!(p.zoneset_hash()[0], 1);
+        assert_eq!(p.zoneset_hash()[31], 32);
+        assert_eq!(
+            p.zone(0),
+            Some(ZoneState {
+                live: true,
+                id: 7,
+                error_flags: 5,
+                trigger_type: 2,
+                trigger_status: 1,
+                triggered_frames: 161_074,
+                count: 742,
+                occlusion_count: 369,
+                invalid_count: 5_182,
+                max_count: 6_883,
+                min_range_mm: 817,
+                max_range_mm: 524_287,
+                mean_range_mm: 1_161,
+            })
+        );
+        let last = p.zone(15).unwrap();
+        assert!(!last.live);
+        assert_eq!(
+            (last.id, last.trigger_type, last.trigger_status),
+            (255, 0, 0)
+        );
+        assert_eq!(p.zone(16), None);
+        assert_eq!(p.crc(), p.computed_crc());
+        for len in [0, 679, 681, 1024] {
+            let long = vec![0u8; len];
+            assert!(matches!(
+                ZonePacket::new(&long, HeaderKind::Standard),
+                Err(WireError::Length { expected: 680, .. })
+            ));
+        }
     }
 }
