@@ -1050,23 +1050,37 @@ fn lidar_stream_off_as_the_sdk_decides() {
         json!("10.0.0.1")
     )));
     // A profile ringscan does not decode is fine while the stream is off, refused otherwise.
-    let zone = with(
+    let rgb = with(
         nested(),
         &["lidar_data_format", "udp_profile_lidar"],
-        json!("RNG19_RFL8_SIG16_NIR16_ZONE16"),
+        json!("RNG19_RFL8_SIG16_NIR16_RGB16"),
     );
     let info = ok(&with(
-        zone.clone(),
+        rgb.clone(),
         &["config_params", "udp_port_lidar"],
         json!(0),
     ));
     assert!(info.lidar_off);
-    assert_eq!(info.lidar_profile_name, "RNG19_RFL8_SIG16_NIR16_ZONE16");
+    assert_eq!(info.lidar_profile_name, "RNG19_RFL8_SIG16_NIR16_RGB16");
     assert_eq!(
         (info.lidar_packet_bytes(), info.expected_packets_per_frame()),
         (0, 0)
     );
-    rejects(&zone, "ringscan does not decode it");
+    rejects(&rgb, "ringscan does not decode it");
+    // The zone-monitoring profiles are decoded (their zone mask is not read).
+    for name in [
+        "RNG19_RFL8_SIG16_NIR16_ZONE16",
+        "RNG15_RFL8_NIR8_ZONE16",
+        "RNG19_RFL8_SIG16_ZONE16_DUAL",
+    ] {
+        let info = ok(&with(
+            nested(),
+            &["lidar_data_format", "udp_profile_lidar"],
+            json!(name),
+        ));
+        assert!(!info.lidar_off, "{name}");
+        assert_eq!(info.format.profile.name(), name);
+    }
     // The IMU profile check does not apply to an OFF lidar.
     let v = with(
         nested(),

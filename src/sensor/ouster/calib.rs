@@ -50,7 +50,7 @@
 //! columns per packet that do not divide W; a lidar packet larger than a UDP datagram; a column
 //! window outside `[0, W)`; `pixel_shift_by_row` whose length is not H (the SDK pads or cuts)
 //! or with |shift| ≥ W; unknown profile names (the SDK falls back to LEGACY); profiles ringscan
-//! cannot decode (the `ZONE16` / `RGB16` ones) unless the lidar stream is off; a `header_type`
+//! cannot decode (the `RGB16` ones) unless the lidar stream is off; a `header_type`
 //! that contradicts the profile; a LEGACY lidar profile with the ACCEL32_GYRO32_NMEA IMU profile
 //! (the SDK's `PacketFormat` throws on that pair); beam angles that are not H plain numbers, out
 //! of range, or all-zero altitudes (`malformed/complete_but_all_zeros_legacy.json`: every beam at
@@ -142,10 +142,7 @@ const NESTED_SECTIONS: [&str; 7] = [
 ];
 
 /// Lidar profile names ouster-sdk 1.0.1 knows but ringscan does not decode.
-const UNDECODED_PROFILES: [&str; 6] = [
-    "RNG15_RFL8_NIR8_ZONE16",
-    "RNG19_RFL8_SIG16_NIR16_ZONE16",
-    "RNG19_RFL8_SIG16_ZONE16_DUAL",
+const UNDECODED_PROFILES: [&str; 3] = [
     "RNG19_RFL8_SIG16_NIR16_RGB16",
     "RNG19_RFL8_SIG16_NIR16_RGB16_DUAL",
     "UNKNOWN",

@@ -57,6 +57,15 @@ pub enum Profile {
     FiveWordPixel,
     /// RNG15_RFL8_WIN8 (4-byte pixels).
     Rng15Rfl8Win8,
+    /// RNG15_RFL8_NIR8_ZONE16 (FW 3.2 zone monitoring: the low-data pixel and a 16-bit zone
+    /// mask, 8-byte pixels).
+    Rng15Rfl8Nir8Zone16,
+    /// RNG19_RFL8_SIG16_NIR16_ZONE16 (the single-return pixel with its two spare bytes
+    /// holding the zone mask, 12-byte pixels).
+    Rng19Rfl8Sig16Nir16Zone16,
+    /// RNG19_RFL8_SIG16_ZONE16_DUAL (the dual-return pixel with the zone mask where near-IR
+    /// was: no near-IR, 16-byte pixels).
+    Rng19Rfl8Sig16Zone16Dual,
 }
 
 /// The fields of one profile (None where the profile lacks the field).
@@ -85,7 +94,7 @@ pub struct Layout {
 }
 
 /// Every profile, for iteration.
-pub const ALL_PROFILES: [Profile; 8] = [
+pub const ALL_PROFILES: [Profile; 11] = [
     Profile::Legacy,
     Profile::Rng19Rfl8Sig16Nir16,
     Profile::Rng19Rfl8Sig16Nir16Dual,
@@ -94,6 +103,9 @@ pub const ALL_PROFILES: [Profile; 8] = [
     Profile::FusaRng15Rfl8Nir8Dual,
     Profile::FiveWordPixel,
     Profile::Rng15Rfl8Win8,
+    Profile::Rng15Rfl8Nir8Zone16,
+    Profile::Rng19Rfl8Sig16Nir16Zone16,
+    Profile::Rng19Rfl8Sig16Zone16Dual,
 ];
 
 impl Profile {
@@ -108,6 +120,9 @@ impl Profile {
             Self::FusaRng15Rfl8Nir8Dual => "FUSA_RNG15_RFL8_NIR8_DUAL",
             Self::FiveWordPixel => "FIVE_WORD_PIXEL",
             Self::Rng15Rfl8Win8 => "RNG15_RFL8_WIN8",
+            Self::Rng15Rfl8Nir8Zone16 => "RNG15_RFL8_NIR8_ZONE16",
+            Self::Rng19Rfl8Sig16Nir16Zone16 => "RNG19_RFL8_SIG16_NIR16_ZONE16",
+            Self::Rng19Rfl8Sig16Zone16Dual => "RNG19_RFL8_SIG16_ZONE16_DUAL",
         }
     }
 
@@ -150,7 +165,9 @@ impl Profile {
                 reflectivity2: None,
                 signal2: None,
             },
-            Self::Rng19Rfl8Sig16Nir16 => Layout {
+            // The zone mask (ZONE16 profiles: @80 single, @32 low data, @96 dual, 16 bits) is
+            // not read: points do not carry it.
+            Self::Rng19Rfl8Sig16Nir16 | Self::Rng19Rfl8Sig16Nir16Zone16 => Layout {
                 pixel_bytes: 12,
                 range: f(0, 19, 0),
                 flags: Some(f(19, 5, 0)),
@@ -162,25 +179,29 @@ impl Profile {
                 reflectivity2: None,
                 signal2: None,
             },
-            Self::Rng19Rfl8Sig16Nir16Dual => Layout {
+            Self::Rng19Rfl8Sig16Nir16Dual | Self::Rng19Rfl8Sig16Zone16Dual => Layout {
                 pixel_bytes: 16,
                 range: f(0, 19, 0),
                 flags: Some(f(19, 5, 0)),
                 reflectivity: f(24, 8, 0),
                 signal: Some(f(64, 16, 0)),
-                near_ir: Some(f(96, 16, 0)),
+                near_ir: (self == Self::Rng19Rfl8Sig16Nir16Dual).then_some(f(96, 16, 0)),
                 range2: Some(f(32, 19, 0)),
                 flags2: Some(f(51, 5, 0)),
                 reflectivity2: Some(f(56, 8, 0)),
                 signal2: Some(f(80, 16, 0)),
             },
-            Self::Rng15Rfl8Nir8 | Self::Rng15Rfl8Win8 => Layout {
-                pixel_bytes: 4,
+            Self::Rng15Rfl8Nir8 | Self::Rng15Rfl8Win8 | Self::Rng15Rfl8Nir8Zone16 => Layout {
+                pixel_bytes: if self == Self::Rng15Rfl8Nir8Zone16 {
+                    8
+                } else {
+                    4
+                },
                 range: f(0, 15, 3),
                 flags: Some(f(15, 1, 0)),
                 reflectivity: f(16, 8, 0),
                 signal: None,
-                near_ir: if self == Self::Rng15Rfl8Nir8 {
+                near_ir: if self != Self::Rng15Rfl8Win8 {
                     Some(f(24, 8, 4))
                 } else {
                     None
@@ -318,5 +339,66 @@ mod tests {
         for p in ALL_PROFILES {
             assert_eq!(Profile::from_name(p.name()), Some(p));
         }
+    }
+
+    /// One pixel of each zone-monitoring profile written byte by byte from ouster-sdk's
+    /// tables (`ZM_LB_FIELD_INFO`, `ZM_SINGLE_FIELD_INFO`, `DUAL_ZONE_FIELD_INFO`), the zone
+    /// mask and the window byte all ones: no field reads into them.
+    #[test]
+    fn zone_profile_pixels_read_the_sdk_offsets() {
+        use crate::sensor::ouster::wire::read_field_at;
+        let read = |px: &[u8], f: Option<Field>| f.map(|f| read_field_at(px, 0, f));
+
+        // RNG15_RFL8_NIR8_ZONE16: range/8 (15 bits) + flag, reflectivity, near-IR/16, zone
+        // mask u16 @4, window @6, one spare byte.
+        let l = Profile::Rng15Rfl8Nir8Zone16.layout();
+        let px = [0x39, 0x30 | 0x80, 200, 77, 0xFF, 0xFF, 0xFF, 0x00];
+        assert_eq!(l.pixel_bytes, 8);
+        assert_eq!(read(&px, Some(l.range)), Some(0x3039 * 8));
+        assert_eq!(read(&px, l.flags), Some(1));
+        assert_eq!(read(&px, Some(l.reflectivity)), Some(200));
+        assert_eq!(read(&px, l.near_ir), Some(77 * 16));
+        assert_eq!((read(&px, l.signal), read(&px, l.range2)), (None, None));
+
+        // RNG19_RFL8_SIG16_NIR16_ZONE16: range (19 bits) + flags, reflectivity @4, window @5,
+        // signal @6, near-IR @8, zone mask @10.
+        let l = Profile::Rng19Rfl8Sig16Nir16Zone16.layout();
+        let mut px = [0u8; 12];
+        px[..4].copy_from_slice(&(123_456u32 | 0b10101 << 19 | 0xFF << 24).to_le_bytes());
+        px[4] = 201;
+        px[5] = 0xFF;
+        px[6..8].copy_from_slice(&0x1234u16.to_le_bytes());
+        px[8..10].copy_from_slice(&0x5678u16.to_le_bytes());
+        px[10..12].copy_from_slice(&[0xFF, 0xFF]);
+        assert_eq!(l.pixel_bytes, 12);
+        assert_eq!(read(&px, Some(l.range)), Some(123_456));
+        assert_eq!(read(&px, l.flags), Some(0b10101));
+        assert_eq!(read(&px, Some(l.reflectivity)), Some(201));
+        assert_eq!(read(&px, l.signal), Some(0x1234));
+        assert_eq!(read(&px, l.near_ir), Some(0x5678));
+
+        // RNG19_RFL8_SIG16_ZONE16_DUAL: two returns (range, flags, reflectivity) @0 and @4,
+        // signals @8 and @10, zone mask @12 where the dual profile has near-IR, window @15.
+        let l = Profile::Rng19Rfl8Sig16Zone16Dual.layout();
+        let mut px = [0u8; 16];
+        px[..4].copy_from_slice(&(4_000u32 | 3 << 19 | 17 << 24).to_le_bytes());
+        px[4..8].copy_from_slice(&(524_287u32 | 0b11111 << 19 | 250 << 24).to_le_bytes());
+        px[8..10].copy_from_slice(&1_000u16.to_le_bytes());
+        px[10..12].copy_from_slice(&2_000u16.to_le_bytes());
+        px[12..14].copy_from_slice(&[0xFF, 0xFF]);
+        px[14] = 0xFF;
+        px[15] = 0xFF;
+        assert_eq!(l.pixel_bytes, 16);
+        assert_eq!(read(&px, Some(l.range)), Some(4_000));
+        assert_eq!(read(&px, l.flags), Some(3));
+        assert_eq!(read(&px, Some(l.reflectivity)), Some(17));
+        assert_eq!(read(&px, l.range2), Some(524_287));
+        assert_eq!(read(&px, l.flags2), Some(0b11111));
+        assert_eq!(read(&px, l.reflectivity2), Some(250));
+        assert_eq!(
+            (read(&px, l.signal), read(&px, l.signal2)),
+            (Some(1_000), Some(2_000))
+        );
+        assert_eq!(l.near_ir, None);
     }
 }
