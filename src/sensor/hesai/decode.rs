@@ -195,13 +195,53 @@ pub struct HesaiDecoder {
     /// bound cuts at the same raw value; the per-point distance is then an f32 product.
     raw_bounds: Vec<(u16, u16)>,
     fov_udeg: Option<(i64, i64)>,
-    /// Firing offsets (ns, relative to the tail time) for the current (returns, flags),
-    /// `block × channels + channel`.
+    /// Firing tables of the (returns, flags) keys met, at most [`FIRING_TABLES`]; the one of
+    /// the current packet is `tables[current]`. Kept, not rebuilt, when the key alternates
+    /// (the QT128's dual-return loops): no work and no allocation per packet.
+    tables: Vec<FiringTable>,
+    current: usize,
+    /// The table a new key replaces once `tables` is full (round robin).
+    evict: usize,
+}
+
+/// Most firing tables a decoder keeps.
+const FIRING_TABLES: usize = 4;
+
+/// The firing offsets of one (returns, reduced tail flags) key.
+#[derive(Clone, Debug)]
+struct FiringTable {
+    key: (usize, TailFlags),
+    /// Firing offsets, ns relative to the tail time, `block × channels + channel`.
     firing: Vec<i32>,
     /// Per block: the earliest of `firing` over the return group starting there (the stream
     /// asks for it once per group; a scan of the group's rows cost as much as its points).
     group_earliest: Vec<i32>,
-    firing_key: Option<(usize, TailFlags)>,
+}
+
+impl FiringTable {
+    fn new(model: HesaiModel, channels: usize, key: (usize, TailFlags)) -> Self {
+        let (n_returns, flags) = key;
+        let blocks = model.spec().layout.blocks;
+        let mut firing = Vec::with_capacity(blocks * channels);
+        for b in 0..blocks {
+            for c in 0..channels {
+                firing.push(model.firing_offset_ns(b, c, n_returns, flags) as i32);
+            }
+        }
+        let group_earliest = (0..blocks)
+            .map(|b| {
+                firing
+                    .get(b * channels..((b + n_returns.max(1)) * channels).min(firing.len()))
+                    .and_then(|s| s.iter().min().copied())
+                    .unwrap_or(0)
+            })
+            .collect();
+        Self {
+            key,
+            firing,
+            group_earliest,
+        }
+    }
 }
 
 impl HesaiDecoder {
@@ -305,9 +345,9 @@ impl HesaiDecoder {
             opts,
             raw_bounds: (0..=255u8).map(|u| raw_bounds(u, min_m, max_m)).collect(),
             fov_udeg,
-            firing: Vec::new(),
-            group_earliest: Vec::new(),
-            firing_key: None,
+            tables: Vec::with_capacity(FIRING_TABLES),
+            current: 0,
+            evict: 0,
         })
     }
 
@@ -334,27 +374,29 @@ impl HesaiDecoder {
     /// Prepares the firing table for a packet's return count and tail flags (cheap when they
     /// did not change).
     pub fn prepare(&mut self, n_returns: usize, flags: TailFlags) {
-        if self.firing_key == Some((n_returns, flags)) {
+        let key = (n_returns, self.model.firing_flags(n_returns, flags));
+        if self.tables.get(self.current).is_some_and(|t| t.key == key) {
             return;
         }
-        let spec = self.model.spec();
-        let (blocks, n) = (spec.layout.blocks, self.channels.len());
-        self.firing.clear();
-        for b in 0..blocks {
-            for c in 0..n {
-                self.firing
-                    .push(self.model.firing_offset_ns(b, c, n_returns, flags) as i32);
-            }
+        if let Some(i) = self.tables.iter().position(|t| t.key == key) {
+            self.current = i;
+            return;
         }
-        let rows = &self.firing;
-        self.group_earliest = (0..blocks)
-            .map(|b| {
-                rows.get(b * n..((b + n_returns.max(1)) * n).min(rows.len()))
-                    .and_then(|s| s.iter().min().copied())
-                    .unwrap_or(0)
-            })
-            .collect();
-        self.firing_key = Some((n_returns, flags));
+        let table = FiringTable::new(self.model, self.channels.len(), key);
+        if self.tables.len() < FIRING_TABLES {
+            self.tables.push(table);
+            self.current = self.tables.len() - 1;
+        } else {
+            self.current = self.evict;
+            self.tables[self.evict] = table;
+            self.evict = (self.evict + 1) % FIRING_TABLES;
+        }
+    }
+
+    /// The firing offsets of the current key (empty before [`Self::prepare`]).
+    #[inline]
+    fn firing(&self) -> &[i32] {
+        self.tables.get(self.current).map_or(&[], |t| &t.firing)
     }
 
     /// Firing time of (block, channel) relative to the packet's tail time, ns ([`Self::prepare`]
@@ -362,7 +404,7 @@ impl HesaiDecoder {
     #[inline]
     pub fn firing_ns(&self, block: usize, c: usize) -> i64 {
         i64::from(
-            self.firing
+            self.firing()
                 .get(block * self.channels.len() + c)
                 .copied()
                 .unwrap_or(0),
@@ -373,7 +415,13 @@ impl HesaiDecoder {
     /// group of the return count given to [`Self::prepare`]).
     #[inline]
     pub fn group_earliest_ns(&self, block: usize) -> i64 {
-        i64::from(self.group_earliest.get(block).copied().unwrap_or(0))
+        let table = self.tables.get(self.current);
+        i64::from(
+            table
+                .and_then(|t| t.group_earliest.get(block))
+                .copied()
+                .unwrap_or(0),
+        )
     }
 
     /// Corrected azimuth of channel `c` for a block azimuth (packet units), µ° in `[0, 360°)`;
@@ -486,8 +534,9 @@ impl HesaiDecoder {
         let exact = |raw: u16| (f64::from(raw) * unit_m) as f32;
         let fov = self.fov_udeg.is_some();
         let nc = self.channels.len();
+        let firing = self.firing();
         let fire: [&[i32]; N] = core::array::from_fn(|k| {
-            self.firing
+            firing
                 .get((first + k) * nc..(first + k + 1) * nc)
                 .unwrap_or(&[])
         });

@@ -420,6 +420,36 @@ impl HesaiModel {
         }
     }
 
+    /// `tail` reduced to what [`Self::firing_offset_ns`] reads for `n_returns` returns: two
+    /// packets with equal reduced flags have equal firing tables (the decoder keys its cached
+    /// tables on it; the QT128's mode byte, for one, changes from packet to packet).
+    pub fn firing_flags(self, n_returns: usize, tail: TailFlags) -> TailFlags {
+        match self {
+            Self::PandarQt128 if n_returns > 1 => TailFlags {
+                mode_flag: tail.mode_flag & 1,
+                ..TailFlags::default()
+            },
+            Self::PandarOt128 if tail.operational_state != 0 => TailFlags {
+                operational_state: 1,
+                ..TailFlags::default()
+            },
+            Self::PandarOt128 => {
+                // Per block, only whether its 2-bit state is 0.
+                let mut states = 0u16;
+                for pair in 0..8 {
+                    if (tail.azimuth_state >> (14 - 2 * pair)) & 0b11 != 0 {
+                        states |= 1 << (14 - 2 * pair);
+                    }
+                }
+                TailFlags {
+                    azimuth_state: states,
+                    ..TailFlags::default()
+                }
+            }
+            _ => TailFlags::default(),
+        }
+    }
+
     /// Firing time of (block, channel) relative to the packet's tail time stamp, ns (negative:
     /// before it). `n_returns` = blocks per return group (1, 2 or 3); `mode_flag`, `az_state`,
     /// `op_state` are the tail bytes the QT128 / OT128 tables depend on.
@@ -850,6 +880,41 @@ mod tests {
     fn every_model_id_round_trips() {
         for m in ALL_MODELS {
             assert_eq!(HesaiModel::from_id(m.id()), Some(m));
+        }
+    }
+
+    /// The reduced flags the decoder keys its firing tables on give every model the same
+    /// firing times as the full tail flags, for every return count, block and channel.
+    #[test]
+    fn firing_flags_keep_every_firing_time() {
+        let mut x = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        for m in ALL_MODELS {
+            for n in 1..=3 {
+                for _ in 0..64 {
+                    let v = next();
+                    let tail = TailFlags {
+                        mode_flag: v as u8,
+                        azimuth_state: (v >> 8) as u16,
+                        operational_state: if v >> 24 & 1 == 0 { 0 } else { (v >> 25) as u8 },
+                    };
+                    let reduced = m.firing_flags(n, tail);
+                    for b in 0..m.spec().layout.blocks {
+                        for c in 0..m.channels() {
+                            assert_eq!(
+                                m.firing_offset_ns(b, c, n, tail),
+                                m.firing_offset_ns(b, c, n, reduced),
+                                "{m:?} n {n} block {b} channel {c} {tail:?}"
+                            );
+                        }
+                    }
+                }
+            }
         }
     }
 }
