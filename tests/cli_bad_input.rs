@@ -282,3 +282,80 @@ fn random_bytes_after_a_valid_header_never_panic() {
     assert!(!r.stderr.contains("panicked"), "{}", r.stderr);
     assert_not_corrupt(&out);
 }
+
+/// `--out` is written beside the path and renamed over it, so a path that is not a regular
+/// file is refused before anything is decoded (a device such as `/dev/null` would otherwise be
+/// replaced by the MCAP); a symbolic link to a file writes that file and stays a link.
+#[cfg(unix)]
+#[test]
+fn out_that_is_not_a_file_is_refused_and_a_link_writes_its_target() {
+    let p = write("ok.pcap", &capture(80, &|_, _| {}));
+    let dir = Scratch::dir("bad-out");
+    let fifo = dir.join("fifo");
+    let made = Command::new("mkfifo").arg(&fifo).status().unwrap();
+    assert!(made.success());
+    for (what, path) in [
+        ("a device, pipe or socket", fifo.as_path()),
+        ("a directory", &*dir),
+    ] {
+        let r = decode(&p, &["--out", path.to_str().unwrap()]);
+        assert_eq!(r.code, 2, "{}", r.stderr);
+        assert!(r.stderr.contains(what), "{}", r.stderr);
+    }
+    use std::os::unix::fs::FileTypeExt;
+    assert!(std::fs::symlink_metadata(&fifo)
+        .unwrap()
+        .file_type()
+        .is_fifo());
+    let target = dir.join("target.mcap");
+    std::fs::write(&target, b"old").unwrap();
+    let link = dir.join("link.mcap");
+    std::os::unix::fs::symlink(&target, &link).unwrap();
+    let r = decode(&p, &["--out", link.to_str().unwrap()]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(std::fs::symlink_metadata(&link)
+        .unwrap()
+        .file_type()
+        .is_symlink());
+    assert_not_corrupt(&target);
+    assert!(std::fs::metadata(&target).unwrap().len() > 1000);
+}
+
+/// A run that fails before any sweep is decoded writes no output: no empty MCAP, and a file
+/// already at the path (or a rosbag2 folder's absence) stays as it was. One that fails later
+/// keeps what it decoded, finalised.
+#[test]
+fn a_run_that_decodes_nothing_leaves_the_output_path_as_it_was() {
+    let mut bytes = capture(80, &|_, _| {});
+    // The first record claims a gigabyte: an error before any sweep.
+    bytes[24 + 8..24 + 12].copy_from_slice(&1_000_000_000u32.to_le_bytes());
+    bytes[24 + 12..24 + 16].copy_from_slice(&1_000_000_000u32.to_le_bytes());
+    let p = write("first-huge.pcap", &bytes);
+    let out = tmp("keep.mcap");
+    std::fs::write(&out, b"an earlier run's file").unwrap();
+    let r = decode(&p, &["--out", out.to_str().unwrap()]);
+    assert_eq!(r.code, 1, "{}", r.stderr);
+    assert_eq!(std::fs::read(&out).unwrap(), b"an earlier run's file");
+    let bag = Scratch::dir("bad-bag");
+    let bag_dir = bag.join("run");
+    let r = decode(
+        &p,
+        &["--format", "ros2", "--out", bag_dir.to_str().unwrap()],
+    );
+    assert_eq!(r.code, 1, "{}", r.stderr);
+    assert!(!bag_dir.exists(), "an empty bag folder was left");
+
+    // The damage after 200 packets (over two sweeps): the sweeps before it are written.
+    let mut bytes = capture(240, &|_, _| {});
+    let off = 24 + 200 * (16 + 42 + 1206);
+    bytes[off + 8..off + 12].copy_from_slice(&1_000_000_000u32.to_le_bytes());
+    bytes[off + 12..off + 16].copy_from_slice(&1_000_000_000u32.to_le_bytes());
+    let p = write("late-huge.pcap", &bytes);
+    let r = decode(&p, &["--out", out.to_str().unwrap()]);
+    assert_eq!(r.code, 1, "{}", r.stderr);
+    assert_not_corrupt(&out);
+    let summary = mcap::Summary::read(&std::fs::read(&out).unwrap())
+        .unwrap()
+        .unwrap();
+    assert!(summary.stats.unwrap().message_count > 0);
+}

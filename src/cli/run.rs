@@ -805,6 +805,13 @@ impl Session {
         }
     }
 
+    /// Drops the output unwritten: its temporary file is removed.
+    pub fn abort_sink(&mut self) {
+        if let Some(s) = self.out.sink.take() {
+            s.abort();
+        }
+    }
+
     /// Closes the output, if any (and lets the live view's clients drain).
     pub fn close_sink(&mut self) -> Result<Option<SinkSummary>, SinkError> {
         if let Some(live) = &self.out.live {
@@ -1301,7 +1308,12 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
         .out
         .as_deref()
         .filter(|p| args.format == FormatArg::Ros2 && crate::sink::rosbag2::is_bag_dir(p));
-    let sink = match (&args.out, bag_dir) {
+    let out_path = match (&args.out, bag_dir) {
+        (Some(p), None) => Some(output_file_path(p)?),
+        _ => None,
+    };
+    let bag_dir_existed = bag_dir.is_some_and(Path::exists);
+    let sink = match (&out_path, bag_dir) {
         (_, Some(dir)) => {
             crate::sink::rosbag2::create_dir(dir).map_err(|source| SinkError::Io {
                 context: format!("creating the rosbag2 directory {}", dir.display()),
@@ -1343,10 +1355,22 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
             .filter(|m| m.is_file())
             .map(|m| m.len()),
     };
-    // Finalise the output on success and on error alike: the file is always a valid MCAP.
+    // On an error, the output is finalised (a valid MCAP) if it holds a sweep: what was
+    // decoded before the damage. An output without one is not written, so a run that could
+    // not decode leaves no empty file, and leaves a file already at the path as it was.
     if let Err(e) = pump(&mut src, &mut session, total) {
-        if let Ok(s) = session.close_sink() {
-            let _ = commit_bag(&s);
+        if session.out.sweeps > 0 {
+            if let Ok(s) = session.close_sink() {
+                let _ = commit_bag(&s);
+            }
+        } else {
+            session.abort_sink();
+            if let Some(dir) = bag_dir {
+                let _ = std::fs::remove_file(dir.join("metadata.yaml"));
+                if !bag_dir_existed {
+                    let _ = std::fs::remove_dir(dir);
+                }
+            }
         }
         return Err(session.run_error(e, &path_s));
     }
@@ -1574,6 +1598,40 @@ pub fn decode_command(args: &DecodeArgs) -> Result<ExitCode, RunError> {
         )));
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The file `decode --out` writes: `path`, or the regular file a symbolic link names. The
+/// output is written beside it and renamed over it at the end, so a path that is not a regular
+/// file is refused before anything is decoded: renaming over a device (`/dev/null`) or a
+/// directory would replace it.
+fn output_file_path(path: &Path) -> Result<PathBuf, RunError> {
+    let refuse = |what: &str| {
+        RunError::Usage(format!(
+            "--out {}: {what}, not a file (ringscan writes the MCAP beside it and renames it \
+             into place); give a file path, or leave out --out to decode without writing",
+            path.display()
+        ))
+    };
+    let meta = match std::fs::symlink_metadata(path) {
+        Ok(m) => m,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(path.to_path_buf()),
+        Err(e) => return Err(refuse(&format!("cannot be inspected ({e})"))),
+    };
+    let ft = meta.file_type();
+    if ft.is_file() {
+        Ok(path.to_path_buf())
+    } else if ft.is_symlink() {
+        match std::fs::metadata(path) {
+            Ok(t) if t.is_file() => std::fs::canonicalize(path)
+                .map_err(|e| refuse(&format!("a symbolic link that cannot be resolved ({e})"))),
+            Ok(_) => Err(refuse("a symbolic link to something that is not a file")),
+            Err(_) => Err(refuse("a symbolic link to nothing")),
+        }
+    } else if ft.is_dir() {
+        Err(refuse("a directory"))
+    } else {
+        Err(refuse("a device, pipe or socket"))
+    }
 }
 
 /// `ringscan info`.
