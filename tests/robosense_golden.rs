@@ -386,3 +386,38 @@ fn info_names_the_difop_facts() {
     }
     eprintln!("{text}");
 }
+
+/// `--raw` keeps every datagram, also the 543 MSOP packets that arrive before the DIFOP tells
+/// the model (held, then written once the sensor is known); `--format ros2`, which has no
+/// Robosense packet message, writes none and says how many.
+#[test]
+fn raw_keeps_every_datagram_and_ros2_counts_what_it_cannot_hold() {
+    let Some(r) = root() else { return };
+    let pcap = pcap_path(&r);
+    let datagrams = common::datagrams(&pcap).len() as u64;
+    let dir = common::Scratch::dir("robosense-raw");
+    for format in ["foxglove", "ros2"] {
+        let out = dir.join(format!("{format}.mcap"));
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_ringscan"))
+            .arg("decode")
+            .arg(&pcap)
+            .args(["--raw", "--json", "--format", format, "--out"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let (written, dropped) = (&j["output"]["topics"]["/raw"], &j["output"]["raw_dropped"]);
+        assert_eq!(j["sensors"][0]["raw_dropped"], 0, "{format}");
+        match format {
+            "foxglove" => assert_eq!(
+                (written.as_u64(), dropped.as_u64()),
+                (Some(datagrams), Some(0))
+            ),
+            _ => assert_eq!(
+                (written.as_u64(), dropped.as_u64()),
+                (None, Some(datagrams))
+            ),
+        }
+    }
+}

@@ -38,8 +38,11 @@ const PRESCAN_DATAGRAMS: usize = 4_000;
 /// 8 MiB still hold a third of a second of the largest Ouster mode, by which every sensor
 /// of a recording has spoken.
 const PRESCAN_BYTES: u64 = 8 << 20;
-/// Raw datagrams held per sensor until its model is known (for `--raw`).
-const RAW_HOLD: usize = 256;
+/// Raw datagrams held per sensor until it is registered (for `--raw`), at most this many
+/// bytes: as many as a Robosense stream holds while it waits for its DIFOP (4,096 MSOP
+/// packets), or two seconds of an OS-2-128's lidar packets. Beyond that they are counted
+/// (`raw_dropped`), never dropped unseen.
+const RAW_HOLD_BYTES: usize = 16 << 20;
 
 /// Everything `decode` needs.
 #[derive(Debug, Clone)]
@@ -155,6 +158,7 @@ struct SensorOut {
     topic: String,
     calib_file: Option<String>,
     raw_hold: Vec<(i64, u16, u16, Vec<u8>)>,
+    raw_hold_bytes: usize,
     raw_dropped: u64,
     /// How the sensor was registered in the sink (again in each file with `--split-every`).
     info: Option<SensorInfo>,
@@ -243,6 +247,7 @@ impl Output {
                 topic: String::new(),
                 calib_file: None,
                 raw_hold: Vec::new(),
+                raw_hold_bytes: 0,
                 raw_dropped: 0,
                 info: None,
             });
@@ -288,6 +293,7 @@ impl Output {
         if let Some(sink) = self.sink.as_mut() {
             let id = sink.add_sensor(&info)?;
             let hold = std::mem::take(&mut self.sensors[idx].raw_hold);
+            self.sensors[idx].raw_hold_bytes = 0;
             for (t, port, src_port, payload) in hold {
                 sink.write_raw(
                     id,
@@ -986,7 +992,8 @@ impl Session {
                 }
                 _ => {
                     let s = &mut out.sensors[idx];
-                    if s.raw_hold.len() < RAW_HOLD {
+                    if s.raw_hold_bytes + payload.len() <= RAW_HOLD_BYTES {
+                        s.raw_hold_bytes += payload.len();
                         s.raw_hold.push((time, port, src_port, payload.to_vec()));
                     } else {
                         s.raw_dropped += 1;
@@ -1121,6 +1128,7 @@ pub fn output_json(
         "attachments": s.attachments.iter().map(|a| json!({"name": a.name, "media_type": a.media_type, "size": a.size})).collect::<Vec<_>>(),
         "chunks": s.chunks,
         "chunks_uncompressed": s.chunks_uncompressed,
+        "raw_dropped": s.raw_dropped,
         "threads": opts.threads,
     })
 }
@@ -1753,6 +1761,17 @@ fn print_text(j: &Value) {
             o["format"].as_str().unwrap_or(""),
             o["topics"]
         );
+        let held_over: u64 = j["sensors"].as_array().map_or(0, |a| {
+            a.iter().filter_map(|s| s["raw_dropped"].as_u64()).sum()
+        });
+        let not_written = o["raw_dropped"].as_u64().unwrap_or(0) + held_over;
+        if let Some(n) = Some(not_written).filter(|&n| n > 0) {
+            println!(
+                "  {n} raw packets not written (output.raw_dropped: no ROS 2 packet message \
+                 of their family holds them, --format foxglove keeps them on /raw; \
+                 sensors[].raw_dropped: more than 16 MiB arrived before the sensor was known)"
+            );
+        }
     }
     println!("  {:.3} s", j["elapsed_s"].as_f64().unwrap_or(0.0));
 }

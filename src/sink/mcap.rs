@@ -326,6 +326,10 @@ pub struct SinkSummary {
     pub chunks_uncompressed: u64,
     /// Where the file was committed, when created with [`create_file`].
     pub path: Option<PathBuf>,
+    /// `--raw` packets the file does not hold: with `--format ros2`, those its family's packet
+    /// message cannot take (Robosense and Livox have none; a Velodyne or Hesai packet of
+    /// another size). Counted, never hidden.
+    pub raw_dropped: u64,
 }
 
 /// Errors of the MCAP sink. Each says what was being done and with what.
@@ -1099,6 +1103,7 @@ impl<W: Write + Seek> McapSink<W> {
             chunks: summary.stats.chunks as usize,
             chunks_uncompressed: summary.stats.chunks_uncompressed,
             path: None,
+            raw_dropped: self.sensors.iter().map(SensorChannels::raw_dropped).sum(),
         };
         match self.commit.take() {
             None => {
