@@ -32,7 +32,7 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
-    /// Decode a pcap / pcapng capture into sweeps, written to MCAP.
+    /// Decode a capture (pcap, pcapng, ROS bag, Livox .lvx / .lvx2) into sweeps, written to MCAP.
     Decode(DecodeCmd),
     /// Tell what a capture holds: sensors, models, return modes, ports, duration, sweeps, loss.
     Info(InfoCmd),
@@ -102,10 +102,10 @@ pub enum FormatArg {
     Ros2,
 }
 
-/// Ouster CRC checking.
+/// Packet CRC checking (Ouster, Hesai, Livox).
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
 pub enum CrcArg {
-    /// Check where the firmware writes valid CRCs (≥ 2.5, not FUSA).
+    /// Check where the sensor writes valid CRCs (Ouster: firmware ≥ 2.5, not FUSA).
     Auto,
     /// Always check (packets with a bad CRC are dropped and counted).
     On,
@@ -126,17 +126,21 @@ pub enum FieldsArg {
 
 #[derive(clap::Args, Debug)]
 struct DecodeCmd {
-    /// Input capture (.pcap or .pcapng) or ROS bag (ROS 1 .bag; rosbag2 directory, .db3 or
-    /// .mcap), told apart by its bytes.
+    /// Input capture (.pcap or .pcapng), ROS bag (ROS 1 .bag; rosbag2 directory, .db3 or
+    /// .mcap) or Livox recording (.lvx, .lvx2), told apart by its bytes.
     input: PathBuf,
     /// Output MCAP file (omit to decode and count only).
     #[arg(long, short)]
     out: Option<PathBuf>,
-    /// Sensor model, overriding detection: vlp16, puck-hires, hdl32e, vlp32c, hdl64e-s2,
-    /// hdl64e-s3, vls128.
+    /// Sensor model, overriding detection. Velodyne: vlp16, puck-hires, hdl32e, vlp32c,
+    /// hdl64e-s2, hdl64e-s3, vls128; Hesai: pandar40p, pandar64, pandarqt64, pandarqt128,
+    /// pandarxt16, pandarxt32, pandarxt32m, pandarat128, pandarot128; Robosense: rs16, rs32,
+    /// rsbpearl, rshelios, rshelios16p, rsruby128, rsm1; Livox: mid360, hap, avia, horizon,
+    /// tele15, mid40, mid70.
     #[arg(long)]
     model: Option<String>,
-    /// Calibration file: ROS velodyne yaml, VeloView xml or HDL-64E db.xml; `ADDR=FILE` gives
+    /// Calibration file: Velodyne ROS yaml, VeloView xml or HDL-64E db.xml; Ouster metadata
+    /// JSON; Hesai angle-correction CSV or AT128 .dat; Robosense angle CSV. `ADDR=FILE` gives
     /// it to the sensor at that source address only. Repeatable.
     #[arg(long = "calib", value_name = "[ADDR=]FILE")]
     calib: Vec<String>,
@@ -188,7 +192,8 @@ struct DecodeCmd {
     /// Also write every UDP payload to `/raw`, so the drive can be decoded again later.
     #[arg(long)]
     raw: bool,
-    /// Ouster footer CRC-64 check: `auto` = for firmware ≥ 2.5 (not FUSA), `on`, `off`.
+    /// Packet CRC checks (Ouster footer CRC-64, Hesai CRC-32, Livox CRC-32): `auto` = where
+    /// the sensor writes them (Ouster: firmware ≥ 2.5, not FUSA), `on`, `off`.
     #[arg(long, value_enum, default_value_t = CrcArg::Auto)]
     crc: CrcArg,
     /// Exit with an error if any packet was missing, dropped or malformed.
@@ -241,8 +246,10 @@ struct DemoCmd {
 #[derive(clap::Args, Debug)]
 struct ListenCmd {
     /// A sensor's source address, optionally with the UDP port to listen on (repeatable; one
-    /// socket per port). Without a port: the ports its --calib metadata names, else 2368, 8308,
-    /// 7502 and 7503. Datagrams from other addresses are counted and ignored.
+    /// socket per port). Without a port: the ports its --calib file names (Ouster metadata,
+    /// Robosense angle file), else every family's default ports (Velodyne / Hesai 2368, 8308;
+    /// Ouster 7502, 7503; Robosense 6699, 7788; Livox 56001–56004, 56301, 56401, 57000, 58000).
+    /// Datagrams from other addresses are counted and ignored.
     #[arg(long = "sensor", value_name = "IP[:PORT]", required = true, value_parser = listen::parse_sensor)]
     sensors: Vec<(std::net::Ipv4Addr, Option<u16>)>,
     /// Output MCAP file, written continuously and finalised on SIGINT / SIGTERM (omit to
@@ -253,7 +260,7 @@ struct ListenCmd {
     /// every N megabytes (`500MB`); no packet is lost at the switch.
     #[arg(long, value_name = "S|MB", value_parser = listen::parse_split)]
     split_every: Option<listen::Split>,
-    /// Sensor model, overriding detection (Velodyne).
+    /// Sensor model, overriding detection (the names `decode --help` lists).
     #[arg(long)]
     model: Option<String>,
     /// Calibration file(s), as for `decode`. Ouster sensors without one: their metadata is read
@@ -325,7 +332,8 @@ struct ListenCmd {
     /// Uncompressed size of an MCAP chunk, MiB (fractions allowed).
     #[arg(long, value_name = "MIB", default_value = "4", value_parser = parse_chunk_size)]
     chunk_size: u64,
-    /// Ouster footer CRC-64 check.
+    /// Packet CRC checks (Ouster footer CRC-64, Hesai CRC-32, Livox CRC-32): `auto` = where
+    /// the sensor writes them (Ouster: firmware ≥ 2.5, not FUSA).
     #[arg(long, value_enum, default_value_t = CrcArg::Auto)]
     crc: CrcArg,
     /// Port of the sensors' HTTP API (Ouster metadata).
@@ -585,6 +593,29 @@ where
             match e {
                 RunError::Usage(_) => 2,
                 _ => 1,
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::CommandFactory;
+
+    /// `decode --help` names every model `--model` takes (the list is written out by hand).
+    #[test]
+    fn decode_help_names_every_model() {
+        let mut cmd = super::Cli::command();
+        let decode = cmd.find_subcommand_mut("decode").expect("decode");
+        let help = decode.render_long_help().to_string();
+        for f in crate::sensor::FAMILIES {
+            for m in f.models() {
+                assert!(
+                    help.split(|c: char| !(c.is_alphanumeric() || c == '-'))
+                        .any(|w| w == *m),
+                    "{m} ({}) is not in decode --help",
+                    f.name()
+                );
             }
         }
     }

@@ -28,7 +28,7 @@ pub struct PipelineArgs {
     #[arg(long, value_name = "none|default|FILE.toml")]
     pub pipeline: Option<String>,
     /// Motion correction of every sweep: `none`, `constant-velocity` (the twist of the
-    /// pipeline configuration), `imu` (Ouster gyro), `poses:FILE` (TUM poses), `odometry`.
+    /// pipeline configuration), `imu` (the sensor's gyro: Ouster, Livox), `poses:FILE` (TUM poses), `odometry`.
     /// Overrides the configuration's `deskew.mode`.
     #[arg(long, value_name = "MODE")]
     pub deskew: Option<String>,
