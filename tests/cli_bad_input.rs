@@ -359,3 +359,29 @@ fn a_run_that_decodes_nothing_leaves_the_output_path_as_it_was() {
         .unwrap();
     assert!(summary.stats.unwrap().message_count > 0);
 }
+
+/// `replay` says in its text output how many datagrams an offset pushed past port 65535 (they
+/// are skipped), and refuses an offset no port survives.
+#[test]
+fn replay_reports_datagrams_its_port_offset_skips() {
+    let p = write("replay.pcap", &capture(20, &|_, _| {}));
+    let run = |offset: &str| {
+        let o = Command::new(bin())
+            .args(["replay", p.to_str().unwrap(), "--to", "127.0.0.1"])
+            .args(["--rate", "max", "--port-offset", offset])
+            .output()
+            .unwrap();
+        (
+            o.status.code().unwrap_or(-1),
+            String::from_utf8_lossy(&o.stdout).into_owned(),
+            String::from_utf8_lossy(&o.stderr).into_owned(),
+        )
+    };
+    // 2368 + 63200 = 65568: every data packet is skipped.
+    let (code, out, err) = run("63200");
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("sent 0 datagrams"), "{out}");
+    assert!(out.contains("skipped 20 datagrams"), "{out}");
+    let (code, _, err) = run("70000");
+    assert_eq!(code, 2, "{err}");
+}

@@ -368,8 +368,10 @@ struct ReplayCmd {
     /// Destination IPv4 address; each datagram goes to its original destination port.
     #[arg(long)]
     to: std::net::Ipv4Addr,
-    /// Added to every destination port.
-    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
+    /// Added to every destination port (−65535 … 65535; a datagram whose port falls outside
+    /// 0 … 65535 is skipped and counted).
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true,
+          value_parser = clap::value_parser!(i32).range(-65535..=65535))]
     port_offset: i32,
     /// Speed: a factor of real time (`1.0`, `10`) or `max`.
     #[arg(long, default_value = "1.0", value_parser = replay::parse_rate)]

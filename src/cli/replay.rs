@@ -191,6 +191,15 @@ pub fn replay_command(args: &ReplayArgs) -> Result<ExitCode, RunError> {
             "sent {sent} datagrams ({bytes} bytes) to {} in {elapsed:.3} s; {errors} send errors",
             args.to
         );
+        if skipped > 0 {
+            println!(
+                "skipped {skipped} datagrams whose port + --port-offset {} is outside 0..=65535",
+                args.port_offset
+            );
+        }
+        if decoded_frames > 0 {
+            println!("skipped {decoded_frames} messages a driver had decoded (never on the wire)");
+        }
     }
     Ok(ExitCode::SUCCESS)
 }
