@@ -602,3 +602,41 @@ fn decode_reads_the_at128_dat_through_calib() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("AT128"), "{err}");
 }
+
+/// A calibration no sensor takes is named, not passed over: the XT32 capture with the QT128's
+/// correction file (128 rows for a 32-laser sensor) decodes no points, and the summary says
+/// the file was used by no sensor; with its own file, nothing is reported unused.
+#[test]
+fn a_calibration_no_sensor_takes_is_reported() {
+    let Some(c) = common::captures() else {
+        return;
+    };
+    let pcap = pcap_in(&c.join(GT).join("xt32"));
+    let run = |csv: &str, json: bool| {
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_ringscan"));
+        cmd.arg("decode")
+            .arg(&pcap)
+            .arg("--calib")
+            .arg(c.join(CALIB).join(csv));
+        if json {
+            cmd.arg("--json");
+        }
+        let o = cmd.output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8(o.stdout).unwrap()
+    };
+    let j: serde_json::Value = serde_json::from_str(&run("PandarQT128.csv", true)).unwrap();
+    assert_eq!(
+        j["unused_calibrations"],
+        serde_json::json!(["PandarQT128.csv"])
+    );
+    assert_eq!(j["points"], 0);
+    let text = run("PandarQT128.csv", false);
+    assert!(
+        text.contains("warning: calibration PandarQT128.csv was used by no sensor"),
+        "{text}"
+    );
+    let j: serde_json::Value = serde_json::from_str(&run("PandarXT32.csv", true)).unwrap();
+    assert_eq!(j["unused_calibrations"], serde_json::json!([]));
+    assert!(j["points"].as_u64().unwrap() > 0);
+}

@@ -1087,6 +1087,20 @@ impl Session {
         m.insert("points".into(), json!(out.points));
         m.insert("imu_samples".into(), json!(out.imu_samples));
         m.insert("zone_reports".into(), json!(out.zone_reports));
+        // A calibration no sensor took (another model's file, another sensor's metadata)
+        // would otherwise pass unnoticed: the sensor decodes without it, or not at all.
+        let used: std::collections::BTreeSet<&str> = out
+            .sensors
+            .iter()
+            .filter_map(|s| s.calib_file.as_deref())
+            .collect();
+        let unused: Vec<&str> = out
+            .calibs
+            .iter()
+            .map(|(_, n, _)| n.as_str())
+            .filter(|n| !used.contains(n))
+            .collect();
+        m.insert("unused_calibrations".into(), json!(unused));
         m.insert(
             "packets".into(),
             json!({
@@ -1744,6 +1758,17 @@ fn print_text(j: &Value) {
         println!("  no sensor found (Ouster captures need their metadata: --calib META.json)");
     }
     let p = &j["packets"];
+    for name in j["unused_calibrations"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(Value::as_str)
+    {
+        println!(
+            "  warning: calibration {name} was used by no sensor: it fits none of the sensors \
+             found (family, model, laser count, serial or address)"
+        );
+    }
     println!(
         "  total: {} sweeps, {} points; packets decoded {}, dropped {}, malformed {}, missing {}, ignored {}",
         g(&j["sweeps"]),
