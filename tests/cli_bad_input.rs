@@ -385,3 +385,67 @@ fn replay_reports_datagrams_its_port_offset_skips() {
     let (code, _, err) = run("70000");
     assert_eq!(code, 2, "{err}");
 }
+
+/// Values that would do nothing, or something other than asked, are bad usage (exit 2) with a
+/// message naming them, instead of being replaced or accepted without a word (from the audit):
+/// an empty or `/`-bearing `--name` (an empty frame id breaks TF), a negative `--min-range`
+/// (it said "empty range"), a bag window that ends before it starts, `replay --loop 0` (sent
+/// once), `render --range-m 0` / `nan` (drawn at 40 m) and `--size-px 8192` (clamped).
+#[test]
+fn values_that_would_be_ignored_are_refused() {
+    let cap = write("ok3.pcap", &capture(5, &|_, _| {}));
+    for (args, says) in [
+        (&["--name", ""][..], "--name"),
+        (&["--name", "a/b"], "--name"),
+        (&["--min-range=-1"], "0 m or more"),
+        (&["--start", "5", "--end", "1"], "ends before it starts"),
+    ] {
+        let r = decode(&cap, args);
+        assert_eq!(r.code, 2, "{args:?}: {}", r.stderr);
+        assert!(r.stderr.contains(says), "{args:?}: {}", r.stderr);
+    }
+    let code = |args: &[&str]| {
+        let o = Command::new(bin()).args(args).output().unwrap();
+        (
+            o.status.code(),
+            String::from_utf8_lossy(&o.stderr).into_owned(),
+        )
+    };
+    let p = cap.to_str().unwrap();
+    for args in [
+        &["replay", p, "--to", "127.0.0.1", "--loop", "0"][..],
+        &[
+            "render",
+            p,
+            "--sweep",
+            "0",
+            "--out",
+            "x.png",
+            "--range-m",
+            "0",
+        ],
+        &[
+            "render",
+            p,
+            "--sweep",
+            "0",
+            "--out",
+            "x.png",
+            "--range-m",
+            "nan",
+        ],
+        &[
+            "render",
+            p,
+            "--sweep",
+            "0",
+            "--out",
+            "x.png",
+            "--size-px",
+            "8192",
+        ],
+    ] {
+        let (c, err) = code(args);
+        assert_eq!(c, Some(2), "{args:?}: {err}");
+    }
+}

@@ -38,6 +38,13 @@ impl BagArgs {
                 )));
             }
         }
+        if let (Some(a), Some(b)) = (self.start, self.end) {
+            if a > b {
+                return Err(RunError::Usage(format!(
+                    "--start {a} / --end {b}: the window ends before it starts"
+                )));
+            }
+        }
         Ok(BagOptions {
             topics: self.topics.clone(),
             start: self.start.map(TimeBound::from_seconds),

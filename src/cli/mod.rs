@@ -145,7 +145,7 @@ struct DecodeCmd {
     #[arg(long = "calib", value_name = "[ADDR=]FILE")]
     calib: Vec<String>,
     /// Sensor name (frame id and topic prefix); only with a single sensor.
-    #[arg(long)]
+    #[arg(long, value_parser = parse_name)]
     name: Option<String>,
     /// Only data packets sent to this UDP port.
     #[arg(long)]
@@ -268,7 +268,7 @@ struct ListenCmd {
     #[arg(long = "calib", value_name = "[ADDR=]FILE")]
     calib: Vec<String>,
     /// Sensor name (frame id and topic prefix); only with a single sensor.
-    #[arg(long)]
+    #[arg(long, value_parser = parse_name)]
     name: Option<String>,
     /// Before listening, fetch the angle correction of every --sensor without its own --calib
     /// over Hesai's TCP control protocol (port 9347, or PORT).
@@ -376,8 +376,9 @@ struct ReplayCmd {
     /// Speed: a factor of real time (`1.0`, `10`) or `max`.
     #[arg(long, default_value = "1.0", value_parser = replay::parse_rate)]
     rate: crate::source::udp::Rate,
-    /// Send the capture this many times.
-    #[arg(long = "loop", default_value_t = 1)]
+    /// Send the capture this many times (1 or more).
+    #[arg(long = "loop", default_value_t = 1,
+          value_parser = clap::value_parser!(u32).range(1..))]
     loops: u32,
     /// Send each original source address's datagrams from its own loopback address
     /// (127.0.0.1, 127.0.0.2, … in order of appearance; a bag's sensors from the 127.0.0.N
@@ -395,6 +396,22 @@ struct ReplayCmd {
 }
 
 /// `--threads`: a positive number.
+/// `--name`: a frame id and topic segment, so not empty and without `/` or spaces (ROS names:
+/// letters, digits, `_`, `-`, `.`).
+fn parse_name(s: &str) -> Result<String, String> {
+    let ok = !s.is_empty()
+        && s.chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.'));
+    if ok {
+        Ok(s.to_string())
+    } else {
+        Err(format!(
+            "`{s}`: expected a name of letters, digits, `_`, `-` or `.` (it is the frame id \
+             and the topic prefix)"
+        ))
+    }
+}
+
 fn parse_threads(s: &str) -> Result<usize, String> {
     match s.parse::<usize>() {
         Ok(n) if (1..=1024).contains(&n) => Ok(n),

@@ -33,11 +33,11 @@ pub struct RenderCmd {
     /// Sensor topic prefix when the file holds several sensors (e.g. `/vlp16-201`).
     #[arg(long, default_value = "")]
     sensor: String,
-    /// Half-width of the square drawn, metres.
-    #[arg(long, default_value_t = 40.0)]
+    /// Half-width of the square drawn, metres (0.5 … 10000).
+    #[arg(long, default_value_t = 40.0, value_parser = parse_range_m)]
     range_m: f64,
     /// Image side, pixels (64 ..= 4096).
-    #[arg(long, default_value_t = 1000)]
+    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u32).range(64..=4096))]
     size_px: u32,
 }
 
@@ -296,6 +296,15 @@ fn glyph(c: char) -> Option<[u8; 7]> {
         ' ' => [0; 7],
         _ => return None,
     })
+}
+
+/// `--range-m`: a finite half-width of 0.5 … 10,000 m (a bad value was replaced by 40 m
+/// without a word).
+fn parse_range_m(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(m) if (0.5..=10_000.0).contains(&m) => Ok(m),
+        _ => Err(format!("`{s}`: expected metres, 0.5 … 10000")),
+    }
 }
 
 fn rgb(c: [f32; 3]) -> [u8; 3] {

@@ -639,11 +639,18 @@ impl Session {
             min_range: opts.min_range.unwrap_or(0.0),
             max_range: opts.max_range.unwrap_or(f32::INFINITY),
         };
-        if decode.min_range.is_nan()
-            || decode.max_range.is_nan()
-            || decode.min_range > decode.max_range
-            || decode.min_range < 0.0
-        {
+        if decode.min_range.is_nan() || decode.max_range.is_nan() {
+            return Err(RunError::Usage(
+                "--min-range / --max-range: expected numbers of metres".into(),
+            ));
+        }
+        if decode.min_range < 0.0 {
+            return Err(RunError::Usage(format!(
+                "--min-range {}: expected a distance of 0 m or more",
+                decode.min_range
+            )));
+        }
+        if decode.min_range > decode.max_range {
             return Err(RunError::Usage(format!(
                 "--min-range {} / --max-range {}: empty range",
                 decode.min_range, decode.max_range
