@@ -43,6 +43,9 @@ const PRESCAN_BYTES: u64 = 8 << 20;
 /// packets), or two seconds of an OS-2-128's lidar packets. Beyond that they are counted
 /// (`raw_dropped`), never dropped unseen.
 const RAW_HOLD_BYTES: usize = 16 << 20;
+/// Raw datagrams held over all sensors: a capture of many sources that never register (a
+/// hostile one) holds no more than this.
+const RAW_HOLD_TOTAL_BYTES: usize = 64 << 20;
 
 /// Everything `decode` needs.
 #[derive(Debug, Clone)]
@@ -174,6 +177,8 @@ struct Output {
     name: Option<String>,
     raw: bool,
     calibs: Vec<(Option<Ipv4Addr>, String, Vec<u8>)>,
+    /// Bytes of `SensorOut::raw_hold` over all sensors (at most [`RAW_HOLD_TOTAL_BYTES`]).
+    raw_hold_total: usize,
     error: Option<SinkError>,
     sweeps: u64,
     points: u64,
@@ -293,6 +298,9 @@ impl Output {
         if let Some(sink) = self.sink.as_mut() {
             let id = sink.add_sensor(&info)?;
             let hold = std::mem::take(&mut self.sensors[idx].raw_hold);
+            self.raw_hold_total = self
+                .raw_hold_total
+                .saturating_sub(self.sensors[idx].raw_hold_bytes);
             self.sensors[idx].raw_hold_bytes = 0;
             for (t, port, src_port, payload) in hold {
                 sink.write_raw(
@@ -722,6 +730,7 @@ impl Session {
                 .into_iter()
                 .map(|c| (c.addr, c.file_name, c.bytes.to_vec()))
                 .collect(),
+            raw_hold_total: 0,
             error: None,
             sweeps: 0,
             points: 0,
@@ -998,9 +1007,13 @@ impl Session {
                         .map_err(PumpError::Sink)?;
                 }
                 _ => {
+                    let total = &mut out.raw_hold_total;
                     let s = &mut out.sensors[idx];
-                    if s.raw_hold_bytes + payload.len() <= RAW_HOLD_BYTES {
+                    if s.raw_hold_bytes + payload.len() <= RAW_HOLD_BYTES
+                        && *total + payload.len() <= RAW_HOLD_TOTAL_BYTES
+                    {
                         s.raw_hold_bytes += payload.len();
+                        *total += payload.len();
                         s.raw_hold.push((time, port, src_port, payload.to_vec()));
                     } else {
                         s.raw_dropped += 1;
