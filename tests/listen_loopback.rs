@@ -155,6 +155,13 @@ fn loopback(c: &Path, rel: &str, calibs: &[&str], tmp: &Path) {
     assert_eq!(r["kernel_dropped"], 0, "{name}");
     assert_eq!(r["other_source"], 0, "{name}");
     assert_eq!(live["stop"], "SIGINT");
+    // Every sensor has its `--calib` file: none is asked for its metadata (an Ouster IMU
+    // packet before the first lidar packet once made listen ask), and nothing is left held.
+    assert!(
+        !err.contains("/api/v1/sensor/metadata"),
+        "{name}: asked a sensor that has a --calib file\n{err}"
+    );
+    assert_eq!(r["held_for_metadata"]["left"], 0, "{name}");
     // The same counts as the file decode.
     for k in ["sweeps", "points", "imu_samples"] {
         assert_eq!(live[k], decoded[k], "{name}: {k}");

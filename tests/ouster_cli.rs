@@ -289,3 +289,153 @@ fn zone_monitor_packet_decodes_to_ouster_sdks_zone_states() {
         assert_eq!(Value::Array(got), reference, "{format}");
     }
 }
+
+/// Two sensors on one port (`same_ports*.pcap`); in `same_ports.pcap` both send an IMU packet
+/// before their first lidar packet, in `same_ports_nonlegacy.pcap` one does. A legacy IMU
+/// packet names no sensor, so it can only be decoded once its address's lidar packet has
+/// matched a metadata file. Every 48-byte datagram (the legacy IMU packet's size, on the
+/// metadata's `udp_port_imu`), counted here from the pcap per source address, must be one IMU
+/// packet of that address's sensor; before the demultiplexer held them, the early ones were
+/// ignored.
+#[test]
+fn imu_packets_before_the_first_lidar_packet_are_decoded() {
+    let Some(root) = common::captures() else {
+        return;
+    };
+    let dir = root.join("ouster-lidar__ouster-sdk/tests/pcaps");
+    for name in ["same_ports", "same_ports_nonlegacy"] {
+        let pcap = dir.join(format!("{name}.pcap"));
+        // Per source address: 48-byte datagrams, and those of them before its first lidar
+        // packet.
+        let mut want: std::collections::BTreeMap<String, u64> = Default::default();
+        let mut early = 0u64;
+        let mut started = std::collections::BTreeSet::new();
+        let mut src = ringscan::source::pcap::PcapSource::open(&pcap).unwrap();
+        while let Some(d) = src.next_datagram().unwrap() {
+            let addr = d.src.ip().to_string();
+            let imu = d.payload.len() == 48 && d.dst.port() == 7502;
+            if imu && !started.contains(&addr) {
+                early += 1;
+            }
+            if !imu {
+                started.insert(addr.clone());
+            }
+            *want.entry(addr).or_default() += u64::from(imu);
+        }
+        assert!(early > 0, "{name}: a sensor starts with an IMU packet");
+        let o = Command::new(env!("CARGO_BIN_EXE_ringscan"))
+            .arg("info")
+            .arg(&pcap)
+            .arg("--json")
+            .arg("--calib")
+            .arg(dir.join(format!("{name}.1.json")))
+            .arg("--calib")
+            .arg(dir.join(format!("{name}.2.json")))
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "{name}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let j: Value = serde_json::from_slice(&o.stdout).unwrap();
+        let sensors = j["sensors"].as_array().unwrap();
+        assert_eq!(sensors.len(), 2, "{name}");
+        for s in sensors {
+            let addr = s["address"].as_str().unwrap();
+            assert_eq!(
+                s["imu_packets"].as_u64(),
+                want.get(addr).copied(),
+                "{name}: IMU packets of {addr}"
+            );
+        }
+        assert_eq!(j["imu_samples"], want.values().sum::<u64>(), "{name}");
+        assert_eq!(j["packets"]["ignored"], 0, "{name}");
+        assert_eq!(j["packets"]["early"], early, "{name}");
+    }
+}
+
+/// `same_ports.pcap` through a port offset (as `replay --port-offset` sends it): the LEGACY
+/// sensor's packets carry no serial, so an unbound metadata file can only know them by the
+/// metadata's lidar port, and misses them; a file bound to the sender's address
+/// (`--calib ADDR=FILE`) takes them on any port. The points per sensor are ouster-sdk's
+/// golden counts.
+#[test]
+fn a_metadata_file_bound_to_an_address_takes_legacy_packets_on_any_port() {
+    use ringscan::sensor::{claim, parse_calibration, CalibrationPool, StreamSettings};
+    use ringscan::sweep::Demux;
+    let Some(root) = common::captures() else {
+        return;
+    };
+    let dir = root.join("ouster-lidar__ouster-sdk/tests/pcaps");
+    let golden: Value = serde_json::from_slice(
+        &std::fs::read(
+            root.join("golden/ouster-lidar__ouster-sdk/tests/pcaps/same_ports.golden.json"),
+        )
+        .unwrap(),
+    )
+    .unwrap();
+    // The golden's points per serial.
+    let want: std::collections::BTreeMap<u64, u64> = golden["sensors"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| {
+            let n = s["frames"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .flat_map(|f| f["returns"].as_array().cloned().unwrap_or_default())
+                .map(|r| r["points"].as_u64().unwrap())
+                .sum();
+            (s["sn"].as_str().unwrap().parse().unwrap(), n)
+        })
+        .collect();
+    assert_eq!(want.len(), 2);
+    // Which address sends which metadata's packets (INVENTORY.md).
+    let bindings = [
+        ("169.254.92.158", "same_ports.1.json"),
+        ("169.254.238.111", "same_ports.2.json"),
+    ];
+    for bound in [false, true] {
+        let calibs = bindings
+            .iter()
+            .map(|(a, f)| {
+                let addr = bound.then(|| a.parse().unwrap());
+                parse_calibration(&std::fs::read(dir.join(f)).unwrap(), f, addr).unwrap()
+            })
+            .collect();
+        let mut pool = CalibrationPool::new(calibs, StreamSettings::default());
+        let mut demux = Demux::new(Box::new(move |d| claim(d, &mut pool)), None);
+        let mut points = [0u64; 2];
+        let mut src =
+            ringscan::source::pcap::PcapSource::open(&dir.join("same_ports.pcap")).unwrap();
+        while let Some(d) = src.next_datagram().unwrap() {
+            let port = d.dst.port() + 20000;
+            demux
+                .push(d.time_ns, *d.src.ip(), port, d.payload, &mut |i, s, _| {
+                    points[i] += s.points.len() as u64
+                })
+                .unwrap();
+        }
+        demux
+            .finish(&mut |i, s, _| points[i] += s.points.len() as u64)
+            .unwrap();
+        let got: std::collections::BTreeMap<u64, u64> = demux
+            .sensors()
+            .enumerate()
+            .map(|(i, (_, s, _))| (s.summary().0["serial"].as_u64().unwrap(), points[i]))
+            .collect();
+        if bound {
+            assert_eq!(got, want, "bound files: both sensors, the golden's points");
+        } else {
+            let profile_based: Vec<u64> = got.keys().copied().collect();
+            assert_eq!(
+                profile_based,
+                [122247000785],
+                "unbound: the LEGACY sensor is not known"
+            );
+            assert_eq!(got[&122247000785], want[&122247000785]);
+        }
+    }
+}

@@ -377,6 +377,9 @@ struct Held {
     decoded: u64,
     /// Let go to stay within [`HOLD_BYTES`].
     evicted: u64,
+    /// Let go when a `--calib` file started their sensor (the demultiplexer holds a sensor's
+    /// datagrams of the last second itself, and routed them).
+    recognised: u64,
 }
 
 impl Held {
@@ -412,6 +415,7 @@ impl Held {
             "decoded": self.decoded,
             "replayed": self.replayed,
             "evicted": self.evicted,
+            "recognised": self.recognised,
             "left": self.by_addr.values().map(|q| q.len() as u64).sum::<u64>(),
         })
     }
@@ -473,6 +477,11 @@ impl DecodeThread {
                     }
                     if self.session.demux().stats().ignored > ignored {
                         self.unclaimed(r);
+                    } else if self.held.by_addr.contains_key(r.src.ip()) {
+                        // Started by a `--calib` file: the demultiplexer routed its held
+                        // datagrams (those of the last second) to it.
+                        let n = self.held.take(*r.src.ip()).len() as u64;
+                        self.held.recognised += n;
                     }
                     self.forward_sweeps();
                     let (sweeps, points) = self.session.totals();
@@ -510,13 +519,17 @@ impl DecodeThread {
 
     /// A datagram from a sensor address that no family claimed: a sensor whose calibration
     /// is not known yet (an Ouster sensor without its metadata); ask the sensor for it, and
-    /// hold the datagram until it comes.
+    /// hold the datagram until it comes. A sensor a `--calib` file may still start (its IMU
+    /// packet came before its first lidar packet) is not asked.
     fn unclaimed(&mut self, r: Received) {
         let addr = *r.src.ip();
         if !self.sensors.contains(&addr) {
             return;
         }
         self.held.hold(r);
+        if self.session.calibration_pending("ouster", addr) {
+            return;
+        }
         if self
             .asked
             .get(&addr)
@@ -641,7 +654,9 @@ impl DecodeThread {
                 self.session.add_calib(spec);
             }
         }
-        // What arrived while the metadata was on its way.
+        // What arrived while the metadata was on its way (the demultiplexer's own copies of
+        // the last second's go: these are pushed again).
+        self.session.forget_early(addr);
         let held = self.held.take(addr);
         if !held.is_empty() {
             tracing::info!(

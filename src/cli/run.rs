@@ -322,6 +322,40 @@ impl Output {
         Ok(())
     }
 
+    /// Writes one datagram of sensor `idx` to `/raw` (`--raw`), or holds it until the sensor
+    /// is registered (its model known), within [`RAW_HOLD_BYTES`] and
+    /// [`RAW_HOLD_TOTAL_BYTES`]; beyond them it is counted in `raw_dropped`.
+    fn raw_datagram(
+        &mut self,
+        idx: usize,
+        time: i64,
+        src: std::net::SocketAddrV4,
+        port: u16,
+        payload: &[u8],
+    ) -> Result<(), PumpError> {
+        let id = self.sensor(idx, *src.ip()).id;
+        match (id, self.sink.as_mut()) {
+            (Some(id), Some(sink)) => {
+                sink.write_raw(id, time.max(0) as u64, src, port, payload)
+                    .map_err(PumpError::Sink)?;
+            }
+            _ => {
+                let total = &mut self.raw_hold_total;
+                let s = &mut self.sensors[idx];
+                if s.raw_hold_bytes + payload.len() <= RAW_HOLD_BYTES
+                    && *total + payload.len() <= RAW_HOLD_TOTAL_BYTES
+                {
+                    s.raw_hold_bytes += payload.len();
+                    *total += payload.len();
+                    s.raw_hold.push((time, port, src.port(), payload.to_vec()));
+                } else {
+                    s.raw_dropped += 1;
+                }
+            }
+        }
+        Ok(())
+    }
+
     fn on_sweep(
         &mut self,
         idx: usize,
@@ -776,6 +810,18 @@ impl Session {
 
     /// Adds a calibration (e.g. Ouster metadata fetched from the sensor) for sensors not yet
     /// seen; it is attached to the output like a `--calib` file.
+    /// Whether a `--calib` file of `family` may still serve a sensor at `addr` (bound to it,
+    /// or unbound and serving no sensor yet): its first lidar packet will start it.
+    pub fn calibration_pending(&self, family: &str, addr: Ipv4Addr) -> bool {
+        self.chooser.borrow().pending(family, addr)
+    }
+
+    /// Lets go of the datagrams the demultiplexer holds for `addr` (the caller holds them too
+    /// and pushes them again).
+    pub fn forget_early(&mut self, addr: Ipv4Addr) {
+        self.demux.forget_early(addr);
+    }
+
     pub fn add_calib(&mut self, spec: Calibration) {
         self.chooser.borrow_mut().add(&spec);
         self.out
@@ -935,14 +981,16 @@ impl Session {
         payload: &[u8],
     ) -> Result<(), PumpError> {
         let (demux, out) = (&mut self.demux, &mut self.out);
-        let (addr, src_port) = (*src.ip(), src.port());
-        let routed = demux.push(time, addr, port, payload, &mut |idx, sweep, facts| {
+        let addr = *src.ip();
+        let routed = demux.push_from(time, src, port, payload, &mut |idx, sweep, facts| {
             out.on_sweep(idx, addr, sweep, facts, &[port]);
         });
-        let idx = match routed {
-            Ok(Some(idx)) => idx,
-            Ok(None) => return Ok(()),
-            Err((idx, e)) => return Err(PumpError::Stream(idx, e)),
+        // Datagrams the sensor sent before the one that started it went to it first.
+        let (idx, own) = match (routed, demux.replayed().0) {
+            (Ok(Some(idx)), _) => (idx, true),
+            (Ok(None), Some(idx)) => (idx, false),
+            (Ok(None), None) => return Ok(()),
+            (Err((idx, e)), _) => return Err(PumpError::Stream(idx, e)),
         };
         if let Some(e) = out.error.take() {
             return Err(PumpError::Sink(e));
@@ -1000,25 +1048,12 @@ impl Session {
             }
         }
         if out.raw && out.sink.is_some() {
-            let id = out.sensor(idx, addr).id;
-            match (id, out.sink.as_mut()) {
-                (Some(id), Some(sink)) => {
-                    sink.write_raw(id, time.max(0) as u64, src, port, payload)
-                        .map_err(PumpError::Sink)?;
-                }
-                _ => {
-                    let total = &mut out.raw_hold_total;
-                    let s = &mut out.sensors[idx];
-                    if s.raw_hold_bytes + payload.len() <= RAW_HOLD_BYTES
-                        && *total + payload.len() <= RAW_HOLD_TOTAL_BYTES
-                    {
-                        s.raw_hold_bytes += payload.len();
-                        *total += payload.len();
-                        s.raw_hold.push((time, port, src_port, payload.to_vec()));
-                    } else {
-                        s.raw_dropped += 1;
-                    }
-                }
+            for e in demux.replayed().1 {
+                let from = std::net::SocketAddrV4::new(addr, e.src_port);
+                out.raw_datagram(idx, e.host_ns, from, e.dst_port, e.payload)?;
+            }
+            if own {
+                out.raw_datagram(idx, time, src, port, payload)?;
             }
         }
         Ok(())
@@ -1130,6 +1165,7 @@ impl Session {
                 "missing": missing,
                 "position": position,
                 "ignored": dstats.ignored,
+                "early": dstats.early,
             }),
         );
         m.insert("sensors".into(), Value::Array(sensors));

@@ -93,6 +93,11 @@ impl Chooser {
             .collect()
     }
 
+    /// Whether a calibration of `family` may still serve a new sensor at `addr`.
+    pub fn pending(&self, family: &str, addr: Ipv4Addr) -> bool {
+        self.pool.candidates(family, addr, true).next().is_some()
+    }
+
     /// The stream for a new sensor whose first datagram is `d`.
     pub fn choose(&mut self, d: &FirstDatagram<'_>) -> Option<Claimed> {
         sensor::claim(d, &mut self.pool)

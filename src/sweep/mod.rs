@@ -9,7 +9,7 @@ pub mod demux;
 use crate::point::Point;
 use crate::time::ClockSource;
 
-pub use demux::{Demux, DemuxStats, SensorKey};
+pub use demux::{Demux, DemuxStats, EarlyDatagram, SensorKey};
 
 /// One sweep: the points of one revolution (or of the sensor's frame), with its times and
 /// its packet accounting. Buffers are reused from sweep to sweep.

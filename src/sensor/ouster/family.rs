@@ -44,15 +44,17 @@ impl OusterCalibration {
     /// Whether a sensor whose first datagram is `d` is the one this metadata describes: a
     /// lidar packet of the metadata's size whose serial and init_id fit (profile-based
     /// packets), or whose destination port is the metadata's lidar port (LEGACY packets carry
-    /// no serial); an IMU-only sensor (lidar port 0) by its IMU packet size and port.
-    pub fn fits(&self, d: &FirstDatagram<'_>) -> bool {
+    /// no serial; a file `bound` to the sender's address needs no port: the user named the
+    /// sensor, and its packets may come through a port offset); an IMU-only sensor (lidar port
+    /// 0) by its IMU packet size and port.
+    pub fn fits(&self, d: &FirstDatagram<'_>, bound: bool) -> bool {
         let info = &self.info;
         let lidar = d.payload.len() == info.lidar_packet_bytes()
             && info.udp_port_lidar != 0
             && match LidarPacket::with_header(d.payload, &info.format, self.decoder.header_kind()) {
                 Ok(p) => {
                     if info.format.profile.header() == HeaderKind::Legacy {
-                        d.port == info.udp_port_lidar
+                        bound || d.port == info.udp_port_lidar
                     } else {
                         self.decoder.check_sensor(&p).is_ok()
                             && (info.serial == 0 || p.serial() == info.serial)
@@ -139,7 +141,7 @@ impl Family for Ouster {
             .candidates(self.name(), d.src, true)
             .find_map(|(i, c)| {
                 let oc = c.get::<OusterCalibration>()?;
-                oc.fits(d).then(|| {
+                oc.fits(d, c.addr == Some(d.src)).then(|| {
                     (
                         i,
                         (oc.info.clone(), oc.decoder.clone()),
