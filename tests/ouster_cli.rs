@@ -295,8 +295,8 @@ fn zone_monitor_packet_decodes_to_ouster_sdks_zone_states() {
 /// packet names no sensor, so it can only be decoded once its address's lidar packet has
 /// matched a metadata file. Every 48-byte datagram (the legacy IMU packet's size, on the
 /// metadata's `udp_port_imu`), counted here from the pcap per source address, must be one IMU
-/// packet of that address's sensor; before the demultiplexer held them, the early ones were
-/// ignored.
+/// packet of that address's sensor, and `--raw` must keep every datagram; before the
+/// demultiplexer held them, the early ones were ignored.
 #[test]
 fn imu_packets_before_the_first_lidar_packet_are_decoded() {
     let Some(root) = common::captures() else {
@@ -323,10 +323,13 @@ fn imu_packets_before_the_first_lidar_packet_are_decoded() {
             *want.entry(addr).or_default() += u64::from(imu);
         }
         assert!(early > 0, "{name}: a sensor starts with an IMU packet");
+        let scratch = common::Scratch::dir("ouster-early-imu");
         let o = Command::new(env!("CARGO_BIN_EXE_ringscan"))
-            .arg("info")
+            .arg("decode")
             .arg(&pcap)
             .arg("--json")
+            .args(["--raw", "--out"])
+            .arg(scratch.join("out.mcap"))
             .arg("--calib")
             .arg(dir.join(format!("{name}.1.json")))
             .arg("--calib")
@@ -352,6 +355,19 @@ fn imu_packets_before_the_first_lidar_packet_are_decoded() {
         assert_eq!(j["imu_samples"], want.values().sum::<u64>(), "{name}");
         assert_eq!(j["packets"]["ignored"], 0, "{name}");
         assert_eq!(j["packets"]["early"], early, "{name}");
+        // `--raw` keeps every datagram of both sensors, the early ones too.
+        let raw: u64 = j["output"]["topics"]
+            .as_object()
+            .unwrap()
+            .iter()
+            .filter(|(t, _)| t.ends_with("/raw"))
+            .map(|(_, n)| n.as_u64().unwrap())
+            .sum();
+        assert_eq!(
+            raw,
+            common::datagrams(&pcap).len() as u64,
+            "{name}: /raw messages"
+        );
     }
 }
 
