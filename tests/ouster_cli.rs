@@ -117,7 +117,7 @@ fn info_names_serial_firmware_profile_mode_window_timestamps_and_packets_per_por
     };
     let idx: Value =
         serde_json::from_slice(&std::fs::read(root.join("golden/index.json")).unwrap()).unwrap();
-    let mut checked = 0;
+    let (mut checked, mut firmware_checked) = (0, 0);
     for g in idx["goldens"].as_array().unwrap() {
         if g["reference"] != "ouster-sdk" || !g["capture"].as_str().unwrap().ends_with(".pcap") {
             continue;
@@ -157,6 +157,24 @@ fn info_names_serial_firmware_profile_mode_window_timestamps_and_packets_per_por
             }
             // Empty only where the metadata has no firmware (the reduced OS-1-64 file).
             assert!(ours["firmware"].is_string(), "{name}");
+            // `build_rev` is ouster-sdk's `fw_rev`; FW 3.x writes a git hash there, so the
+            // firmware shown is the version its `image_rev` names (read by hand from the
+            // files: crc_test.json `ousteros-image-dev-bootes-v3.2.0-alpha.1+20240812193256`).
+            if s.get("fw_rev").is_some_and(|v| !v.is_null()) {
+                assert_eq!(ours["build_rev"], s["fw_rev"], "{name}");
+            }
+            let want = match name.as_ref() {
+                "crc_test.pcap" => Some("v3.2.0-alpha.1"),
+                "shot_limiting_test.pcap" => Some("v3.2.0"),
+                "OS-1-128_767798045_1024x10_20230712_120049.pcap" => Some("v3.1.0-alpha.1"),
+                "OS-0-32-U1_v2.2.0_1024x10.pcap" => Some("v2.2.0-rc.2-17-gbc0879e"),
+                "OS-2-128-U1_v2.3.0_1024x10.pcap" => Some("v2.3.0"),
+                _ => None,
+            };
+            if let Some(w) = want {
+                assert_eq!(ours["firmware"], w, "{name}");
+                firmware_checked += 1;
+            }
             assert!(ours["timestamp_mode"].is_string(), "{name}");
             let per_port = ours["packets_per_port"].as_object().unwrap();
             let total: u64 = per_port.values().map(|v| v.as_u64().unwrap()).sum();
@@ -175,6 +193,7 @@ fn info_names_serial_firmware_profile_mode_window_timestamps_and_packets_per_por
         }
     }
     assert!(checked >= 15, "{checked}");
+    assert!(firmware_checked >= 4, "{firmware_checked}");
 }
 
 /// `--crc on` checks every footer: FW 2.3 writes footers that are not CRCs (INVENTORY.md: 64 of

@@ -1049,29 +1049,33 @@ fn lidar_stream_off_as_the_sdk_decides() {
         &["config_params", "udp_ip"],
         json!("10.0.0.1")
     )));
-    // A profile ringscan does not decode is fine while the stream is off, refused otherwise.
-    let rgb = with(
+    // A profile ringscan does not decode (ouster-sdk's UNKNOWN) is fine while the stream is
+    // off, refused otherwise.
+    let unknown = with(
         nested(),
         &["lidar_data_format", "udp_profile_lidar"],
-        json!("RNG19_RFL8_SIG16_NIR16_RGB16"),
+        json!("UNKNOWN"),
     );
     let info = ok(&with(
-        rgb.clone(),
+        unknown.clone(),
         &["config_params", "udp_port_lidar"],
         json!(0),
     ));
     assert!(info.lidar_off);
-    assert_eq!(info.lidar_profile_name, "RNG19_RFL8_SIG16_NIR16_RGB16");
+    assert_eq!(info.lidar_profile_name, "UNKNOWN");
     assert_eq!(
         (info.lidar_packet_bytes(), info.expected_packets_per_frame()),
         (0, 0)
     );
-    rejects(&rgb, "ringscan does not decode it");
-    // The zone-monitoring profiles are decoded (their zone mask is not read).
+    rejects(&unknown, "ringscan does not decode it");
+    // The zone-monitoring and colour profiles are decoded (their zone mask and colour
+    // channels are not read).
     for name in [
         "RNG19_RFL8_SIG16_NIR16_ZONE16",
         "RNG15_RFL8_NIR8_ZONE16",
         "RNG19_RFL8_SIG16_ZONE16_DUAL",
+        "RNG19_RFL8_SIG16_NIR16_RGB16",
+        "RNG19_RFL8_SIG16_NIR16_RGB16_DUAL",
     ] {
         let info = ok(&with(
             nested(),

@@ -1,13 +1,14 @@
 """Ouster's zone-monitoring lidar profiles (FW 3.2: RNG19_RFL8_SIG16_NIR16_ZONE16,
-RNG15_RFL8_NIR8_ZONE16, RNG19_RFL8_SIG16_ZONE16_DUAL), of which no real capture exists here.
+RNG15_RFL8_NIR8_ZONE16, RNG19_RFL8_SIG16_ZONE16_DUAL) and colour profiles
+(RNG19_RFL8_SIG16_NIR16_RGB16 and its _DUAL), of which no real capture exists here.
 The packets are written by ouster-sdk 1.0.1 (``frame_to_packets``, its own packet format) from
 one frame of random fields, so ringscan's layout tables and the encoder cannot share a mistake:
 
 - every point's range, reflectivity, signal and near-IR equal ouster-sdk's field values of the
   pixels with a return (the same multiset: the profile's fields are where ouster-sdk put them,
-  and the zone mask between them is not read as anything else);
+  and the zone mask or colour channels between them are not read as anything else);
 - the points (x, y, z, ring, t, return) equal those of the same frame written by ouster-sdk in
-  the profile without the zone mask, which the real captures hold ringscan to.
+  the profile without the zone mask or colour, which the real captures hold ringscan to.
 """
 
 from __future__ import annotations
@@ -32,6 +33,12 @@ PAIRS = [
     ("RNG19_RFL8_SIG16_ZONE16_DUAL", "RNG19_RFL8_SIG16_NIR16_DUAL"),
 ]
 
+# Each colour profile and the profile without the colour channels.
+RGB_PAIRS = [
+    ("RNG19_RFL8_SIG16_NIR16_RGB16", "RNG19_RFL8_SIG16_NIR16"),
+    ("RNG19_RFL8_SIG16_NIR16_RGB16_DUAL", "RNG19_RFL8_SIG16_NIR16_DUAL"),
+]
+
 
 def random_fields(h: int, w: int, seed: int) -> dict:
     """Values every profile of PAIRS can carry exactly: ranges in steps of 8 mm (15-bit
@@ -53,6 +60,9 @@ def random_fields(h: int, w: int, seed: int) -> dict:
         "SIGNAL2": rng.integers(0, 65_536, (h, w), dtype=np.uint16),
         "NEAR_IR": rng.integers(0, 256, (h, w), dtype=np.uint16) * 16,
         "ZONE_MASK": rng.integers(0, 65_536, (h, w), dtype=np.uint16),
+        # ouster-sdk holds the three 16-bit colour channels as half floats; finite values
+        # set bits across each channel.
+        "RGB": rng.uniform(0.0, 60_000.0, (h, w, 3)).astype(np.float16),
     }
 
 
@@ -118,11 +128,16 @@ def expected_returns(held: dict) -> list:
 
 
 @pytest.mark.skipif(CAPTURES is None, reason="SKIP: ../shared/captures is missing")
-@pytest.mark.parametrize("zone, base", PAIRS, ids=[z for z, _ in PAIRS])
-def test_zone_profile_decodes_as_ouster_sdk_wrote_it(zone, base, tmp_path):
+@pytest.mark.parametrize(
+    "zone, base, extra",
+    [(z, b, "ZONE_MASK") for z, b in PAIRS] + [(z, b, "RGB") for z, b in RGB_PAIRS],
+    ids=[z for z, _ in PAIRS + RGB_PAIRS],
+)
+def test_zone_and_colour_profiles_decode_as_ouster_sdk_wrote_them(zone, base, extra, tmp_path):
     fields = random_fields(32, 1024, seed=len(zone))
     zpcap, zmeta, held = encode(zone, fields, tmp_path)
-    assert "ZONE_MASK" in held, zone
+    assert extra in held, zone
+    assert np.count_nonzero(held[extra]) > 0.9 * held[extra].size, zone
     got = decode(zpcap, zmeta)
     want = expected_returns(held)
     assert len(got) == len(want) > 25_000

@@ -49,8 +49,8 @@
 //! that contradict the lidar mode; W ∉ {512, 1024, 2048, 4096}; H ∉ {16, 32, 64, 128};
 //! columns per packet that do not divide W; a lidar packet larger than a UDP datagram; a column
 //! window outside `[0, W)`; `pixel_shift_by_row` whose length is not H (the SDK pads or cuts)
-//! or with |shift| ≥ W; unknown profile names (the SDK falls back to LEGACY); profiles ringscan
-//! cannot decode (the `RGB16` ones) unless the lidar stream is off; a `header_type`
+//! or with |shift| ≥ W; unknown profile names (the SDK falls back to LEGACY); the SDK's
+//! `UNKNOWN` profile unless the lidar stream is off; a `header_type`
 //! that contradicts the profile; a LEGACY lidar profile with the ACCEL32_GYRO32_NMEA IMU profile
 //! (the SDK's `PacketFormat` throws on that pair); beam angles that are not H plain numbers, out
 //! of range, or all-zero altitudes (`malformed/complete_but_all_zeros_legacy.json`: every beam at
@@ -142,11 +142,7 @@ const NESTED_SECTIONS: [&str; 7] = [
 ];
 
 /// Lidar profile names ouster-sdk 1.0.1 knows but ringscan does not decode.
-const UNDECODED_PROFILES: [&str; 3] = [
-    "RNG19_RFL8_SIG16_NIR16_RGB16",
-    "RNG19_RFL8_SIG16_NIR16_RGB16_DUAL",
-    "UNKNOWN",
-];
+const UNDECODED_PROFILES: [&str; 1] = ["UNKNOWN"];
 
 /// How the sensor stamps its columns (`config_params.timestamp_mode`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -327,6 +323,27 @@ impl OusterInfo {
     /// Pre-release suffixes are dropped (`v2.5.0-omega.8` → (2, 5, 0)).
     pub fn firmware_version(&self) -> Option<(u32, u32, u32)> {
         parse_firmware_version(&self.image_rev).or_else(|| parse_firmware_version(&self.firmware))
+    }
+
+    /// The firmware as people name it, e.g. `v3.2.0-alpha.1`: [`Self::firmware`] when it is a
+    /// version (`v` and a digit), else the version in [`Self::image_rev`] (FW 3.x writes a git
+    /// hash in `build_rev`: `ousteros-image-dev-bootes-v3.2.0-alpha.1+2024…` → `v3.2.0-alpha.1`),
+    /// else [`Self::firmware`] as it is.
+    pub fn firmware_label(&self) -> String {
+        let is_version = |s: &str| {
+            s.strip_prefix('v')
+                .is_some_and(|r| r.starts_with(|c: char| c.is_ascii_digit()))
+        };
+        if is_version(&self.firmware) {
+            return self.firmware.clone();
+        }
+        let image = &self.image_rev;
+        let from_image = image.match_indices("-v").find_map(|(i, _)| {
+            let tail = &image[i + 1..];
+            let v = tail.split('+').next().unwrap_or(tail);
+            is_version(v).then(|| v.to_string())
+        });
+        from_image.unwrap_or_else(|| self.firmware.clone())
     }
 
     /// Whether lidar packets carry a CRC-64 in the last 8 bytes of the footer: firmware ≥ 2.5

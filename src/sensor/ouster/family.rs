@@ -310,6 +310,7 @@ impl SensorStream for OusterStream {
             "model": f.prod_line,
             "serial": f.serial,
             "firmware": f.firmware,
+            "build_rev": info.firmware,
             "profile": f.profile,
             "lidar_mode": f.mode,
             "columns_per_frame": info.columns_per_frame,

@@ -66,6 +66,13 @@ pub enum Profile {
     /// RNG19_RFL8_SIG16_ZONE16_DUAL (the dual-return pixel with the zone mask where near-IR
     /// was: no near-IR, 16-byte pixels).
     Rng19Rfl8Sig16Zone16Dual,
+    /// RNG19_RFL8_SIG16_NIR16_RGB16 (a single-return pixel packed tighter than
+    /// RNG19_RFL8_SIG16_NIR16, reflectivity beside the range, then three 16-bit colour
+    /// channels: 16-byte pixels).
+    Rng19Rfl8Sig16Nir16Rgb16,
+    /// RNG19_RFL8_SIG16_NIR16_RGB16_DUAL (the dual-return pixel and three 16-bit colour
+    /// channels after the near-IR: 20-byte pixels).
+    Rng19Rfl8Sig16Nir16Rgb16Dual,
 }
 
 /// The fields of one profile (None where the profile lacks the field).
@@ -94,7 +101,7 @@ pub struct Layout {
 }
 
 /// Every profile, for iteration.
-pub const ALL_PROFILES: [Profile; 11] = [
+pub const ALL_PROFILES: [Profile; 13] = [
     Profile::Legacy,
     Profile::Rng19Rfl8Sig16Nir16,
     Profile::Rng19Rfl8Sig16Nir16Dual,
@@ -106,6 +113,8 @@ pub const ALL_PROFILES: [Profile; 11] = [
     Profile::Rng15Rfl8Nir8Zone16,
     Profile::Rng19Rfl8Sig16Nir16Zone16,
     Profile::Rng19Rfl8Sig16Zone16Dual,
+    Profile::Rng19Rfl8Sig16Nir16Rgb16,
+    Profile::Rng19Rfl8Sig16Nir16Rgb16Dual,
 ];
 
 impl Profile {
@@ -123,6 +132,8 @@ impl Profile {
             Self::Rng15Rfl8Nir8Zone16 => "RNG15_RFL8_NIR8_ZONE16",
             Self::Rng19Rfl8Sig16Nir16Zone16 => "RNG19_RFL8_SIG16_NIR16_ZONE16",
             Self::Rng19Rfl8Sig16Zone16Dual => "RNG19_RFL8_SIG16_ZONE16_DUAL",
+            Self::Rng19Rfl8Sig16Nir16Rgb16 => "RNG19_RFL8_SIG16_NIR16_RGB16",
+            Self::Rng19Rfl8Sig16Nir16Rgb16Dual => "RNG19_RFL8_SIG16_NIR16_RGB16_DUAL",
         }
     }
 
@@ -223,7 +234,21 @@ impl Profile {
                 reflectivity2: Some(f(48, 8, 0)),
                 signal2: None,
             },
-            Self::FiveWordPixel => Layout {
+            // The colour channels (R, G, B u16 @8 single, @14 dual) are not read: points do
+            // not carry them.
+            Self::Rng19Rfl8Sig16Nir16Rgb16 => Layout {
+                pixel_bytes: 16,
+                range: f(0, 19, 0),
+                flags: Some(f(19, 5, 0)),
+                reflectivity: f(24, 8, 0),
+                signal: Some(f(32, 16, 0)),
+                near_ir: Some(f(48, 16, 0)),
+                range2: None,
+                flags2: None,
+                reflectivity2: None,
+                signal2: None,
+            },
+            Self::FiveWordPixel | Self::Rng19Rfl8Sig16Nir16Rgb16Dual => Layout {
                 pixel_bytes: 20,
                 range: f(0, 19, 0),
                 flags: Some(f(19, 5, 0)),
@@ -400,5 +425,54 @@ mod tests {
             (Some(1_000), Some(2_000))
         );
         assert_eq!(l.near_ir, None);
+    }
+
+    /// One pixel of each colour profile written byte by byte from ouster-sdk's tables
+    /// (`RGB_FIELD_INFO`, `DUAL_RGB_FIELD_INFO`), the colour channels all ones: no field reads
+    /// into them.
+    #[test]
+    fn rgb_profile_pixels_read_the_sdk_offsets() {
+        use crate::sensor::ouster::wire::read_field_at;
+        let read = |px: &[u8], f: Option<Field>| f.map(|f| read_field_at(px, 0, f));
+
+        // RNG19_RFL8_SIG16_NIR16_RGB16: range (19 bits) + flags, reflectivity @3, signal @4,
+        // near-IR @6, R G B @8, @10, @12, two spare bytes.
+        let l = Profile::Rng19Rfl8Sig16Nir16Rgb16.layout();
+        let mut px = [0xFFu8; 16];
+        px[..4].copy_from_slice(&(98_765u32 | 0b01010 << 19 | 199 << 24).to_le_bytes());
+        px[4..6].copy_from_slice(&0x4321u16.to_le_bytes());
+        px[6..8].copy_from_slice(&0x8765u16.to_le_bytes());
+        assert_eq!(l.pixel_bytes, 16);
+        assert_eq!(read(&px, Some(l.range)), Some(98_765));
+        assert_eq!(read(&px, l.flags), Some(0b01010));
+        assert_eq!(read(&px, Some(l.reflectivity)), Some(199));
+        assert_eq!(read(&px, l.signal), Some(0x4321));
+        assert_eq!(read(&px, l.near_ir), Some(0x8765));
+        assert_eq!((read(&px, l.range2), read(&px, l.signal2)), (None, None));
+
+        // RNG19_RFL8_SIG16_NIR16_RGB16_DUAL: two returns @0 and @4, signals @8 and @10,
+        // near-IR @12, R G B @14, @16, @18.
+        let l = Profile::Rng19Rfl8Sig16Nir16Rgb16Dual.layout();
+        let mut px = [0xFFu8; 20];
+        px[..4].copy_from_slice(&(7_000u32 | 1 << 19 | 33 << 24).to_le_bytes());
+        px[4..8].copy_from_slice(&(300_000u32 | 0b00110 << 19 | 44 << 24).to_le_bytes());
+        px[8..10].copy_from_slice(&1_111u16.to_le_bytes());
+        px[10..12].copy_from_slice(&2_222u16.to_le_bytes());
+        px[12..14].copy_from_slice(&3_333u16.to_le_bytes());
+        assert_eq!(l.pixel_bytes, 20);
+        assert_eq!(read(&px, Some(l.range)), Some(7_000));
+        assert_eq!(read(&px, l.flags), Some(1));
+        assert_eq!(read(&px, Some(l.reflectivity)), Some(33));
+        assert_eq!(read(&px, l.range2), Some(300_000));
+        assert_eq!(read(&px, l.flags2), Some(0b00110));
+        assert_eq!(read(&px, l.reflectivity2), Some(44));
+        assert_eq!(
+            (
+                read(&px, l.signal),
+                read(&px, l.signal2),
+                read(&px, l.near_ir)
+            ),
+            (Some(1_111), Some(2_222), Some(3_333))
+        );
     }
 }

@@ -142,7 +142,7 @@ pub struct OusterFacts {
     pub prod_line: String,
     /// Serial number.
     pub serial: u64,
-    /// Firmware.
+    /// Firmware ([`crate::sensor::ouster::calib::OusterInfo::firmware_label`]).
     pub firmware: String,
     /// Lidar profile name.
     pub profile: String,
@@ -220,7 +220,7 @@ impl OusterStream {
         let facts = OusterFacts {
             prod_line: info.prod_line.clone(),
             serial: info.serial,
-            firmware: info.firmware.clone(),
+            firmware: info.firmware_label(),
             profile: info.format.profile.name().to_string(),
             mode: format!("{}x{}", info.columns_per_frame, info.fps),
             metadata: cfg.metadata_name.clone(),
