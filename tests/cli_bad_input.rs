@@ -449,3 +449,34 @@ fn values_that_would_be_ignored_are_refused() {
         assert_eq!(c, Some(2), "{args:?}: {err}");
     }
 }
+
+/// `info` says why it found no sensor: nothing read (an empty capture), or datagrams that no
+/// family recognised, counted (an Ouster capture without its metadata: every datagram of the
+/// pcap). It used to give the Ouster hint whatever the cause.
+#[test]
+fn no_sensor_found_says_why() {
+    let Some(root) = common::captures() else {
+        return;
+    };
+    let dir = root.join("ouster-lidar__ouster-sdk/tests/pcaps");
+    let info = |p: &Path| {
+        let o = Command::new(bin()).arg("info").arg(p).output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
+    let empty = info(&dir.join("empty_pcap.pcap"));
+    assert!(
+        empty.contains("no sensor found: no datagram was read"),
+        "{empty}"
+    );
+    let pcap = dir.join("OS-2-128-U1_v2.3.0_1024x10.pcap");
+    let n = common::datagrams(&pcap).len();
+    assert!(n > 0);
+    let out = info(&pcap);
+    assert!(
+        out.contains(&format!(
+            "no sensor found: {n} datagrams that no sensor family recognised"
+        )) && out.contains("--calib META.json"),
+        "{out}"
+    );
+}

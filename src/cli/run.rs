@@ -1811,7 +1811,20 @@ fn print_text(j: &Value) {
         }
     }
     if j["sensors"].as_array().is_none_or(|a| a.is_empty()) {
-        println!("  no sensor found (Ouster captures need their metadata: --calib META.json)");
+        // Say why, as far as the counts tell: nothing read, or datagrams no family knew.
+        let ignored = g(&j["packets"]["ignored"]);
+        if ignored == 0 {
+            println!(
+                "  no sensor found: no datagram was read (an empty capture, or none selected by \
+                 --topic, --start, --end)"
+            );
+        } else {
+            println!(
+                "  no sensor found: {ignored} datagrams that no sensor family recognised (Ouster \
+                 packets need their metadata: --calib META.json; the others are known by their \
+                 size and layout)"
+            );
+        }
     }
     let p = &j["packets"];
     for name in j["unused_calibrations"]
