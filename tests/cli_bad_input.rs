@@ -480,3 +480,63 @@ fn no_sensor_found_says_why() {
         "{out}"
     );
 }
+
+/// An option that only one family reads, on a capture of another family, is reported instead
+/// of passing for applied (`--fov` on a Velodyne capture left its 872,800 points unchanged
+/// without a word); on a capture of that family it is not. A deskew that could not run (no IMU
+/// on an HDL-32E) is said in the text output, not only in `--json`.
+#[test]
+fn options_of_another_family_and_a_skipped_deskew_are_reported() {
+    let Some(root) = common::captures() else {
+        return;
+    };
+    let velodyne = root.join("Kitware__VeloView/Testing/Data/monterey-first-100-packets.pcap");
+    let hesai = root.join(
+        "tier4__nebula/src/nebula_hesai/nebula_hesai/test_resources/decoder_ground_truth/xt32/1673400677802009732/1673400677802009732_0.pcap",
+    );
+    let out = tmp("family-options.mcap");
+    let run = |input: &Path, extra: &[&str]| {
+        let o = Command::new(bin())
+            .arg("decode")
+            .arg(input)
+            .arg("--out")
+            .arg(&*out)
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
+    let j: serde_json::Value = serde_json::from_str(&run(
+        &velodyne,
+        &["--fov", "30:150", "--integration-ms", "50", "--json"],
+    ))
+    .unwrap();
+    let unused: Vec<&str> = j["unused_options"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|v| v.as_str())
+        .collect();
+    assert_eq!(unused.len(), 2, "{unused:?}");
+    assert!(
+        unused[0].starts_with("--fov applies to Hesai sensors only"),
+        "{unused:?}"
+    );
+    assert!(
+        unused[1].starts_with("--integration-ms applies to Livox"),
+        "{unused:?}"
+    );
+    let text = run(&velodyne, &["--fov", "30:150"]);
+    assert!(text.contains("warning: --fov applies to Hesai"), "{text}");
+
+    let j: serde_json::Value =
+        serde_json::from_str(&run(&hesai, &["--fov", "30:150", "--json"])).unwrap();
+    assert_eq!(j["unused_options"], serde_json::json!([]));
+
+    let text = run(&velodyne, &["--pipeline", "default", "--deskew", "imu"]);
+    assert!(
+        text.contains("warning: deskew skipped on 19 sweeps"),
+        "{text}"
+    );
+}

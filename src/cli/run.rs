@@ -194,6 +194,8 @@ struct Output {
     tap: Option<Vec<(usize, Sweep)>>,
     /// Buffers the tap's consumer gives back, for the next tapped sweeps.
     pool: Option<Arc<BufferPool>>,
+    /// Options given that only one family reads: (option, family, where the others have it).
+    family_options: Vec<(&'static str, &'static str, &'static str)>,
 }
 
 /// Point and column buffers that the consumer of handed-out sweeps gives back (the Python
@@ -775,6 +777,30 @@ impl Session {
             live: None,
             tap: None,
             pool: None,
+            family_options: [
+                (
+                    opts.fov_deg.is_some(),
+                    "--fov",
+                    "hesai",
+                    "; other sensors: the pipeline's filter.azimuth_min_deg / azimuth_max_deg",
+                ),
+                (
+                    opts.dual_return_threshold_m.is_some(),
+                    "--dual-return-threshold",
+                    "hesai",
+                    "",
+                ),
+                (
+                    opts.integration_ms.is_some(),
+                    "--integration-ms",
+                    "livox",
+                    "",
+                ),
+            ]
+            .into_iter()
+            .filter(|(given, ..)| *given)
+            .map(|(_, o, f, h)| (o, f, h))
+            .collect(),
         };
         Ok(Self {
             demux,
@@ -1156,6 +1182,23 @@ impl Session {
             .filter(|n| !used.contains(n))
             .collect();
         m.insert("unused_calibrations".into(), json!(unused));
+        // An option of one family on a run that found sensors, none of them that family's,
+        // did nothing: say so rather than let it pass for applied.
+        let kinds: std::collections::BTreeSet<&str> =
+            sensors.iter().filter_map(|s| s["kind"].as_str()).collect();
+        let unused_options: Vec<String> = out
+            .family_options
+            .iter()
+            .filter(|(_, family, _)| !kinds.is_empty() && !kinds.contains(family))
+            .map(|(option, family, hint)| {
+                let mut name = family.to_string();
+                if let Some(c) = name.get_mut(..1) {
+                    c.make_ascii_uppercase();
+                }
+                format!("{option} applies to {name} sensors only, and none was found{hint}")
+            })
+            .collect();
+        m.insert("unused_options".into(), json!(unused_options));
         m.insert(
             "packets".into(),
             json!({
@@ -1837,6 +1880,23 @@ fn print_text(j: &Value) {
             "  warning: calibration {name} was used by no sensor: it fits none of the sensors \
              found (family, model, laser count, serial or address)"
         );
+    }
+    for w in j["unused_options"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(Value::as_str)
+    {
+        println!("  warning: {w}");
+    }
+    if let Some(n) = j["pipeline"]["deskew_skipped"].as_u64().filter(|&n| n > 0) {
+        let why = j["pipeline"]["sensors"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .find_map(|s| s["deskew_last_error"].as_str())
+            .unwrap_or("");
+        println!("  warning: deskew skipped on {n} sweeps (kept as measured): {why}");
     }
     println!(
         "  total: {} sweeps, {} points; packets decoded {}, dropped {}, malformed {}, missing {}, ignored {}",
