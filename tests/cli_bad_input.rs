@@ -540,3 +540,58 @@ fn options_of_another_family_and_a_skipped_deskew_are_reported() {
         "{text}"
     );
 }
+
+/// `render`'s exit codes follow the other commands (from the audit: every failure was 2): a file
+/// it cannot read or write is an error (1), asking for what the file does not hold or for an
+/// output path that is a directory is bad usage (2). The PNG is renamed into place, so a
+/// directory or device at `--out` is refused before anything is drawn and no temporary file is
+/// left behind.
+#[test]
+fn render_exit_codes_and_output_path() {
+    let cap = write("render.pcap", &capture(400, &|_, _| {}));
+    let mcap = tmp("render.mcap");
+    let r = decode(
+        &cap,
+        &["--pipeline", "default", "--out", mcap.to_str().unwrap()],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let png = tmp("render.png");
+    let render = |input: &Path, sweep: &str, out: &Path| {
+        let o = Command::new(bin())
+            .arg("render")
+            .arg(input)
+            .args(["--sweep", sweep, "--out"])
+            .arg(out)
+            .output()
+            .unwrap();
+        (
+            o.status.code(),
+            String::from_utf8_lossy(&o.stderr).into_owned(),
+        )
+    };
+    let (c, err) = render(&mcap, "0", &png);
+    assert_eq!(c, Some(0), "{err}");
+    let drawn = std::fs::read(&*png).unwrap();
+    assert_eq!(&drawn[1..4], b"PNG");
+    let dir = png.parent().unwrap();
+    let leftovers: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().contains("tmp-ringscan"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+
+    let (c, err) = render(&mcap, "0", dir);
+    assert_eq!(c, Some(2), "a directory: {err}");
+    let (c, err) = render(&mcap, "0", &dir.join("no/such/dir/b.png"));
+    assert_eq!(c, Some(1), "an unwritable path: {err}");
+    let (c, err) = render(&cap, "0", &png);
+    assert_eq!(c, Some(1), "not an MCAP: {err}");
+    let (c, err) = render(&mcap, "9999", &png);
+    assert_eq!(c, Some(2), "a sweep the file does not hold: {err}");
+    assert_eq!(
+        std::fs::read(&*png).unwrap(),
+        drawn,
+        "the picture already there is kept"
+    );
+}

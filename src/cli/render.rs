@@ -7,7 +7,7 @@
 //! once the sweep's messages are in: memory does not grow with the file.
 
 use std::fs::File;
-use std::io::{BufWriter, Read};
+use std::io::Read;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -52,8 +52,14 @@ struct Frame {
     frame_id: String,
 }
 
+/// Asked for what the file does not hold (exit 2).
 fn bad(path: &str, msg: impl std::fmt::Display) -> RunError {
     RunError::Usage(format!("{path}: {msg}"))
+}
+
+/// The file could not be read, parsed or written (exit 1).
+fn failed(path: &str, msg: impl std::fmt::Display) -> RunError {
+    RunError::File(format!("{path}: {msg}"))
 }
 
 /// x, y (and the `cluster` field, if any) of a point cloud's points.
@@ -79,7 +85,7 @@ fn points_of(pc: &PointCloud) -> Option<Vec<(f32, f32, u32)>> {
 
 fn read_frame(cmd: &RenderCmd) -> Result<Frame, RunError> {
     let path = cmd.input.display().to_string();
-    let mut file = File::open(&cmd.input).map_err(|e| bad(&path, e))?;
+    let mut file = File::open(&cmd.input).map_err(|e| failed(&path, e))?;
     let mut reader = LinearReader::new();
     let topics = [
         format!("{}/ground", cmd.sensor),
@@ -92,14 +98,14 @@ fn read_frame(cmd: &RenderCmd) -> Result<Frame, RunError> {
     // Every pipeline prefix in the file, to name them when the one asked for is absent.
     let mut prefixes: Vec<String> = Vec::new();
     while let Some(event) = reader.next_event() {
-        match event.map_err(|e| bad(&path, e))? {
+        match event.map_err(|e| failed(&path, e))? {
             LinearReadEvent::ReadRequest(n) => {
                 let buf = reader.insert(n.clamp(4096, 1 << 20));
-                let read = file.read(buf).map_err(|e| bad(&path, e))?;
+                let read = file.read(buf).map_err(|e| failed(&path, e))?;
                 reader.notify_read(read);
             }
             LinearReadEvent::Record { data, opcode } => {
-                match mcap::parse_record(opcode, data).map_err(|e| bad(&path, e))? {
+                match mcap::parse_record(opcode, data).map_err(|e| failed(&path, e))? {
                     Record::Channel(c) => {
                         if let Some(i) = topics.iter().position(|t| *t == c.topic) {
                             ids[i] = Some(c.id);
@@ -120,9 +126,9 @@ fn read_frame(cmd: &RenderCmd) -> Result<Frame, RunError> {
                         }
                         got[i] = true;
                         if i < 2 {
-                            let pc = PointCloud::decode(&data[..]).map_err(|e| bad(&path, e))?;
+                            let pc = PointCloud::decode(&data[..]).map_err(|e| failed(&path, e))?;
                             let pts = points_of(&pc)
-                                .ok_or_else(|| bad(&path, "a point cloud without x, y"))?;
+                                .ok_or_else(|| failed(&path, "a point cloud without x, y"))?;
                             frame.frame_id = pc.frame_id.clone();
                             if i == 0 {
                                 frame.ground = pts.iter().map(|p| [p.0, p.1]).collect();
@@ -130,7 +136,7 @@ fn read_frame(cmd: &RenderCmd) -> Result<Frame, RunError> {
                                 frame.obstacles = pts;
                             }
                         } else {
-                            let u = SceneUpdate::decode(&data[..]).map_err(|e| bad(&path, e))?;
+                            let u = SceneUpdate::decode(&data[..]).map_err(|e| failed(&path, e))?;
                             for e in &u.entities {
                                 let k: u32 = e.id.parse().unwrap_or(0);
                                 for c in &e.cubes {
@@ -410,17 +416,29 @@ fn draw(frame: &Frame, cmd: &RenderCmd) -> Canvas {
 
 /// Runs `ringscan render`.
 pub fn render_command(cmd: &RenderCmd) -> Result<ExitCode, RunError> {
+    // A device or directory at --out would be replaced by the rename: refused first.
+    let target = crate::cli::run::output_file_path(&cmd.out, "PNG")?;
     let frame = read_frame(cmd)?;
     let img = draw(&frame, cmd);
     let out = cmd.out.display().to_string();
-    let file = File::create(&cmd.out).map_err(|e| bad(&out, e))?;
-    let mut enc = png::Encoder::new(BufWriter::new(file), img.w, img.h);
+    // Encoded in memory and renamed into place, so a failed write (disk full) leaves no
+    // truncated PNG at the path, nor spoils a picture already there.
+    let mut png_bytes = Vec::new();
+    let mut enc = png::Encoder::new(&mut png_bytes, img.w, img.h);
     enc.set_color(png::ColorType::Rgb);
     enc.set_depth(png::BitDepth::Eight);
     enc.set_compression(png::Compression::Best);
-    let mut w = enc.write_header().map_err(|e| bad(&out, e))?;
-    w.write_image_data(&img.px).map_err(|e| bad(&out, e))?;
-    w.finish().map_err(|e| bad(&out, e))?;
+    let mut w = enc.write_header().map_err(|e| failed(&out, e))?;
+    w.write_image_data(&img.px).map_err(|e| failed(&out, e))?;
+    w.finish().map_err(|e| failed(&out, e))?;
+    let mut tmp = target.clone().into_os_string();
+    tmp.push(".tmp-ringscan");
+    let tmp = std::path::PathBuf::from(tmp);
+    let written = std::fs::write(&tmp, &png_bytes).and_then(|()| std::fs::rename(&tmp, &target));
+    if let Err(e) = written {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(failed(&out, e));
+    }
     println!(
         "{out}: sweep {} of {} ({} frame): {} ground, {} obstacle points, {} clusters",
         cmd.sweep,

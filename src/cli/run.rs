@@ -123,6 +123,9 @@ pub enum RunError {
     /// `--strict` and something was lost.
     #[error("{0}")]
     Strict(String),
+    /// A file could not be read or written (`render`'s MCAP and PNG), with its path.
+    #[error("{0}")]
+    File(String),
 }
 
 fn parse_model(m: Option<&str>) -> Result<Option<String>, RunError> {
@@ -1430,7 +1433,7 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
         .as_deref()
         .filter(|p| args.format == FormatArg::Ros2 && crate::sink::rosbag2::is_bag_dir(p));
     let out_path = match (&args.out, bag_dir) {
-        (Some(p), None) => Some(output_file_path(p)?),
+        (Some(p), None) => Some(output_file_path(p, "MCAP")?),
         _ => None,
     };
     let bag_dir_existed = bag_dir.is_some_and(Path::exists);
@@ -1725,12 +1728,17 @@ pub fn decode_command(args: &DecodeArgs) -> Result<ExitCode, RunError> {
 /// output is written beside it and renamed over it at the end, so a path that is not a regular
 /// file is refused before anything is decoded: renaming over a device (`/dev/null`) or a
 /// directory would replace it.
-fn output_file_path(path: &Path) -> Result<PathBuf, RunError> {
+pub(crate) fn output_file_path(path: &Path, kind: &str) -> Result<PathBuf, RunError> {
     let refuse = |what: &str| {
         RunError::Usage(format!(
-            "--out {}: {what}, not a file (ringscan writes the MCAP beside it and renames it \
-             into place); give a file path, or leave out --out to decode without writing",
-            path.display()
+            "--out {}: {what}, not a file (ringscan writes the {kind} beside it and renames it \
+             into place); give a file path{}",
+            path.display(),
+            if kind == "MCAP" {
+                ", or leave out --out to decode without writing"
+            } else {
+                ""
+            }
         ))
     };
     let meta = match std::fs::symlink_metadata(path) {

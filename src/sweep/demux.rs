@@ -308,11 +308,15 @@ impl Demux {
         }
         self.replayed_to = Some(idx);
         let mut result = Ok(());
-        for h in &held {
+        for (i, h) in held.iter().enumerate() {
             self.stats.ignored = self.stats.ignored.saturating_sub(1);
             self.stats.early += 1;
             if let Err(e) = self.route(idx, h.host_ns, h.dst_port, &h.payload, on_sweep) {
                 result = Err(e);
+                // Those after it were not routed: not listed, and still counted `ignored`.
+                for h in held.drain(i + 1..) {
+                    self.early.spare.push(h.payload);
+                }
                 break;
             }
         }
