@@ -407,6 +407,22 @@ fn a_poses_file_moves_the_points_by_its_motion() {
         }
     }
     assert!(worst < 1e-4, "worst deviation {worst} m");
+    // Without --pipeline only the deskew runs (the later stages' outputs would be thrown
+    // away: the audit found ground and clusters computed for nothing); the points are those
+    // the full pipeline writes.
+    assert_eq!(j["pipeline"]["outputs"], false);
+    for k in ["after_voxel", "ground", "clusters"] {
+        assert_eq!(j["pipeline"]["counts"][k], 0, "{k}");
+    }
+    let (full, j) = run(
+        &["--pipeline", "default", "--deskew", &poses_moving],
+        "moving-full.mcap",
+    );
+    assert!(j["pipeline"]["counts"]["ground"].as_u64().unwrap() > 0);
+    assert_eq!(
+        full, moved,
+        "the deskewed points do not depend on the later stages"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -419,7 +419,12 @@ impl PipelineRunner {
         };
         copy_sweep(&mut sp.work, sweep);
         let mut clock = || origin.elapsed().as_nanos() as u64;
-        let stats = sp.pipeline.run(&mut sp.work, &mut clock);
+        // `--deskew` without `--pipeline`: the later stages' outputs would be thrown away.
+        let stats = if outputs {
+            sp.pipeline.run(&mut sp.work, &mut clock)
+        } else {
+            sp.pipeline.run_deskew(&mut sp.work, &mut clock)
+        };
         // Points deskewed to the sweep's end pose are stamped with the end's time (on both
         // clocks, so the sensor-clock instant of the stamp stays known: the odometry's IMU).
         let reference_ns = i64::from(stats.reference_ns);

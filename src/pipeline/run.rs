@@ -222,6 +222,26 @@ impl Pipeline {
             ..SweepStats::default()
         };
         let t0 = clock();
+        self.deskew_stage(sweep, &mut stats);
+        let t1 = clock();
+        self.later_stages(sweep, &mut stats, clock, t0, t1);
+        stats
+    }
+
+    /// Only the deskew stage (a caller that wants the deskewed points and no other output):
+    /// the later stages' counts stay 0.
+    pub fn run_deskew(&mut self, sweep: &mut Sweep, clock: &mut dyn FnMut() -> u64) -> SweepStats {
+        let mut stats = SweepStats {
+            input: sweep.points.len(),
+            ..SweepStats::default()
+        };
+        let t0 = clock();
+        self.deskew_stage(sweep, &mut stats);
+        stats.times.deskew_ns = clock().saturating_sub(t0);
+        stats
+    }
+
+    fn deskew_stage(&mut self, sweep: &mut Sweep, stats: &mut SweepStats) {
         let deskewed = match &self.mode {
             DeskewMode::None => Ok(false),
             DeskewMode::ConstantVelocity | DeskewMode::Odometry => {
@@ -263,7 +283,16 @@ impl Pipeline {
             }
             Err(e) => stats.deskew_error = Some(e),
         }
-        let t1 = clock();
+    }
+
+    fn later_stages(
+        &mut self,
+        sweep: &Sweep,
+        stats: &mut SweepStats,
+        clock: &mut dyn FnMut() -> u64,
+        t0: u64,
+        t1: u64,
+    ) {
         stats.filter = self
             .filter
             .apply(&sweep.points, &mut self.filtered, &self.base_from_sensor);
@@ -306,7 +335,6 @@ impl Pipeline {
             ground_ns: t4.saturating_sub(t3),
             cluster_ns: t5.saturating_sub(t4),
         };
-        stats
     }
 
     /// Ground points of the last sweep (`base_link`, or the sensor frame without extrinsics).
