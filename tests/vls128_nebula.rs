@@ -385,3 +385,48 @@ fn vls128_real_capture_matches_nebula() {
     // tolerance from ringscan's, by the interpolation measured above.
     assert!(over > 0);
 }
+
+/// `info` on the VLS-128 capture without its calibration (the VLS-128 has no built-in one)
+/// still says what the capture is, as it does for a Hesai sensor without its file: the model,
+/// the return mode (byte 1204 = 0x37, strongest: NEBULA.md) and every data packet, no points
+/// (from the audit: it printed nothing and exited 1). `decode` still refuses, writing nothing.
+#[test]
+fn info_without_the_calibration_names_the_model() {
+    let Some(c) = common::captures() else { return };
+    let pcap = c
+        .join(DIR)
+        .join("1614315746471294674/1614315746471294674_0.pcap");
+    let n = common::datagrams(&pcap).len() as u64;
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_ringscan"))
+        .arg("info")
+        .arg(&pcap)
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let s = &j["sensors"][0];
+    assert_eq!(s["model"], "VLS-128");
+    assert_eq!(s["return_mode"], "strongest");
+    assert_eq!(s["data_packets"], n);
+    assert_eq!(
+        (s["points"].as_u64(), j["points"].as_u64()),
+        (Some(0), Some(0))
+    );
+    assert!(
+        s["calibration"].as_str().unwrap().starts_with("none"),
+        "{s}"
+    );
+
+    let out = std::env::temp_dir().join(format!("ringscan-vls128-{}.mcap", std::process::id()));
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_ringscan"))
+        .arg("decode")
+        .arg(&pcap)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("no built-in calibration"));
+    assert!(!out.exists());
+}

@@ -520,6 +520,7 @@ where
                 serve_rate: c.serve_rate,
                 bag: c.bag,
                 keep_columns: false,
+                inspect: false,
             };
             run::decode_command(&args)
         }
@@ -562,6 +563,7 @@ where
                     format: c.format,
                     odometry: c.odometry,
                     keep_columns: false,
+                    inspect: false,
                 },
                 format: c.format,
                 fields_minimal: c.fields == FieldsArg::Minimal,

@@ -97,6 +97,9 @@ pub struct DecodeArgs {
     pub bag: BagArgs,
     /// Keep each point's firing column in the sweeps ([`SweepReader`]'s organised images).
     pub keep_columns: bool,
+    /// `info`: read a sensor that lacks a calibration without points instead of failing
+    /// ([`StreamSettings::inspect`]).
+    pub inspect: bool,
 }
 
 /// Why a run failed.
@@ -592,6 +595,8 @@ pub struct SessionOptions {
     pub odometry: OdometryArgs,
     /// Keep each point's firing column in the sweeps (organised images, [`SweepReader`]).
     pub keep_columns: bool,
+    /// Only inspecting (`info`): [`StreamSettings::inspect`].
+    pub inspect: bool,
 }
 
 impl DecodeArgs {
@@ -629,6 +634,7 @@ impl DecodeArgs {
             serve_rate: crate::source::udp::Rate::Max,
             bag: BagArgs::default(),
             keep_columns: false,
+            inspect: false,
         }
     }
 
@@ -652,6 +658,7 @@ impl DecodeArgs {
             format: self.format,
             odometry: self.odometry.clone(),
             keep_columns: self.keep_columns,
+            inspect: self.inspect,
         }
     }
 }
@@ -754,6 +761,7 @@ impl Session {
                     .filter(|ms| ms.is_finite() && *ms > 0.0)
                     .map(|ms| (ms * 1e6).round() as u64),
                 imu_to_sensor: None,
+                inspect: opts.inspect,
             },
         )));
         let shared = chooser.clone();
@@ -1776,6 +1784,7 @@ pub fn info_command(
         calib: calib.to_vec(),
         json: json_out,
         bag: bag.clone(),
+        inspect: true,
         ..DecodeArgs::new(input.to_path_buf())
     };
     let s = decode_capture(&args)?;

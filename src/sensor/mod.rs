@@ -259,6 +259,10 @@ pub struct StreamSettings {
     /// IMU-to-sensor transform (row-major 4 × 4, mm) overriding the one the family
     /// publishes per model (Livox).
     pub imu_to_sensor: Option<[f64; 16]>,
+    /// Only inspecting the input (`ringscan info`): a sensor whose points need a calibration
+    /// it was not given (VLS-128) is still read — model, return mode, clock, loss — instead of
+    /// stopping the run.
+    pub inspect: bool,
 }
 
 /// The calibrations given for a run, and which of them already serve a sensor: a file not

@@ -93,6 +93,7 @@ impl Family for Velodyne {
             decode: s.decode,
             cut_angle: s.cut_angle,
             keep_columns: s.keep_columns,
+            inspect: s.inspect,
             ..StreamConfig::default()
         };
         Some(Ok(Box::new(VelodyneStream::new(cfg))))

@@ -57,6 +57,9 @@ pub struct StreamConfig {
     pub max_sweep_ns: i64,
     /// Keep each point's firing column (for [`crate::sweep::Organized`]).
     pub keep_columns: bool,
+    /// Only inspecting: a model without its calibration is read without points
+    /// ([`crate::sensor::StreamSettings::inspect`]) instead of being an error.
+    pub inspect: bool,
 }
 
 impl Default for StreamConfig {
@@ -69,6 +72,7 @@ impl Default for StreamConfig {
             max_gap_ns: 1_000_000_000,
             max_sweep_ns: 1_000_000_000,
             keep_columns: false,
+            inspect: false,
         }
     }
 }
@@ -182,6 +186,8 @@ pub struct VelodyneStream {
     column_rate: ColumnRate,
     /// The rate [`Self::column_rate`] gave the packet being decoded.
     packet_rate: Option<f64>,
+    /// Inspecting a model whose calibration is missing: packets are counted, not decoded.
+    uncalibrated: bool,
 }
 
 impl VelodyneStream {
@@ -201,6 +207,7 @@ impl VelodyneStream {
             anchor: (0, 0),
             column_rate: ColumnRate::default(),
             packet_rate: None,
+            uncalibrated: false,
         }
     }
 
@@ -293,6 +300,10 @@ impl VelodyneStream {
             self.stats.malformed += 1;
             return Ok(());
         };
+        if self.uncalibrated {
+            self.stats.data_packets += 1;
+            return Ok(());
+        }
         if self.decoder.is_none() {
             if self.facts.product_id.is_none() {
                 self.facts.product_id = Some(packet.factory_product());
@@ -321,6 +332,10 @@ impl VelodyneStream {
 
     fn replay_pending(&mut self, on_sweep: &mut dyn FnMut(&mut Sweep, &SensorFacts)) {
         let pending = core::mem::take(&mut self.pending);
+        if self.uncalibrated {
+            self.stats.data_packets += pending.len() as u64;
+            return;
+        }
         for (host, bytes) in &pending {
             if let Ok(p) = DataPacket::new(&bytes[..]) {
                 self.decode_packet(*host, &p, on_sweep);
@@ -393,9 +408,23 @@ impl VelodyneStream {
                         found: c.num_lasers(),
                     }))
                 }
-                None => {
-                    builtin::builtin(model).ok_or(StreamError::NeedsCalibration(model.name()))?
-                }
+                None => match builtin::builtin(model) {
+                    Some(c) => c,
+                    None if self.cfg.inspect => {
+                        // Read on without points: the packets still tell the model, return
+                        // mode, clock and loss.
+                        self.facts.calibration = format!(
+                            "none (the {} has no built-in calibration: give its file with \
+                             --calib; no points decoded)",
+                            model.name()
+                        );
+                        self.facts.model = Some(model);
+                        self.facts.mode = Some(mode);
+                        self.uncalibrated = true;
+                        return Ok(());
+                    }
+                    None => return Err(StreamError::NeedsCalibration(model.name())),
+                },
             },
         };
         self.facts.calibration = calib.source.clone();
