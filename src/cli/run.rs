@@ -845,8 +845,6 @@ impl Session {
         self.out.sink = sink;
     }
 
-    /// Adds a calibration (e.g. Ouster metadata fetched from the sensor) for sensors not yet
-    /// seen; it is attached to the output like a `--calib` file.
     /// Whether a `--calib` file of `family` may still serve a sensor at `addr` (bound to it,
     /// or unbound and serving no sensor yet): its first lidar packet will start it.
     pub fn calibration_pending(&self, family: &str, addr: Ipv4Addr) -> bool {
@@ -859,6 +857,8 @@ impl Session {
         self.demux.forget_early(addr);
     }
 
+    /// Adds a calibration (e.g. Ouster metadata fetched from the sensor) for sensors not yet
+    /// seen; it is attached to the output like a `--calib` file.
     pub fn add_calib(&mut self, spec: Calibration) {
         self.chooser.borrow_mut().add(&spec);
         self.out
