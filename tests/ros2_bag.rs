@@ -268,7 +268,8 @@ fn an_existing_bag_is_not_overwritten() {
         .arg(&bag)
         .output()
         .unwrap();
-    assert!(!out.status.success());
+    // Bad usage, as a directory or device given for an MCAP file is (exit 2).
+    assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("already holds a rosbag2"), "{err}");
     assert_eq!(std::fs::read(bag.join("metadata.yaml")).unwrap(), b"x");

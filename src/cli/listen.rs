@@ -979,6 +979,13 @@ pub fn listen_run_with(
                             let current = files.path(0);
                             files.current = current.clone();
                             if bag_dir {
+                                if files.base.join("metadata.yaml").exists() {
+                                    return Err(RunError::Usage(format!(
+                                        "--out {}: already holds a rosbag2 (metadata.yaml); \
+                                         choose another --out",
+                                        files.base.display()
+                                    )));
+                                }
                                 // The directory and its first (empty) metadata.yaml.
                                 crate::sink::rosbag2::create_dir(&files.base).map_err(
                                     |source| {

@@ -1444,6 +1444,14 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
         (Some(p), None) => Some(output_file_path(p, "MCAP")?),
         _ => None,
     };
+    // A bag is never overwritten: refused as the other unusable --out paths are, before
+    // anything is decoded.
+    if let Some(dir) = bag_dir.filter(|d| d.join("metadata.yaml").exists()) {
+        return Err(RunError::Usage(format!(
+            "--out {}: already holds a rosbag2 (metadata.yaml); choose another --out",
+            dir.display()
+        )));
+    }
     let bag_dir_existed = bag_dir.is_some_and(Path::exists);
     let sink = match (&out_path, bag_dir) {
         (_, Some(dir)) => {
