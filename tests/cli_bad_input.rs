@@ -530,8 +530,19 @@ fn options_of_another_family_and_a_skipped_deskew_are_reported() {
     let text = run(&velodyne, &["--fov", "30:150"]);
     assert!(text.contains("warning: --fov applies to Hesai"), "{text}");
 
-    let j: serde_json::Value =
-        serde_json::from_str(&run(&hesai, &["--fov", "30:150", "--json"])).unwrap();
+    let xt32_csv = root
+        .join("tier4__nebula/src/nebula_hesai/nebula_hesai_decoders/calibration/PandarXT32.csv");
+    let j: serde_json::Value = serde_json::from_str(&run(
+        &hesai,
+        &[
+            "--fov",
+            "30:150",
+            "--json",
+            "--calib",
+            xt32_csv.to_str().unwrap(),
+        ],
+    ))
+    .unwrap();
     assert_eq!(j["unused_options"], serde_json::json!([]));
 
     let text = run(&velodyne, &["--pipeline", "default", "--deskew", "imu"]);
@@ -593,5 +604,41 @@ fn render_exit_codes_and_output_path() {
         std::fs::read(&*png).unwrap(),
         drawn,
         "the picture already there is kept"
+    );
+}
+
+/// `--port` that no data packet went to: the run says how many went elsewhere (counted from
+/// the capture: every 1206-byte datagram to 2368) instead of listing a sensor of "unknown
+/// model" with nothing to explain it.
+#[test]
+fn a_port_no_data_packet_went_to_is_explained() {
+    let Some(c) = common::captures() else {
+        return;
+    };
+    let pcap = c.join("jerry73204__rust-lidar-utils/test_files/hdl32_example.pcap");
+    let data = common::datagrams(&pcap)
+        .iter()
+        .filter(|(_, port, p)| *port == 2368 && p.len() == 1206)
+        .count() as u64;
+    assert!(data > 0);
+    let run = |json: bool| {
+        let mut cmd = Command::new(bin());
+        cmd.arg("decode").arg(&pcap).args(["--port", "9999"]);
+        if json {
+            cmd.arg("--json");
+        }
+        let o = cmd.output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8(o.stdout).unwrap()
+    };
+    let j: serde_json::Value = serde_json::from_str(&run(true)).unwrap();
+    assert_eq!(j["packets"]["other_port"], data);
+    assert_eq!(j["points"], 0);
+    let text = run(false);
+    assert!(
+        text.contains(&format!(
+            "{data} data packets went to other ports than --port: dropped, not decoded"
+        )) && text.contains("model unknown (no data packet decoded)"),
+        "{text}"
     );
 }

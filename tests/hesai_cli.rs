@@ -604,39 +604,103 @@ fn decode_reads_the_at128_dat_through_calib() {
 }
 
 /// A calibration no sensor takes is named, not passed over: the XT32 capture with the QT128's
-/// correction file (128 rows for a 32-laser sensor) decodes no points, and the summary says
-/// the file was used by no sensor; with its own file, nothing is reported unused.
+/// correction file (128 rows for a 32-laser sensor). `info` reads the packets and reports the
+/// file unused; `decode` stops (exit 1, nothing written), names the sensor's need and the
+/// file given; with its own file, nothing is reported unused.
 #[test]
 fn a_calibration_no_sensor_takes_is_reported() {
     let Some(c) = common::captures() else {
         return;
     };
     let pcap = pcap_in(&c.join(GT).join("xt32"));
-    let run = |csv: &str, json: bool| {
-        let mut cmd = Command::new(env!("CARGO_BIN_EXE_ringscan"));
-        cmd.arg("decode")
+    let run = |cmd: &str, csv: &str, json: bool| {
+        let mut c2 = Command::new(env!("CARGO_BIN_EXE_ringscan"));
+        c2.arg(cmd)
             .arg(&pcap)
             .arg("--calib")
             .arg(c.join(CALIB).join(csv));
         if json {
-            cmd.arg("--json");
+            c2.arg("--json");
         }
-        let o = cmd.output().unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        String::from_utf8(o.stdout).unwrap()
+        c2.output().unwrap()
     };
-    let j: serde_json::Value = serde_json::from_str(&run("PandarQT128.csv", true)).unwrap();
+    let o = run("info", "PandarQT128.csv", true);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(
         j["unused_calibrations"],
         serde_json::json!(["PandarQT128.csv"])
     );
     assert_eq!(j["points"], 0);
-    let text = run("PandarQT128.csv", false);
+    let o = run("info", "PandarQT128.csv", false);
+    let text = String::from_utf8_lossy(&o.stdout);
     assert!(
         text.contains("warning: calibration PandarQT128.csv was used by no sensor"),
         "{text}"
     );
-    let j: serde_json::Value = serde_json::from_str(&run("PandarXT32.csv", true)).unwrap();
+    let out = common::Scratch::file("hesai-nocalib", "x.mcap");
+    let o = Command::new(env!("CARGO_BIN_EXE_ringscan"))
+        .arg("decode")
+        .arg(&pcap)
+        .arg("--calib")
+        .arg(c.join(CALIB).join("PandarQT128.csv"))
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("PandarXT32 has no built-in calibration")
+            && err.contains("PandarQT128.csv given, but it fits none of the sensors found"),
+        "{err}"
+    );
+    assert!(!out.exists(), "a failed run wrote {}", out.display());
+    let o = run("decode", "PandarXT32.csv", true);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(j["unused_calibrations"], serde_json::json!([]));
     assert!(j["points"].as_u64().unwrap() > 0);
+}
+
+/// `decode` of a Hesai capture without its angle correction stops with exit 1 and writes
+/// nothing, as a VLS-128 without its calibration does: an empty file and exit 0 would pass
+/// for a decoded capture. `info` still describes it.
+#[test]
+fn decode_without_the_correction_fails_and_writes_nothing() {
+    let Some(c) = common::captures() else {
+        return;
+    };
+    let pcap = pcap_in(&c.join(GT).join("xt32"));
+    let out = common::Scratch::file("hesai-nocalib", "x.mcap");
+    let o = Command::new(env!("CARGO_BIN_EXE_ringscan"))
+        .arg("decode")
+        .arg(&pcap)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains(
+            "the PandarXT32 has no built-in calibration: give its calibration file with --calib"
+        ),
+        "{err}"
+    );
+    assert!(!out.exists());
+    let o = Command::new(env!("CARGO_BIN_EXE_ringscan"))
+        .args(["info", "--json"])
+        .arg(&pcap)
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["sensors"][0]["model"], "PandarXT32");
+    assert_eq!(j["sensors"][0]["data_packets"], 2000);
 }

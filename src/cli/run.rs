@@ -114,9 +114,14 @@ pub enum RunError {
     /// A calibration file could not be used.
     #[error("calibration {path}: {msg}")]
     Calib { path: String, msg: String },
-    /// A sensor's stream could not be decoded.
-    #[error("sensor {addr}: {err}")]
-    Stream { addr: Ipv4Addr, err: StreamError },
+    /// A sensor's stream could not be decoded; `note` names the calibration files no sensor
+    /// took (the one meant for it may be among them).
+    #[error("sensor {addr}: {err}{note}")]
+    Stream {
+        addr: Ipv4Addr,
+        err: StreamError,
+        note: String,
+    },
     /// Writing the output failed.
     #[error("{0}")]
     Sink(#[from] SinkError),
@@ -991,20 +996,48 @@ impl Session {
     }
 
     /// The error a [`PumpError`] means for the user.
+    /// The `--calib` files no sensor took, by name.
+    fn unused_calibrations(&self) -> Vec<&str> {
+        let out = &self.out;
+        let used: std::collections::BTreeSet<&str> = out
+            .sensors
+            .iter()
+            .filter_map(|s| s.calib_file.as_deref())
+            .collect();
+        out.calibs
+            .iter()
+            .map(|(_, n, _)| n.as_str())
+            .filter(|n| !used.contains(n))
+            .collect()
+    }
+
     pub fn run_error(&self, e: PumpError, path: &str) -> RunError {
         match e {
             PumpError::Source(err) => RunError::Source {
                 path: path.to_string(),
                 err,
             },
-            PumpError::Stream(idx, err) => RunError::Stream {
-                addr: self
-                    .demux
-                    .stream(idx)
-                    .map(|(a, _)| a)
-                    .unwrap_or(Ipv4Addr::UNSPECIFIED),
-                err,
-            },
+            PumpError::Stream(idx, err) => {
+                let unused = self.unused_calibrations();
+                let note = if unused.is_empty() {
+                    String::new()
+                } else {
+                    format!(
+                        " ({} given, but it fits none of the sensors found: family, model, \
+                         laser count, serial or address)",
+                        unused.join(", ")
+                    )
+                };
+                RunError::Stream {
+                    addr: self
+                        .demux
+                        .stream(idx)
+                        .map(|(a, _)| a)
+                        .unwrap_or(Ipv4Addr::UNSPECIFIED),
+                    err,
+                    note,
+                }
+            }
             PumpError::Sink(e) => RunError::Sink(e),
         }
     }
@@ -1181,18 +1214,10 @@ impl Session {
         m.insert("zone_reports".into(), json!(out.zone_reports));
         // A calibration no sensor took (another model's file, another sensor's metadata)
         // would otherwise pass unnoticed: the sensor decodes without it, or not at all.
-        let used: std::collections::BTreeSet<&str> = out
-            .sensors
-            .iter()
-            .filter_map(|s| s.calib_file.as_deref())
-            .collect();
-        let unused: Vec<&str> = out
-            .calibs
-            .iter()
-            .map(|(_, n, _)| n.as_str())
-            .filter(|n| !used.contains(n))
-            .collect();
-        m.insert("unused_calibrations".into(), json!(unused));
+        m.insert(
+            "unused_calibrations".into(),
+            json!(self.unused_calibrations()),
+        );
         // An option of one family on a run that found sensors, none of them that family's,
         // did nothing: say so rather than let it pass for applied.
         let kinds: std::collections::BTreeSet<&str> =
@@ -1220,6 +1245,7 @@ impl Session {
                 "position": position,
                 "ignored": dstats.ignored,
                 "early": dstats.early,
+                "other_port": dstats.other_port,
             }),
         );
         m.insert("sensors".into(), Value::Array(sensors));
@@ -1933,6 +1959,9 @@ fn print_text(j: &Value) {
         g(&p["missing"]),
         g(&p["ignored"])
     );
+    if let Some(n) = p["other_port"].as_u64().filter(|&n| n > 0) {
+        println!("  {n} data packets went to other ports than --port: dropped, not decoded");
+    }
     if let Some(o) = j["output"].as_object() {
         println!(
             "  wrote {} ({}): {}",

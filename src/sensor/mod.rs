@@ -260,10 +260,14 @@ pub struct StreamSettings {
     /// publishes per model (Livox).
     pub imu_to_sensor: Option<[f64; 16]>,
     /// Only inspecting the input (`ringscan info`): a sensor whose points need a calibration
-    /// it was not given (VLS-128) is still read — model, return mode, clock, loss — instead of
+    /// it was not given (VLS-128, a Hesai sensor without its angle correction) is still read — model, return mode, clock, loss — instead of
     /// stopping the run.
     pub inspect: bool,
 }
+
+/// How a sensor summary names a model no data packet told (every datagram it sent went
+/// elsewhere, e.g. to another port than `--port`, or it sent only position packets).
+pub const UNKNOWN_MODEL: &str = "model unknown (no data packet decoded)";
 
 /// The calibrations given for a run, and which of them already serve a sensor: a file not
 /// bound to an address serves the first sensor it fits (a family may let one file serve

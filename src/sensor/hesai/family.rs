@@ -130,6 +130,7 @@ impl Family for Hesai {
             cfg.options.dual_return_threshold_m = t;
         }
         cfg.options.fov_cdeg = s.fov_cdeg;
+        cfg.inspect = s.inspect;
         Some(Ok(Box::new(HesaiStream::new(cfg))))
     }
 
@@ -142,8 +143,11 @@ impl Family for Hesai {
             st("name"),
             st("address"),
             s["ports"],
-            s["model"].as_str().unwrap_or("unknown model"),
-            s["protocol"].as_str().unwrap_or("none (no pre-header)"),
+            s["model"].as_str().unwrap_or(crate::sensor::UNKNOWN_MODEL),
+            match (&s["model"], s["protocol"].as_str()) {
+                (Value::Null, _) => "-",
+                (_, p) => p.unwrap_or("none (no pre-header)"),
+            },
             st("return_mode"),
             st("detection")
         ));
@@ -252,7 +256,11 @@ impl SensorStream for HesaiStream {
         on_sweep: &mut OnSweep<'_>,
     ) -> Result<(), StreamError> {
         HesaiStream::push(self, host_ns, payload, &mut |sw, f| on_sweep(sw, f))
-            .map_err(StreamError::Decode)
+            .map_err(StreamError::Decode)?;
+        match self.missing_calibration() {
+            Some(m) => Err(StreamError::NeedsCalibration(m.name())),
+            None => Ok(()),
+        }
     }
 
     fn finish(&mut self, on_sweep: &mut OnSweep<'_>) -> Result<(), StreamError> {

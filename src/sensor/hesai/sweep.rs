@@ -53,6 +53,10 @@ pub struct HesaiConfig {
     pub check_crc: bool,
     /// A tail-time gap longer than this ends the sweep, ns.
     pub max_gap_ns: i64,
+    /// Only inspecting (`ringscan info`): a sensor without its correction is read without
+    /// points. Otherwise [`HesaiStream::missing_calibration`] names it, and a caller that
+    /// wants points stops there (a run that writes an empty file and succeeds hides it).
+    pub inspect: bool,
 }
 
 impl HesaiConfig {
@@ -66,6 +70,7 @@ impl HesaiConfig {
             cut_cdeg: None,
             check_crc: true,
             max_gap_ns: 1_000_000_000,
+            inspect: false,
         }
     }
 }
@@ -243,6 +248,15 @@ impl HesaiStream {
     /// The decoder, once the model is known.
     pub fn decoder(&self) -> Option<&HesaiDecoder> {
         self.decoder.as_ref()
+    }
+
+    /// The model, once known, when the stream has no correction for it and is not only
+    /// inspecting ([`HesaiConfig::inspect`]): its packets give no points.
+    pub fn missing_calibration(&self) -> Option<HesaiModel> {
+        if self.cfg.inspect || self.cfg.calibration.is_some() {
+            return None;
+        }
+        self.facts.model
     }
 
     fn ensure_decoder(&mut self, payload: &[u8]) -> Result<(), crate::sensor::DecodeError> {

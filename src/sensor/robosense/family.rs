@@ -91,7 +91,7 @@ impl Family for Robosense {
                 st("name"),
                 st("address"),
                 s["ports"],
-                s["model"].as_str().unwrap_or("unknown model"),
+                s["model"].as_str().unwrap_or(crate::sensor::UNKNOWN_MODEL),
                 st("return_mode"),
                 st("detection")
             ),
