@@ -41,10 +41,11 @@ pub struct Point {
     pub pad: u8,
 }
 
-/// Values some sensors measure beyond the [`Point`] record (Ouster: range, signal, near-IR),
-/// kept per point in a parallel buffer when asked for (`--fields all`).
+/// Values some sensors measure beyond the [`Point`] record (Ouster: range, signal, near-IR,
+/// the zone mask and colour of the profiles that carry them), kept per point in a parallel
+/// buffer when asked for (`--fields all`). A value the sensor does not send is 0.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct PointExtra {
     /// Range, mm.
     pub range_mm: u32,
@@ -52,14 +53,26 @@ pub struct PointExtra {
     pub signal: u16,
     /// Near-infrared (ambient) photons.
     pub near_ir: u16,
+    /// Zone-occupancy mask: bit `i` set when the point lies in zone `i` (Ouster ZONE16).
+    pub zones: u16,
+    /// Padding, 0.
+    pub pad: u16,
+    /// Red, as the sensor measured it (Ouster RGB16: its half float, widened exactly).
+    pub red: f32,
+    /// Green.
+    pub green: f32,
+    /// Blue.
+    pub blue: f32,
 }
 
 /// Stride of the extended record written with `--fields all`: a [`Point`] then a
 /// [`PointExtra`].
 pub const EXTENDED_STRIDE: usize = POINT_STRIDE + core::mem::size_of::<PointExtra>();
 
+const _: () = assert!(EXTENDED_STRIDE == 48);
+
 /// Fields of the extended record, in record order (the [`POINT_FIELDS`] first).
-pub const EXTENDED_FIELDS: [(&str, usize, FieldType); 10] = [
+pub const EXTENDED_FIELDS: [(&str, usize, FieldType); 14] = [
     ("x", 0, FieldType::F32),
     ("y", 4, FieldType::F32),
     ("z", 8, FieldType::F32),
@@ -70,7 +83,16 @@ pub const EXTENDED_FIELDS: [(&str, usize, FieldType); 10] = [
     ("range", 24, FieldType::U32),
     ("signal", 28, FieldType::U16),
     ("near_ir", 30, FieldType::U16),
+    ("zones", 32, FieldType::U16),
+    ("red", 36, FieldType::F32),
+    ("green", 40, FieldType::F32),
+    ("blue", 44, FieldType::F32),
 ];
+
+/// The f32 of an IEEE half float's bits.
+pub fn half_to_f32(bits: u16) -> f32 {
+    half::f16::from_bits(bits).to_f32()
+}
 
 /// Interleaves points and their extras into extended records (`out` is cleared first).
 pub fn interleave_extended(points: &[Point], extras: &[PointExtra], out: &mut Vec<u8>) {
@@ -168,5 +190,56 @@ mod tests {
         for (name, off, _) in POINT_FIELDS {
             assert!(off < POINT_STRIDE, "{name}");
         }
+    }
+
+    /// Each extended field's offset and type hold the value `interleave_extended` wrote there.
+    #[test]
+    fn extended_fields_describe_the_interleaved_record() {
+        let p = Point {
+            x: 1.5,
+            ret: 1,
+            ..Point::default()
+        };
+        let e = PointExtra {
+            range_mm: 0x0A0B_0C0D,
+            signal: 0x1112,
+            near_ir: 0x2122,
+            zones: 0x3132,
+            pad: 0,
+            red: 0.25,
+            green: half_to_f32(0x3C00),
+            blue: half_to_f32(0xC000),
+        };
+        let mut out = Vec::new();
+        interleave_extended(&[p, p], &[e], &mut out);
+        assert_eq!(out.len(), 2 * EXTENDED_STRIDE);
+        let want: [(&str, u64); 7] = [
+            ("range", 0x0A0B_0C0D),
+            ("signal", 0x1112),
+            ("near_ir", 0x2122),
+            ("zones", 0x3132),
+            ("red", u64::from(0.25f32.to_bits())),
+            ("green", u64::from(1.0f32.to_bits())),
+            ("blue", u64::from((-2.0f32).to_bits())),
+        ];
+        let read = |rec: &[u8], off: usize, t: FieldType| -> u64 {
+            let n = match t {
+                FieldType::U8 => 1,
+                FieldType::U16 => 2,
+                FieldType::U32 | FieldType::F32 => 4,
+            };
+            rec[off..off + n]
+                .iter()
+                .rev()
+                .fold(0, |a, &b| (a << 8) | u64::from(b))
+        };
+        for (name, v) in want {
+            let (_, off, t) = EXTENDED_FIELDS.iter().find(|f| f.0 == name).unwrap();
+            assert_eq!(read(&out, *off, *t), v, "{name}");
+            // The second point has no extras: zeros.
+            assert_eq!(read(&out[EXTENDED_STRIDE..], *off, *t), 0, "{name}");
+        }
+        assert_eq!(read(&out, 0, FieldType::F32), u64::from(1.5f32.to_bits()));
+        assert_eq!(read(&out, 22, FieldType::U8), 1);
     }
 }

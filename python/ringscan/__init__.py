@@ -72,13 +72,18 @@ POINT_DTYPE = np.dtype(
     }
 )
 
-#: ``fields="all"`` (Ouster): the point, then range (mm), signal and near-IR photons.
+#: ``fields="all"`` (Ouster): the point, then range (mm), signal and near-IR photons, the zone
+#: mask (ZONE16 profiles) and red, green, blue (RGB16 profiles); 0 where the sensor sends none.
 EXTENDED_DTYPE = np.dtype(
     {
-        "names": POINT_DTYPE.names + ("range", "signal", "near_ir"),
-        "formats": ["<f4", "<f4", "<f4", "<f4", "<u4", "<u2", "u1", "<u4", "<u2", "<u2"],
-        "offsets": [0, 4, 8, 12, 16, 20, 22, 24, 28, 30],
-        "itemsize": 32,
+        "names": POINT_DTYPE.names
+        + ("range", "signal", "near_ir", "zones", "red", "green", "blue"),
+        "formats": [
+            "<f4", "<f4", "<f4", "<f4", "<u4", "<u2", "u1",
+            "<u4", "<u2", "<u2", "<u2", "<f4", "<f4", "<f4",
+        ],
+        "offsets": [0, 4, 8, 12, 16, 20, 22, 24, 28, 30, 32, 36, 40, 44],
+        "itemsize": 48,
     }
 )
 
@@ -134,7 +139,7 @@ class Sweep:
 
     @property
     def points(self) -> np.ndarray:
-        """The points, a structured array (x, y, z, intensity, t, ring, return [, range, signal, near_ir])."""
+        """The points, a structured array (x, y, z, intensity, t, ring, return [, range, signal, near_ir, zones, red, green, blue])."""
         if self._points is None:
             dtype = EXTENDED_DTYPE if self._raw.extended else POINT_DTYPE
             self._points = np.asarray(self._raw.points).view(dtype)

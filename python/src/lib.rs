@@ -208,7 +208,7 @@ pub struct RawSweep {
     family: &'static str,
     address: String,
     channels: Option<usize>,
-    /// `Point` records (24 bytes), or `Point` + `PointExtra` records (32 bytes) with extras.
+    /// `Point` records (24 bytes), or `Point` + `PointExtra` records (48 bytes) with extras.
     points: Py<Buffer>,
     /// Whether `points` holds the extended records.
     extended: bool,
@@ -275,7 +275,7 @@ pub(crate) fn raw_sweep(
     let points = if extended {
         let mut bytes = Vec::new();
         interleave_extended(&sw.points, &sw.extras, &mut bytes);
-        Buffer::records(bytes, EXTENDED_STRIDE, "|V32")
+        Buffer::records(bytes, EXTENDED_STRIDE, "|V48")
     } else {
         debug_assert_eq!(POINT_STRIDE, 24);
         Buffer::points(std::mem::take(&mut sw.points)).returning_to(pool)

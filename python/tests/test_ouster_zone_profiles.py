@@ -4,9 +4,9 @@ RNG15_RFL8_NIR8_ZONE16, RNG19_RFL8_SIG16_ZONE16_DUAL) and colour profiles
 The packets are written by ouster-sdk 1.0.1 (``frame_to_packets``, its own packet format) from
 one frame of random fields, so ringscan's layout tables and the encoder cannot share a mistake:
 
-- every point's range, reflectivity, signal and near-IR equal ouster-sdk's field values of the
-  pixels with a return (the same multiset: the profile's fields are where ouster-sdk put them,
-  and the zone mask or colour channels between them are not read as anything else);
+- every point's range, reflectivity, signal, near-IR, zone mask and colour (`fields="all"`)
+  equal ouster-sdk's field values of the pixels with a return (the same multiset: each field is
+  where ouster-sdk put it, and none is read as another);
 - the points (x, y, z, ring, t, return) equal those of the same frame written by ouster-sdk in
   the profile without the zone mask or colour, which the real captures hold ringscan to.
 """
@@ -113,18 +113,26 @@ def decode(pcap, meta) -> np.ndarray:
 
 
 def expected_returns(held: dict) -> list:
-    """(range, reflectivity, signal, near-IR) of every return of the frame, as ouster-sdk
-    holds it; near-IR 0 where the profile has none."""
-    nir = held.get("NEAR_IR")
+    """(range, reflectivity, signal, near-IR, zone mask, red, green, blue) of every return of
+    the frame, as ouster-sdk holds it; 0 for what the profile does not carry. The colour is
+    ouster-sdk's half float, widened to float32 (exact)."""
+    h, w = held["RANGE"].shape
+    zeros = np.zeros((h, w), dtype=np.uint16)
+    nir = held.get("NEAR_IR", zeros)
+    zones = held.get("ZONE_MASK", zeros)
+    rgb = held.get("RGB", np.zeros((h, w, 3), dtype=np.float16)).astype(np.float32)
     out = []
     for r, refl, sig in (("RANGE", "REFLECTIVITY", "SIGNAL"), ("RANGE2", "REFLECTIVITY2", "SIGNAL2")):
         if r not in held:
             continue
         m = held[r] > 0
         s = held[sig][m] if sig in held else np.zeros(m.sum())
-        n = nir[m] if nir is not None else np.zeros(m.sum())
-        out += zip(held[r][m].tolist(), held[refl][m].tolist(), s.tolist(), n.tolist())
-    return sorted(tuple(int(v) for v in t) for t in out)
+        ints = zip(held[r][m].tolist(), held[refl][m].tolist(), s.tolist(), nir[m].tolist(), zones[m].tolist())
+        out += [
+            tuple(int(v) for v in i) + tuple(c)
+            for i, c in zip(ints, rgb[m].tolist())
+        ]
+    return sorted(out)
 
 
 @pytest.mark.skipif(CAPTURES is None, reason="SKIP: ../shared/captures is missing")
@@ -147,9 +155,18 @@ def test_zone_and_colour_profiles_decode_as_ouster_sdk_wrote_them(zone, base, ex
             got["intensity"].astype(int).tolist(),
             got["signal"].tolist(),
             got["near_ir"].tolist(),
+            got["zones"].tolist(),
+            got["red"].tolist(),
+            got["green"].tolist(),
+            got["blue"].tolist(),
         )
     )
     assert ours == want
+    # The values the test compares are there to be compared: masks and colours vary.
+    if extra == "ZONE_MASK":
+        assert len(set(got["zones"].tolist())) > 1000, zone
+    else:
+        assert len(set(got["red"].tolist())) > 1000, zone
 
     bpcap, bmeta, _ = encode(base, fields, tmp_path)
     same = decode(bpcap, bmeta)

@@ -61,6 +61,20 @@ pub struct Extra {
     pub reflectivity: u8,
     /// The return's flags field.
     pub flags: u8,
+    /// Zone-occupancy mask of the pixel (ZONE16 profiles; 0 elsewhere). The same for both
+    /// returns.
+    pub zones: u16,
+    /// Red, green and blue of the pixel as IEEE half-float bits (RGB16 profiles; 0 elsewhere).
+    /// The same for both returns.
+    pub rgb: [u16; 3],
+}
+
+/// The values of a pixel both its returns share.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct Shared {
+    near_ir: u16,
+    zones: u16,
+    rgb: [u16; 3],
 }
 
 /// What one packet decoded.
@@ -172,6 +186,8 @@ struct Readers {
     flags2: FieldReader,
     reflectivity2: FieldReader,
     signal2: FieldReader,
+    zones: FieldReader,
+    rgb: [FieldReader; 3],
 }
 
 impl Readers {
@@ -187,12 +203,27 @@ impl Readers {
             flags2: r(l.flags2)?,
             reflectivity2: r(l.reflectivity2)?,
             signal2: r(l.signal2)?,
+            zones: r(l.zones)?,
+            rgb: {
+                let [red, green, blue] = l.rgb().map_or([None; 3], |c| c.map(Some));
+                [r(red)?, r(green)?, r(blue)?]
+            },
         })
     }
 
-    /// First (`SECOND` false) or second return of pixel `px`, with the pixel's near-IR.
+    /// The values both returns of pixel `px` share.
     #[inline(always)]
-    fn extra<const N: usize, const SECOND: bool>(&self, px: &[u8; N], near_ir: u16) -> Extra {
+    fn shared<const N: usize>(&self, px: &[u8; N]) -> Shared {
+        Shared {
+            near_ir: self.near_ir.read(px) as u16,
+            zones: self.zones.read(px) as u16,
+            rgb: self.rgb.map(|c| c.read(px) as u16),
+        }
+    }
+
+    /// First (`SECOND` false) or second return of pixel `px`, with the values of the pixel.
+    #[inline(always)]
+    fn extra<const N: usize, const SECOND: bool>(&self, px: &[u8; N], sh: Shared) -> Extra {
         let (range, signal, reflectivity, flags) = if SECOND {
             (self.range2, self.signal2, self.reflectivity2, self.flags2)
         } else {
@@ -201,9 +232,11 @@ impl Readers {
         Extra {
             range_mm: range.read(px),
             signal: signal.read(px) as u16,
-            near_ir,
+            near_ir: sh.near_ir,
             reflectivity: reflectivity.read(px) as u8,
             flags: flags.read(px) as u8,
+            zones: sh.zones,
+            rgb: sh.rgb,
         }
     }
 }
@@ -428,6 +461,8 @@ impl OusterDecoder {
         let get = |f| read_field_at(b, at, f);
         let opt = |f: Option<crate::sensor::ouster::model::Field>| f.map_or(0, get);
         let near_ir = opt(l.near_ir) as u16;
+        let zones = opt(l.zones) as u16;
+        let rgb = l.rgb().map_or([0; 3], |c| c.map(|f| get(f) as u16));
         Pixel {
             r: [
                 Extra {
@@ -436,6 +471,8 @@ impl OusterDecoder {
                     near_ir,
                     reflectivity: get(l.reflectivity) as u8,
                     flags: opt(l.flags) as u8,
+                    zones,
+                    rgb,
                 },
                 Extra {
                     range_mm: opt(l.range2),
@@ -443,6 +480,8 @@ impl OusterDecoder {
                     near_ir,
                     reflectivity: opt(l.reflectivity2) as u8,
                     flags: opt(l.flags2) as u8,
+                    zones,
+                    rgb,
                 },
             ],
         }
@@ -536,14 +575,14 @@ impl OusterDecoder {
                     };
                     // At most 2 × BLOCK_ROWS = STAGE writes per block: `k < STAGE` at each
                     // write, the mask only spares the bounds check.
-                    let near_ir = rd.near_ir.read(px) as u16;
-                    let x = rd.extra::<N, false>(px, near_ir);
+                    let sh = rd.shared(px);
+                    let x = rd.extra::<N, false>(px, sh);
                     points[k % STAGE] = make_point(x.range_mm, x.reflectivity, e, t | ring);
                     extras[k % STAGE] = x;
                     rows[k % STAGE] = row;
                     k += usize::from(x.range_mm != 0);
                     if DUAL {
-                        let x = rd.extra::<N, true>(px, near_ir);
+                        let x = rd.extra::<N, true>(px, sh);
                         let pt = make_point(x.range_mm, x.reflectivity, e, t | ring | RET1);
                         points[k % STAGE] = pt;
                         extras[k % STAGE] = x;
@@ -859,11 +898,15 @@ impl OusterDecoder {
                     continue;
                 };
                 let i = row * w + m;
-                let near_ir = rd.near_ir.read(px) as u16;
-                frame.near_ir[i] = near_ir;
-                Self::frame_pixel(frame, i, &rd.extra::<N, false>(px, near_ir), e, n);
+                // The frame has no planes for the zone mask or colour: not read.
+                let sh = Shared {
+                    near_ir: rd.near_ir.read(px) as u16,
+                    ..Shared::default()
+                };
+                frame.near_ir[i] = sh.near_ir;
+                Self::frame_pixel(frame, i, &rd.extra::<N, false>(px, sh), e, n);
                 if dual {
-                    let x = rd.extra::<N, true>(px, near_ir);
+                    let x = rd.extra::<N, true>(px, sh);
                     Self::frame_pixel(frame, plane + i, &x, e, n);
                 }
             }

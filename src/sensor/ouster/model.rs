@@ -98,6 +98,25 @@ pub struct Layout {
     pub reflectivity2: Option<Field>,
     /// Signal of the second return.
     pub signal2: Option<Field>,
+    /// The pixel's zone-occupancy mask (ZONE16 profiles; ouster-sdk `ZONE_MASK`): bit `i` set
+    /// when the return lies in zone `i`. The same for both returns.
+    pub zones: Option<Field>,
+    /// The pixel's red channel (RGB16 profiles); green and blue follow at +16 and +32 bits.
+    /// Each is an IEEE half float (ouster-sdk holds `RGB` as `FLOAT16`).
+    pub red: Option<Field>,
+}
+
+impl Layout {
+    /// The red, green and blue fields, where the profile has them.
+    pub fn rgb(&self) -> Option<[Field; 3]> {
+        self.red.map(|r| {
+            let at = |k: u16| Field {
+                bit: r.bit + 16 * k,
+                ..r
+            };
+            [r, at(1), at(2)]
+        })
+    }
 }
 
 /// Every profile, for iteration.
@@ -163,7 +182,7 @@ impl Profile {
     /// The pixel layout.
     pub fn layout(self) -> Layout {
         let f = Field::new;
-        match self {
+        let mut l = match self {
             Self::Legacy => Layout {
                 pixel_bytes: 12,
                 range: f(0, 20, 0),
@@ -175,9 +194,9 @@ impl Profile {
                 flags2: None,
                 reflectivity2: None,
                 signal2: None,
+                zones: None,
+                red: None,
             },
-            // The zone mask (ZONE16 profiles: @80 single, @32 low data, @96 dual, 16 bits) is
-            // not read: points do not carry it.
             Self::Rng19Rfl8Sig16Nir16 | Self::Rng19Rfl8Sig16Nir16Zone16 => Layout {
                 pixel_bytes: 12,
                 range: f(0, 19, 0),
@@ -189,6 +208,8 @@ impl Profile {
                 flags2: None,
                 reflectivity2: None,
                 signal2: None,
+                zones: None,
+                red: None,
             },
             Self::Rng19Rfl8Sig16Nir16Dual | Self::Rng19Rfl8Sig16Zone16Dual => Layout {
                 pixel_bytes: 16,
@@ -201,6 +222,8 @@ impl Profile {
                 flags2: Some(f(51, 5, 0)),
                 reflectivity2: Some(f(56, 8, 0)),
                 signal2: Some(f(80, 16, 0)),
+                zones: None,
+                red: None,
             },
             Self::Rng15Rfl8Nir8 | Self::Rng15Rfl8Win8 | Self::Rng15Rfl8Nir8Zone16 => Layout {
                 pixel_bytes: if self == Self::Rng15Rfl8Nir8Zone16 {
@@ -221,6 +244,8 @@ impl Profile {
                 flags2: None,
                 reflectivity2: None,
                 signal2: None,
+                zones: None,
+                red: None,
             },
             Self::Rng15Rfl8Nir8Dual | Self::FusaRng15Rfl8Nir8Dual => Layout {
                 pixel_bytes: 8,
@@ -233,9 +258,9 @@ impl Profile {
                 flags2: Some(f(47, 1, 0)),
                 reflectivity2: Some(f(48, 8, 0)),
                 signal2: None,
+                zones: None,
+                red: None,
             },
-            // The colour channels (R, G, B u16 @8 single, @14 dual) are not read: points do
-            // not carry them.
             Self::Rng19Rfl8Sig16Nir16Rgb16 => Layout {
                 pixel_bytes: 16,
                 range: f(0, 19, 0),
@@ -247,6 +272,8 @@ impl Profile {
                 flags2: None,
                 reflectivity2: None,
                 signal2: None,
+                zones: None,
+                red: None,
             },
             Self::FiveWordPixel | Self::Rng19Rfl8Sig16Nir16Rgb16Dual => Layout {
                 pixel_bytes: 20,
@@ -259,8 +286,24 @@ impl Profile {
                 flags2: Some(f(51, 5, 0)),
                 reflectivity2: Some(f(56, 8, 0)),
                 signal2: Some(f(80, 16, 0)),
+                zones: None,
+                red: None,
             },
-        }
+        };
+        // ouster-sdk's `ZM_LB_FIELD_INFO`, `ZM_SINGLE_FIELD_INFO`, `DUAL_ZONE_FIELD_INFO`,
+        // `RGB_FIELD_INFO`, `DUAL_RGB_FIELD_INFO`.
+        l.zones = match self {
+            Self::Rng15Rfl8Nir8Zone16 => Some(f(32, 16, 0)),
+            Self::Rng19Rfl8Sig16Nir16Zone16 => Some(f(80, 16, 0)),
+            Self::Rng19Rfl8Sig16Zone16Dual => Some(f(96, 16, 0)),
+            _ => None,
+        };
+        l.red = match self {
+            Self::Rng19Rfl8Sig16Nir16Rgb16 => Some(f(64, 16, 0)),
+            Self::Rng19Rfl8Sig16Nir16Rgb16Dual => Some(f(112, 16, 0)),
+            _ => None,
+        };
+        l
     }
 }
 
@@ -363,6 +406,51 @@ mod tests {
     fn names_round_trip() {
         for p in ALL_PROFILES {
             assert_eq!(Profile::from_name(p.name()), Some(p));
+        }
+    }
+
+    /// The zone mask and the colour channels at ouster-sdk's offsets (`ZONE_MASK`, `R`, `G`,
+    /// `B` of `ZM_LB_FIELD_INFO`, `ZM_SINGLE_FIELD_INFO`, `DUAL_ZONE_FIELD_INFO`,
+    /// `RGB_FIELD_INFO`, `DUAL_RGB_FIELD_INFO`), each written into a pixel whose other bytes
+    /// are all ones; the other profiles have neither.
+    #[test]
+    fn zone_mask_and_colour_read_the_sdk_offsets() {
+        use crate::sensor::ouster::wire::read_field_at;
+        let zoned = [
+            (Profile::Rng15Rfl8Nir8Zone16, 8, 4),
+            (Profile::Rng19Rfl8Sig16Nir16Zone16, 12, 10),
+            (Profile::Rng19Rfl8Sig16Zone16Dual, 16, 12),
+        ];
+        for (p, n, at) in zoned {
+            let l = p.layout();
+            let mut px = vec![0xFFu8; n];
+            px[at..at + 2].copy_from_slice(&0xA5C3u16.to_le_bytes());
+            assert_eq!(l.pixel_bytes, n);
+            assert_eq!(
+                l.zones.map(|f| read_field_at(&px, 0, f)),
+                Some(0xA5C3),
+                "{p}"
+            );
+            assert_eq!(l.rgb(), None, "{p}");
+        }
+        let coloured = [
+            (Profile::Rng19Rfl8Sig16Nir16Rgb16, 16, 8),
+            (Profile::Rng19Rfl8Sig16Nir16Rgb16Dual, 20, 14),
+        ];
+        for (p, n, at) in coloured {
+            let l = p.layout();
+            let mut px = vec![0xFFu8; n];
+            for (k, v) in [0x3C00u16, 0x4000, 0x4200].into_iter().enumerate() {
+                px[at + 2 * k..at + 2 * k + 2].copy_from_slice(&v.to_le_bytes());
+            }
+            let rgb = l.rgb().map(|c| c.map(|f| read_field_at(&px, 0, f)));
+            assert_eq!(rgb, Some([0x3C00, 0x4000, 0x4200]), "{p}");
+            assert_eq!(l.zones, None, "{p}");
+        }
+        for p in ALL_PROFILES {
+            if !zoned.iter().any(|z| z.0 == p) && !coloured.iter().any(|c| c.0 == p) {
+                assert_eq!((p.layout().zones, p.layout().rgb()), (None, None), "{p}");
+            }
         }
     }
 

@@ -12,7 +12,7 @@
 //! sensor re-initialised) starts a new epoch: counted, warned in the summary, the stream goes on.
 //! Zone-monitor packets (FW 3.2+) become [`ZoneReport`]s, taken with [`OusterStream::drain_zones`].
 
-use crate::point::PointExtra;
+use crate::point::{half_to_f32, PointExtra};
 use crate::sensor::ouster::calib::ImuProfile;
 use crate::sensor::ouster::calib::OusterInfo;
 use crate::sensor::ouster::calib::TimestampMode;
@@ -602,10 +602,16 @@ impl OusterStream {
                     }
                     points.push(pt);
                     if keep_extras {
+                        let [red, green, blue] = ex.rgb.map(half_to_f32);
                         extras.push(PointExtra {
                             range_mm: ex.range_mm,
                             signal: ex.signal,
                             near_ir: ex.near_ir,
+                            zones: ex.zones,
+                            pad: 0,
+                            red,
+                            green,
+                            blue,
                         });
                     }
                     if keep_columns {
