@@ -309,3 +309,38 @@ fn every_container_gives_the_pcaps_packets_and_points() {
         println!("{r}");
     }
 }
+
+/// The summary names the container as a reader would: a rosbag2 directory and the bare
+/// `.db3` inside it are both rosbag2 (from the audit: `rosbag2` and `Sqlite3`), a fixture
+/// ROS 1 bag is a ROS 1 bag.
+#[test]
+fn summaries_name_the_bag_container() {
+    let kind = |input: &Path| -> String {
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_ringscan"))
+            .args(["info", "--json"])
+            .arg(input)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        j["capture"]["bag"]["kind"].as_str().unwrap().to_string()
+    };
+    let ros1 = std::fs::read_dir(fixtures().join("bags"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "bag"));
+    if let Some(bag) = ros1 {
+        assert_eq!(kind(&bag), "ROS 1 bag");
+    }
+    let Some(root) = common::captures() else {
+        return;
+    };
+    let d = root.join(
+        "tier4__nebula/src/nebula_velodyne/nebula_velodyne/test_resources/decoder_ground_truth/vlp16/1673400471837873222",
+    );
+    assert_eq!(kind(&d), "rosbag2 directory");
+    assert_eq!(
+        kind(&d.join("1673400471837873222_0.db3")),
+        "rosbag2 sqlite3 file"
+    );
+}

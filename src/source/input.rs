@@ -210,8 +210,8 @@ impl<R: Read> Input<R> {
             Self::Bag(b) => {
                 let st = b.stats();
                 let kind = match b.kind() {
-                    bag::BagKind::File(k) => format!("{k:?}"),
-                    bag::BagKind::Rosbag2(_) => "rosbag2".to_string(),
+                    bag::BagKind::File(k) => k.name(),
+                    bag::BagKind::Rosbag2(_) => "rosbag2 directory",
                 };
                 let sensors: Vec<Value> = b
                     .sensors()

@@ -69,6 +69,42 @@ pub struct Extra {
     pub rgb: [u16; 3],
 }
 
+/// An [`Extra`] without what the pixel's returns share beyond near-IR.
+#[derive(Clone, Copy, Debug, Default)]
+struct Lean {
+    range_mm: u32,
+    signal: u16,
+    near_ir: u16,
+    reflectivity: u8,
+    flags: u8,
+}
+
+impl Lean {
+    #[inline(always)]
+    fn of(x: &Extra) -> Self {
+        Self {
+            range_mm: x.range_mm,
+            signal: x.signal,
+            near_ir: x.near_ir,
+            reflectivity: x.reflectivity,
+            flags: x.flags,
+        }
+    }
+
+    #[inline(always)]
+    fn extra(&self, sh: Shared) -> Extra {
+        Extra {
+            range_mm: self.range_mm,
+            signal: self.signal,
+            near_ir: self.near_ir,
+            reflectivity: self.reflectivity,
+            flags: self.flags,
+            zones: sh.zones,
+            rgb: sh.rgb,
+        }
+    }
+}
+
 /// The values of a pixel both its returns share.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 struct Shared {
@@ -211,11 +247,19 @@ impl Readers {
         })
     }
 
-    /// The values both returns of pixel `px` share.
+    /// The values both returns of pixel `px` share; the zone mask and colour only when the
+    /// profile has them (`MORE`), so that other profiles load nothing more per pixel.
     #[inline(always)]
-    fn shared<const N: usize>(&self, px: &[u8; N]) -> Shared {
+    fn shared<const N: usize, const MORE: bool>(&self, px: &[u8; N]) -> Shared {
+        let near_ir = self.near_ir.read(px) as u16;
+        if !MORE {
+            return Shared {
+                near_ir,
+                ..Shared::default()
+            };
+        }
         Shared {
-            near_ir: self.near_ir.read(px) as u16,
+            near_ir,
             zones: self.zones.read(px) as u16,
             rgb: self.rgb.map(|c| c.read(px) as u16),
         }
@@ -528,10 +572,12 @@ impl OusterDecoder {
         rd: &Readers,
         emit: &mut F,
     ) -> Decoded {
-        if self.returns() == 2 {
-            self.emit_returns::<N, true, F>(p, sweep_start_ns, rd, emit)
-        } else {
-            self.emit_returns::<N, false, F>(p, sweep_start_ns, rd, emit)
+        let more = self.layout.zones.is_some() || self.layout.red.is_some();
+        match (self.returns() == 2, more) {
+            (true, false) => self.emit_returns::<N, true, false, F>(p, sweep_start_ns, rd, emit),
+            (false, false) => self.emit_returns::<N, false, false, F>(p, sweep_start_ns, rd, emit),
+            (true, true) => self.emit_returns::<N, true, true, F>(p, sweep_start_ns, rd, emit),
+            (false, true) => self.emit_returns::<N, false, true, F>(p, sweep_start_ns, rd, emit),
         }
     }
 
@@ -539,8 +585,17 @@ impl OusterDecoder {
     /// [`BLOCK_ROWS`] rows of a column are decoded into buffers on the stack without a branch
     /// per pixel, then handed to `emit` in a second, short loop: the caller's work per point
     /// does not compete with the field extraction for registers.
-    #[inline(always)]
-    fn emit_returns<const N: usize, const DUAL: bool, F: FnMut(Point, Extra, usize, usize)>(
+    ///
+    /// Not inlined: with its four instances (returns × zone mask / colour) inlined into
+    /// `decode_with`, the loop ran a third slower (`decode --min-range` on an OS-2-128 capture,
+    /// side by side with the build before the zone mask and colour).
+    #[inline(never)]
+    fn emit_returns<
+        const N: usize,
+        const DUAL: bool,
+        const MORE: bool,
+        F: FnMut(Point, Extra, usize, usize),
+    >(
         &self,
         p: &LidarPacket<'_>,
         sweep_start_ns: u64,
@@ -550,7 +605,11 @@ impl OusterDecoder {
         let mut n = Decoded::default();
         let h = self.h;
         let mut points = [Point::default(); STAGE];
-        let mut extras = [Extra::default(); STAGE];
+        // The values of each return without the pixel's zone mask and colour, which are staged
+        // apart and only where the profile has them: staged in one wider record, they cost a
+        // third of the loop's speed on every profile (measured as above).
+        let mut extras = [Lean::default(); STAGE];
+        let mut mores = [Shared::default(); STAGE];
         let mut rows = [0u32; STAGE];
         for c in p.columns() {
             let Some(m) = self.column_index(&c, &mut n) else {
@@ -575,25 +634,41 @@ impl OusterDecoder {
                     };
                     // At most 2 × BLOCK_ROWS = STAGE writes per block: `k < STAGE` at each
                     // write, the mask only spares the bounds check.
-                    let sh = rd.shared(px);
+                    let sh = rd.shared::<N, MORE>(px);
                     let x = rd.extra::<N, false>(px, sh);
                     points[k % STAGE] = make_point(x.range_mm, x.reflectivity, e, t | ring);
-                    extras[k % STAGE] = x;
+                    extras[k % STAGE] = Lean::of(&x);
+                    if MORE {
+                        mores[k % STAGE] = sh;
+                    }
                     rows[k % STAGE] = row;
                     k += usize::from(x.range_mm != 0);
                     if DUAL {
                         let x = rd.extra::<N, true>(px, sh);
                         let pt = make_point(x.range_mm, x.reflectivity, e, t | ring | RET1);
                         points[k % STAGE] = pt;
-                        extras[k % STAGE] = x;
+                        extras[k % STAGE] = Lean::of(&x);
+                        if MORE {
+                            mores[k % STAGE] = sh;
+                        }
                         rows[k % STAGE] = row;
                         k += usize::from(x.range_mm != 0);
                     }
                     row += 1;
                 }
                 let k = k.min(STAGE);
-                for ((&pt, &x), &r) in points[..k].iter().zip(&extras[..k]).zip(&rows[..k]) {
-                    emit(pt, x, r as usize, m);
+                for (i, ((&pt, x), &r)) in points[..k]
+                    .iter()
+                    .zip(&extras[..k])
+                    .zip(&rows[..k])
+                    .enumerate()
+                {
+                    let sh = if MORE {
+                        mores.get(i).copied().unwrap_or_default()
+                    } else {
+                        Shared::default()
+                    };
+                    emit(pt, x.extra(sh), r as usize, m);
                 }
                 n.points += k;
             }

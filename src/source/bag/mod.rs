@@ -289,6 +289,19 @@ pub enum FileKind {
     ZstdMcap,
 }
 
+impl FileKind {
+    /// How summaries name it (`capture.bag.kind`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Ros1 => "ROS 1 bag",
+            Self::Sqlite3 => "rosbag2 sqlite3 file",
+            Self::Mcap => "MCAP file",
+            Self::ZstdSqlite3 => "rosbag2 sqlite3 file (zstd)",
+            Self::ZstdMcap => "MCAP file (zstd)",
+        }
+    }
+}
+
 /// What a path holds, as far as bags go.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum BagKind {
