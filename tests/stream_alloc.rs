@@ -250,3 +250,38 @@ fn streams_allocate_nothing_per_packet_once_warm() {
         );
     }
 }
+
+/// A Robosense DIFOP (1 Hz) once the stream is decoding allocates nothing: the facts it renews
+/// (serial and firmware as hex) are written over the strings already held. The real capture
+/// holds one DIFOP, at its start; it is sent again after the last MSOP packet.
+#[test]
+fn a_robosense_difop_once_warm_allocates_nothing() {
+    let Some(root) = common::captures() else {
+        return;
+    };
+    let pcap = root.join("tier4__nebula__pr79/nebula_tests/data/robosense/helios16P/rosbag2_2023_08_03-11_02_46/rosbag2_2023_08_03-11_02_46_0.pcap");
+    let datagrams = common::datagrams(&pcap);
+    let difop = datagrams
+        .iter()
+        .find(|d| d.1 == 7788)
+        .cloned()
+        .expect("the capture's DIFOP");
+    let mut pool = CalibrationPool::new(Vec::new(), StreamSettings::default());
+    let mut demux = Demux::new(Box::new(move |d| claim(d, &mut pool)), None);
+    let src = std::net::Ipv4Addr::new(10, 0, 0, 1);
+    let mut points = 0usize;
+    for (t, port, payload) in &datagrams {
+        demux
+            .push(*t, src, *port, payload, &mut |_, s, _| {
+                points += s.points.len()
+            })
+            .unwrap();
+    }
+    assert!(points > 0, "the DIFOP's table decodes the capture");
+    let t = datagrams.last().unwrap().0 + 1_000_000;
+    for k in 0..3 {
+        let (res, n) = counted(|| demux.push(t + k, src, 7788, &difop.2, &mut |_, _, _| {}));
+        assert!(res.is_ok());
+        assert_eq!(n, 0, "DIFOP {k} allocated {n} times");
+    }
+}

@@ -357,8 +357,8 @@ impl RobosenseStream {
         self.stats.difop += 1;
         self.facts.rpm = Some(d.rpm());
         self.facts.fov = Some(d.fov());
-        self.facts.serial = d.serial();
-        self.facts.firmware = d.firmware();
+        d.write_serial(&mut self.facts.serial);
+        d.write_firmware(&mut self.facts.firmware);
         self.facts.return_mode = Some(d.return_mode());
         if let Some(dec) = &mut self.decoder {
             dec.set_rpm(d.rpm());

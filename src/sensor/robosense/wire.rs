@@ -273,16 +273,31 @@ impl<'a> Difop<'a> {
 
     /// Top and bottom board firmware versions (5 bytes each, from byte 40), as hex.
     pub fn firmware(&self) -> String {
-        let hex = |s: &[u8]| s.iter().map(|x| format!("{x:02x}")).collect::<String>();
-        format!("{}/{}", hex(&self.bytes[40..45]), hex(&self.bytes[45..50]))
+        let mut s = String::new();
+        self.write_firmware(&mut s);
+        s
+    }
+
+    /// [`Self::firmware`] written over `out`, which keeps its capacity: the stream re-reads it
+    /// from every DIFOP (1 Hz) without allocating.
+    pub fn write_firmware(&self, out: &mut String) {
+        out.clear();
+        push_hex(out, &self.bytes[40..45]);
+        out.push('/');
+        push_hex(out, &self.bytes[45..50]);
     }
 
     /// Serial number (6 bytes at 292), as hex.
     pub fn serial(&self) -> String {
-        self.bytes[292..298]
-            .iter()
-            .map(|x| format!("{x:02x}"))
-            .collect()
+        let mut s = String::new();
+        self.write_serial(&mut s);
+        s
+    }
+
+    /// [`Self::serial`] written over `out` (see [`Self::write_firmware`]).
+    pub fn write_serial(&self, out: &mut String) {
+        out.clear();
+        push_hex(out, &self.bytes[292..298]);
     }
 
     /// Return-mode byte (300).
@@ -331,6 +346,15 @@ impl<'a> Difop<'a> {
             out.push((read(i)?, read(entries + i)?));
         }
         Ok(out)
+    }
+}
+
+/// Appends `bytes` as lower-case hex.
+fn push_hex(out: &mut String, bytes: &[u8]) {
+    const HEX: &[u8; 16] = b"0123456789abcdef";
+    for &b in bytes {
+        out.push(char::from(HEX[usize::from(b >> 4)]));
+        out.push(char::from(HEX[usize::from(b & 15)]));
     }
 }
 
