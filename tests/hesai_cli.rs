@@ -690,7 +690,7 @@ fn decode_without_the_correction_fails_and_writes_nothing() {
     assert!(
         err.contains(
             "the PandarXT32 has no built-in calibration: give its calibration file with --calib"
-        ),
+        ) && err.contains("ringscan hesai-calib --sensor IP --out FILE"),
         "{err}"
     );
     assert!(!out.exists());

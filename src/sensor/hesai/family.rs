@@ -258,7 +258,11 @@ impl SensorStream for HesaiStream {
         HesaiStream::push(self, host_ns, payload, &mut |sw, f| on_sweep(sw, f))
             .map_err(StreamError::Decode)?;
         match self.missing_calibration() {
-            Some(m) => Err(StreamError::NeedsCalibration(m.name())),
+            Some(m) => Err(StreamError::NeedsCalibration(
+                m.name(),
+                " (the sensor serves its angle correction: `ringscan hesai-calib --sensor IP --out \
+                 FILE`, or `listen --hesai-ptc`)",
+            )),
             None => Ok(()),
         }
     }

@@ -88,9 +88,9 @@ pub enum StreamError {
         /// Smallest stamp difference seen, µs.
         period_us: Option<f64>,
     },
-    /// The model has no built-in calibration.
-    #[error("the {0} has no built-in calibration: give its calibration file with --calib")]
-    NeedsCalibration(&'static str),
+    /// The model has no built-in calibration; `.1` says where its file may come from.
+    #[error("the {0} has no built-in calibration: give its calibration file with --calib{1}")]
+    NeedsCalibration(&'static str, &'static str),
     /// The decoder could not be built.
     #[error(transparent)]
     Decode(#[from] DecodeError),
@@ -423,7 +423,7 @@ impl VelodyneStream {
                         self.uncalibrated = true;
                         return Ok(());
                     }
-                    None => return Err(StreamError::NeedsCalibration(model.name())),
+                    None => return Err(StreamError::NeedsCalibration(model.name(), "")),
                 },
             },
         };
