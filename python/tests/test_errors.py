@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 import ringscan
-from conftest import REPO
+from conftest import CAPTURES, REPO
 
 DEMO = REPO / "fixtures" / "demo-vlp16.pcap"
 
@@ -179,6 +179,20 @@ def test_bad_calibration_file(tmp_path):
     bad.write_text("lasers: [ {laser_id: 0, rot_correction: nope} ]\n")
     with pytest.raises(ringscan.CalibrationError, match="bad.yaml"):
         list(ringscan.open(DEMO, calib=bad))
+
+
+@pytest.mark.skipif(CAPTURES is None, reason="SKIP: ../shared/captures is missing")
+def test_a_sensor_without_its_calibration_is_a_decode_error_info_still_reads_it():
+    """As on the command line: a Hesai capture without its angle correction decodes nothing,
+    so iterating raises (the CLI's message); ``info()`` still names the model."""
+    xt32 = CAPTURES / (
+        "tier4__nebula/src/nebula_hesai/nebula_hesai/test_resources/decoder_ground_truth/"
+        "xt32/1673400677802009732/1673400677802009732_0.pcap"
+    )
+    with pytest.raises(ringscan.DecodeError, match="the PandarXT32 has no built-in calibration"):
+        list(ringscan.open(xt32))
+    info = ringscan.open(xt32).info()
+    assert info["sensors"][0]["model"] == "PandarXT32"
 
 
 def test_stopping_early_and_reiterating():
