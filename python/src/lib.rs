@@ -511,10 +511,12 @@ fn info(
     start: Option<f64>,
     end: Option<f64>,
 ) -> PyResult<String> {
-    let args = decode_args(
+    let mut args = decode_args(
         path, model, calib, topics, start, end, None, 0.0, None, None, false, None, None, None,
         None,
     );
+    // As `ringscan info`: a sensor without the calibration its points need is still read.
+    args.inspect = true;
     run_decode(py, &args)
 }
 
