@@ -995,7 +995,6 @@ impl Session {
         })
     }
 
-    /// The error a [`PumpError`] means for the user.
     /// The `--calib` files no sensor took, by name.
     fn unused_calibrations(&self) -> Vec<&str> {
         let out = &self.out;
@@ -1011,6 +1010,7 @@ impl Session {
             .collect()
     }
 
+    /// The error a [`PumpError`] means for the user.
     pub fn run_error(&self, e: PumpError, path: &str) -> RunError {
         match e {
             PumpError::Source(err) => RunError::Source {
