@@ -34,8 +34,16 @@ MODELS = {"VLP16": "vlp16", "HDL32E": "hdl32e", "VLP32C": "vlp32c"}
 CAPTURE_SUFFIXES = (".pcap", ".pcapng", ".bag", ".db3", ".mcap")
 
 # Captures without a golden that still need a file to decode (no built-in calibration).
+_HESAI = "tier4__nebula/src/nebula_hesai/nebula_hesai_decoders/calibration/"
 EXTRA_CALIB = {
     "vls128/": "tier4__nebula/src/nebula_velodyne/nebula_velodyne_decoders/calibration/VLS128.yaml",
+    # nebula's Hesai captures and the angle correction of each (NEBULA.md).
+    "decoder_ground_truth/40p/": _HESAI + "Pandar40P.csv",
+    "decoder_ground_truth/64/": _HESAI + "Pandar64.csv",
+    "decoder_ground_truth/qt64/": _HESAI + "PandarQT64.csv",
+    "decoder_ground_truth/qt128/": _HESAI + "PandarQT128.csv",
+    "decoder_ground_truth/xt32/": _HESAI + "PandarXT32.csv",
+    "decoder_ground_truth/xt32m/": _HESAI + "PandarXT32M.csv",
 }
 
 
