@@ -1,4 +1,4 @@
-//! The error every family's decoder shares, and the options every decoder takes.
+//! The errors every family's decoder and stream share, and the options every decoder takes.
 //!
 //! A family's `decode` module turns a packet view + its calibration's lookup table into points
 //! appended to a caller's buffer. Decoders know nothing of sockets or files; they are built
@@ -96,4 +96,23 @@ pub enum DecodeError {
         /// The packet's frame id.
         found: u32,
     },
+}
+
+/// A sensor stream that cannot go on (every family's `SensorStream`).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum StreamError {
+    /// A Velodyne stream: neither the product id nor the packet cadence names a model.
+    #[error("cannot tell the Velodyne model (product id {product_id:#04x}, packet period {period_us:?} µs): name it with --model")]
+    UnknownModel {
+        /// Byte 1205.
+        product_id: u8,
+        /// Smallest stamp difference seen, µs.
+        period_us: Option<f64>,
+    },
+    /// The model has no built-in calibration; `.1` says where its file may come from.
+    #[error("the {0} has no built-in calibration: give its calibration file with --calib{1}")]
+    NeedsCalibration(&'static str, &'static str),
+    /// The decoder could not be built.
+    #[error(transparent)]
+    Decode(#[from] DecodeError),
 }

@@ -32,10 +32,9 @@ use std::net::Ipv4Addr;
 use std::sync::Arc;
 
 pub use calib::{CalibError, MAX_CALIB_BYTES};
-pub use decode::{DecodeError, DecodeOptions};
+pub use decode::{DecodeError, DecodeOptions, StreamError};
 pub use ouster::sweep::ImuSample;
 pub use ouster::sweep::ZoneReport;
-pub use velodyne::sweep::StreamError;
 pub use wire::WireError;
 
 use crate::sweep::Sweep;

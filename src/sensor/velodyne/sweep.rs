@@ -33,6 +33,7 @@ use crate::sensor::velodyne::wire::PpsState;
 use crate::sensor::velodyne::VelodyneDecoder;
 use crate::sensor::DecodeError;
 use crate::sensor::DecodeOptions;
+use crate::sensor::StreamError;
 use crate::sweep::Sweep;
 use crate::time::{complete_toh, toh_delta_us, ClockSource};
 
@@ -75,25 +76,6 @@ impl Default for StreamConfig {
             inspect: false,
         }
     }
-}
-
-/// A stream that cannot go on.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum StreamError {
-    /// Neither the product id nor the cadence names a model.
-    #[error("cannot tell the Velodyne model (product id {product_id:#04x}, packet period {period_us:?} µs): name it with --model")]
-    UnknownModel {
-        /// Byte 1205.
-        product_id: u8,
-        /// Smallest stamp difference seen, µs.
-        period_us: Option<f64>,
-    },
-    /// The model has no built-in calibration; `.1` says where its file may come from.
-    #[error("the {0} has no built-in calibration: give its calibration file with --calib{1}")]
-    NeedsCalibration(&'static str, &'static str),
-    /// The decoder could not be built.
-    #[error(transparent)]
-    Decode(#[from] DecodeError),
 }
 
 /// Counters of one stream.
