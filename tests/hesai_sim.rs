@@ -4,8 +4,9 @@
 //! carry that firing's time within 1 µs; the stream must hand over every point once, with
 //! `t` ≥ 0 from its sweep's first firing. Single return for every model, dual (last +
 //! strongest) for the models that send it. Corrections: a synthetic CSV (elevations spread over
-//! the model's field, azimuth offsets up to ±6°) and a synthetic AT128 `.dat`; the real shared
-//! files too when `../shared` is present.
+//! the model's field, azimuth offsets up to ±6°), a synthetic AT128 `.dat` and ATX `.dat`
+//! (version x.3: per-frame azimuths, elevation adjustment); the real shared files too when
+//! `../shared` is present. The ATX's sweeps are its frames.
 #![cfg(feature = "sim")]
 
 mod common;
@@ -25,6 +26,27 @@ const CALIB: &str = "tier4__nebula/src/nebula_hesai/nebula_hesai_decoders/calibr
 
 fn synthetic(model: HesaiModel) -> HesaiCalibration {
     let n = model.channels();
+    if model == HesaiModel::PandarAtx {
+        // Version x.3, 100 channels in 1/256°: azimuths ±2° (odd frames 0.05° more),
+        // elevations 12.5° … −12.5°, an elevation adjustment of ±0.2° along the azimuth.
+        let div = 256.0;
+        let mut b = vec![0xEE, 0xFF, 4, 3, 0, 0, 100];
+        b.extend_from_slice(&256u16.to_le_bytes());
+        let mut put = |v: f64| b.extend_from_slice(&((v * div).round() as i16).to_le_bytes());
+        for odd in [0.0, 0.05] {
+            for c in 0..100 {
+                put(((c % 4) as f64 - 2.0) + odd);
+            }
+        }
+        for c in 0..100 {
+            put(12.5 - 25.0 * c as f64 / 99.0);
+        }
+        for i in 0..70 {
+            put(0.2 * ((i % 10) as f64 - 5.0) / 5.0);
+        }
+        b.extend_from_slice(&[0u8; 32]);
+        return parse_hesai_calibration(&b).unwrap().unwrap();
+    }
     if model == HesaiModel::PandarAt128 {
         let mut b = vec![0u8; 16 + 24 + 1024 + 46080 + 32];
         b[..7].copy_from_slice(&[0xEE, 0xFF, 1, 5, 128, 3, 3]);
@@ -70,6 +92,8 @@ fn real(model: HesaiModel) -> Option<(HesaiCalibration, &'static str)> {
         HesaiModel::PandarXt32m => "PandarXT32M.csv",
         HesaiModel::PandarAt128 => "PandarAT128.dat",
         HesaiModel::PandarOt128 => "Pandar128E4X.csv",
+        // No ATX correction is shared.
+        HesaiModel::PandarAtx => return None,
     };
     let root = common::captures()?;
     let b = std::fs::read(root.join(CALIB).join(file)).ok()?;
@@ -190,6 +214,7 @@ fn dual_return_models_decode_back_to_the_truth() {
         HesaiModel::PandarQt128,
         HesaiModel::PandarXt32,
         HesaiModel::PandarOt128,
+        HesaiModel::PandarAtx,
     ] {
         let fig = run(model, synthetic(model), 0x39);
         check(&format!("{} synthetic, last+strongest", model.name()), &fig);

@@ -341,7 +341,7 @@ fn main() -> Res<()> {
         );
     } else if let Some(model) = HesaiModel::from_id(&model_name) {
         // Hesai: from 192.168.1.201 to port 2368, the beams from the sensor's own angle
-        // correction (the CSV, or the AT128's .dat).
+        // correction (the CSV, or the AT128's or ATX's .dat).
         let path = arg(&args, "--calib").ok_or_else(|| {
             format!("--model {model_name} needs --calib FILE (its angle correction CSV or .dat)")
         })?;
@@ -352,6 +352,7 @@ fn main() -> Res<()> {
         let elevations: Vec<f64> = match &calib {
             HesaiCalibration::Csv(rows) => rows.iter().map(|r| r.elevation_deg).collect(),
             HesaiCalibration::At128(a) => a.elevation.iter().map(|&e| e as f64).collect(),
+            HesaiCalibration::Atx(a) => a.elevation_deg.clone(),
         };
         let ring = |c: usize| {
             let e = elevations.get(c).copied().unwrap_or(0.0);

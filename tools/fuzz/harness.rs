@@ -2422,6 +2422,22 @@ pub fn hesai_correction(model: HesaiModel) -> HesaiCalibration {
         }
         return parse_hesai_calibration(&b).unwrap().unwrap();
     }
+    if model == HesaiModel::PandarAtx {
+        // Version x.3 in 1/100°: even azimuths 1°, odd 2°, elevations 10° … −9.8°, adjustment
+        // 0.5°.
+        let mut b = vec![0xEE, 0xFF, 4, 3, 0, 0, n as u8, 100, 0];
+        for v in (0..n).map(|_| 100i16).chain((0..n).map(|_| 200)) {
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+        for i in 0..n {
+            b.extend_from_slice(&(1_000 - 20 * i as i16).to_le_bytes());
+        }
+        for _ in 0..70 {
+            b.extend_from_slice(&50i16.to_le_bytes());
+        }
+        b.extend_from_slice(&[0; 32]);
+        return parse_hesai_calibration(&b).unwrap().unwrap();
+    }
     let mut s = String::from("Laser id,Elevation,Azimuth\n");
     for i in 0..n {
         let el = 15.0 - 30.0 * i as f64 / n as f64;
@@ -2491,7 +2507,9 @@ pub fn hesai_packet(data: &[u8]) {
     };
     cfg.cut_cdeg = Some(u32::from(sel & 0x80) * 100);
     let max_m = model.spec().max_range_m;
-    let l = &model.spec().layout;
+    // The most points a packet can hold: its layout's (the ATX's, from its header).
+    let per_packet =
+        HesaiPacket::new(payload, model).map_or(0, |p| p.layout().blocks * p.layout().channels);
     let mut stream = HesaiStream::new(cfg);
     let mut points = 0usize;
     let mut on_sweep = |sw: &mut Sweep, _: &ringscan::sensor::hesai::HesaiFacts| {
@@ -2507,7 +2525,7 @@ pub fn hesai_packet(data: &[u8]) {
     }
     stream.finish(&mut on_sweep);
     assert!(
-        points <= 2 * l.blocks * l.channels,
+        points <= 2 * per_packet,
         "{points} points from two packets"
     );
 }
@@ -2531,7 +2549,9 @@ pub fn calib_hesai(data: &[u8]) {
                 assert!(r.azimuth_deg.is_finite() && r.azimuth_deg.abs() <= 180.0);
             }
             for m in HESAI_MODELS {
-                if m.channels() == rows.len() && m != HesaiModel::PandarAt128 {
+                if m.channels() == rows.len()
+                    && !matches!(m, HesaiModel::PandarAt128 | HesaiModel::PandarAtx)
+                {
                     HesaiDecoder::new(m, &c, HesaiOptions::default()).unwrap();
                 }
             }
@@ -2546,6 +2566,19 @@ pub fn calib_hesai(data: &[u8]) {
                     }
                     if let Some(az) = d.channel_azimuth_udeg((enc as u32) & 0xFF_FFFF, ch) {
                         assert!((0..360_000_000).contains(&az));
+                    }
+                }
+            }
+        }
+        HesaiCalibration::Atx(a) => {
+            HesaiDecoder::new(HesaiModel::PandarAtx, &c, HesaiOptions::default()).unwrap();
+            // Block azimuths up to 256°, offsets within ±180°, elevations and their
+            // adjustment within ±90° each.
+            for ch in [0, 1, a.channels() / 2, a.channels() - 1] {
+                for raw in [0u16, 1, 5_120, 40_448, u16::MAX] {
+                    for odd in [false, true] {
+                        let (az, el) = a.angles(ch, raw, odd).unwrap();
+                        assert!(az.abs() <= 436 * 25_600 && el.abs() <= 180 * 25_600);
                     }
                 }
             }

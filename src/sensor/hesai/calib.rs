@@ -1,5 +1,5 @@
 //! Hesai angle corrections: the angle-correction CSV every spinning model ships with, and the
-//! AT128's binary `.dat` ([`super::at128`]).
+//! AT128's and the ATX's binary `.dat` ([`super::at128`], [`super::atx`]).
 //!
 //! The CSV (Hesai user manuals, "Angle correction file"; what the sensor serves over PTC) is a
 //! header line `Laser id,Elevation,Azimuth` (older files: `Channel,Elevation,Azimuth`) and one
@@ -9,6 +9,7 @@
 //! models' channel counts, finite angles (elevation within ±90°, azimuth offset within ±180°).
 
 use super::at128::At128Correction;
+use super::atx::AtxCorrection;
 use crate::sensor::calib::parse_decimal;
 use crate::sensor::CalibError;
 
@@ -31,6 +32,8 @@ pub enum HesaiCalibration {
     Csv(Vec<ChannelAngles>),
     /// The AT128's binary correction.
     At128(At128Correction),
+    /// The Pandar ATX's binary correction.
+    Atx(AtxCorrection),
 }
 
 impl HesaiCalibration {
@@ -39,6 +42,7 @@ impl HesaiCalibration {
         match self {
             Self::Csv(c) => c.len(),
             Self::At128(a) => a.channels(),
+            Self::Atx(a) => a.channels(),
         }
     }
 }

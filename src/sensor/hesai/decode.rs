@@ -5,7 +5,8 @@
 //! lowest), its azimuth offset in µ° for the sweep cut; a cos / sin table of the 36 000 block
 //! azimuths (0.01°). Per block group one table look-up; per point a complex multiply (block
 //! azimuth rotated by the channel's offset) and three products. The AT128's azimuth-dependent
-//! correction ([`super::at128`]) is evaluated per point instead.
+//! correction ([`super::at128`]) and the ATX's ([`super::atx`]: per-frame azimuths, an
+//! azimuth-dependent elevation) are evaluated per point instead, in the AT128's 1/25 600° unit.
 //!
 //! **Coordinates.** Hesai azimuth α grows clockwise seen from above with 0 on the sensor's
 //! forward (Hesai's and nebula's +y); ringscan's frame is REP 103, so
@@ -20,6 +21,7 @@
 //! return of the group (nebula's `dual_return_distance_threshold`).
 
 use super::at128::{At128Block, At128Correction, TURN as AT128_TURN, UNITS_PER_DEG};
+use super::atx::AtxCorrection;
 use super::calib::HesaiCalibration;
 use super::model::{return_index, returns_of_mode, HesaiModel, TailFlags};
 use super::wire::HesaiPacket;
@@ -128,9 +130,12 @@ pub struct BlockAzimuths<'a> {
 
 impl BlockAzimuths<'_> {
     /// Corrected azimuth of channel `c`, µ° in `[0, 360°)`; `None` for an AT128 block outside
-    /// every mirror field.
+    /// every mirror field, and for the ATX (its sweeps are its frames, not azimuth turns).
     #[inline]
     pub fn channel_udeg(&self, c: usize) -> Option<i64> {
+        if self.dec.atx.is_some() {
+            return None;
+        }
         match (&self.dec.at128, &self.at128) {
             (None, _) => {
                 let off = self.dec.channels.get(c).map_or(0, |ch| ch.off_udeg);
@@ -189,6 +194,7 @@ pub struct HesaiDecoder {
     model: HesaiModel,
     channels: Vec<Channel>,
     at128: Option<At128Correction>,
+    atx: Option<AtxCorrection>,
     opts: HesaiOptions,
     /// Per distance unit (mm, the header byte): the raw distances inside the range filter,
     /// `lo..=hi`, decided with nebula's arithmetic (raw × unit in f64, then f32) so that a
@@ -203,6 +209,12 @@ pub struct HesaiDecoder {
     /// The table a new key replaces once `tables` is full (round robin).
     evict: usize,
 }
+
+/// Correction kinds of [`HesaiDecoder::group`]: the CSV's constant offsets, the AT128's
+/// mirror fields, the ATX's per-frame rows.
+const CSV: u8 = 0;
+const AT128: u8 = 1;
+const ATX: u8 = 2;
 
 /// Most firing tables a decoder keeps.
 const FIRING_TABLES: usize = 4;
@@ -245,26 +257,28 @@ impl FiringTable {
 }
 
 impl HesaiDecoder {
-    /// Builds the decoder; the correction must have the model's channel count.
+    /// Builds the decoder; the correction must have the model's channel count (the ATX's
+    /// gives it: its packets must then have as many lasers).
     pub fn new(
         model: HesaiModel,
         calib: &HesaiCalibration,
         opts: HesaiOptions,
     ) -> Result<Self, DecodeError> {
         let n = model.channels();
-        if calib.channels() != n {
+        if model != HesaiModel::PandarAtx && calib.channels() != n {
             return Err(DecodeError::LaserCount {
                 model: model.name(),
                 expected: n,
                 found: calib.channels(),
             });
         }
-        let (mut channels, at128) = match calib {
+        let (mut channels, at128, atx) = match calib {
             HesaiCalibration::Csv(rows) => {
-                if model == HesaiModel::PandarAt128 {
-                    return Err(DecodeError::Calibration(
-                        "the PandarAT128 needs its binary .dat angle correction".into(),
-                    ));
+                if matches!(model, HesaiModel::PandarAt128 | HesaiModel::PandarAtx) {
+                    return Err(DecodeError::Calibration(format!(
+                        "the {} needs its binary .dat angle correction",
+                        model.name()
+                    )));
                 }
                 let ch: Vec<Channel> = rows
                     .iter()
@@ -281,7 +295,7 @@ impl HesaiDecoder {
                         }
                     })
                     .collect();
-                (ch, None)
+                (ch, None, None)
             }
             HesaiCalibration::At128(a) => {
                 if model != HesaiModel::PandarAt128 {
@@ -302,7 +316,29 @@ impl HesaiDecoder {
                         }
                     })
                     .collect();
-                (ch, Some(a.clone()))
+                (ch, Some(a.clone()), None)
+            }
+            HesaiCalibration::Atx(a) => {
+                if model != HesaiModel::PandarAtx {
+                    return Err(DecodeError::Calibration(format!(
+                        "an ATX .dat correction cannot serve the {}",
+                        model.name()
+                    )));
+                }
+                // Rings rank the elevations before their azimuth-dependent adjustment.
+                let ch: Vec<Channel> = a
+                    .elevation_deg
+                    .iter()
+                    .map(|&e| {
+                        let (se, ce) = e.to_radians().sin_cos();
+                        Channel {
+                            cos_el: ce as f32,
+                            sin_el: se as f32,
+                            ..Channel::default()
+                        }
+                    })
+                    .collect();
+                (ch, None, Some(a.clone()))
             }
         };
         // Ring = rank of the elevation (ties by channel index), 0 = lowest.
@@ -342,6 +378,7 @@ impl HesaiDecoder {
             model,
             channels,
             at128,
+            atx,
             opts,
             raw_bounds: (0..=255u8).map(|u| raw_bounds(u, min_m, max_m)).collect(),
             fov_udeg,
@@ -374,6 +411,10 @@ impl HesaiDecoder {
     /// Prepares the firing table for a packet's return count and tail flags (cheap when they
     /// did not change).
     pub fn prepare(&mut self, n_returns: usize, flags: TailFlags) {
+        if self.atx.is_some() {
+            // No firing table (every offset 0): nothing to prepare.
+            return;
+        }
         let key = (n_returns, self.model.firing_flags(n_returns, flags));
         if self.tables.get(self.current).is_some_and(|t| t.key == key) {
             return;
@@ -444,11 +485,10 @@ impl HesaiDecoder {
         }
     }
 
-    /// Per-channel azimuth offsets, µ° (`None` for the AT128, whose channel azimuths are not
-    /// the block azimuth plus a constant).
+    /// Per-channel azimuth offsets, µ° (`None` for the AT128 and the ATX, whose channel
+    /// azimuths are not the block azimuth plus a constant).
     pub fn azimuth_offsets_udeg(&self) -> Option<Vec<i64>> {
-        self.at128
-            .is_none()
+        (self.at128.is_none() && self.atx.is_none())
             .then(|| self.channels.iter().map(|c| c.off_udeg).collect())
     }
 
@@ -474,19 +514,29 @@ impl HesaiDecoder {
         // One loop per (returns, correction kind): the per-channel work then has no dispatch
         // and fixed-size arrays.
         let n = n.clamp(1, 3).min(p.layout().blocks.saturating_sub(first));
-        match (n, self.at128.is_some()) {
+        let kind = if self.at128.is_some() {
+            AT128
+        } else if self.atx.is_some() {
+            ATX
+        } else {
+            CSV
+        };
+        match (n, kind) {
             (0, _) => {}
-            (1, false) => self.group::<1, false>(p, first, out),
-            (2, false) => self.group::<2, false>(p, first, out),
-            (_, false) => self.group::<3, false>(p, first, out),
-            (1, true) => self.group::<1, true>(p, first, out),
-            (2, true) => self.group::<2, true>(p, first, out),
-            (_, true) => self.group::<3, true>(p, first, out),
+            (1, CSV) => self.group::<1, CSV>(p, first, out),
+            (2, CSV) => self.group::<2, CSV>(p, first, out),
+            (_, CSV) => self.group::<3, CSV>(p, first, out),
+            (1, AT128) => self.group::<1, AT128>(p, first, out),
+            (2, AT128) => self.group::<2, AT128>(p, first, out),
+            (_, AT128) => self.group::<3, AT128>(p, first, out),
+            (1, _) => self.group::<1, ATX>(p, first, out),
+            (2, _) => self.group::<2, ATX>(p, first, out),
+            (_, _) => self.group::<3, ATX>(p, first, out),
         }
     }
 
     #[inline(always)]
-    fn group<const N: usize, const AT128: bool>(
+    fn group<const N: usize, const KIND: u8>(
         &self,
         p: &HesaiPacket<'_>,
         first: usize,
@@ -509,7 +559,7 @@ impl HesaiDecoder {
             .fold(self.channels.len(), |n, u| n.min(u.len() / ul));
         let units: [&[u8]; N] = core::array::from_fn(|k| &units[k][..n_channels * ul]);
         let block_az = p.azimuth(first);
-        let (cb, sb) = if AT128 {
+        let (cb, sb) = if KIND != CSV {
             (1.0, 0.0)
         } else {
             azimuth_table()
@@ -519,12 +569,19 @@ impl HesaiDecoder {
         };
         // AT128: what the block's channels share (mirror field, grid position); a block
         // outside every mirror's field has no point.
-        let at128 = if AT128 {
+        let at128 = if KIND == AT128 {
             let Some(a) = &self.at128 else { return };
             let Some(b) = a.block(i64::from(block_az)) else {
                 return;
             };
             Some((a, b))
+        } else {
+            None
+        };
+        // ATX: the frame's parity picks the azimuth row; the block azimuth is in 1/256°.
+        let atx = if KIND == ATX {
+            let Some(a) = &self.atx else { return };
+            Some((a, p.frame_id().unwrap_or(0) & 1 == 1, block_az as u16))
         } else {
             None
         };
@@ -563,6 +620,16 @@ impl HesaiDecoder {
                     }
                     None => continue,
                 }
+            } else if let Some((a, odd, raw_az)) = &atx {
+                let Some((az, el)) = a.angles(c, *raw_az, *odd) else {
+                    continue;
+                };
+                if fov && !self.in_fov((az * 1_000_000 / UNITS_PER_DEG).rem_euclid(TURN_UDEG)) {
+                    continue;
+                }
+                let (co, s) = at128_cos_sin(az);
+                let (ce, se) = at128_cos_sin(el);
+                (co, s, ce, se)
             } else {
                 if fov
                     && !self
@@ -703,6 +770,7 @@ mod tests {
             dis_unit_mm: 5,
             flags: TailFlags::default(),
             signature: false,
+            frame_id: 0,
         };
         encode_packet(m, &blocks, &tail)
     }

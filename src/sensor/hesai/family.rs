@@ -15,6 +15,7 @@ use std::sync::Arc;
 use serde_json::{json, Map, Value};
 
 use super::at128::{looks_like_dat, At128Correction};
+use super::atx::{looks_like_atx_dat, AtxCorrection};
 use super::calib::{parse_csv, HesaiCalibration};
 use super::model::{HesaiModel, ALL_MODELS, SIGNATURE_LEN};
 use super::sweep::{return_mode_words, HesaiConfig, HesaiFacts, HesaiStream};
@@ -38,11 +39,16 @@ const MODEL_IDS: &[&str] = &[
     "pandarxt32m",
     "pandarat128",
     "pandarot128",
+    "pandaratx",
 ];
 
-/// Reads a Hesai correction: the AT128 `.dat` by its `EE FF 01` start, the CSV by its header
-/// line; `None` for anything else.
+/// Reads a Hesai correction: the AT128 `.dat` by its `EE FF 01` start, the ATX `.dat` by `EE FF`
+/// and a minor version 1–3 after another major, the CSV by its header line; `None` for
+/// anything else.
 pub fn parse_hesai_calibration(bytes: &[u8]) -> Option<Result<HesaiCalibration, CalibError>> {
+    if looks_like_atx_dat(bytes) {
+        return Some(AtxCorrection::parse(bytes).map(HesaiCalibration::Atx));
+    }
     if looks_like_dat(bytes) {
         return Some(At128Correction::parse(bytes).map(HesaiCalibration::At128));
     }
@@ -74,7 +80,11 @@ impl Family for Hesai {
 
     fn lidar_sizes(&self, _calibs: &[Calibration]) -> Vec<usize> {
         let mut v = Vec::new();
-        for m in ALL_MODELS {
+        // The ATX's lengths follow its header's counts: not a fixed list.
+        for m in ALL_MODELS
+            .into_iter()
+            .filter(|m| !m.spec().layout.counts_from_header)
+        {
             let l = &m.spec().layout;
             v.push(l.base_len());
             if l.trailing_udp_seq {
@@ -103,9 +113,14 @@ impl Family for Hesai {
             Some(_) => return None,
             None => HesaiModel::detect(d.payload)?,
         };
-        let fits = |c: &HesaiCalibration| {
-            c.channels() == model.channels()
-                && matches!(c, HesaiCalibration::At128(_)) == (model == HesaiModel::PandarAt128)
+        let fits = |c: &HesaiCalibration| match c {
+            HesaiCalibration::At128(_) => model == HesaiModel::PandarAt128,
+            // Its channel count is the packets' laser count, checked per packet.
+            HesaiCalibration::Atx(_) => model == HesaiModel::PandarAtx,
+            HesaiCalibration::Csv(_) => {
+                c.channels() == model.channels()
+                    && !matches!(model, HesaiModel::PandarAt128 | HesaiModel::PandarAtx)
+            }
         };
         let found = pool
             .candidates(self.name(), d.src, true)
@@ -325,13 +340,16 @@ impl SensorStream for HesaiStream {
 
     fn is_lidar_datagram(&self, payload: &[u8]) -> bool {
         match HesaiStream::facts(self).model {
-            Some(m) => m.spec().layout.accepts_len(payload.len()),
+            Some(m) => m.accepts(payload),
             None => HesaiModel::detect(payload).is_some(),
         }
     }
 
     fn channels(&self) -> Option<usize> {
-        HesaiStream::facts(self).model.map(HesaiModel::channels)
+        // The ATX's count is its correction's (= its packets' laser count).
+        self.decoder()
+            .map(|d| d.channels())
+            .or_else(|| HesaiStream::facts(self).model.map(HesaiModel::channels))
     }
 
     fn as_any(&self) -> &dyn Any {

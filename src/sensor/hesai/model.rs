@@ -15,6 +15,15 @@
 //!   block on QT128 / OT128; a tail (return mode, motor speed, date, µs, UDP sequence, tail
 //!   CRC); an optional 32-byte cyber-security signature.
 //!
+//! The Pandar ATX (protocol 4.7; HesaiLidar_SDK_2.0's `udp_protocol_v4_7.h`, the only public
+//! description) takes its laser and block counts from the header instead of a fixed layout:
+//! blocks of a u16 azimuth (1/256°), a fine byte and 4-byte units; a body CRC; a 32-byte tail
+//! (frame id at 10: bit 0 toggles each frame); the UDP sequence when flag bit 0 is set; a
+//! 12-byte E2E header (always); the signature when flag bit 3 is set. Its CRCs' algorithms are
+//! not published: they are skipped, not checked. [`Layout::for_header`] builds a packet's
+//! layout; the spec holds the simulator's configuration (2 blocks of 100 channels, the
+//! channel count of the SDK's sample correction).
+//!
 //! All multi-byte fields are little-endian, except the AT128's Unix seconds (big-endian).
 //!
 //! Firing times are each model's table of the manual's "laser firing time" appendix, relative to
@@ -41,10 +50,13 @@ pub enum HesaiModel {
     PandarAt128,
     /// OT128 / Pandar128E3X / Pandar128E4X (protocol 1.4).
     PandarOt128,
+    /// Pandar ATX (protocol 4.7): laser and block counts from the header, a binary angle
+    /// correction with per-frame (even / odd) azimuths.
+    PandarAtx,
 }
 
 /// Every model, in `--model` order.
-pub const ALL_MODELS: [HesaiModel; 9] = [
+pub const ALL_MODELS: [HesaiModel; 10] = [
     HesaiModel::Pandar40P,
     HesaiModel::Pandar64,
     HesaiModel::PandarQt64,
@@ -54,6 +66,7 @@ pub const ALL_MODELS: [HesaiModel; 9] = [
     HesaiModel::PandarXt32m,
     HesaiModel::PandarAt128,
     HesaiModel::PandarOt128,
+    HesaiModel::PandarAtx,
 ];
 
 /// Which header a packet starts with.
@@ -74,6 +87,9 @@ pub enum DateForm {
     Ymdhms,
     /// One zero byte, then the Unix seconds as a 40-bit big-endian number (AT128).
     UnixSeconds,
+    /// [`DateForm::Ymdhms`] when the first byte is not 0, else the Unix seconds as a 32-bit
+    /// big-endian number in bytes 2–5 (ATX; the SDK's `GetMicroLidarTimeU64`).
+    YmdhmsOrUnix32,
 }
 
 /// Offsets of the tail's fields, from the tail's first byte.
@@ -105,6 +121,8 @@ pub struct TailLayout {
     pub operational_state: Option<usize>,
     /// High-temperature shutdown flag.
     pub shutdown_flag: Option<usize>,
+    /// Frame id (ATX: bit 0 toggles at each frame of the mirror).
+    pub frame_id: Option<usize>,
 }
 
 /// Byte layout of one model's packets.
@@ -122,6 +140,12 @@ pub struct Layout {
     pub fine_azimuth: bool,
     /// Whether a CRC-32/MPEG-2 of the blocks follows them.
     pub body_crc: bool,
+    /// Whether the CRCs (body and tail) follow a known algorithm: false for the ATX, whose
+    /// 4-byte body CRC and E2E CRC are not documented anywhere public (skipped, not checked).
+    pub crc_known: bool,
+    /// The header's laser and block counts define the layout (ATX): see
+    /// [`Layout::for_header`]; `blocks` and `channels` here are the simulator's.
+    pub counts_from_header: bool,
     /// Bytes of the functional-safety block between body and tail (0 when absent).
     pub safety_len: usize,
     /// The tail.
@@ -184,6 +208,32 @@ impl Layout {
         self.tail_start() + self.tail.len
     }
 
+    /// The layout of a packet of this kind whose header gives `lasers`, `blocks` and `flags`
+    /// (ATX; every other layout is returned as it is). Flag bit 0 adds the 4-byte UDP sequence
+    /// after the tail, bit 3 the signature; the 12-byte E2E header always follows.
+    pub fn for_header(&self, lasers: u8, blocks: u8, flags: u8) -> Layout {
+        if !self.counts_from_header {
+            return *self;
+        }
+        let seq = flags & 1 != 0;
+        Layout {
+            channels: usize::from(lasers),
+            blocks: usize::from(blocks),
+            tail: TailLayout {
+                len: ATX_TAIL_LEN + if seq { 4 } else { 0 } + ATX_E2E_LEN,
+                udp_seq: seq.then_some(ATX_TAIL_LEN),
+                ..self.tail
+            },
+            signature: flags & 0b1000 != 0,
+            ..*self
+        }
+    }
+
+    /// The exact length of a packet of this layout (ATX, from [`Self::for_header`]).
+    pub fn header_len_exact(&self) -> usize {
+        self.base_len() + if self.signature { SIGNATURE_LEN } else { 0 }
+    }
+
     /// Whether `len` is a length this layout's packets have (with or without the optional
     /// UDP sequence / signature).
     pub fn accepts_len(&self, len: usize) -> bool {
@@ -208,6 +258,7 @@ const TAIL_40P: TailLayout = TailLayout {
     azimuth_state: None,
     operational_state: None,
     shutdown_flag: Some(5),
+    frame_id: None,
 };
 
 const TAIL_QT64: TailLayout = TailLayout {
@@ -224,6 +275,7 @@ const TAIL_QT64: TailLayout = TailLayout {
     azimuth_state: None,
     operational_state: None,
     shutdown_flag: None,
+    frame_id: None,
 };
 
 const TAIL_QT128: TailLayout = TailLayout {
@@ -240,6 +292,7 @@ const TAIL_QT128: TailLayout = TailLayout {
     azimuth_state: None,
     operational_state: None,
     shutdown_flag: None,
+    frame_id: None,
 };
 
 const TAIL_XT: TailLayout = TailLayout {
@@ -256,6 +309,7 @@ const TAIL_XT: TailLayout = TailLayout {
     azimuth_state: None,
     operational_state: None,
     shutdown_flag: None,
+    frame_id: None,
 };
 
 const TAIL_AT128: TailLayout = TailLayout {
@@ -272,6 +326,7 @@ const TAIL_AT128: TailLayout = TailLayout {
     azimuth_state: None,
     operational_state: None,
     shutdown_flag: Some(6),
+    frame_id: None,
 };
 
 const TAIL_OT128: TailLayout = TailLayout {
@@ -288,7 +343,33 @@ const TAIL_OT128: TailLayout = TailLayout {
     azimuth_state: Some(9),
     operational_state: Some(11),
     shutdown_flag: None,
+    frame_id: None,
 };
+
+/// The ATX tail: the AT128's first 32 bytes (motor speed at 18, µs at 20, return mode at 24,
+/// factory at 25, date at 26), with the frame id at 10; the UDP sequence (flag bit 0) and the
+/// 12-byte E2E header follow it ([`Layout::for_header`]).
+const TAIL_ATX: TailLayout = TailLayout {
+    len: ATX_TAIL_LEN + ATX_E2E_LEN,
+    return_mode: 24,
+    motor_rpm: 18,
+    date: 26,
+    date_form: DateForm::YmdhmsOrUnix32,
+    timestamp_us: 20,
+    factory: 25,
+    udp_seq: None,
+    crc: None,
+    mode_flag: None,
+    azimuth_state: None,
+    operational_state: None,
+    shutdown_flag: None,
+    frame_id: Some(10),
+};
+
+/// Bytes of the ATX tail proper.
+pub const ATX_TAIL_LEN: usize = 32;
+/// Bytes of the ATX E2E header (length, counter, data id, CRC; big-endian).
+pub const ATX_E2E_LEN: usize = 12;
 
 /// Bytes of the QT128 / OT128 functional-safety block.
 pub const SAFETY_LEN: usize = 17;
@@ -307,6 +388,8 @@ const fn layout(
         unit_len,
         fine_azimuth: false,
         body_crc: false,
+        crc_known: true,
+        counts_from_header: false,
         safety_len: 0,
         tail,
         trailing_udp_seq: false,
@@ -352,6 +435,7 @@ impl HesaiModel {
             Self::PandarXt32m => &SPEC_XT32M,
             Self::PandarAt128 => &SPEC_AT128,
             Self::PandarOt128 => &SPEC_OT128,
+            Self::PandarAtx => &SPEC_ATX,
         }
     }
 
@@ -376,6 +460,7 @@ impl HesaiModel {
         let id = match id.as_str() {
             "pandar128e3x" | "pandar128e4x" | "ot128" => "pandarot128",
             "at128" => "pandarat128",
+            "atx" => "pandaratx",
             "qt64" => "pandarqt64",
             "qt128" => "pandarqt128",
             "xt16" => "pandarxt16",
@@ -400,10 +485,12 @@ impl HesaiModel {
                 });
                 (l.accepts_len(len) && blocks_ok).then_some(Self::Pandar40P)
             }
+            [0xEE, 0xFF, 4, 7, ..] => Self::PandarAtx.accepts(payload).then_some(Self::PandarAtx),
             [0xEE, 0xFF, major, _minor, _, _, lasers, blocks, ..] => {
                 let found = ALL_MODELS.into_iter().find(|m| {
                     let s = m.spec();
-                    s.protocol_major == Some(*major)
+                    !s.layout.counts_from_header
+                        && s.protocol_major == Some(*major)
                         && usize::from(*lasers) == s.layout.channels
                         && usize::from(*blocks) == s.layout.blocks
                         && s.layout.accepts_len(len)
@@ -417,6 +504,23 @@ impl HesaiModel {
                 })
             }
             _ => None,
+        }
+    }
+
+    /// Whether `payload` has a length this model's packets have: the layout's, or for the ATX
+    /// the one its header's counts and flags give (at least one laser and one block).
+    pub fn accepts(self, payload: &[u8]) -> bool {
+        let l = &self.spec().layout;
+        if !l.counts_from_header {
+            return l.accepts_len(payload.len());
+        }
+        match payload {
+            [0xEE, 0xFF, _, _, _, _, lasers, blocks, _, _, _, flags, ..] => {
+                *lasers > 0
+                    && *blocks > 0
+                    && l.for_header(*lasers, *blocks, *flags).header_len_exact() == payload.len()
+            }
+            _ => false,
         }
     }
 
@@ -526,6 +630,9 @@ impl HesaiModel {
                 };
                 block_ns + 43_346 + i64::from(ch)
             }
+            // No firing-time table is published: every point takes the packet's time (the
+            // SDK's per-point time too).
+            Self::PandarAtx => 0,
         }
     }
 }
@@ -749,6 +856,28 @@ const SPEC_OT128: ModelSpec = ModelSpec {
     max_range_m: 230.0,
     fixed_dis_unit_mm: None,
     block_period_ns: 55_556,
+    default_cut_cdeg: 0,
+    fov_cdeg: (0, 0),
+};
+
+const SPEC_ATX: ModelSpec = ModelSpec {
+    id: "pandaratx",
+    name: "Pandar ATX",
+    protocol_major: Some(4),
+    layout: Layout {
+        fine_azimuth: true,
+        body_crc: true,
+        crc_known: false,
+        counts_from_header: true,
+        signature: true,
+        ..layout(HeaderKind::PreHeader12, 2, 100, 4, TAIL_ATX)
+    },
+    // No measuring range is published for the ATX: every return is kept.
+    min_range_m: 0.0,
+    max_range_m: f32::INFINITY,
+    fixed_dis_unit_mm: None,
+    // Not published either: loss is counted from the UDP sequence only.
+    block_period_ns: 0,
     default_cut_cdeg: 0,
     fov_cdeg: (0, 0),
 };

@@ -15,6 +15,11 @@
 //! distance unit (range noise off). Dual mode (0x39, last + strongest): every 5th beam also sees
 //! a weaker surface 1.5 m behind (the last return); the others send the same return twice,
 //! which the decoder merges into one point.
+//!
+//! The ATX has no published timing: the simulator's ATX scans 20°→160° in 1 400 columns of
+//! 0.1° per frame (the frame id counts frames), two columns per packet in single return,
+//! 72 µs apart, with the laser count of the correction it is given; every return takes the
+//! packet's time.
 
 use nalgebra::{Point3, Vector3};
 
@@ -41,6 +46,8 @@ pub struct TailData {
     pub flags: TailFlags,
     /// Append the 32-byte signature (zeros) where the layout allows it.
     pub signature: bool,
+    /// Frame id (ATX).
+    pub frame_id: u8,
 }
 
 /// One block: its azimuth (0.01°; AT128: 1/25600° of encoder) and (raw distance,
@@ -54,10 +61,18 @@ pub struct BlockData {
 }
 
 /// Writes one packet of `model`. Blocks beyond the layout's count are ignored, missing ones are
-/// empty.
+/// empty. The ATX's packet has as many blocks as given, of as many channels as the first holds
+/// (the layout its header then gives), with the UDP sequence.
 pub fn encode_packet(model: HesaiModel, blocks: &[BlockData], tail: &TailData) -> Vec<u8> {
     let spec = model.spec();
-    let l = &spec.layout;
+    let l = &if spec.layout.counts_from_header {
+        let lasers = blocks.first().map_or(0, |b| b.units.len()).min(255) as u8;
+        let flags = 1 | if tail.signature { 1 << 3 } else { 0 };
+        spec.layout
+            .for_header(lasers, blocks.len().min(255) as u8, flags)
+    } else {
+        spec.layout
+    };
     let mut b = vec![0u8; l.base_len()];
     match l.header {
         HeaderKind::None => {}
@@ -90,6 +105,7 @@ pub fn encode_packet(model: HesaiModel, blocks: &[BlockData], tail: &TailData) -
                 HesaiModel::PandarQt128 => 2,
                 HesaiModel::PandarAt128 => 3,
                 HesaiModel::PandarOt128 => 4,
+                HesaiModel::PandarAtx => 7,
                 _ => 1,
             };
             b[..12].copy_from_slice(&[
@@ -115,7 +131,10 @@ pub fn encode_packet(model: HesaiModel, blocks: &[BlockData], tail: &TailData) -
             b[o..o + 2].copy_from_slice(&[0xFF, 0xEE]);
             o += 2;
         }
-        if l.fine_azimuth {
+        if l.counts_from_header {
+            // ATX: the u16 in 1/256°; the fine byte stays 0.
+            b[o..o + 2].copy_from_slice(&(blk.azimuth as u16).to_le_bytes());
+        } else if l.fine_azimuth {
             b[o..o + 2].copy_from_slice(&((blk.azimuth >> 8) as u16).to_le_bytes());
             b[o + 2] = blk.azimuth as u8;
         } else {
@@ -128,7 +147,7 @@ pub fn encode_packet(model: HesaiModel, blocks: &[BlockData], tail: &TailData) -
             b[u + 2] = r;
         }
     }
-    if l.body_crc {
+    if l.body_crc && l.crc_known {
         let crc = crc32_mpeg2(&b[l.body_start()..l.body_end()]);
         b[l.body_end()..l.body_end() + 4].copy_from_slice(&crc.to_le_bytes());
     }
@@ -152,7 +171,7 @@ pub fn encode_packet(model: HesaiModel, blocks: &[BlockData], tail: &TailData) -
             }
             d
         }
-        DateForm::Ymdhms => {
+        DateForm::Ymdhms | DateForm::YmdhmsOrUnix32 => {
             let (y, mo, day) = civil_from_days(secs.div_euclid(86_400));
             let s = secs.rem_euclid(86_400);
             let yb = if y >= 2070 {
@@ -186,6 +205,9 @@ pub fn encode_packet(model: HesaiModel, blocks: &[BlockData], tail: &TailData) -
     }
     if let Some(o) = tl.operational_state {
         b[t + o] = tail.flags.operational_state;
+    }
+    if let Some(o) = tl.frame_id {
+        b[t + o] = tail.frame_id;
     }
     if let Some(o) = tl.udp_seq {
         b[t + o..t + o + 4].copy_from_slice(&tail.udp_seq.to_le_bytes());
@@ -293,6 +315,9 @@ impl HesaiSim {
     /// Time between packets, ns (whole µs, so that every tail time is exact).
     pub fn period_ns(&self) -> i64 {
         let s = self.model.spec();
+        if self.model == HesaiModel::PandarAtx {
+            return 72_000 * (s.layout.blocks / self.returns()) as i64;
+        }
         let groups = (s.layout.blocks / self.returns()) as i64;
         (groups * i64::from(s.block_period_ns) + 500) / 1_000 * 1_000
     }
@@ -313,6 +338,33 @@ impl HesaiSim {
                 let (az, el) = a.angles(c, i64::from(block_az))?;
                 Some((az as f64 / 25_600.0, el as f64 / 25_600.0))
             }
+            HesaiCalibration::Atx(a) => {
+                let (az, el) = a.angles(c, block_az as u16, self.atx_frame() & 1 == 1)?;
+                Some((az as f64 / 25_600.0, el as f64 / 25_600.0))
+            }
+        }
+    }
+
+    /// ATX: columns of one frame.
+    pub const ATX_COLUMNS: u64 = 1_400;
+
+    /// ATX: the frame of the current packet.
+    fn atx_frame(&self) -> u64 {
+        let groups = (self.model.spec().layout.blocks / self.returns()) as u64;
+        self.packet_index * groups / Self::ATX_COLUMNS
+    }
+
+    /// ATX: block azimuth (1/256°) of group `g` of the current packet.
+    fn atx_azimuth(&self, g: usize) -> u32 {
+        let groups = (self.model.spec().layout.blocks / self.returns()) as u64;
+        let col = (self.packet_index * groups + (g / self.returns()) as u64) % Self::ATX_COLUMNS;
+        ((20.0 + 0.1 * col as f64) * 256.0).round() as u32
+    }
+
+    fn channel_count(&self) -> usize {
+        match (&self.calib, self.model) {
+            (c, HesaiModel::PandarAtx) => c.channels(),
+            _ => self.model.channels(),
         }
     }
 
@@ -333,10 +385,11 @@ impl HesaiSim {
             operational_state: 1,
         };
         let unit_m = f64::from(self.dis_unit_mm) / 1000.0;
+        let channels = self.channel_count();
         let mut blocks = vec![
             BlockData {
                 azimuth: 0,
-                units: vec![(0, 0); l.channels]
+                units: vec![(0, 0); channels]
             };
             l.blocks
         ];
@@ -348,7 +401,9 @@ impl HesaiSim {
                 .min()
                 .unwrap_or(0);
             let head = self.head_deg(stamp + earliest);
-            let az = if l.fine_azimuth {
+            let az = if self.model == HesaiModel::PandarAtx {
+                self.atx_azimuth(g)
+            } else if l.fine_azimuth {
                 ((head * 25_600.0).round() as u32) % (360 * 25_600)
             } else {
                 ((head * 100.0).round() as u32) % 36_000
@@ -356,7 +411,7 @@ impl HesaiSim {
             for blk in blocks.iter_mut().skip(g).take(n) {
                 blk.azimuth = az;
             }
-            for c in 0..l.channels {
+            for c in 0..channels {
                 let Some((az_deg, el_deg)) = self.beam(az, c) else {
                     continue;
                 };
@@ -434,6 +489,7 @@ impl HesaiSim {
             dis_unit_mm: self.dis_unit_mm,
             flags,
             signature: true,
+            frame_id: self.atx_frame() as u8,
         };
         self.packet_index += 1;
         (
@@ -474,6 +530,7 @@ mod tests {
                 dis_unit_mm: m.spec().fixed_dis_unit_mm.unwrap_or(4),
                 flags: TailFlags::default(),
                 signature: false,
+                frame_id: 0,
             };
             let bytes = encode_packet(m, &blocks, &tail);
             assert_eq!(HesaiModel::detect(&bytes), Some(m), "{m:?}");

@@ -12,7 +12,8 @@
 //! space, whatever the channels' azimuth offsets (the QT64's reach ±8°): cutting on the block
 //! azimuth instead (what the Velodyne stream does) would give every channel its own seam.
 //! The sweep's timestamp is the earliest firing of the block group that opened it, so every
-//! point's `t` ≥ 0.
+//! point's `t` ≥ 0. **The ATX's sweeps are its frames**: one ends when bit 0 of the tail's
+//! frame id changes (the SDK's frame split), whatever the azimuths.
 //!
 //! **Clock.** A packet's time is its tail date + µs ([`super::wire::HesaiPacket::stamp_ns`]);
 //! point times add the model's firing offsets. The tail does not say how the sensor's clock is
@@ -145,6 +146,8 @@ pub enum CrcState {
     Checked,
     /// Present but not checked (`--crc off`).
     Unchecked,
+    /// Present, of an algorithm no public document gives (ATX): skipped.
+    Unpublished,
 }
 
 impl CrcState {
@@ -155,6 +158,7 @@ impl CrcState {
             Self::Absent => "absent (no CRC in this model's packets)",
             Self::Checked => "checked (CRC-32/MPEG-2 of body and tail)",
             Self::Unchecked => "present, not checked",
+            Self::Unpublished => "present, not checked (its algorithm is not published)",
         }
     }
 }
@@ -202,6 +206,8 @@ pub struct HesaiStream {
     /// offset, µ°), the window they span (start, width), and the last block azimuth.
     thresholds: Option<(Vec<i64>, i64, i64)>,
     last_block_udeg: Option<i64>,
+    /// Bit 0 of the last packet's frame id (ATX: the sweep ends when it changes).
+    last_frame: Option<u8>,
     packet_no: u64,
     cut_udeg: i64,
 }
@@ -230,6 +236,7 @@ impl HesaiStream {
             prev_stamp: None,
             thresholds: None,
             last_block_udeg: None,
+            last_frame: None,
             packet_no: 0,
             cut_udeg: 0,
         }
@@ -270,12 +277,18 @@ impl HesaiStream {
                 None => return Ok(()),
             },
         };
-        let n = model.channels();
+        // The ATX's channel count is its correction's.
+        let n = match (&self.cfg.calibration, model) {
+            (Some(c), HesaiModel::PandarAtx) => c.channels(),
+            _ => model.channels(),
+        };
         self.facts.model = Some(model);
         self.facts.detection = how;
-        self.facts.crc = if !model.spec().layout.body_crc && model.spec().layout.tail.crc.is_none()
-        {
+        let layout = &model.spec().layout;
+        self.facts.crc = if !layout.body_crc && layout.tail.crc.is_none() {
             CrcState::Absent
+        } else if !layout.crc_known {
+            CrcState::Unpublished
         } else if self.cfg.check_crc {
             CrcState::Checked
         } else {
@@ -400,6 +413,23 @@ impl HesaiStream {
             self.last_block_udeg = None;
         }
 
+        // ATX: a packet whose laser count is not its correction's cannot be decoded with it.
+        if self
+            .decoder
+            .as_ref()
+            .is_some_and(|d| p.layout().channels != d.channels())
+        {
+            self.stats.malformed += 1;
+            return Ok(());
+        }
+        let frame = p.frame_id().map(|f| f & 1);
+        if let (Some(f), Some(last)) = (frame, self.last_frame) {
+            if f != last {
+                self.emit_all(on_sweep);
+            }
+        }
+        self.last_frame = frame;
+
         self.packet_no += 1;
         self.stats.packets += 1;
         let Some(mut dec) = self.decoder.take() else {
@@ -414,7 +444,9 @@ impl HesaiStream {
             // Per-channel cut. The first group after a start or a discontinuity may straddle
             // the cut: its channels already past it (within a quarter turn) open the next
             // sweep (nebula's `initialize_state`).
-            if self.last_az.first() == Some(&i64::MIN) {
+            if frame.is_some() {
+                // Cut by frames (above), not by azimuth.
+            } else if self.last_az.first() == Some(&i64::MIN) {
                 let q = TURN_UDEG / 4;
                 let rel = |az: i64| (az - self.cut_udeg).rem_euclid(TURN_UDEG);
                 let azs: Vec<i64> = (0..nc).filter_map(|c| azimuths.channel_udeg(c)).collect();
@@ -428,7 +460,8 @@ impl HesaiStream {
                 }
                 self.gens_changed();
             }
-            if let Some((th, w_start, w_width)) = &self.thresholds {
+            if frame.is_some() {
+            } else if let Some((th, w_start, w_width)) = &self.thresholds {
                 // Angle-correction CSV: channel c's azimuth is the block azimuth + a constant,
                 // so it passes the cut exactly when the block azimuth passes cut − offset(c);
                 // the channels are looked at only when the block's step reaches that window.

@@ -70,14 +70,32 @@ pub struct FunctionalSafety {
 pub struct HesaiPacket<'a> {
     bytes: &'a [u8],
     model: HesaiModel,
-    layout: &'static Layout,
+    /// The model's layout, or the one this packet's header gives (ATX).
+    layout: Layout,
 }
 
 impl<'a> HesaiPacket<'a> {
     /// Checks `bytes` as a packet of `model`.
     pub fn new(bytes: &'a [u8], model: HesaiModel) -> Result<Self, WireError> {
-        let layout = &model.spec().layout;
-        if !layout.accepts_len(bytes.len()) {
+        let spec_layout = &model.spec().layout;
+        let layout = if spec_layout.counts_from_header {
+            if !model.accepts(bytes) {
+                return Err(WireError::Length {
+                    what: "Hesai ATX packet (from its header's laser and block counts)",
+                    expected: match bytes {
+                        [_, _, _, _, _, _, l, b, _, _, _, f, ..] => {
+                            spec_layout.for_header(*l, *b, *f).header_len_exact()
+                        }
+                        _ => spec_layout.base_len(),
+                    },
+                    found: bytes.len(),
+                });
+            }
+            spec_layout.for_header(bytes[6], bytes[7], bytes[11])
+        } else {
+            *spec_layout
+        };
+        if !layout.counts_from_header && !layout.accepts_len(bytes.len()) {
             return Err(WireError::Length {
                 what: model.name(),
                 expected: layout.base_len(),
@@ -113,6 +131,14 @@ impl<'a> HesaiPacket<'a> {
                     6
                 };
                 let (lasers, blocks) = (usize::from(bytes[at]), usize::from(bytes[at + 1]));
+                if layout.counts_from_header && bytes[2..4] != [4, 7] {
+                    return Err(WireError::BlockFlag {
+                        block: 0,
+                        offset: 2,
+                        found: bytes[2],
+                        found2: bytes[3],
+                    });
+                }
                 if lasers != layout.channels || blocks != layout.blocks {
                     return Err(WireError::Length {
                         what: "Hesai header laser × block count",
@@ -140,8 +166,8 @@ impl<'a> HesaiPacket<'a> {
     }
 
     /// The layout.
-    pub fn layout(&self) -> &'static Layout {
-        self.layout
+    pub fn layout(&self) -> &Layout {
+        &self.layout
     }
 
     /// Protocol version (major, minor) of the pre-header.
@@ -178,7 +204,8 @@ impl<'a> HesaiPacket<'a> {
         self.layout.body_start() + b * self.layout.block_len()
     }
 
-    /// Block azimuth in 0.01° (AT128: in 1/25600°, the fine byte appended).
+    /// Block azimuth in 0.01° (AT128: in 1/25600°, the fine byte appended; ATX: the u16 in
+    /// 1/256°, its fine byte unread, as the SDK leaves it).
     pub fn azimuth(&self, b: usize) -> u32 {
         let o = self.block_start(b)
             + if self.layout.header == HeaderKind::None {
@@ -187,7 +214,7 @@ impl<'a> HesaiPacket<'a> {
                 0
             };
         let az = u32::from(le_u16(self.bytes, o));
-        if self.layout.fine_azimuth {
+        if self.layout.fine_azimuth && !self.layout.counts_from_header {
             (az << 8) | u32::from(byte(self.bytes, o + 2))
         } else {
             az
@@ -248,7 +275,10 @@ impl<'a> HesaiPacket<'a> {
                     .iter()
                     .fold(0i64, |acc, &b| (acc << 8) | i64::from(b)),
             ),
-            DateForm::Ymdhms => {
+            DateForm::YmdhmsOrUnix32 if d[0] == 0 => {
+                Some(i64::from(u32::from_be_bytes([d[2], d[3], d[4], d[5]])))
+            }
+            DateForm::Ymdhms | DateForm::YmdhmsOrUnix32 => {
                 let year = super::model::year_from_byte(d[0]);
                 let (mo, day, h, mi, s) = (d[1], d[2], d[3], d[4], d[5]);
                 if !(1..=12).contains(&mo)
@@ -292,6 +322,14 @@ impl<'a> HesaiPacket<'a> {
             .then(|| le_u32(self.bytes, self.layout.base_len()))
     }
 
+    /// Frame id, where the tail has one (ATX: bit 0 toggles at each frame).
+    pub fn frame_id(&self) -> Option<u8> {
+        self.layout
+            .tail
+            .frame_id
+            .map(|o| byte(self.bytes, self.tail(o)))
+    }
+
     /// The tail bytes the firing tables depend on.
     pub fn tail_flags(&self) -> TailFlags {
         let t = &self.layout.tail;
@@ -332,14 +370,18 @@ impl<'a> HesaiPacket<'a> {
         })
     }
 
-    /// Whether the packet carries CRCs.
+    /// Whether the packet carries CRCs of a known algorithm.
     pub fn has_crc(&self) -> bool {
-        self.layout.body_crc || self.layout.tail.crc.is_some()
+        self.layout.crc_known && (self.layout.body_crc || self.layout.tail.crc.is_some())
     }
 
-    /// Checks the body and tail CRC-32/MPEG-2 where the packet has them.
+    /// Checks the body and tail CRC-32/MPEG-2 where the packet has them (not the ATX's, whose
+    /// algorithm is not published).
     pub fn check_crc(&self) -> Result<(), (CrcPart, WireError)> {
-        let l = self.layout;
+        let l = &self.layout;
+        if !l.crc_known {
+            return Ok(());
+        }
         if l.body_crc {
             let stored = le_u32(self.bytes, l.body_end());
             let computed = crc32_mpeg2(&self.bytes[l.body_start()..l.body_end()]);

@@ -1,0 +1,239 @@
+//! The Pandar ATX's binary angle correction (`.dat`) and its angle formulas.
+//!
+//! No user manual of the ATX is public; its one public description is HesaiLidar_SDK_2.0
+//! (`udp_protocol_v4_7.h`, `udp4_7_parser.cc`, 2.0.11), which reads three versions, told apart
+//! by the minor version byte (its sample file, `ATX_Angle_Correction_File_V42.dat`, is
+//! version 4.2 with 100 channels). Little-endian:
+//!
+//! | offset | field |
+//! |---|---|
+//! | 0 | `EE FF` |
+//! | 2, 3 | version major, minor (1, 2 or 3) |
+//! | 4 | 2 reserved bytes |
+//! | 6 | channels N (at most 200) |
+//! | 7 | angle division D, u16 (file values are 1/D degree) |
+//! | 9 | minor 1: azimuth, i16 × N; elevation, i16 × N |
+//! | 9 | minor 2, 3: azimuth of even frames, i16 × N; of odd frames, i16 × N; elevation, i16 × N |
+//! | 9 + 6N | minor 3: elevation adjustment, i16 × 70 (every 2° of azimuth from 20° to 158°) |
+//! | then | SHA-256 of the file, 32 bytes (not checked: integrity is the transport's business) |
+//!
+//! Angles (degrees): a block azimuth `a` (the packet's u16 / 256) gives channel c
+//! `azimuth = a + azimuth[c]` (minor 2, 3: the even or odd frame's, by bit 0 of the tail's
+//! frame id), `elevation = elevation[c]`, and with minor 3 `+ adjust(azimuth)`: the adjustment
+//! row interpolated linearly at the corrected azimuth (taken in `[0°, 360°)`), 0 outside
+//! 20°–158°, the last entry itself at 158°. Both angles are then rounded to 1/25 600°, the
+//! unit of the SDK's trigonometry tables and of the AT128's correction.
+//!
+//! The SDK also reads a *firetime* correction (per channel, a time for even and odd frames,
+//! turned into an azimuth shift with the motor speed); its binary form cannot be told from an
+//! angle correction of minor 1 by its bytes, and the shift's units are not documented, so it is
+//! not applied: the points are those of the SDK without a firetime file.
+
+use crate::sensor::CalibError;
+
+/// Most channels the SDK allows in an ATX correction.
+pub const MAX_CHANNELS: usize = 200;
+/// Entries of the elevation adjustment (minor 3).
+pub const ADJUST_LEN: usize = 70;
+/// Azimuth of the first adjustment entry, degrees.
+pub const ADJUST_START_DEG: f64 = 20.0;
+/// Azimuth step between adjustment entries, degrees.
+pub const ADJUST_STEP_DEG: f64 = 2.0;
+/// 1/25 600° per degree.
+const UNITS_PER_DEG: f64 = 25_600.0;
+
+/// A Pandar ATX angle correction, read and checked.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AtxCorrection {
+    /// File version (major, minor).
+    pub version: (u8, u8),
+    /// Angle division: file values are 1/`division` degree.
+    pub division: u16,
+    /// Per channel, azimuth offset of even frames, degrees (minor 1: the one azimuth).
+    pub azimuth_even_deg: Vec<f64>,
+    /// Per channel, azimuth offset of odd frames, degrees.
+    pub azimuth_odd_deg: Vec<f64>,
+    /// Per channel, elevation, degrees.
+    pub elevation_deg: Vec<f64>,
+    /// Minor 3: the elevation adjustment, degrees, every 2° of azimuth from 20°.
+    pub elevation_adjust_deg: Option<Vec<f64>>,
+}
+
+fn err(msg: String) -> CalibError {
+    CalibError::BadValue {
+        key: "ATX angle correction".into(),
+        context: String::new(),
+        expected: "a Pandar ATX .dat (version x.1, x.2 or x.3)".into(),
+        found: msg,
+    }
+}
+
+/// Whether `bytes` start like an ATX correction: `EE FF`, a minor version 1–3, and a major
+/// version other than 1 (the AT128's `.dat` is 1.x).
+pub fn looks_like_atx_dat(bytes: &[u8]) -> bool {
+    matches!(bytes, [0xEE, 0xFF, major, 1..=3, ..] if *major != 1)
+}
+
+impl AtxCorrection {
+    /// Parses an ATX `.dat` (minor version 1, 2 or 3). Bytes after the SHA-256 are ignored, as
+    /// the SDK ignores them.
+    pub fn parse(bytes: &[u8]) -> Result<Self, CalibError> {
+        let [0xEE, 0xFF, major, minor, _, _, n, d0, d1, ..] = *bytes else {
+            return Err(err(format!(
+                "expected EE FF and a 9-byte header, file has {} bytes",
+                bytes.len()
+            )));
+        };
+        if !(1..=3).contains(&minor) {
+            return Err(err(format!(
+                "version {major}.{minor} is not supported (minor 1, 2 and 3 are)"
+            )));
+        }
+        let n = usize::from(n);
+        let division = u16::from_le_bytes([d0, d1]);
+        if n == 0 || n > MAX_CHANNELS {
+            return Err(err(format!("{n} channels (1 to {MAX_CHANNELS})")));
+        }
+        if division == 0 {
+            return Err(err("angle division 0".into()));
+        }
+        let arrays = if minor == 1 { 2 } else { 3 };
+        let adjust = if minor == 3 { ADJUST_LEN } else { 0 };
+        let need = 9 + 2 * (arrays * n + adjust) + 32;
+        if bytes.len() < need {
+            return Err(err(format!(
+                "version {major}.{minor} with {n} channels is {need} bytes, file has {}",
+                bytes.len()
+            )));
+        }
+        let div = f64::from(division);
+        let read = |at: usize, count: usize| -> Vec<f64> {
+            bytes[at..at + 2 * count]
+                .chunks_exact(2)
+                .map(|c| f64::from(i16::from_le_bytes([c[0], c[1]])) / div)
+                .collect()
+        };
+        let (azimuth_even_deg, azimuth_odd_deg, elevation_deg) = if minor == 1 {
+            let az = read(9, n);
+            (az.clone(), az, read(9 + 2 * n, n))
+        } else {
+            (read(9, n), read(9 + 2 * n, n), read(9 + 4 * n, n))
+        };
+        let elevation_adjust_deg = (minor == 3).then(|| read(9 + 6 * n, ADJUST_LEN));
+        let check = |what: &str, v: &[f64], limit: f64| -> Result<(), CalibError> {
+            match v.iter().position(|x| x.abs() > limit) {
+                Some(i) => Err(err(format!(
+                    "{what} of entry {i} is {}°, beyond ±{limit}°",
+                    v[i]
+                ))),
+                None => Ok(()),
+            }
+        };
+        check("even-frame azimuth", &azimuth_even_deg, 180.0)?;
+        check("odd-frame azimuth", &azimuth_odd_deg, 180.0)?;
+        check("elevation", &elevation_deg, 90.0)?;
+        if let Some(a) = &elevation_adjust_deg {
+            check("elevation adjustment", a, 90.0)?;
+        }
+        Ok(Self {
+            version: (major, minor),
+            division,
+            azimuth_even_deg,
+            azimuth_odd_deg,
+            elevation_deg,
+            elevation_adjust_deg,
+        })
+    }
+
+    /// Channels.
+    pub fn channels(&self) -> usize {
+        self.elevation_deg.len()
+    }
+
+    /// The elevation adjustment at azimuth `az_deg` (minor 3; 0 otherwise).
+    pub fn elevation_adjust(&self, az_deg: f64) -> f64 {
+        let Some(row) = &self.elevation_adjust_deg else {
+            return 0.0;
+        };
+        let a = az_deg.rem_euclid(360.0);
+        let end = ADJUST_START_DEG + ADJUST_STEP_DEG * (ADJUST_LEN - 1) as f64;
+        if !(ADJUST_START_DEG..=end).contains(&a) {
+            return 0.0;
+        }
+        let i = (((a - ADJUST_START_DEG) / ADJUST_STEP_DEG) as usize).min(ADJUST_LEN - 1);
+        if i == ADJUST_LEN - 1 {
+            return row[i];
+        }
+        let k = (a - ADJUST_START_DEG - i as f64 * ADJUST_STEP_DEG) / ADJUST_STEP_DEG;
+        row[i] * (1.0 - k) + row[i + 1] * k
+    }
+
+    /// (azimuth, elevation) of channel `c` in 1/25 600° for a block azimuth `raw` (the
+    /// packet's u16, 1/256°) in an even or odd frame; `None` past the last channel.
+    #[inline]
+    pub fn angles(&self, c: usize, raw: u16, odd: bool) -> Option<(i64, i64)> {
+        let off = if odd {
+            self.azimuth_odd_deg.get(c)?
+        } else {
+            self.azimuth_even_deg.get(c)?
+        };
+        let az = f64::from(raw) / 256.0 + off;
+        let el = self.elevation_deg.get(c)? + self.elevation_adjust(az);
+        Some((
+            (az * UNITS_PER_DEG).round() as i64,
+            (el * UNITS_PER_DEG).round() as i64,
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn file(minor: u8, n: u8, division: u16, values: &[i16]) -> Vec<u8> {
+        let mut b = vec![0xEE, 0xFF, 4, minor, 0, 0, n];
+        b.extend_from_slice(&division.to_le_bytes());
+        for v in values {
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+        b.extend_from_slice(&[0xAB; 32]);
+        b
+    }
+
+    #[test]
+    fn the_three_versions_read_their_arrays() {
+        // Two channels, 1/256°.
+        let v1 = AtxCorrection::parse(&file(1, 2, 256, &[256, -512, 1280, -2560])).unwrap();
+        assert_eq!(v1.azimuth_even_deg, [1.0, -2.0]);
+        assert_eq!(v1.azimuth_odd_deg, [1.0, -2.0]);
+        assert_eq!(v1.elevation_deg, [5.0, -10.0]);
+        let v2 = AtxCorrection::parse(&file(2, 2, 100, &[100, 200, 300, 400, 500, 600])).unwrap();
+        assert_eq!(v2.azimuth_odd_deg, [3.0, 4.0]);
+        assert_eq!(v2.elevation_deg, [5.0, 6.0]);
+        let mut vals = vec![0i16; 6];
+        vals.extend((0..70).map(|i| i as i16));
+        let v3 = AtxCorrection::parse(&file(3, 2, 10, &vals)).unwrap();
+        // 20° + 2·3.5 = 27°: halfway between entries 3 and 4 (0.3° and 0.4°).
+        assert!((v3.elevation_adjust(27.0) - 0.35).abs() < 1e-12);
+        assert_eq!(v3.elevation_adjust(158.0), 6.9);
+        assert_eq!(v3.elevation_adjust(19.9), 0.0);
+        assert_eq!(v3.elevation_adjust(158.1), 0.0);
+        assert_eq!(v3.elevation_adjust(20.0 - 360.0), 0.0);
+    }
+
+    #[test]
+    fn hostile_files_are_refused() {
+        assert!(AtxCorrection::parse(&[]).is_err());
+        assert!(AtxCorrection::parse(&file(4, 2, 256, &[0; 6])).is_err());
+        assert!(AtxCorrection::parse(&file(1, 0, 256, &[])).is_err());
+        assert!(AtxCorrection::parse(&file(1, 201, 256, &[0; 402])).is_err());
+        assert!(AtxCorrection::parse(&file(1, 2, 0, &[0; 4])).is_err());
+        // Sizes that lie: 3 channels announced, 2 sent.
+        assert!(AtxCorrection::parse(&file(2, 3, 256, &[0; 6])).is_err());
+        // 181° of azimuth offset; 91° of elevation.
+        assert!(AtxCorrection::parse(&file(1, 1, 1, &[181, 0])).is_err());
+        assert!(AtxCorrection::parse(&file(1, 1, 1, &[0, 91])).is_err());
+        assert!(!looks_like_atx_dat(&[0xEE, 0xFF, 1, 3]));
+        assert!(looks_like_atx_dat(&[0xEE, 0xFF, 4, 2]));
+    }
+}
