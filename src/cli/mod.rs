@@ -134,13 +134,13 @@ struct DecodeCmd {
     out: Option<PathBuf>,
     /// Sensor model, overriding detection. Velodyne: vlp16, puck-hires, hdl32e, vlp32c,
     /// hdl64e-s2, hdl64e-s3, vls128; Hesai: pandar40p, pandar64, pandarqt64, pandarqt128,
-    /// pandarxt16, pandarxt32, pandarxt32m, pandarat128, pandarot128; Robosense: rs16, rs32,
-    /// rsbpearl, rshelios, rshelios16p, rsruby128, rsm1; Livox: mid360, hap, avia, horizon,
-    /// tele15, mid40, mid70.
+    /// pandarxt16, pandarxt32, pandarxt32m, pandarat128, pandarot128, pandaratx; Robosense:
+    /// rs16, rs32, rsbpearl, rshelios, rshelios16p, rsruby128, rsm1; Livox: mid360, hap, avia,
+    /// horizon, tele15, mid40, mid70.
     #[arg(long)]
     model: Option<String>,
     /// Calibration file: Velodyne ROS yaml, VeloView xml or HDL-64E db.xml; Ouster metadata
-    /// JSON; Hesai angle-correction CSV or AT128 .dat; Robosense angle CSV. `ADDR=FILE` gives
+    /// JSON; Hesai angle-correction CSV, AT128 or ATX .dat; Robosense angle CSV. `ADDR=FILE` gives
     /// it to the sensor at that source address only. Repeatable.
     #[arg(long = "calib", value_name = "[ADDR=]FILE")]
     calib: Vec<String>,

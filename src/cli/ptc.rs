@@ -71,7 +71,7 @@ pub fn fetch_angle_correction(addr: SocketAddr, timeout: Duration) -> Result<Vec
         Some(Ok(_)) => Ok(bytes),
         Some(Err(e)) => Err(format!("{addr}: the sensor's angle correction: {e}")),
         None => Err(format!(
-            "{addr}: the sensor's angle correction ({} bytes) is neither a Hesai CSV nor an AT128 .dat",
+            "{addr}: the sensor's angle correction ({} bytes) is neither a Hesai CSV nor an AT128 or ATX .dat",
             bytes.len()
         )),
     }

@@ -2524,10 +2524,7 @@ pub fn hesai_packet(data: &[u8]) {
         assert_eq!(st.packets + st.malformed, i as u64 + 1, "{st:?}");
     }
     stream.finish(&mut on_sweep);
-    assert!(
-        points <= 2 * per_packet,
-        "{points} points from two packets"
-    );
+    assert!(points <= 2 * per_packet, "{points} points from two packets");
 }
 
 /// Any bytes as a Hesai correction: recognised only by the CSV header line or the `.dat` start;

@@ -38,7 +38,8 @@ pub struct HesaiOptions {
     pub range: DecodeOptions,
     /// Also drop distances outside the model's own measuring range (the user manual's
     /// specification, nebula's sensor-class limits: Pandar40P / 64 0.3–200 m, QT64 0.1–60 m,
-    /// QT128 0.05–50 m, XT16 / XT32 0.05–120 m, XT32M 0.5–300 m, AT128 1–180 m, OT128 0.1–230 m).
+    /// QT128 0.05–50 m, XT16 / XT32 0.05–120 m, XT32M 0.5–300 m, AT128 1–180 m, OT128 0.1–230 m;
+    /// none is published for the ATX).
     /// On by default: returns inside the blind zone are not measurements the sensor stands by
     /// (the shared QT64 capture sends thousands below 0.1 m).
     pub sensor_range: bool,
