@@ -94,6 +94,79 @@ fn xt32_packet() -> Vec<u8> {
     b
 }
 
+/// A well-formed Pandar ATX packet written here (HesaiLidar_SDK_2.0 `udp_protocol_v4_7.h`):
+/// pre-header 4.7, `lasers` × 2 blocks (azimuth u16 in 1/256°, fine byte, 4-byte units), body
+/// CRC, 32-byte tail (frame id at 10, return mode at 24, UTC at 26), UDP sequence (flag bit 0),
+/// 12-byte E2E header.
+fn atx_packet(lasers: u8) -> Vec<u8> {
+    let n = usize::from(lasers);
+    let mut b = vec![0xEE, 0xFF, 4, 7, 0, 0, lasers, 2, 1, 4, 1, 0b0000_0001];
+    for blk in 0..2u16 {
+        b.extend_from_slice(&((60 + blk) * 256).to_le_bytes());
+        b.push(0);
+        for c in 0..n {
+            b.extend_from_slice(&(2_000 + c as u16).to_le_bytes());
+            b.extend_from_slice(&[40, 1]);
+        }
+    }
+    b.extend_from_slice(&[0xC0; 4]);
+    let mut tail = [0u8; 32];
+    tail[24] = 0x37;
+    tail[26..32].copy_from_slice(&[124, 1, 2, 3, 4, 5]);
+    b.extend_from_slice(&tail);
+    b.extend_from_slice(&7u32.to_le_bytes());
+    b.extend_from_slice(&[0; 12]);
+    b
+}
+
+/// The ATX's layout comes from its header: a header whose counts, flags or protocol do not
+/// fit the datagram, or a laser count its correction does not have, is counted, not decoded.
+#[test]
+fn atx_packets_whose_header_lies_are_counted_not_decoded() {
+    let good = atx_packet(100);
+    let mut s = stream_for(HesaiModel::PandarAtx);
+    let mut points = 0;
+    let mut on = |sw: &mut ringscan::sweep::Sweep, _: &_| points += sw.points.len();
+    s.push(0, &good, &mut on).unwrap();
+    assert_eq!(s.stats().packets, 1);
+    let with = |i: usize, v: u8| {
+        let mut b = good.clone();
+        b[i] = v;
+        b
+    };
+    let cases: Vec<(&str, Vec<u8>)> = vec![
+        ("one byte short", good[..good.len() - 1].to_vec()),
+        ("one byte more", [good.clone(), vec![0]].concat()),
+        ("no tail", good[..12 + 2 * 403].to_vec()),
+        ("99 lasers in the header", with(6, 99)),
+        ("no laser", with(6, 0)),
+        ("no block", with(7, 0)),
+        ("255 blocks", with(7, 255)),
+        ("signature flag, no signature", with(11, 0b1001)),
+        ("sequence flag off, sequence sent", with(11, 0)),
+        ("protocol 4.8", with(3, 8)),
+        (
+            "a well-formed packet of 99 lasers for a 100-channel correction",
+            atx_packet(99),
+        ),
+        ("return mode 0x42", {
+            let mut b = good.clone();
+            b[12 + 2 * 403 + 4 + 24] = 0x42;
+            b
+        }),
+        ("empty", Vec::new()),
+    ];
+    for (i, (what, c)) in cases.iter().enumerate() {
+        s.push(1_000 * (i as i64 + 1), c, &mut on).unwrap();
+        assert_eq!(s.stats().malformed, i as u64 + 1, "{what}");
+    }
+    assert_eq!(s.stats().packets, 1);
+    s.push(100_000, &good, &mut on).unwrap();
+    s.finish(&mut on);
+    assert_eq!(s.stats().packets, 2);
+    assert_eq!(points, 400, "two good packets of 200 returns");
+}
+
 #[test]
 fn short_long_and_marked_wrong_packets_are_counted_not_decoded() {
     let good = xt32_packet();
@@ -207,8 +280,13 @@ fn real_packets_and_files_mutated_through_the_fuzz_harnesses() {
     let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
     let mut runs = 0usize;
     // Always: the synthetic packets.
-    let mut seeds: Vec<Vec<u8>> = vec![xt32_packet()];
-    let mut files: Vec<Vec<u8>> = Vec::new();
+    let mut seeds: Vec<Vec<u8>> = vec![xt32_packet(), atx_packet(100), atx_packet(7)];
+    // An ATX correction (version 4.3, 3 channels) written here.
+    let mut atx_dat = vec![0xEE, 0xFF, 4, 3, 0, 0, 3, 0, 1];
+    atx_dat.extend((0..9 + 70).flat_map(|i: i16| (i * 37 - 200).to_le_bytes()));
+    atx_dat.extend_from_slice(&[0; 32]);
+    assert!(parse_hesai_calibration(&atx_dat).is_some_and(|r| r.is_ok()));
+    let mut files: Vec<Vec<u8>> = vec![atx_dat];
     if let Some(root) = common::captures() {
         for entry in walk(&root.join(GT)) {
             if entry.extension().is_some_and(|e| e == "pcap") {
@@ -228,7 +306,7 @@ fn real_packets_and_files_mutated_through_the_fuzz_harnesses() {
         }
     }
     for seed in &seeds {
-        for sel in 0..9u8 {
+        for sel in 0..10u8 {
             harness::hesai_packet(&[&[sel][..], seed].concat());
             runs += 1;
         }
