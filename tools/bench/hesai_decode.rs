@@ -8,7 +8,8 @@
 //! (2 000 packets, dual return) repeated 10 times, with `PandarXT32.csv`; for comparison the
 //! nebula VLP-16 and VLS-128 captures with nebula's VLP16.yaml / VLS128.yaml, through the
 //! Velodyne decoder. The AT128, of which no real capture exists, on 0.5 s of the simulator's
-//! packets (urban scene, single return) with the real `PandarAT128.dat`. Every payload is loaded before timing; throughput is in elements = points
+//! packets (urban scene, single return) with the real `PandarAT128.dat`; the ATX likewise, with
+//! a correction written in the benchmark (no ATX file is shared). Every payload is loaded before timing; throughput is in elements = points
 //! produced (`decoder/*`: the packet view and the decoder into one reused buffer, cleared every
 //! 500 packets; `stream/*`: the whole stream — `HesaiStream` / `VelodyneStream` — sweeps cut
 //! and handed to a callback that counts their points).
@@ -80,8 +81,38 @@ fn at128_input(shared: &Path) -> (HesaiCalibration, Vec<(i64, Vec<u8>)>) {
         ))
         .unwrap();
     let calib = parse_hesai_calibration(&dat).unwrap().unwrap();
+    simulated(HesaiModel::PandarAt128, calib)
+}
+
+/// 0.5 s of the simulated Pandar ATX (urban scene, single return) with a correction written
+/// here (version 4.3, 100 channels: per-frame azimuths and the elevation adjustment, the
+/// decoder's most expensive ATX form).
+fn atx_input() -> (HesaiCalibration, Vec<(i64, Vec<u8>)>) {
+    let mut b = vec![0xEE, 0xFF, 4, 3, 0, 0, 100];
+    b.extend_from_slice(&256u16.to_le_bytes());
+    let mut put = |v: f64| b.extend_from_slice(&((v * 256.0).round() as i16).to_le_bytes());
+    for odd in [0.0, 0.05] {
+        for c in 0..100 {
+            put((c % 4) as f64 - 2.0 + odd);
+        }
+    }
+    for c in 0..100 {
+        put(12.5 - 25.0 * c as f64 / 99.0);
+    }
+    for i in 0..70 {
+        put(0.04 * ((i % 10) as f64 - 5.0));
+    }
+    b.extend_from_slice(&[0; 32]);
+    let calib = parse_hesai_calibration(&b).unwrap().unwrap();
+    simulated(HesaiModel::PandarAtx, calib)
+}
+
+fn simulated(
+    model: HesaiModel,
+    calib: HesaiCalibration,
+) -> (HesaiCalibration, Vec<(i64, Vec<u8>)>) {
     let t0 = 1_714_564_800_000_000_000;
-    let mut sim = HesaiSim::new(HesaiModel::PandarAt128, calib.clone(), t0);
+    let mut sim = HesaiSim::new(model, calib.clone(), t0);
     sim.trajectory = Trajectory::fixed(nalgebra::Isometry3::translation(
         40.0,
         0.0,
@@ -172,6 +203,7 @@ fn bench(c: &mut Criterion) {
     for (name, model, (calib, input)) in [
         ("hesai-xt32", HesaiModel::PandarXt32, hesai_input(&shared)),
         ("hesai-at128", HesaiModel::PandarAt128, at128_input(&shared)),
+        ("hesai-atx", HesaiModel::PandarAtx, atx_input()),
     ] {
         let packets: Vec<&[u8]> = input.iter().map(|(_, p)| p.as_slice()).collect();
         let mut dec = HesaiDecoder::new(model, &calib, HesaiOptions::default()).unwrap();
