@@ -230,7 +230,7 @@ impl Layout {
     }
 
     /// The exact length of a packet of this layout (ATX, from [`Self::for_header`]).
-    pub fn header_len_exact(&self) -> usize {
+    pub fn exact_len(&self) -> usize {
         self.base_len() + if self.signature { SIGNATURE_LEN } else { 0 }
     }
 
@@ -518,7 +518,7 @@ impl HesaiModel {
             [0xEE, 0xFF, _, _, _, _, lasers, blocks, _, _, _, flags, ..] => {
                 *lasers > 0
                     && *blocks > 0
-                    && l.for_header(*lasers, *blocks, *flags).header_len_exact() == payload.len()
+                    && l.for_header(*lasers, *blocks, *flags).exact_len() == payload.len()
             }
             _ => false,
         }
@@ -996,6 +996,15 @@ mod tests {
         assert_eq!(base(HesaiModel::PandarXt16), 568);
         assert_eq!(base(HesaiModel::PandarAt128) + SIGNATURE_LEN, 1118);
         assert_eq!(base(HesaiModel::PandarOt128), 861);
+        // ATX, the SDK's `GetPacketSize`: 12 + blocks × (3 + 4 × lasers) + body CRC 4 + tail 32
+        // (+ sequence 4) + E2E 12 (+ signature 32).
+        let atx = &HesaiModel::PandarAtx.spec().layout;
+        assert_eq!(atx.for_header(100, 2, 0).exact_len(), 866);
+        assert_eq!(atx.for_header(100, 2, 0b1001).exact_len(), 902);
+        assert_eq!(
+            atx.for_header(128, 2, 0b0001).exact_len(),
+            12 + 2 * 515 + 4 + 32 + 4 + 12
+        );
     }
 
     #[test]

@@ -444,9 +444,9 @@ impl HesaiStream {
             // Per-channel cut. The first group after a start or a discontinuity may straddle
             // the cut: its channels already past it (within a quarter turn) open the next
             // sweep (nebula's `initialize_state`).
-            if frame.is_some() {
-                // Cut by frames (above), not by azimuth.
-            } else if self.last_az.first() == Some(&i64::MIN) {
+            // The ATX's sweeps are its frames (cut above): no azimuth cut.
+            let by_azimuth = frame.is_none();
+            if by_azimuth && self.last_az.first() == Some(&i64::MIN) {
                 let q = TURN_UDEG / 4;
                 let rel = |az: i64| (az - self.cut_udeg).rem_euclid(TURN_UDEG);
                 let azs: Vec<i64> = (0..nc).filter_map(|c| azimuths.channel_udeg(c)).collect();
@@ -460,7 +460,7 @@ impl HesaiStream {
                 }
                 self.gens_changed();
             }
-            if frame.is_some() {
+            if !by_azimuth {
             } else if let Some((th, w_start, w_width)) = &self.thresholds {
                 // Angle-correction CSV: channel c's azimuth is the block azimuth + a constant,
                 // so it passes the cut exactly when the block azimuth passes cut − offset(c);

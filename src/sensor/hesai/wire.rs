@@ -84,7 +84,7 @@ impl<'a> HesaiPacket<'a> {
                     what: "Hesai ATX packet (from its header's laser and block counts)",
                     expected: match bytes {
                         [_, _, _, _, _, _, l, b, _, _, _, f, ..] => {
-                            spec_layout.for_header(*l, *b, *f).header_len_exact()
+                            spec_layout.for_header(*l, *b, *f).exact_len()
                         }
                         _ => spec_layout.base_len(),
                     },
