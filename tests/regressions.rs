@@ -26,6 +26,7 @@ const REGRESSIONS: &[(&str, Option<&str>)] = &[
     ("http_response-chunk-size-overflow.bin", None),
     ("velodyne_packet-vls128-fixed-distance-unit.bin", None),
     ("bag_mcap-mcap-crate-chunk-length-overflow.bin", None),
+    ("calib_hesai-atx-one-channel.bin", None),
 ];
 
 fn dir() -> PathBuf {

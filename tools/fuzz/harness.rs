@@ -2571,7 +2571,9 @@ pub fn calib_hesai(data: &[u8]) {
             HesaiDecoder::new(HesaiModel::PandarAtx, &c, HesaiOptions::default()).unwrap();
             // Block azimuths up to 256°, offsets within ±180°, elevations and their
             // adjustment within ±90° each.
-            for ch in [0, 1, a.channels() / 2, a.channels() - 1] {
+            let n = a.channels();
+            assert!(a.angles(n, 0, false).is_none());
+            for ch in [0, 1, n / 2, n - 1].into_iter().filter(|&c| c < n) {
                 for raw in [0u16, 1, 5_120, 40_448, u16::MAX] {
                     for odd in [false, true] {
                         let (az, el) = a.angles(ch, raw, odd).unwrap();

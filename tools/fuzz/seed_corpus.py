@@ -363,6 +363,25 @@ def main():
         v13[540 + i] = (i * 7) % 256
         v13[36540 + i] = (i * 3) % 256
     put("calib_hesai", bytes(v13), "at128_v13")
+    # The Pandar ATX (no shared capture or file): a 4.3 .dat of 8 channels and a packet of 8
+    # lasers × 2 blocks with UDP sequence and signature (HesaiLidar_SDK_2.0 udp_protocol_v4_7.h).
+    atx_dat = bytes([0xEE, 0xFF, 4, 3, 0, 0, 8]) + struct.pack("<H", 256)
+    atx_dat += struct.pack("<8h", *[(k % 4 - 2) * 256 for k in range(8)]) * 2
+    atx_dat += struct.pack("<8h", *[(6 - 2 * k) * 256 for k in range(8)])
+    atx_dat += struct.pack("<70h", *[(k % 10 - 5) * 10 for k in range(70)]) + bytes(32)
+    put("calib_hesai", atx_dat, "atx_v43")
+    atx = bytearray(bytes([0xEE, 0xFF, 4, 7, 0, 0, 8, 2, 1, 4, 1, 0b1001]))
+    for blk in range(2):
+        atx += struct.pack("<HB", (60 + blk) * 256, 0)
+        atx += b"".join(struct.pack("<HBB", 2000 + 10 * k, 50, 1) for k in range(8))
+    atx += bytes(4)
+    tail = bytearray(32)
+    tail[10] = 1
+    tail[24] = 0x37
+    tail[26:32] = bytes([124, 1, 2, 3, 4, 5])
+    atx += tail + struct.pack("<I", 7) + bytes(12) + bytes(32)
+    for bits in (0x00, 0x30, 0x40, 0x80):
+        put("hesai_packet", bytes([9 | bits]) + bytes(atx), "atx")
     put("calib_hesai", b"Laser id,Elevation,Azimuth\n" + b"".join(
         b"%d,%.3f,%.3f\n" % (i + 1, 15 - i, 0.1 * i) for i in range(32)), "tiny")
 
