@@ -708,7 +708,8 @@ impl HesaiDecoder {
 
     /// Decodes a whole packet into `out` with `t` = firing time − `t0_ns` (ns, clamped to ≥ 0),
     /// where firing time = `stamp_ns` + the model's firing offset. Returns the points added,
-    /// or `None` for a packet whose return mode is unknown.
+    /// or `None` for a packet whose return mode is unknown, or whose laser count is not the
+    /// correction's (ATX).
     pub fn decode_packet(
         &mut self,
         p: &HesaiPacket<'_>,
@@ -717,6 +718,9 @@ impl HesaiDecoder {
         out: &mut Vec<Point>,
     ) -> Option<usize> {
         let n = returns_of_mode(p.return_mode())?;
+        if p.layout().channels != self.channels.len() {
+            return None;
+        }
         self.prepare(n, p.tail_flags());
         let before = out.len();
         let blocks = p.layout().blocks;
