@@ -732,11 +732,17 @@ fn atx_dat() -> Vec<u8> {
 /// and the number of returns the decoder must give.
 fn atx_capture(dat: &[u8], dir: &Path) -> (std::path::PathBuf, usize) {
     use ringscan::sensor::hesai::family::parse_hesai_calibration;
+    atx_capture_with(parse_hesai_calibration(dat).unwrap().unwrap(), dir)
+}
+
+fn atx_capture_with(
+    calib: ringscan::sensor::hesai::HesaiCalibration,
+    dir: &Path,
+) -> (std::path::PathBuf, usize) {
     use ringscan::sensor::hesai::sim::HesaiSim;
     use ringscan::sensor::hesai::HesaiModel;
     use ringscan::sim::{motion::Trajectory, scenes};
 
-    let calib = parse_hesai_calibration(dat).unwrap().unwrap();
     let mut sim = HesaiSim::new(HesaiModel::PandarAtx, calib, 1_714_564_800_000_000_000);
     sim.trajectory = Trajectory::fixed(nalgebra::Isometry3::translation(
         40.0,
@@ -824,4 +830,67 @@ fn the_atx_decodes_through_the_command_line() {
         points as f64 > 0.9 * returns as f64 && points <= returns as u64,
         "{points} of {returns}: {live}"
     );
+}
+
+/// The ATX's firetime CSV given beside its `.dat` (two `--calib` files, one sensor): the
+/// stream joins them (`calibration` names both) and decodes exactly the returns of a simulator
+/// whose beams follow the firetime-shifted azimuths; without the CSV the same points come out
+/// elsewhere; the CSV alone serves no sensor and is named.
+#[test]
+fn the_atx_firetime_csv_joins_its_angle_correction() {
+    use ringscan::sensor::hesai::family::parse_hesai_calibration;
+    use ringscan::sensor::hesai::HesaiCalibration;
+
+    let dir = common::Scratch::dir("hesai-atx-firetimes");
+    let dat = dir.join("atx.dat");
+    std::fs::write(&dat, atx_dat()).unwrap();
+    let mut csv = String::from("Channel,Even_fire time(ns),Odd_fire time(ns)\n");
+    for c in 0..100 {
+        csv.push_str(&format!(
+            "{},{},{}\n",
+            c + 1,
+            4_960 + 480 * c,
+            7_560 + 80 * c
+        ));
+    }
+    let ft = dir.join("atx_firetimes.csv");
+    std::fs::write(&ft, &csv).unwrap();
+    let Some(Ok(HesaiCalibration::Atx(a))) = parse_hesai_calibration(&atx_dat()) else {
+        panic!()
+    };
+    let Some(Ok(HesaiCalibration::AtxFiretimes(f))) = parse_hesai_calibration(csv.as_bytes())
+    else {
+        panic!()
+    };
+    let joined = HesaiCalibration::Atx(a.with_firetimes(f).unwrap());
+    let (pcap, returns) = atx_capture_with(joined, &dir);
+    let run = |calibs: &[&Path]| {
+        let mut c = Command::new(BIN);
+        c.arg("decode").arg(&pcap).arg("--json");
+        for f in calibs {
+            c.arg("--calib").arg(f);
+        }
+        c.output().unwrap()
+    };
+    // Either order of the two files.
+    for files in [[&dat, &ft], [&ft, &dat]] {
+        let o = run(&[files[0].as_path(), files[1].as_path()]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(j["points"].as_u64(), Some(returns as u64), "{j}");
+        assert_eq!(
+            j["sensors"][0]["calibration"], "atx.dat + atx_firetimes.csv",
+            "{j}"
+        );
+        assert_eq!(
+            j["unused_calibrations"].as_array().map_or(0, |v| v.len()),
+            0,
+            "{j}"
+        );
+    }
+    // The CSV alone: no angle correction, the run stops and names the file it could not use.
+    let o = run(&[ft.as_path()]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("atx_firetimes.csv"), "{err}");
 }

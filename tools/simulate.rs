@@ -353,6 +353,9 @@ fn main() -> Res<()> {
             HesaiCalibration::Csv(rows) => rows.iter().map(|r| r.elevation_deg).collect(),
             HesaiCalibration::At128(a) => a.elevation.iter().map(|&e| e as f64).collect(),
             HesaiCalibration::Atx(a) => a.elevation_deg.clone(),
+            HesaiCalibration::AtxFiretimes(_) => {
+                return Err(format!("{path}: an ATX firetime file, not an angle correction").into())
+            }
         };
         let ring = |c: usize| {
             let e = elevations.get(c).copied().unwrap_or(0.0);

@@ -171,6 +171,8 @@ struct SensorOut {
     name: String,
     topic: String,
     calib_file: Option<String>,
+    /// Files used beside `calib_file` (the ATX's firetimes), not attached.
+    calib_more: Vec<String>,
     raw_hold: Vec<(i64, u16, u16, Vec<u8>)>,
     raw_hold_bytes: usize,
     raw_dropped: u64,
@@ -264,6 +266,7 @@ impl Output {
                 name: String::new(),
                 topic: String::new(),
                 calib_file: None,
+                calib_more: Vec::new(),
                 raw_hold: Vec::new(),
                 raw_hold_bytes: 0,
                 raw_dropped: 0,
@@ -290,11 +293,15 @@ impl Output {
             let o = addr.octets();
             name = format!("{name}-{}-{}-{}", o[0], o[1], o[2]);
         }
-        let calib_name = facts.calibration_name();
+        // Several files serve one sensor as `first + second` (the ATX's angle correction and
+        // its firetimes); the first is attached.
+        let mut files = facts.calibration_name().split(" + ");
+        let first = files.next().unwrap_or_default();
+        let more: Vec<String> = files.map(str::to_string).collect();
         let calib = self
             .calibs
             .iter()
-            .find(|(a, n, _)| (a.is_none() || *a == Some(addr)) && calib_name == *n)
+            .find(|(a, n, _)| (a.is_none() || *a == Some(addr)) && first == *n)
             .map(|(_, n, b)| (n.clone(), b.clone()));
         let md = sensors::channel_metadata(facts, addr, ports);
         let topic_prefix = topic_prefix(self.n_sensors_hint, idx, &name);
@@ -302,6 +309,7 @@ impl Output {
         s.name = name.clone();
         s.topic = format!("{topic_prefix}/points");
         s.calib_file = calib.as_ref().map(|(n, _)| n.clone());
+        s.calib_more = more;
         let info = SensorInfo {
             name,
             topic_prefix,
@@ -1001,7 +1009,8 @@ impl Session {
         let used: std::collections::BTreeSet<&str> = out
             .sensors
             .iter()
-            .filter_map(|s| s.calib_file.as_deref())
+            .flat_map(|s| s.calib_file.iter().chain(&s.calib_more))
+            .map(String::as_str)
             .collect();
         out.calibs
             .iter()

@@ -350,7 +350,8 @@ pub trait Facts {
     /// The sensor's default name: `<model>-<serial, else the last octet of its address>`.
     fn default_name(&self, addr: Ipv4Addr) -> String;
 
-    /// The calibration file in use (its file name, or the built-in table's name).
+    /// The calibration file in use (its file name, or the built-in table's name); several files
+    /// serving one sensor are joined by ` + `, the main one first.
     fn calibration_name(&self) -> &str;
 
     /// Adds the family's channel metadata (model, serial, firmware, profile, clock, …).

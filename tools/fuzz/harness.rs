@@ -2567,16 +2567,24 @@ pub fn calib_hesai(data: &[u8]) {
                 }
             }
         }
+        HesaiCalibration::AtxFiretimes(f) => {
+            assert!((1..=200).contains(&f.channels()));
+            assert_eq!(f.odd_ns.len(), f.channels());
+            for t in f.even_ns.iter().chain(&f.odd_ns) {
+                assert!(t.is_finite() && t.abs() <= 1e6);
+            }
+            assert!(HesaiDecoder::new(HesaiModel::PandarAtx, &c, HesaiOptions::default()).is_err());
+        }
         HesaiCalibration::Atx(a) => {
             HesaiDecoder::new(HesaiModel::PandarAtx, &c, HesaiOptions::default()).unwrap();
             // Block azimuths up to 256°, offsets within ±180°, elevations and their
             // adjustment within ±90° each.
             let n = a.channels();
-            assert!(a.angles(n, 0, false).is_none());
+            assert!(a.angles(n, 0, false, 0).is_none());
             for ch in [0, 1, n / 2, n - 1].into_iter().filter(|&c| c < n) {
                 for raw in [0u16, 1, 5_120, 40_448, u16::MAX] {
                     for odd in [false, true] {
-                        let (az, el) = a.angles(ch, raw, odd).unwrap();
+                        let (az, el) = a.angles(ch, raw, odd, i16::MIN).unwrap();
                         assert!(az.abs() <= 436 * 25_600 && el.abs() <= 180 * 25_600);
                     }
                 }

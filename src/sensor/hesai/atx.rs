@@ -24,10 +24,14 @@
 //! 20°–158°, the last entry itself at 158°. Both angles are then rounded to 1/25 600°, the
 //! unit of the SDK's trigonometry tables and of the AT128's correction.
 //!
-//! The SDK also reads a *firetime* correction (per channel, a time for even and odd frames,
-//! turned into an azimuth shift with the motor speed); its binary form cannot be told from an
-//! angle correction of minor 1 by its bytes, and the shift's units are not documented, so it is
-//! not applied: the points are those of the SDK without a firetime file.
+//! **Firetimes.** The SDK also reads a firetime correction: per channel, a time (ns) for even
+//! and odd frames, which shifts the block azimuth by `+even[c]` or `−odd[c]` × |motor speed| ×
+//! 1e-9 / 8 degrees (the tail's i16 motor speed; the SDK's formula, its units undocumented)
+//! before the channel's azimuth and the elevation adjustment are applied. Its CSV form
+//! (`Channel,Even_fire time(ns),Odd_fire time(ns)`, [`AtxFiretimes::parse_csv`]) is read and
+//! applied when given with the angle correction; its binary form (`EE FF`, minor 1, channels,
+//! division, u16 × 2N) has the very bytes of an angle correction of minor 1 and cannot be told
+//! from one, so it is read as that: give the CSV.
 
 use crate::sensor::CalibError;
 
@@ -57,6 +61,99 @@ pub struct AtxCorrection {
     pub elevation_deg: Vec<f64>,
     /// Minor 3: the elevation adjustment, degrees, every 2° of azimuth from 20°.
     pub elevation_adjust_deg: Option<Vec<f64>>,
+    /// The firetime correction given with it ([`Self::with_firetimes`]).
+    pub firetimes: Option<AtxFiretimes>,
+}
+
+/// The ATX's firetime correction: per channel, ns, for even and odd frames.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AtxFiretimes {
+    /// Even frames.
+    pub even_ns: Vec<f64>,
+    /// Odd frames.
+    pub odd_ns: Vec<f64>,
+}
+
+/// Whether `text` starts (after a BOM and blank lines) with the ATX firetime CSV's header.
+pub fn looks_like_firetimes_csv(text: &str) -> bool {
+    let first = text
+        .trim_start_matches('\u{feff}')
+        .lines()
+        .map(str::trim)
+        .find(|l| !l.is_empty());
+    first.is_some_and(|l| {
+        let cols: Vec<String> = l
+            .split(',')
+            .map(|c| c.trim().to_ascii_lowercase())
+            .collect();
+        cols.len() >= 3
+            && cols[0] == "channel"
+            && cols[1].starts_with("even")
+            && cols[2].starts_with("odd")
+    })
+}
+
+impl AtxFiretimes {
+    /// Parses the firetime CSV: its header, then one `channel,even,odd` row per channel, ids
+    /// 1..N each once (any order, as the SDK indexes by id), N ≤ 200, finite times within ±1 ms.
+    pub fn parse_csv(text: &str) -> Result<Self, CalibError> {
+        let ferr = |msg: String| CalibError::BadValue {
+            key: "ATX firetime correction".into(),
+            context: String::new(),
+            expected: "rows `channel,even ns,odd ns`, channels 1..N once each".into(),
+            found: msg,
+        };
+        let mut rows: Vec<Option<(f64, f64)>> = Vec::new();
+        let body = text.trim_start_matches('\u{feff}');
+        let mut lines = body
+            .lines()
+            .enumerate()
+            .filter(|(_, l)| !l.trim().is_empty());
+        lines.next();
+        for (i, line) in lines {
+            let cols: Vec<&str> = line.split(',').map(str::trim).collect();
+            let num = |k: usize| -> Result<f64, CalibError> {
+                let v = cols.get(k).copied().unwrap_or("");
+                crate::sensor::calib::parse_decimal(v)
+                    .filter(|x| x.is_finite() && x.abs() <= 1e6)
+                    .ok_or_else(|| {
+                        ferr(format!(
+                            "line {}: column {} is {:?}",
+                            i + 1,
+                            k + 1,
+                            v.chars().take(20).collect::<String>()
+                        ))
+                    })
+            };
+            let id = num(0)?;
+            if id.fract() != 0.0 || !(1.0..=MAX_CHANNELS as f64).contains(&id) {
+                return Err(ferr(format!("line {}: channel {id}", i + 1)));
+            }
+            let id = id as usize;
+            if rows.len() < id {
+                rows.resize(id, None);
+            }
+            if rows[id - 1].replace((num(1)?, num(2)?)).is_some() {
+                return Err(ferr(format!("line {}: channel {id} given twice", i + 1)));
+            }
+        }
+        if rows.is_empty() {
+            return Err(ferr("no row".into()));
+        }
+        let mut even_ns = Vec::with_capacity(rows.len());
+        let mut odd_ns = Vec::with_capacity(rows.len());
+        for (i, r) in rows.iter().enumerate() {
+            let (e, o) = r.ok_or_else(|| ferr(format!("channel {} missing", i + 1)))?;
+            even_ns.push(e);
+            odd_ns.push(o);
+        }
+        Ok(Self { even_ns, odd_ns })
+    }
+
+    /// Channels.
+    pub fn channels(&self) -> usize {
+        self.even_ns.len()
+    }
 }
 
 fn err(msg: String) -> CalibError {
@@ -142,7 +239,21 @@ impl AtxCorrection {
             azimuth_odd_deg,
             elevation_deg,
             elevation_adjust_deg,
+            firetimes: None,
         })
+    }
+
+    /// The correction with its firetimes, which must have its channel count.
+    pub fn with_firetimes(mut self, firetimes: AtxFiretimes) -> Result<Self, CalibError> {
+        if firetimes.channels() != self.channels() {
+            return Err(err(format!(
+                "a firetime correction of {} channels for an angle correction of {}",
+                firetimes.channels(),
+                self.channels()
+            )));
+        }
+        self.firetimes = Some(firetimes);
+        Ok(self)
     }
 
     /// Channels.
@@ -169,15 +280,27 @@ impl AtxCorrection {
     }
 
     /// (azimuth, elevation) of channel `c` in 1/25 600° for a block azimuth `raw` (the
-    /// packet's u16, 1/256°) in an even or odd frame; `None` past the last channel.
+    /// packet's u16, 1/256°) in an even or odd frame, with the tail's motor speed (read only
+    /// with firetimes); `None` past the last channel.
     #[inline]
-    pub fn angles(&self, c: usize, raw: u16, odd: bool) -> Option<(i64, i64)> {
+    pub fn angles(&self, c: usize, raw: u16, odd: bool, motor_speed: i16) -> Option<(i64, i64)> {
         let off = if odd {
             self.azimuth_odd_deg.get(c)?
         } else {
             self.azimuth_even_deg.get(c)?
         };
-        let az = f64::from(raw) / 256.0 + off;
+        let fire = match &self.firetimes {
+            None => 0.0,
+            Some(f) => {
+                let t = if odd {
+                    -f.odd_ns.get(c)?
+                } else {
+                    *f.even_ns.get(c)?
+                };
+                t * f64::from(motor_speed.unsigned_abs()) * 1e-9 / 8.0
+            }
+        };
+        let az = f64::from(raw) / 256.0 + fire + off;
         let el = self.elevation_deg.get(c)? + self.elevation_adjust(az);
         Some((
             (az * UNITS_PER_DEG).round() as i64,
@@ -219,6 +342,37 @@ mod tests {
         assert_eq!(v3.elevation_adjust(19.9), 0.0);
         assert_eq!(v3.elevation_adjust(158.1), 0.0);
         assert_eq!(v3.elevation_adjust(20.0 - 360.0), 0.0);
+    }
+
+    #[test]
+    fn firetimes_shift_the_azimuth_by_the_sdk_formula() {
+        let text = "Channel,Even_fire time(ns),Odd_fire time(ns)\n2,8000,1600\n1,4000,800\n";
+        assert!(looks_like_firetimes_csv(text));
+        let f = AtxFiretimes::parse_csv(text).unwrap();
+        assert_eq!(f.even_ns, [4000.0, 8000.0]);
+        assert_eq!(f.odd_ns, [800.0, 1600.0]);
+        let c = AtxCorrection::parse(&file(1, 2, 256, &[0, 0, 0, 0])).unwrap();
+        let c = c.with_firetimes(f).unwrap();
+        // 8000 ns × |−2000| × 1e-9 / 8 = +0.002° on even frames; 1600 ns: −0.0004° on odd.
+        assert_eq!(c.angles(1, 2560, false, -2000), Some((256_051, 0)));
+        assert_eq!(c.angles(1, 2560, true, -2000), Some((255_990, 0)));
+        let short = AtxFiretimes::parse_csv("Channel,Even,Odd\n1,1,1\n").unwrap();
+        assert!(AtxCorrection::parse(&file(1, 2, 256, &[0; 4]))
+            .unwrap()
+            .with_firetimes(short)
+            .is_err());
+        for bad in [
+            "Channel,Even,Odd\n",
+            "Channel,Even,Odd\n1,1,1\n1,2,2\n",
+            "Channel,Even,Odd\n2,1,1\n",
+            "Channel,Even,Odd\n1,nan,1\n",
+            "Channel,Even,Odd\n1,1e9,1\n",
+            "Channel,Even,Odd\n201,1,1\n",
+            "Channel,Even,Odd\n1.5,1,1\n",
+            "Channel,Even,Odd\n1,1\n",
+        ] {
+            assert!(AtxFiretimes::parse_csv(bad).is_err(), "{bad:?}");
+        }
     }
 
     #[test]

@@ -9,7 +9,7 @@
 //! models' channel counts, finite angles (elevation within ±90°, azimuth offset within ±180°).
 
 use super::at128::At128Correction;
-use super::atx::AtxCorrection;
+use super::atx::{AtxCorrection, AtxFiretimes};
 use crate::sensor::calib::parse_decimal;
 use crate::sensor::CalibError;
 
@@ -34,6 +34,8 @@ pub enum HesaiCalibration {
     At128(At128Correction),
     /// The Pandar ATX's binary correction.
     Atx(AtxCorrection),
+    /// The Pandar ATX's firetime CSV: it serves with an ATX angle correction, never alone.
+    AtxFiretimes(AtxFiretimes),
 }
 
 impl HesaiCalibration {
@@ -43,6 +45,7 @@ impl HesaiCalibration {
             Self::Csv(c) => c.len(),
             Self::At128(a) => a.channels(),
             Self::Atx(a) => a.channels(),
+            Self::AtxFiretimes(f) => f.channels(),
         }
     }
 }

@@ -341,6 +341,12 @@ impl HesaiDecoder {
                     .collect();
                 (ch, None, Some(a.clone()))
             }
+            HesaiCalibration::AtxFiretimes(_) => {
+                return Err(DecodeError::Calibration(
+                    "an ATX firetime file serves with the ATX's angle correction (.dat), not alone"
+                        .into(),
+                ));
+            }
         };
         // Ring = rank of the elevation (ties by channel index), 0 = lowest.
         let mut order: Vec<usize> = (0..channels.len()).collect();
@@ -582,7 +588,13 @@ impl HesaiDecoder {
         // ATX: the frame's parity picks the azimuth row; the block azimuth is in 1/256°.
         let atx = if KIND == ATX {
             let Some(a) = &self.atx else { return };
-            Some((a, p.frame_id().unwrap_or(0) & 1 == 1, block_az as u16))
+            let speed = p.motor_rpm() as i16;
+            Some((
+                a,
+                p.frame_id().unwrap_or(0) & 1 == 1,
+                block_az as u16,
+                speed,
+            ))
         } else {
             None
         };
@@ -621,8 +633,8 @@ impl HesaiDecoder {
                     }
                     None => continue,
                 }
-            } else if let Some((a, odd, raw_az)) = &atx {
-                let Some((az, el)) = a.angles(c, *raw_az, *odd) else {
+            } else if let Some((a, odd, raw_az, speed)) = &atx {
+                let Some((az, el)) = a.angles(c, *raw_az, *odd, *speed) else {
                     continue;
                 };
                 if fov && !self.in_fov((az * 1_000_000 / UNITS_PER_DEG).rem_euclid(TURN_UDEG)) {

@@ -15,7 +15,7 @@ use std::sync::Arc;
 use serde_json::{json, Map, Value};
 
 use super::at128::{looks_like_dat, At128Correction};
-use super::atx::{looks_like_atx_dat, AtxCorrection};
+use super::atx::{looks_like_atx_dat, looks_like_firetimes_csv, AtxCorrection, AtxFiretimes};
 use super::calib::{parse_csv, HesaiCalibration};
 use super::model::{HesaiModel, ALL_MODELS, SIGNATURE_LEN};
 use super::sweep::{return_mode_words, HesaiConfig, HesaiFacts, HesaiStream};
@@ -43,8 +43,8 @@ const MODEL_IDS: &[&str] = &[
 ];
 
 /// Reads a Hesai correction: the AT128 `.dat` by its `EE FF 01` start, the ATX `.dat` by `EE FF`
-/// and a minor version 1–3 after another major, the CSV by its header line; `None` for
-/// anything else.
+/// and a minor version 1–3 after another major, the ATX firetime CSV and the angle CSV by their
+/// header lines; `None` for anything else.
 pub fn parse_hesai_calibration(bytes: &[u8]) -> Option<Result<HesaiCalibration, CalibError>> {
     if looks_like_atx_dat(bytes) {
         return Some(AtxCorrection::parse(bytes).map(HesaiCalibration::Atx));
@@ -53,6 +53,9 @@ pub fn parse_hesai_calibration(bytes: &[u8]) -> Option<Result<HesaiCalibration, 
         return Some(At128Correction::parse(bytes).map(HesaiCalibration::At128));
     }
     let text = core::str::from_utf8(bytes).ok()?;
+    if looks_like_firetimes_csv(text) {
+        return Some(AtxFiretimes::parse_csv(text).map(HesaiCalibration::AtxFiretimes));
+    }
     parse_csv(text).map(|r| r.map(HesaiCalibration::Csv))
 }
 
@@ -117,6 +120,8 @@ impl Family for Hesai {
             HesaiCalibration::At128(_) => model == HesaiModel::PandarAt128,
             // Its channel count is the packets' laser count, checked per packet.
             HesaiCalibration::Atx(_) => model == HesaiModel::PandarAtx,
+            // Joins the ATX's angle correction below.
+            HesaiCalibration::AtxFiretimes(_) => false,
             HesaiCalibration::Csv(_) => {
                 c.channels() == model.channels()
                     && !matches!(model, HesaiModel::PandarAt128 | HesaiModel::PandarAtx)
@@ -126,13 +131,35 @@ impl Family for Hesai {
             .candidates(self.name(), d.src, true)
             .find(|(_, c)| c.get::<HesaiCalibration>().is_some_and(fits))
             .map(|(i, c)| (i, c.clone()));
-        let (calibration, name) = match found {
+        let (mut calibration, mut name) = match found {
             Some((i, c)) => {
                 pool.mark_used(i);
                 (c.get::<HesaiCalibration>().cloned(), c.file_name.clone())
             }
             None => (None, String::new()),
         };
+        // An ATX angle correction takes a firetime CSV of its channel count along.
+        if let Some(HesaiCalibration::Atx(a)) = &calibration {
+            let firetimes = pool
+                .candidates(self.name(), d.src, true)
+                .find(|(_, c)| {
+                    matches!(c.get::<HesaiCalibration>(),
+                        Some(HesaiCalibration::AtxFiretimes(f)) if f.channels() == a.channels())
+                })
+                .and_then(|(i, c)| match c.get::<HesaiCalibration>() {
+                    Some(HesaiCalibration::AtxFiretimes(f)) => {
+                        Some((i, f.clone(), c.file_name.clone()))
+                    }
+                    _ => None,
+                });
+            if let Some((i, f, file)) = firetimes {
+                if let Ok(joined) = a.clone().with_firetimes(f) {
+                    pool.mark_used(i);
+                    calibration = Some(HesaiCalibration::Atx(joined));
+                    name = format!("{name} + {file}");
+                }
+            }
+        }
         let s = &pool.settings;
         let mut cfg = HesaiConfig::new(calibration, &name);
         cfg.model = named;

@@ -339,9 +339,11 @@ impl HesaiSim {
                 Some((az as f64 / 25_600.0, el as f64 / 25_600.0))
             }
             HesaiCalibration::Atx(a) => {
-                let (az, el) = a.angles(c, block_az as u16, self.atx_frame() & 1 == 1)?;
+                let speed = (self.deg_per_s / 6.0).round() as i16;
+                let (az, el) = a.angles(c, block_az as u16, self.atx_frame() & 1 == 1, speed)?;
                 Some((az as f64 / 25_600.0, el as f64 / 25_600.0))
             }
+            HesaiCalibration::AtxFiretimes(_) => None,
         }
     }
 
