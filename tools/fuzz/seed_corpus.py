@@ -370,6 +370,8 @@ def main():
     atx_dat += struct.pack("<8h", *[(6 - 2 * k) * 256 for k in range(8)])
     atx_dat += struct.pack("<70h", *[(k % 10 - 5) * 10 for k in range(70)]) + bytes(32)
     put("calib_hesai", atx_dat, "atx_v43")
+    put("calib_hesai", b"Channel,Even_fire time(ns),Odd_fire time(ns)\n" + b"".join(
+        b"%d,%d,%d\n" % (k + 1, 4960 + 520 * k, 7560) for k in range(8)), "atx_firetimes")
     atx = bytearray(bytes([0xEE, 0xFF, 4, 7, 0, 0, 8, 2, 1, 4, 1, 0b1001]))
     for blk in range(2):
         atx += struct.pack("<HB", (60 + blk) * 256, 0)
