@@ -511,16 +511,32 @@ fn listen_with_ptc(served: Vec<u8>, pcap: &Path, file: &str) -> serde_json::Valu
 /// the pcap and the number of returns the decoder must give.
 fn at128_capture(c: &Path, dir: &Path) -> (std::path::PathBuf, usize) {
     use ringscan::sensor::hesai::family::parse_hesai_calibration;
-    use ringscan::sensor::hesai::sim::HesaiSim;
     use ringscan::sensor::hesai::HesaiModel;
-    use ringscan::sim::{motion::Trajectory, scenes};
 
     let dat = c.join(CALIB).join("PandarAT128.dat");
     let calib = parse_hesai_calibration(&std::fs::read(dat).unwrap())
         .unwrap()
         .unwrap();
-    let t0 = 1_714_564_800_000_000_000;
-    let mut sim = HesaiSim::new(HesaiModel::PandarAt128, calib, t0);
+    sim_capture(
+        HesaiModel::PandarAt128,
+        calib,
+        3_600,
+        &dir.join("at128.pcap"),
+    )
+}
+
+/// `packets` packets of the simulated `model` with `calib`, at rest in the urban scene, written
+/// to `pcap`: the pcap and the number of returns the decoder must give.
+fn sim_capture(
+    model: ringscan::sensor::hesai::HesaiModel,
+    calib: ringscan::sensor::hesai::HesaiCalibration,
+    packets: usize,
+    pcap: &Path,
+) -> (std::path::PathBuf, usize) {
+    use ringscan::sensor::hesai::sim::HesaiSim;
+    use ringscan::sim::{motion::Trajectory, scenes};
+
+    let mut sim = HesaiSim::new(model, calib, 1_714_564_800_000_000_000);
     sim.trajectory = Trajectory::fixed(nalgebra::Isometry3::translation(
         40.0,
         0.0,
@@ -528,13 +544,12 @@ fn at128_capture(c: &Path, dir: &Path) -> (std::path::PathBuf, usize) {
     ));
     let scene = scenes::named("urban").unwrap();
     let (mut truth, mut datagrams) = (Vec::new(), Vec::new());
-    while datagrams.len() < 3_600 {
+    while datagrams.len() < packets {
         let (host_ns, payload) = sim.next_packet(&scene, &mut truth);
         datagrams.push((host_ns, [192, 168, 1, 201], payload));
     }
-    let pcap = dir.join("at128.pcap");
-    write_pcap(&pcap, &datagrams);
-    (pcap, truth.len())
+    write_pcap(pcap, &datagrams);
+    (pcap.to_path_buf(), truth.len())
 }
 
 /// An AT128 serves its binary `.dat` over PTC; `listen --hesai-ptc` decodes with it (the
@@ -739,25 +754,8 @@ fn atx_capture_with(
     calib: ringscan::sensor::hesai::HesaiCalibration,
     dir: &Path,
 ) -> (std::path::PathBuf, usize) {
-    use ringscan::sensor::hesai::sim::HesaiSim;
     use ringscan::sensor::hesai::HesaiModel;
-    use ringscan::sim::{motion::Trajectory, scenes};
-
-    let mut sim = HesaiSim::new(HesaiModel::PandarAtx, calib, 1_714_564_800_000_000_000);
-    sim.trajectory = Trajectory::fixed(nalgebra::Isometry3::translation(
-        40.0,
-        0.0,
-        scenes::SENSOR_HEIGHT_M,
-    ));
-    let scene = scenes::named("urban").unwrap();
-    let (mut truth, mut datagrams) = (Vec::new(), Vec::new());
-    while datagrams.len() < 2_100 {
-        let (host_ns, payload) = sim.next_packet(&scene, &mut truth);
-        datagrams.push((host_ns, [192, 168, 1, 201], payload));
-    }
-    let pcap = dir.join("atx.pcap");
-    write_pcap(&pcap, &datagrams);
-    (pcap, truth.len())
+    sim_capture(HesaiModel::PandarAtx, calib, 2_100, &dir.join("atx.pcap"))
 }
 
 /// The Pandar ATX at the process boundary (no real ATX packet exists: the simulator's, with a
