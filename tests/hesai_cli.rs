@@ -892,3 +892,61 @@ fn the_atx_firetime_csv_joins_its_angle_correction() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("atx_firetimes.csv"), "{err}");
 }
+
+/// Sensors are counted before decoding (one sensor: topic `/points`; several: `/<name>/points`
+/// each). The ATX's length follows its header, so it is counted by its bytes: a capture of an
+/// ATX and a simulated XT32 names both topics, not one `/points` and one `/<name>/points`.
+#[test]
+fn an_atx_is_counted_among_the_sensors_of_a_capture() {
+    use ringscan::sensor::hesai::family::parse_hesai_calibration;
+    use ringscan::sensor::hesai::HesaiModel;
+
+    let dir = common::Scratch::dir("hesai-atx-count");
+    let dat = dir.join("atx.dat");
+    std::fs::write(&dat, atx_dat()).unwrap();
+    let mut csv = String::from("Laser id,Elevation,Azimuth\n");
+    for i in 0..32 {
+        csv.push_str(&format!("{},{},0\n", i + 1, 15.0 - i as f64));
+    }
+    let xt = dir.join("xt32.csv");
+    std::fs::write(&xt, &csv).unwrap();
+    let calib = parse_hesai_calibration(csv.as_bytes()).unwrap().unwrap();
+    let (xt_pcap, _) = sim_capture(HesaiModel::PandarXt32, calib, 400, &dir.join("xt.pcap"));
+    let (atx_pcap, _) = atx_capture(&atx_dat(), &dir);
+    // Merged in time order, the XT32 re-addressed to 192.168.1.202 (its first packet after the
+    // ATX's, so the ATX is the sensor registered first).
+    let mut all: Vec<(i64, [u8; 4], Vec<u8>)> = Vec::new();
+    for (pcap, src) in [
+        (&atx_pcap, [192, 168, 1, 201]),
+        (&xt_pcap, [192, 168, 1, 202]),
+    ] {
+        for (t, _, p) in common::datagrams(pcap) {
+            all.push((t + i64::from(src[3] == 202) * 1_000, src, p));
+        }
+    }
+    all.sort_by_key(|d| d.0);
+    let merged = dir.join("merged.pcap");
+    write_pcap(&merged, &all);
+    let o = Command::new(BIN)
+        .arg("decode")
+        .arg(&merged)
+        .arg("--calib")
+        .arg(&dat)
+        .arg("--calib")
+        .arg(&xt)
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let sensors = j["sensors"].as_array().unwrap();
+    assert_eq!(sensors.len(), 2, "{j}");
+    for s in sensors {
+        let topic = s["topic"].as_str().unwrap();
+        assert_eq!(
+            topic,
+            format!("/{}/points", s["name"].as_str().unwrap()),
+            "{j}"
+        );
+    }
+}

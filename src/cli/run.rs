@@ -559,7 +559,10 @@ impl SensorCount {
 
     fn see(&mut self, d: &Datagram<'_>) {
         self.seen += 1;
-        if self.sizes.contains(&d.payload.len())
+        if (self.sizes.contains(&d.payload.len())
+            || crate::sensor::FAMILIES
+                .iter()
+                .any(|f| f.is_header_sized_lidar(d.payload)))
             && self.port.is_none_or(|p| p == d.dst.port())
             && !self.addrs.contains(d.src.ip())
         {

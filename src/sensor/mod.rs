@@ -134,6 +134,12 @@ pub trait Family: Sync {
     /// (used to count sensors in a capture before decoding it).
     fn lidar_sizes(&self, calibs: &[Calibration]) -> Vec<usize>;
 
+    /// Whether `payload` starts one of its sensors though its length is in no list: a length
+    /// the packet's own header gives (the Hesai ATX). Counted like [`Self::lidar_sizes`].
+    fn is_header_sized_lidar(&self, _payload: &[u8]) -> bool {
+        false
+    }
+
     /// The stream for a new sensor if its first datagram is the family's; `None` leaves the
     /// datagram to the next family. An error is a sensor the family recognised but cannot
     /// decode with what it was given.

@@ -102,6 +102,11 @@ impl Family for Hesai {
         v
     }
 
+    /// The ATX: its length follows its header's laser and block counts.
+    fn is_header_sized_lidar(&self, payload: &[u8]) -> bool {
+        HesaiModel::detect(payload) == Some(HesaiModel::PandarAtx)
+    }
+
     /// A datagram whose bytes name a Hesai model ([`HesaiModel::detect`]), or that fits the
     /// model named with `--model`. The first Hesai correction with the model's channel count
     /// (bound to this address, or unbound and unused) serves it; without one the stream reads
