@@ -266,7 +266,7 @@ impl HesaiDecoder {
         opts: HesaiOptions,
     ) -> Result<Self, DecodeError> {
         let n = model.channels();
-        if model != HesaiModel::PandarAtx && calib.channels() != n {
+        if !model.spec().layout.counts_from_header && calib.channels() != n {
             return Err(DecodeError::LaserCount {
                 model: model.name(),
                 expected: n,

@@ -277,9 +277,9 @@ impl HesaiStream {
                 None => return Ok(()),
             },
         };
-        // The ATX's channel count is its correction's.
-        let n = match (&self.cfg.calibration, model) {
-            (Some(c), HesaiModel::PandarAtx) => c.channels(),
+        // A layout read from each header (ATX) has its correction's channel count.
+        let n = match &self.cfg.calibration {
+            Some(c) if model.spec().layout.counts_from_header => c.channels(),
             _ => model.channels(),
         };
         self.facts.model = Some(model);
