@@ -725,16 +725,21 @@ fn decode_without_the_correction_fails_and_writes_nothing() {
 /// A Pandar ATX correction written here (version 4.3, 100 channels in 1/256°: azimuths ±2°,
 /// odd frames 0.05° more; elevations 12.5° … −12.5°; an elevation adjustment of ±0.2°).
 fn atx_dat() -> Vec<u8> {
-    let mut b = vec![0xEE, 0xFF, 4, 3, 0, 0, 100];
+    atx_dat_of(100)
+}
+
+/// [`atx_dat`] with `n` channels.
+fn atx_dat_of(n: u8) -> Vec<u8> {
+    let mut b = vec![0xEE, 0xFF, 4, 3, 0, 0, n];
     b.extend_from_slice(&256u16.to_le_bytes());
     let mut put = |v: f64| b.extend_from_slice(&((v * 256.0).round() as i16).to_le_bytes());
     for odd in [0.0, 0.05] {
-        for c in 0..100 {
+        for c in 0..n {
             put((c % 4) as f64 - 2.0 + odd);
         }
     }
-    for c in 0..100 {
-        put(12.5 - 25.0 * c as f64 / 99.0);
+    for c in 0..n {
+        put(12.5 - 25.0 * f64::from(c) / f64::from(n - 1));
     }
     for i in 0..70 {
         put(0.04 * ((i % 10) as f64 - 5.0));
@@ -949,4 +954,58 @@ fn an_atx_is_counted_among_the_sensors_of_a_capture() {
             "{j}"
         );
     }
+}
+
+/// Two ATX units of different channel counts in one capture, their `.dat` files given unbound
+/// and in the opposite order to the sensors': each file goes to the sensor whose header has its
+/// laser count (before, the first ATX took the first ATX file, and decoded nothing with it),
+/// so every simulated return of both comes out, each sensor naming its own file.
+#[test]
+fn atx_corrections_go_to_the_sensor_of_their_channel_count() {
+    use ringscan::sensor::hesai::family::parse_hesai_calibration;
+    use ringscan::sensor::hesai::HesaiModel;
+
+    let dir = common::Scratch::dir("hesai-atx-two");
+    let (wide, narrow) = (dir.join("wide.dat"), dir.join("narrow.dat"));
+    std::fs::write(&wide, atx_dat_of(100)).unwrap();
+    std::fs::write(&narrow, atx_dat_of(64)).unwrap();
+    let mut all: Vec<(i64, [u8; 4], Vec<u8>)> = Vec::new();
+    let mut returns = 0;
+    for (n, last) in [(100, 201u8), (64, 202)] {
+        let calib = parse_hesai_calibration(&atx_dat_of(n)).unwrap().unwrap();
+        let pcap = dir.join(format!("atx{n}.pcap"));
+        let (pcap, r) = sim_capture(HesaiModel::PandarAtx, calib, 1_400, &pcap);
+        returns += r;
+        for (t, _, p) in common::datagrams(&pcap) {
+            all.push((t + i64::from(last == 202) * 1_000, [192, 168, 1, last], p));
+        }
+    }
+    all.sort_by_key(|d| d.0);
+    let merged = dir.join("merged.pcap");
+    write_pcap(&merged, &all);
+    let o = Command::new(BIN)
+        .arg("decode")
+        .arg(&merged)
+        .arg("--calib")
+        .arg(&narrow)
+        .arg("--calib")
+        .arg(&wide)
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["points"].as_u64(), Some(returns as u64), "{j}");
+    let by_addr = |a: &str| {
+        j["sensors"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|s| s["address"] == a)
+            .unwrap_or_else(|| panic!("{a}: {j}"))
+            .clone()
+    };
+    assert_eq!(by_addr("192.168.1.201")["calibration"], "wide.dat", "{j}");
+    assert_eq!(by_addr("192.168.1.202")["calibration"], "narrow.dat", "{j}");
+    assert_eq!(by_addr("192.168.1.202")["malformed"], 0, "{j}");
 }

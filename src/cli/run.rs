@@ -293,11 +293,11 @@ impl Output {
             let o = addr.octets();
             name = format!("{name}-{}-{}-{}", o[0], o[1], o[2]);
         }
-        // Several files serve one sensor as `first + second` (the ATX's angle correction and
-        // its firetimes); the first is attached.
-        let mut files = facts.calibration_name().split(" + ");
-        let first = files.next().unwrap_or_default();
-        let more: Vec<String> = files.map(str::to_string).collect();
+        // Several files may serve one sensor (the ATX's angle correction and its firetimes);
+        // the first is attached.
+        let files = facts.calibration_files();
+        let first = files.first().copied().unwrap_or_default();
+        let more: Vec<String> = files.iter().skip(1).map(|f| f.to_string()).collect();
         let calib = self
             .calibs
             .iter()

@@ -356,9 +356,18 @@ pub trait Facts {
     /// The sensor's default name: `<model>-<serial, else the last octet of its address>`.
     fn default_name(&self, addr: Ipv4Addr) -> String;
 
-    /// The calibration file in use (its file name, or the built-in table's name); several files
-    /// serving one sensor are joined by ` + `, the main one first.
+    /// The calibration in use, as shown: its file name, or the built-in table's name; several
+    /// files serving one sensor are joined by ` + `, the main one first.
     fn calibration_name(&self) -> &str;
+
+    /// The files the calibration was read from, the main one first (Hesai ATX: its angle
+    /// correction and its firetimes); by default the one [`Self::calibration_name`] names.
+    fn calibration_files(&self) -> Vec<&str> {
+        match self.calibration_name() {
+            "" => Vec::new(),
+            n => vec![n],
+        }
+    }
 
     /// Adds the family's channel metadata (model, serial, firmware, profile, clock, …).
     fn channel_metadata(&self, md: &mut BTreeMap<String, String>);

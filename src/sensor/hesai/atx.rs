@@ -272,11 +272,15 @@ impl AtxCorrection {
             return 0.0;
         }
         let i = (((a - ADJUST_START_DEG) / ADJUST_STEP_DEG) as usize).min(ADJUST_LEN - 1);
-        if i == ADJUST_LEN - 1 {
-            return row[i];
-        }
+        // `parse` gives 70 entries; a value built by hand may hold fewer, which adjust nothing.
+        let (Some(&lo), hi) = (row.get(i), row.get(i + 1)) else {
+            return 0.0;
+        };
+        let Some(&hi) = hi else {
+            return if i == ADJUST_LEN - 1 { lo } else { 0.0 };
+        };
         let k = (a - ADJUST_START_DEG - i as f64 * ADJUST_STEP_DEG) / ADJUST_STEP_DEG;
-        row[i] * (1.0 - k) + row[i + 1] * k
+        lo * (1.0 - k) + hi * k
     }
 
     /// (azimuth, elevation) of channel `c` in 1/25 600° for a block azimuth `raw` (the
@@ -389,5 +393,20 @@ mod tests {
         assert!(AtxCorrection::parse(&file(1, 1, 1, &[0, 91])).is_err());
         assert!(!looks_like_atx_dat(&[0xEE, 0xFF, 1, 3]));
         assert!(looks_like_atx_dat(&[0xEE, 0xFF, 4, 2]));
+    }
+
+    /// The fields are public: a value built by hand with a short adjustment row adjusts
+    /// nothing past its end (it panicked on an index before).
+    #[test]
+    fn a_short_adjustment_row_built_by_hand_does_not_panic() {
+        let mut a = AtxCorrection::parse(&file(3, 1, 256, &[0; 3 + ADJUST_LEN])).unwrap();
+        a.elevation_adjust_deg = Some(vec![1.0, 3.0]);
+        assert_eq!(a.elevation_adjust(21.0), 2.0);
+        for tenth in 0..3600 {
+            let az = f64::from(tenth) / 10.0;
+            let v = a.elevation_adjust(az);
+            assert!(v == 0.0 || (1.0..=3.0).contains(&v), "{az}: {v}");
+        }
+        assert_eq!(a.elevation_adjust(158.0), 0.0);
     }
 }

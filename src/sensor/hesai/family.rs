@@ -116,15 +116,20 @@ impl Family for Hesai {
             None => None,
             Some(m) => Some(HesaiModel::from_id(m)?),
         };
-        let model = match named {
-            Some(m) if HesaiPacket::new(d.payload, m).is_ok() => m,
-            Some(_) => return None,
-            None => HesaiModel::detect(d.payload)?,
+        let first = named.map(|m| (m, HesaiPacket::new(d.payload, m)));
+        let (model, packet) = match first {
+            Some((m, Ok(p))) => (m, Some(p)),
+            Some((_, Err(_))) => return None,
+            None => {
+                let m = HesaiModel::detect(d.payload)?;
+                (m, HesaiPacket::new(d.payload, m).ok())
+            }
         };
+        // The laser count its packets carry: the ATX's header gives its own.
+        let lasers = packet.map_or(model.channels(), |p| p.layout().channels);
         let fits = |c: &HesaiCalibration| match c {
             HesaiCalibration::At128(_) => model == HesaiModel::PandarAt128,
-            // Its channel count is the packets' laser count, checked per packet.
-            HesaiCalibration::Atx(_) => model == HesaiModel::PandarAtx,
+            HesaiCalibration::Atx(a) => model == HesaiModel::PandarAtx && a.channels() == lasers,
             // Joins the ATX's angle correction below.
             HesaiCalibration::AtxFiretimes(_) => false,
             HesaiCalibration::Csv(_) => {
@@ -136,12 +141,15 @@ impl Family for Hesai {
             .candidates(self.name(), d.src, true)
             .find(|(_, c)| c.get::<HesaiCalibration>().is_some_and(fits))
             .map(|(i, c)| (i, c.clone()));
-        let (mut calibration, mut name) = match found {
+        let (mut calibration, mut files) = match found {
             Some((i, c)) => {
                 pool.mark_used(i);
-                (c.get::<HesaiCalibration>().cloned(), c.file_name.clone())
+                (
+                    c.get::<HesaiCalibration>().cloned(),
+                    vec![c.file_name.clone()],
+                )
             }
-            None => (None, String::new()),
+            None => (None, Vec::new()),
         };
         // An ATX angle correction takes a firetime CSV of its channel count along.
         if let Some(HesaiCalibration::Atx(a)) = &calibration {
@@ -161,12 +169,13 @@ impl Family for Hesai {
                 if let Ok(joined) = a.clone().with_firetimes(f) {
                     pool.mark_used(i);
                     calibration = Some(HesaiCalibration::Atx(joined));
-                    name = format!("{name} + {file}");
+                    files.push(file);
                 }
             }
         }
         let s = &pool.settings;
-        let mut cfg = HesaiConfig::new(calibration, &name);
+        let mut cfg = HesaiConfig::new(calibration, &files.join(" + "));
+        cfg.calibration_files = files;
         cfg.model = named;
         cfg.options.range = s.decode;
         cfg.cut_cdeg = Some(u32::from(s.cut_angle));
@@ -240,6 +249,10 @@ impl Facts for HesaiFacts {
 
     fn calibration_name(&self) -> &str {
         &self.calibration
+    }
+
+    fn calibration_files(&self) -> Vec<&str> {
+        self.calibration_files.iter().map(String::as_str).collect()
     }
 
     fn channel_metadata(&self, md: &mut BTreeMap<String, String>) {

@@ -43,8 +43,11 @@ pub struct HesaiConfig {
     /// The angle correction; without one the stream reads the packets (model, clock, loss,
     /// health) but decodes no points.
     pub calibration: Option<HesaiCalibration>,
-    /// Its file name.
+    /// Its name as shown: the file names of [`Self::calibration_files`] joined by ` + `.
     pub calibration_name: String,
+    /// The files it was read from, the angle correction first (an ATX's firetime CSV second);
+    /// what `--calib` files a run reports as used.
+    pub calibration_files: Vec<String>,
     /// Decoding options.
     pub options: HesaiOptions,
     /// Cut angle, 0.01°; `None` (or 0 for the AT128, whose field of view 0° is outside) = the
@@ -67,6 +70,11 @@ impl HesaiConfig {
             model: None,
             calibration,
             calibration_name: calibration_name.to_string(),
+            calibration_files: if calibration_name.is_empty() {
+                Vec::new()
+            } else {
+                vec![calibration_name.to_string()]
+            },
             options: HesaiOptions::default(),
             cut_cdeg: None,
             check_crc: true,
@@ -118,8 +126,10 @@ pub struct HesaiFacts {
     pub dis_unit_mm: Option<u8>,
     /// Last motor speed, rpm.
     pub motor_rpm: Option<u16>,
-    /// Correction file name.
+    /// Correction file name (several joined by ` + `).
     pub calibration: String,
+    /// The correction's files, the angle correction first.
+    pub calibration_files: Vec<String>,
     /// Tail time of the last packet, ns since the epoch.
     pub last_stamp_ns: Option<i64>,
     /// Whether the tail clock agrees with the host's (see the module docs).
@@ -217,6 +227,7 @@ impl HesaiStream {
     pub fn new(cfg: HesaiConfig) -> Self {
         let facts = HesaiFacts {
             calibration: cfg.calibration_name.clone(),
+            calibration_files: cfg.calibration_files.clone(),
             ..HesaiFacts::default()
         };
         Self {
