@@ -323,11 +323,38 @@ fn with_hesai_corrections(args: &ListenArgs, port: u16) -> (ListenArgs, FetchedC
                     }
                     Err(e) => tracing::warn!("{}: {e}", path.display()),
                 }
+                if crate::sensor::hesai::atx::looks_like_atx_dat(&bytes) {
+                    with_atx_firetimes(&mut out, &dir, *ip, addr);
+                }
             }
             Err(e) => tracing::warn!("--hesai-ptc: {e}"),
         }
     }
     (out, guard)
+}
+
+/// An ATX's firetime correction, fetched over PTC beside its angle correction and written as
+/// the CSV the run joins to it; without it (an older firmware, an error) the ATX is decoded
+/// without the firetime shift, which is said.
+fn with_atx_firetimes(out: &mut ListenArgs, dir: &Path, ip: Ipv4Addr, addr: SocketAddr) {
+    match super::ptc::fetch_atx_firetimes(addr, Duration::from_secs(2)) {
+        Ok(f) => {
+            let path = dir.join(format!("hesai-ptc-{ip}-firetimes.csv"));
+            match std::fs::write(&path, f.to_csv()) {
+                Ok(()) => {
+                    tracing::info!(
+                        "{ip}: firetime correction fetched over PTC ({} channels)",
+                        f.channels()
+                    );
+                    out.session.calib.push(format!("{ip}={}", path.display()));
+                }
+                Err(e) => tracing::warn!("{}: {e}", path.display()),
+            }
+        }
+        Err(e) => tracing::warn!(
+            "--hesai-ptc: {e}; the ATX at {ip} is decoded without its firetime correction"
+        ),
+    }
 }
 
 /// Parses fetched Ouster metadata into a calibration bound to `addr`.

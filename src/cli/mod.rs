@@ -54,9 +54,13 @@ struct HesaiCalibCmd {
     /// The sensor's address, optionally with its PTC port (default 9347).
     #[arg(long, value_name = "IP[:PORT]")]
     sensor: String,
-    /// Where to write the file (the CSV, or the AT128's .dat).
+    /// Where to write the file (the CSV, or the AT128's or ATX's .dat).
     #[arg(long, short)]
     out: PathBuf,
+    /// Also fetch the Pandar ATX's firetime correction (PTC 0xA9) and write it here as the CSV
+    /// that `--calib` joins to the `.dat`.
+    #[arg(long, value_name = "CSV")]
+    firetimes: Option<PathBuf>,
     /// Seconds to wait for the sensor.
     #[arg(long, default_value_t = 5.0)]
     timeout: f64,
@@ -90,6 +94,17 @@ fn hesai_calib_command(c: &HesaiCalibCmd) -> Result<ExitCode, RunError> {
         c.out.display(),
         bytes.len()
     );
+    if let Some(path) = &c.firetimes {
+        let f = ptc::fetch_atx_firetimes(addr, std::time::Duration::from_secs_f64(c.timeout))
+            .map_err(RunError::Live)?;
+        std::fs::write(path, f.to_csv())
+            .map_err(|e| RunError::Live(format!("{}: {e}", path.display())))?;
+        println!(
+            "{}: firetime correction of {} channels from {addr}",
+            path.display(),
+            f.channels()
+        );
+    }
     Ok(ExitCode::SUCCESS)
 }
 
@@ -271,7 +286,8 @@ struct ListenCmd {
     #[arg(long, value_parser = parse_name)]
     name: Option<String>,
     /// Before listening, fetch the angle correction of every --sensor without its own --calib
-    /// over Hesai's TCP control protocol (port 9347, or PORT).
+    /// over Hesai's TCP control protocol (port 9347, or PORT); for a Pandar ATX, its firetime
+    /// correction too.
     #[arg(long, value_name = "PORT", num_args = 0..=1, default_missing_value = "9347")]
     hesai_ptc: Option<u16>,
     /// Livox: start the sensor before listening (SDK2: discovery, point / IMU destination,

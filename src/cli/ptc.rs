@@ -1,6 +1,8 @@
-//! Hesai's TCP control protocol (PTC, port 9347): the one command ringscan needs, "get angle
+//! Hesai's TCP control protocol (PTC, port 9347): the commands ringscan needs, "get angle
 //! correction" (0x05), which returns the file a Hesai sensor is calibrated with (the CSV, or the
-//! AT128's `.dat`), so that a live sensor can be decoded without a file on disk.
+//! AT128's or ATX's `.dat`), so that a live sensor can be decoded without a file on disk, and
+//! the ATX's "get firetimes" (0xA9, HesaiLidar_SDK_2.0's `kPTCGetLidarFiretimes`), its firetime
+//! correction in the binary form.
 //!
 //! Framing (Hesai user manuals, "TCP API"; the same as nebula's `hesai_hw_interface`):
 //! request = `47 74`, command, one zero byte, payload length (u32 big-endian), payload;
@@ -16,6 +18,8 @@ use std::time::Duration;
 pub const PTC_PORT: u16 = 9347;
 /// "Get angle correction".
 pub const GET_ANGLE_CORRECTION: u8 = 0x05;
+/// "Get firetimes" (the ATX's firetime correction).
+pub const GET_FIRETIMES: u8 = 0xA9;
 /// Largest response accepted (real correction files are < 100 kB).
 const MAX_RESPONSE: usize = 4 << 20;
 
@@ -75,6 +79,17 @@ pub fn fetch_angle_correction(addr: SocketAddr, timeout: Duration) -> Result<Vec
             bytes.len()
         )),
     }
+}
+
+/// The firetime correction of the ATX at `addr` (its PTC port), read from the binary form the
+/// sensor serves.
+pub fn fetch_atx_firetimes(
+    addr: SocketAddr,
+    timeout: Duration,
+) -> Result<crate::sensor::hesai::atx::AtxFiretimes, String> {
+    let bytes = command(addr, GET_FIRETIMES, &[], timeout)?;
+    crate::sensor::hesai::atx::AtxFiretimes::parse_binary(&bytes)
+        .map_err(|e| format!("{addr}: the sensor's firetime correction: {e}"))
 }
 
 #[cfg(test)]
@@ -149,5 +164,29 @@ mod tests {
         });
         let e = fetch_angle_correction(addr, Duration::from_secs(5)).unwrap_err();
         assert!(e.contains("refused"), "{e}");
+    }
+
+    /// The ATX's firetimes come as the binary form (built here from the SDK's struct) and are
+    /// read into ns; a sensor without the command answers with an error code, reported.
+    #[test]
+    fn fetches_the_atx_firetimes_from_a_fake_sensor() {
+        let mut bin = vec![0xEE, 0xFF, 4, 1, 0, 0, 2, 10, 0];
+        for v in [496u16, 544, 756, 764] {
+            bin.extend_from_slice(&v.to_le_bytes());
+        }
+        bin.extend_from_slice(&[0; 32]);
+        let addr = fake_sensor(move |cmd| {
+            assert_eq!(cmd, GET_FIRETIMES);
+            response(cmd, 0, &bin)
+        });
+        let f = fetch_atx_firetimes(addr, Duration::from_secs(5)).unwrap();
+        assert_eq!(f.even_ns, [4_960.0, 5_440.0]);
+        assert_eq!(f.odd_ns, [7_560.0, 7_640.0]);
+        let addr = fake_sensor(|cmd| response(cmd, 0x01, b""));
+        let e = fetch_atx_firetimes(addr, Duration::from_secs(5)).unwrap_err();
+        assert!(e.contains("error code 0x01"), "{e}");
+        let addr = fake_sensor(|cmd| response(cmd, 0, &[0xEE, 0xFF, 4, 1, 0, 0, 9, 1, 0]));
+        let e = fetch_atx_firetimes(addr, Duration::from_secs(5)).unwrap_err();
+        assert!(e.contains("firetime correction"), "{e}");
     }
 }

@@ -2532,6 +2532,18 @@ pub fn hesai_packet(data: &[u8]) {
 /// and serves a decoder for every model of its channel count; an AT128 correction gives angles
 /// within one turn for every channel and encoder azimuth tried.
 pub fn calib_hesai(data: &[u8]) {
+    // The ATX's binary firetimes (fetched over PTC): bounded, and the CSV written from them
+    // reads back the same.
+    if let Ok(f) = ringscan::sensor::hesai::atx::AtxFiretimes::parse_binary(data) {
+        assert!((1..=200).contains(&f.channels()) && f.odd_ns.len() == f.channels());
+        assert!(f
+            .even_ns
+            .iter()
+            .chain(&f.odd_ns)
+            .all(|t| (0.0..=1e6).contains(t)));
+        let csv = ringscan::sensor::hesai::atx::AtxFiretimes::parse_csv(&f.to_csv());
+        assert_eq!(csv.ok().as_ref(), Some(&f));
+    }
     let Some(parsed) = parse_hesai_calibration(data) else {
         return;
     };

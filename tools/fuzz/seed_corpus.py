@@ -372,6 +372,11 @@ def main():
     put("calib_hesai", atx_dat, "atx_v43")
     put("calib_hesai", b"Channel,Even_fire time(ns),Odd_fire time(ns)\n" + b"".join(
         b"%d,%d,%d\n" % (k + 1, 4960 + 520 * k, 7560) for k in range(8)), "atx_firetimes")
+    # Its binary firetimes, as the sensor serves them over PTC (0xA9): version x.1, 8
+    # channels, division 10, u16 even then odd, SHA-256.
+    atx_ft = bytes([0xEE, 0xFF, 4, 1, 0, 0, 8]) + struct.pack("<H", 10)
+    atx_ft += struct.pack("<8H", *[496 + 52 * k for k in range(8)]) + struct.pack("<8H", *[756] * 8)
+    put("calib_hesai", atx_ft + bytes(32), "atx_firetimes_bin")
     atx = bytearray(bytes([0xEE, 0xFF, 4, 7, 0, 0, 8, 2, 1, 4, 1, 0b1001]))
     for blk in range(2):
         atx += struct.pack("<HB", (60 + blk) * 256, 0)

@@ -29,9 +29,12 @@
 //! 1e-9 / 8 degrees (the tail's i16 motor speed; the SDK's formula, its units undocumented)
 //! before the channel's azimuth and the elevation adjustment are applied. Its CSV form
 //! (`Channel,Even_fire time(ns),Odd_fire time(ns)`, [`AtxFiretimes::parse_csv`]) is read and
-//! applied when given with the angle correction; its binary form (`EE FF`, minor 1, channels,
-//! division, u16 × 2N) has the very bytes of an angle correction of minor 1 and cannot be told
-//! from one, so it is read as that: give the CSV.
+//! applied when given with the angle correction. Its binary form (`EE FF`, major, minor 1, 2
+//! reserved bytes, channels N, division D as u16, then u16 × N for even frames and u16 × N for
+//! odd ones, each `value × D` ns, then a SHA-256) is what the sensor serves over PTC (command
+//! `0xA9`, [`AtxFiretimes::parse_binary`]); as a file it has the very bytes of an angle
+//! correction of minor 1 and cannot be told from one, so a file is read as that: give the CSV
+//! ([`AtxFiretimes::to_csv`] writes it).
 
 use crate::sensor::CalibError;
 
@@ -148,6 +151,71 @@ impl AtxFiretimes {
             odd_ns.push(o);
         }
         Ok(Self { even_ns, odd_ns })
+    }
+
+    /// Parses the binary form (the PTC command `0xA9`'s answer; see the module docs): as the
+    /// SDK reads it, minor version 1, 1 to 200 channels, division ≠ 0, bytes after the SHA-256
+    /// ignored; times beyond 1 ms are refused, as in the CSV.
+    pub fn parse_binary(bytes: &[u8]) -> Result<Self, CalibError> {
+        let ferr = |msg: String| CalibError::BadValue {
+            key: "ATX firetime correction".into(),
+            context: String::new(),
+            expected: "the binary form: EE FF, version x.1, channels, division, u16 × 2N, SHA-256"
+                .into(),
+            found: msg,
+        };
+        let [0xEE, 0xFF, major, minor, _, _, n, d0, d1, ..] = *bytes else {
+            return Err(ferr(format!(
+                "expected EE FF and a 9-byte header, {} bytes",
+                bytes.len()
+            )));
+        };
+        if minor != 1 {
+            return Err(ferr(format!(
+                "version {major}.{minor} (minor 1 is supported)"
+            )));
+        }
+        let n = usize::from(n);
+        let division = u16::from_le_bytes([d0, d1]);
+        if n == 0 || n > MAX_CHANNELS || division == 0 {
+            return Err(ferr(format!(
+                "{n} channels (1 to {MAX_CHANNELS}), division {division} (not 0)"
+            )));
+        }
+        let need = 9 + 4 * n + 32;
+        if bytes.len() < need {
+            return Err(ferr(format!(
+                "{n} channels need {need} bytes, {} given",
+                bytes.len()
+            )));
+        }
+        let read = |at: usize| -> Result<Vec<f64>, CalibError> {
+            bytes[at..at + 2 * n]
+                .chunks_exact(2)
+                .enumerate()
+                .map(|(c, b)| {
+                    let ns = f64::from(u16::from_le_bytes([b[0], b[1]])) * f64::from(division);
+                    if ns <= 1e6 {
+                        Ok(ns)
+                    } else {
+                        Err(ferr(format!("channel {}: {ns} ns, beyond 1 ms", c + 1)))
+                    }
+                })
+                .collect()
+        };
+        Ok(Self {
+            even_ns: read(9)?,
+            odd_ns: read(9 + 2 * n)?,
+        })
+    }
+
+    /// The CSV form [`Self::parse_csv`] reads (the SDK's header, channels from 1).
+    pub fn to_csv(&self) -> String {
+        let mut out = String::from("Channel,Even_fire time(ns),Odd_fire time(ns)\n");
+        for (c, (e, o)) in self.even_ns.iter().zip(&self.odd_ns).enumerate() {
+            out.push_str(&format!("{},{e},{o}\n", c + 1));
+        }
+        out
     }
 
     /// Channels.
@@ -408,5 +476,36 @@ mod tests {
             assert!(v == 0.0 || (1.0..=3.0).contains(&v), "{az}: {v}");
         }
         assert_eq!(a.elevation_adjust(158.0), 0.0);
+    }
+
+    /// The binary firetimes as the SDK's `ATXFiretimes` lays them out (header, channel count,
+    /// division, u16 even then odd, SHA-256): ns = value × division; written back as the CSV,
+    /// the same times parse again.
+    #[test]
+    fn binary_firetimes_read_as_the_sdk_scales_them() {
+        let mut b = vec![0xEE, 0xFF, 4, 1, 0, 0, 3, 2, 0];
+        for v in [100u16, 2_480, 65_535 / 2, 0, 7, 40_000] {
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+        b.extend_from_slice(&[0x11; 32]);
+        let f = AtxFiretimes::parse_binary(&b).unwrap();
+        assert_eq!(f.even_ns, [200.0, 4_960.0, 65_534.0]);
+        assert_eq!(f.odd_ns, [0.0, 14.0, 80_000.0]);
+        assert_eq!(AtxFiretimes::parse_csv(&f.to_csv()).unwrap(), f);
+        assert!(looks_like_firetimes_csv(&f.to_csv()));
+
+        let with = |i: usize, v: u8| {
+            let mut x = b.clone();
+            x[i] = v;
+            x
+        };
+        assert!(AtxFiretimes::parse_binary(&with(3, 2)).is_err()); // minor 2
+        assert!(AtxFiretimes::parse_binary(&with(6, 0)).is_err()); // no channel
+        assert!(AtxFiretimes::parse_binary(&with(6, 201)).is_err()); // too many
+        assert!(AtxFiretimes::parse_binary(&with(7, 0)).is_err()); // division 0
+        assert!(AtxFiretimes::parse_binary(&with(6, 4)).is_err()); // its size lies
+        assert!(AtxFiretimes::parse_binary(&b[..b.len() - 1]).is_err());
+        assert!(AtxFiretimes::parse_binary(&with(8, 1)).is_err()); // 40 000 × 258 ns > 1 ms
+        assert!(AtxFiretimes::parse_binary(&[0xEE, 0xFF, 4]).is_err());
     }
 }
