@@ -99,7 +99,7 @@ fn fixed_regressions_replay_cleanly() {
     }
 }
 
-/// `t_base_ns + firing offset` overflowed for a time base near i64::MAX (src/decode/velodyne.rs;
+/// `t_base_ns + firing offset` overflowed for a time base near i64::MAX (src/sensor/velodyne/decode.rs;
 /// fixed in 8664547).
 #[test]
 fn velodyne_packet_t_base_overflow() {
@@ -118,7 +118,7 @@ fn decode_to_mcap_sensor_name_collision() {
     replay("decode_to_mcap-sensor-name-collision.bin");
 }
 
-/// Host times 1.7e18 then -8.4e18 ns overflowed the sweep time arithmetic (src/sweep/velodyne.rs;
+/// Host times 1.7e18 then -8.4e18 ns overflowed the sweep time arithmetic (src/sensor/velodyne/sweep.rs;
 /// fixed in 8664547).
 #[test]
 fn velodyne_stream_host_time_overflow() {
@@ -133,21 +133,21 @@ fn decode_to_mcap_host_time_overflow() {
 }
 
 /// The RMC date `721Ҫ1` (6 bytes, not ASCII) was sliced off a char boundary: panic
-/// (src/wire/nmea.rs; fixed in 8664547).
+/// (src/sensor/nmea.rs; fixed in 8664547).
 #[test]
 fn velodyne_packet_nmea_date_char_boundary() {
     replay("velodyne_packet-nmea-date-char-boundary.bin");
 }
 
 /// The RMC time `0Ҫ000` (6 bytes, not ASCII) was sliced off a char boundary: panic
-/// (src/wire/nmea.rs; fixed in 8664547).
+/// (src/sensor/nmea.rs; fixed in 8664547).
 #[test]
 fn velodyne_packet_nmea_time_char_boundary() {
     replay("velodyne_packet-nmea-time-char-boundary.bin");
 }
 
 /// A 594-byte pcap with one position packet whose RMC date is not ASCII made `ringscan decode`
-/// panic, release builds too (src/wire/nmea.rs; fixed in 8664547).
+/// panic, release builds too (src/sensor/nmea.rs; fixed in 8664547).
 #[test]
 fn decode_to_mcap_nmea_char_boundary() {
     replay("decode_to_mcap-nmea-char-boundary.bin");

@@ -62,9 +62,9 @@ use ringscan::sweep::Sweep;
 pub const OPEN_ISSUES: &[&str] = &[];
 
 // Fixed in 8664547, checked again by the fuzz targets (their step-arounds below stay, inert,
-// for the next such issue): "decode-t-base-overflow" (src/decode/velodyne.rs), "nmea-char-boundary"
-// (src/wire/nmea.rs), "stream-host-time-overflow" (src/time.rs, src/sweep/velodyne.rs),
-// "cli-sensor-name-collision" (src/cli/run.rs).
+// for the next such issue): "decode-t-base-overflow" (now src/sensor/velodyne/decode.rs),
+// "nmea-char-boundary" (src/sensor/nmea.rs), "stream-host-time-overflow" (src/time.rs,
+// src/sensor/velodyne/sweep.rs), "cli-sensor-name-collision" (src/cli/run.rs).
 
 /// Whether `parse_rmc` may be given these bytes: anything once "nmea-char-boundary" is fixed,
 /// ASCII only while it is open.
