@@ -642,3 +642,59 @@ fn a_port_no_data_packet_went_to_is_explained() {
         "{text}"
     );
 }
+
+/// A reader that goes away (`ringscan info X | head -1`) or a full device on stdout: the command
+/// panicked (exit 101, "failed printing to stdout") on its summary. Now a closed pipe ends the
+/// output quietly with the run's own exit code, as `cat` does, and a full device is an error
+/// (exit 1) that says so; the MCAP is written either way.
+#[test]
+fn stdout_closed_or_full_is_no_panic() {
+    use std::process::Stdio;
+    let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo-vlp16.pcap");
+    for args in [&["info"][..], &["info", "--json"], &["decode", "--json"]] {
+        // A pipe whose reading end is closed before the command writes.
+        let out = tmp("closed-pipe.mcap");
+        let mut child = Command::new(bin())
+            .args(args)
+            .arg(&demo)
+            .args(if args[0] == "decode" {
+                vec!["--out".as_ref(), out.as_os_str()]
+            } else {
+                vec![]
+            })
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        drop(child.stdout.take());
+        let o = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(0), "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+        if args[0] == "decode" {
+            assert_not_corrupt(&out);
+        }
+        // A full device.
+        if Path::new("/dev/full").exists() {
+            let full = std::fs::OpenOptions::new()
+                .write(true)
+                .open("/dev/full")
+                .unwrap();
+            let o = Command::new(bin())
+                .args(args)
+                .arg(&demo)
+                .stdout(full)
+                .output()
+                .unwrap();
+            let err = String::from_utf8_lossy(&o.stderr);
+            assert_eq!(o.status.code(), Some(1), "{args:?}: {err}");
+            assert!(
+                err.contains("writing the output to stdout"),
+                "{args:?}: {err}"
+            );
+            assert!(!err.contains("panicked"), "{args:?}: {err}");
+        } else {
+            eprintln!("SKIP: /dev/full is absent");
+        }
+    }
+}

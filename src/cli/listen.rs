@@ -833,12 +833,12 @@ pub fn listen_command(
         files,
     } = listen_run_with(args, configure)?;
     if args.json {
-        println!("{json_out}");
+        outln!("{json_out}");
     } else {
         let g = |v: &Value| v.as_u64().unwrap_or(0);
         let p = &json_out["packets"];
         let r = &json_out["receive"];
-        println!(
+        outln!(
             "listened {:.1} s ({}): {} datagrams, {} sweeps, {} points; packets decoded {}, dropped {} (queue {}, kernel {}), malformed {}, missing {}, from other sources {}",
             json_out["elapsed_s"].as_f64().unwrap_or(0.0),
             json_out["stop"].as_str().unwrap_or(""),
@@ -854,7 +854,7 @@ pub fn listen_command(
             g(&r["other_source"]),
         );
         for (path, s) in &files {
-            println!("  wrote {}: {:?}", path.display(), s.messages);
+            outln!("  wrote {}: {:?}", path.display(), s.messages);
         }
     }
     if args.strict && lost > 0 {

@@ -1,5 +1,14 @@
 //! Command-line front end: clap commands, progress, exit codes. No algorithms live here.
 
+/// `println!` for a command's output on stdout, without its panic when stdout cannot be written
+/// (a reader gone, `ringscan info X | head -1`; a full device): the failure is kept for
+/// [`run`]'s exit code ([`write_stdout`]).
+macro_rules! outln {
+    ($($arg:tt)*) => {
+        $crate::cli::write_stdout(format_args!($($arg)*))
+    };
+}
+
 pub mod bag_args;
 pub mod listen;
 pub mod livox_ctl;
@@ -89,7 +98,7 @@ fn hesai_calib_command(c: &HesaiCalibCmd) -> Result<ExitCode, RunError> {
         .map_err(RunError::Live)?;
     std::fs::write(&c.out, &bytes)
         .map_err(|e| RunError::Live(format!("{}: {e}", c.out.display())))?;
-    println!(
+    outln!(
         "{}: {} bytes of angle correction from {addr}",
         c.out.display(),
         bytes.len()
@@ -99,7 +108,7 @@ fn hesai_calib_command(c: &HesaiCalibCmd) -> Result<ExitCode, RunError> {
             .map_err(RunError::Live)?;
         std::fs::write(path, f.to_csv())
             .map_err(|e| RunError::Live(format!("{}: {e}", path.display())))?;
-        println!(
+        outln!(
             "{}: firetime correction of {} channels from {addr}",
             path.display(),
             f.channels()
@@ -623,7 +632,7 @@ where
         Command::Render(c) => render::render_command(&c),
         Command::HesaiCalib(c) => hesai_calib_command(&c),
     };
-    match result {
+    let code = match result {
         Ok(_) => 0,
         Err(e) => {
             eprintln!("error: {e}");
@@ -631,6 +640,36 @@ where
                 RunError::Usage(_) => 2,
                 _ => 1,
             }
+        }
+    };
+    let failed = STDOUT_FAILURE.lock().map(|mut f| f.take()).unwrap_or(None);
+    match failed {
+        // The reader went away on purpose (`| head`): what it read was right, as with `cat`.
+        Some(e) if e.kind() == std::io::ErrorKind::BrokenPipe => code,
+        Some(e) if code == 0 => {
+            eprintln!("error: writing the output to stdout: {e}");
+            1
+        }
+        _ => code,
+    }
+}
+
+/// The first error writing a command's output to stdout, for [`run`]'s exit code.
+static STDOUT_FAILURE: std::sync::Mutex<Option<std::io::Error>> = std::sync::Mutex::new(None);
+
+/// Writes one line of a command's output to stdout ([`outln!`]); the first failure is kept for
+/// the exit code instead of panicking. The work the output reports (a file written) is done by
+/// then, so nothing else stops.
+pub(crate) fn write_stdout(args: std::fmt::Arguments<'_>) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    let written = out
+        .write_fmt(args)
+        .and_then(|()| out.write_all(b"\n"))
+        .and_then(|()| out.flush());
+    if let Err(e) = written {
+        if let Ok(mut f) = STDOUT_FAILURE.lock() {
+            f.get_or_insert(e);
         }
     }
 }

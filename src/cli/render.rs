@@ -439,7 +439,7 @@ pub fn render_command(cmd: &RenderCmd) -> Result<ExitCode, RunError> {
         let _ = std::fs::remove_file(&tmp);
         return Err(failed(&out, e));
     }
-    println!(
+    outln!(
         "{out}: sweep {} of {} ({} frame): {} ground, {} obstacle points, {} clusters",
         cmd.sweep,
         cmd.input.display(),

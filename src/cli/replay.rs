@@ -185,20 +185,20 @@ pub fn replay_command(args: &ReplayArgs) -> Result<ExitCode, RunError> {
         "datagrams_per_s": if elapsed > 0.0 { sent as f64 / elapsed } else { 0.0 },
     });
     if args.json {
-        println!("{summary}");
+        outln!("{summary}");
     } else {
-        println!(
+        outln!(
             "sent {sent} datagrams ({bytes} bytes) to {} in {elapsed:.3} s; {errors} send errors",
             args.to
         );
         if skipped > 0 {
-            println!(
+            outln!(
                 "skipped {skipped} datagrams whose port + --port-offset {} is outside 0..=65535",
                 args.port_offset
             );
         }
         if decoded_frames > 0 {
-            println!("skipped {decoded_frames} messages a driver had decoded (never on the wire)");
+            outln!("skipped {decoded_frames} messages a driver had decoded (never on the wire)");
         }
     }
     Ok(ExitCode::SUCCESS)

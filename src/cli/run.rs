@@ -1765,7 +1765,7 @@ fn pump<R: Read>(
 pub fn decode_command(args: &DecodeArgs) -> Result<ExitCode, RunError> {
     let s = decode_capture(args)?;
     if args.json {
-        println!("{}", s.json);
+        outln!("{}", s.json);
     } else {
         print_text(&s.json);
     }
@@ -1835,7 +1835,7 @@ pub fn info_command(
     };
     let s = decode_capture(&args)?;
     if json_out {
-        println!("{}", s.json);
+        outln!("{}", s.json);
     } else {
         print_text(&s.json);
     }
@@ -1852,10 +1852,10 @@ pub fn demo_command(out: &Path, json_out: bool) -> Result<ExitCode, RunError> {
     };
     let s = decode_capture(&args)?;
     if json_out {
-        println!("{}", s.json);
+        outln!("{}", s.json);
     } else {
         print_text(&s.json);
-        println!(
+        outln!(
             "Open {} in Foxglove (https://app.foxglove.dev) to see the point clouds.",
             out.display()
         );
@@ -1866,8 +1866,8 @@ pub fn demo_command(out: &Path, json_out: bool) -> Result<ExitCode, RunError> {
 fn print_text(j: &Value) {
     let g = |v: &Value| v.as_u64().unwrap_or(0);
     let c = &j["capture"];
-    println!("{}", j["input"].as_str().unwrap_or(""));
-    println!(
+    outln!("{}", j["input"].as_str().unwrap_or(""));
+    outln!(
         "  capture: {} records, {} UDP datagrams ({} reassembled from fragments), {:.3} s{}",
         g(&c["records"]),
         g(&c["datagrams"]),
@@ -1879,7 +1879,7 @@ fn print_text(j: &Value) {
         }
     );
     if let Some(b) = c["bag"].as_object() {
-        println!(
+        outln!(
             "  bag ({}): {} messages, {} with packets; unknown types {}, malformed {}, other topics {}, outside the time window {}",
             b["kind"].as_str().unwrap_or(""),
             g(&b["messages"]),
@@ -1890,7 +1890,7 @@ fn print_text(j: &Value) {
             g(&b["outside_time"])
         );
         for s in b["sensors"].as_array().into_iter().flatten() {
-            println!(
+            outln!(
                 "    {} ({}) as {}, ports {}/{}: {}{}",
                 s["namespace"].as_str().unwrap_or(""),
                 s["family"].as_str().unwrap_or(""),
@@ -1909,23 +1909,23 @@ fn print_text(j: &Value) {
     for s in j["sensors"].as_array().into_iter().flatten() {
         let kind = s["kind"].as_str().unwrap_or("");
         let Some(family) = crate::sensor::family(kind) else {
-            println!("  sensor of an unknown kind {kind:?}: {s}");
+            outln!("  sensor of an unknown kind {kind:?}: {s}");
             continue;
         };
         for line in family.describe(s) {
-            println!("{line}");
+            outln!("{line}");
         }
     }
     if j["sensors"].as_array().is_none_or(|a| a.is_empty()) {
         // Say why, as far as the counts tell: nothing read, or datagrams no family knew.
         let ignored = g(&j["packets"]["ignored"]);
         if ignored == 0 {
-            println!(
+            outln!(
                 "  no sensor found: no datagram was read (an empty capture, or none selected by \
                  --topic, --start, --end)"
             );
         } else {
-            println!(
+            outln!(
                 "  no sensor found: {ignored} datagrams that no sensor family recognised (Ouster \
                  packets need their metadata: --calib META.json; the others are known by their \
                  size and layout)"
@@ -1939,7 +1939,7 @@ fn print_text(j: &Value) {
         .flatten()
         .filter_map(Value::as_str)
     {
-        println!(
+        outln!(
             "  warning: calibration {name} was used by no sensor: it fits none of the sensors \
              found (family, model, laser count, serial or address)"
         );
@@ -1950,7 +1950,7 @@ fn print_text(j: &Value) {
         .flatten()
         .filter_map(Value::as_str)
     {
-        println!("  warning: {w}");
+        outln!("  warning: {w}");
     }
     if let Some(n) = j["pipeline"]["deskew_skipped"].as_u64().filter(|&n| n > 0) {
         let why = j["pipeline"]["sensors"]
@@ -1959,9 +1959,9 @@ fn print_text(j: &Value) {
             .flatten()
             .find_map(|s| s["deskew_last_error"].as_str())
             .unwrap_or("");
-        println!("  warning: deskew skipped on {n} sweeps (kept as measured): {why}");
+        outln!("  warning: deskew skipped on {n} sweeps (kept as measured): {why}");
     }
-    println!(
+    outln!(
         "  total: {} sweeps, {} points; packets decoded {}, dropped {}, malformed {}, missing {}, ignored {}",
         g(&j["sweeps"]),
         g(&j["points"]),
@@ -1972,10 +1972,10 @@ fn print_text(j: &Value) {
         g(&p["ignored"])
     );
     if let Some(n) = p["other_port"].as_u64().filter(|&n| n > 0) {
-        println!("  {n} data packets went to other ports than --port: dropped, not decoded");
+        outln!("  {n} data packets went to other ports than --port: dropped, not decoded");
     }
     if let Some(o) = j["output"].as_object() {
-        println!(
+        outln!(
             "  wrote {} ({}): {}",
             o["path"].as_str().unwrap_or(""),
             o["format"].as_str().unwrap_or(""),
@@ -1986,14 +1986,14 @@ fn print_text(j: &Value) {
         });
         let not_written = o["raw_dropped"].as_u64().unwrap_or(0) + held_over;
         if let Some(n) = Some(not_written).filter(|&n| n > 0) {
-            println!(
+            outln!(
                 "  {n} raw packets not written (output.raw_dropped: no ROS 2 packet message \
                  of their family holds them, --format foxglove keeps them on /raw; \
                  sensors[].raw_dropped: more than 16 MiB arrived before the sensor was known)"
             );
         }
     }
-    println!("  {:.3} s", j["elapsed_s"].as_f64().unwrap_or(0.0));
+    outln!("  {:.3} s", j["elapsed_s"].as_f64().unwrap_or(0.0));
 }
 
 /// A zone-monitor report as the `/zones` message (`ringscan.ZoneStates`).
