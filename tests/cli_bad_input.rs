@@ -698,3 +698,39 @@ fn stdout_closed_or_full_is_no_panic() {
         }
     }
 }
+
+/// A `--format ros2` bag whose MCAP cannot be finished (its disk full: the file is written
+/// through a link to /dev/full here) leaves no `metadata.yaml` behind: before, the empty one
+/// written at the start stayed, a directory that looked like a bag and made the next run into
+/// the same --out refuse ("already holds a rosbag2").
+#[test]
+fn a_bag_that_could_not_be_written_leaves_no_metadata() {
+    let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo-vlp16.pcap");
+    if !Path::new("/dev/full").exists() {
+        eprintln!("SKIP: /dev/full is absent");
+        return;
+    }
+    let dir = Scratch::dir("bag-full");
+    let bag = dir.join("drive");
+    std::fs::create_dir(&bag).unwrap();
+    std::os::unix::fs::symlink("/dev/full", bag.join("drive_0.mcap.tmp-ringscan")).unwrap();
+    let run = || {
+        Command::new(bin())
+            .arg("decode")
+            .arg(&demo)
+            .args(["--format", "ros2", "--out"])
+            .arg(&bag)
+            .output()
+            .unwrap()
+    };
+    let o = run();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("No space left on device"), "{err}");
+    assert!(!bag.join("metadata.yaml").exists(), "{err}");
+    // The same --out again (the link went with the failed file): a bag.
+    let o = run();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(bag.join("metadata.yaml").is_file());
+    assert_not_corrupt(&bag.join("drive_0.mcap"));
+}

@@ -1536,24 +1536,39 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
     // On an error, the output is finalised (a valid MCAP) if it holds a sweep: what was
     // decoded before the damage. An output without one is not written, so a run that could
     // not decode leaves no empty file, and leaves a file already at the path as it was.
+    // A bag whose MCAP could not be finished loses the empty `metadata.yaml` written at its
+    // start (and the directory, if this run made it), so the failed run leaves nothing that
+    // looks like a bag and stops the next run into the same --out.
+    let discard_bag = || {
+        if let Some(dir) = bag_dir {
+            let _ = std::fs::remove_file(dir.join("metadata.yaml"));
+            if !bag_dir_existed {
+                let _ = std::fs::remove_dir(dir);
+            }
+        }
+    };
     if let Err(e) = pump(&mut src, &mut session, total) {
-        if session.out.sweeps > 0 {
-            if let Ok(s) = session.close_sink() {
-                let _ = commit_bag(&s);
-            }
-        } else {
+        let kept = session.out.sweeps > 0
+            && match session.close_sink() {
+                Ok(s) => commit_bag(&s).is_ok(),
+                Err(_) => false,
+            };
+        if !kept {
             session.abort_sink();
-            if let Some(dir) = bag_dir {
-                let _ = std::fs::remove_file(dir.join("metadata.yaml"));
-                if !bag_dir_existed {
-                    let _ = std::fs::remove_dir(dir);
-                }
-            }
+            discard_bag();
         }
         return Err(session.run_error(e, &path_s));
     }
-    let sink_summary = session.close_sink()?;
-    commit_bag(&sink_summary)?;
+    let sink_summary = match session
+        .close_sink()
+        .and_then(|s| commit_bag(&s).map(|()| s))
+    {
+        Ok(s) => s,
+        Err(e) => {
+            discard_bag();
+            return Err(e.into());
+        }
+    };
     session.finish_odometry()?;
     let output = match &sink_summary {
         Some(s) => output_json(
