@@ -447,6 +447,22 @@ fn nebula_filters_are_command_line_options() {
             .unwrap();
         assert_eq!(o.status.code(), Some(2), "{bad:?}");
     }
+    // A range the model cannot reach is named, and the right correction is not blamed
+    // (the message said it "fits none of the sensors found").
+    let o = Command::new(BIN)
+        .arg("decode")
+        .arg(&pcap)
+        .arg("--calib")
+        .arg(&calib)
+        .args(["--min-range", "150"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("range 150") && !err.contains("fits none"),
+        "{err}"
+    );
 }
 
 #[test]

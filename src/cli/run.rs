@@ -1031,7 +1031,13 @@ impl Session {
             },
             PumpError::Stream(idx, err) => {
                 let unused = self.unused_calibrations();
-                let note = if unused.is_empty() {
+                // An option the model cannot honour (`--min-range` beyond its range) is no
+                // matter of calibration, whichever file the stream was building with.
+                let options_only = matches!(
+                    err,
+                    crate::sensor::StreamError::Decode(crate::sensor::DecodeError::Option(_))
+                );
+                let note = if unused.is_empty() || options_only {
                     String::new()
                 } else {
                     format!(
