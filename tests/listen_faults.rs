@@ -408,3 +408,44 @@ fn health_goes_to_diagnostics_once_a_second() {
     assert!(n.windows(2).all(|w| w[0] <= w[1]), "{n:?}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `listen`'s text summary warns of a calibration no sensor took, as `decode`'s does, and
+/// counts the ignored datagrams (it said neither: a sensor could vanish from it without a
+/// word, only `--json` telling). A VLP-16 replayed with a Hesai correction given.
+#[test]
+fn the_text_summary_warns_of_an_unused_calibration() {
+    let (pcap, _, _) = velodyne_capture();
+    let dir = tmpdir("unused-calib");
+    let csv = dir.join("hesai32.csv");
+    let mut text = String::from("Laser id,Elevation,Azimuth\n");
+    for i in 0..32 {
+        text.push_str(&format!("{},{},0\n", i + 1, 15.0 - i as f64));
+    }
+    std::fs::write(&csv, text).unwrap();
+    let _g = serial();
+    let offset = free_offset(&[2368, 8308]);
+    let child = std::process::Command::new(BIN)
+        .args(["listen", "--duration", "3", "--calib"])
+        .arg(&csv)
+        .args(sensor_args(offset, None))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(300));
+    replay(&pcap, offset, "max", &[]);
+    let o = child.wait_with_output().unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{out} {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(
+        out.contains("warning: calibration hesai32.csv was used by no sensor"),
+        "{out}"
+    );
+    assert!(out.contains(", ignored 0,"), "{out}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

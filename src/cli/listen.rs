@@ -839,7 +839,7 @@ pub fn listen_command(
         let p = &json_out["packets"];
         let r = &json_out["receive"];
         outln!(
-            "listened {:.1} s ({}): {} datagrams, {} sweeps, {} points; packets decoded {}, dropped {} (queue {}, kernel {}), malformed {}, missing {}, from other sources {}",
+            "listened {:.1} s ({}): {} datagrams, {} sweeps, {} points; packets decoded {}, dropped {} (queue {}, kernel {}), malformed {}, missing {}, ignored {}, from other sources {}",
             json_out["elapsed_s"].as_f64().unwrap_or(0.0),
             json_out["stop"].as_str().unwrap_or(""),
             g(&r["datagrams"]),
@@ -851,8 +851,10 @@ pub fn listen_command(
             g(&r["kernel_dropped"]),
             g(&p["malformed"]),
             g(&p["missing"]),
+            g(&p["ignored"]),
             g(&r["other_source"]),
         );
+        super::run::print_warnings(&json_out);
         for (path, s) in &files {
             outln!("  wrote {}: {:?}", path.display(), s.messages);
         }

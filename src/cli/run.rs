@@ -1954,34 +1954,7 @@ fn print_text(j: &Value) {
         }
     }
     let p = &j["packets"];
-    for name in j["unused_calibrations"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .filter_map(Value::as_str)
-    {
-        outln!(
-            "  warning: calibration {name} was used by no sensor: it fits none of the sensors \
-             found (family, model, laser count, serial or address)"
-        );
-    }
-    for w in j["unused_options"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .filter_map(Value::as_str)
-    {
-        outln!("  warning: {w}");
-    }
-    if let Some(n) = j["pipeline"]["deskew_skipped"].as_u64().filter(|&n| n > 0) {
-        let why = j["pipeline"]["sensors"]
-            .as_array()
-            .into_iter()
-            .flatten()
-            .find_map(|s| s["deskew_last_error"].as_str())
-            .unwrap_or("");
-        outln!("  warning: deskew skipped on {n} sweeps (kept as measured): {why}");
-    }
+    print_warnings(j);
     outln!(
         "  total: {} sweeps, {} points; packets decoded {}, dropped {}, malformed {}, missing {}, ignored {}",
         g(&j["sweeps"]),
@@ -2015,6 +1988,39 @@ fn print_text(j: &Value) {
         }
     }
     outln!("  {:.3} s", j["elapsed_s"].as_f64().unwrap_or(0.0));
+}
+
+/// The text summary's warnings (`decode`, `info`, `listen`): calibrations and options no
+/// sensor used, sweeps left unskewed.
+pub(crate) fn print_warnings(j: &Value) {
+    for name in j["unused_calibrations"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(Value::as_str)
+    {
+        outln!(
+            "  warning: calibration {name} was used by no sensor: it fits none of the sensors \
+             found (family, model, laser count, serial or address)"
+        );
+    }
+    for w in j["unused_options"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(Value::as_str)
+    {
+        outln!("  warning: {w}");
+    }
+    if let Some(n) = j["pipeline"]["deskew_skipped"].as_u64().filter(|&n| n > 0) {
+        let why = j["pipeline"]["sensors"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .find_map(|s| s["deskew_last_error"].as_str())
+            .unwrap_or("");
+        outln!("  warning: deskew skipped on {n} sweeps (kept as measured): {why}");
+    }
 }
 
 /// A zone-monitor report as the `/zones` message (`ringscan.ZoneStates`).
