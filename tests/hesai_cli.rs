@@ -954,32 +954,12 @@ fn an_atx_is_counted_among_the_sensors_of_a_capture() {
     let calib = parse_hesai_calibration(csv.as_bytes()).unwrap().unwrap();
     let (xt_pcap, _) = sim_capture(HesaiModel::PandarXt32, calib, 400, &dir.join("xt.pcap"));
     let (atx_pcap, _) = atx_capture(&atx_dat(), &dir);
-    // Merged in time order, the XT32 re-addressed to 192.168.1.202 (its first packet after the
-    // ATX's, so the ATX is the sensor registered first).
-    let mut all: Vec<(i64, [u8; 4], Vec<u8>)> = Vec::new();
-    for (pcap, src) in [
-        (&atx_pcap, [192, 168, 1, 201]),
-        (&xt_pcap, [192, 168, 1, 202]),
-    ] {
-        for (t, _, p) in common::datagrams(pcap) {
-            all.push((t + i64::from(src[3] == 202) * 1_000, src, p));
-        }
-    }
-    all.sort_by_key(|d| d.0);
-    let merged = dir.join("merged.pcap");
-    write_pcap(&merged, &all);
-    let o = Command::new(BIN)
-        .arg("decode")
-        .arg(&merged)
-        .arg("--calib")
-        .arg(&dat)
-        .arg("--calib")
-        .arg(&xt)
-        .arg("--json")
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    // The XT32 at 192.168.1.202, its first packet after the ATX's: the ATX is registered first.
+    let j = decode_merged(
+        &dir,
+        &[(atx_pcap.as_path(), 201), (xt_pcap.as_path(), 202)],
+        &[dat.as_path(), xt.as_path()],
+    );
     let sensors = j["sensors"].as_array().unwrap();
     assert_eq!(sensors.len(), 2, "{j}");
     for s in sensors {
@@ -990,6 +970,29 @@ fn an_atx_is_counted_among_the_sensors_of_a_capture() {
             "{j}"
         );
     }
+}
+
+/// `pcaps` merged in time order into one capture, each re-addressed to 192.168.1.`octet` and
+/// each later one 1 µs later (so the sensors register in this order), decoded with `calibs`:
+/// the run's `--json`.
+fn decode_merged(dir: &Path, pcaps: &[(&Path, u8)], calibs: &[&Path]) -> serde_json::Value {
+    let mut all: Vec<(i64, [u8; 4], Vec<u8>)> = Vec::new();
+    for (i, (pcap, octet)) in pcaps.iter().enumerate() {
+        for (t, _, p) in common::datagrams(pcap) {
+            all.push((t + i as i64 * 1_000, [192, 168, 1, *octet], p));
+        }
+    }
+    all.sort_by_key(|d| d.0);
+    let merged = dir.join("merged.pcap");
+    write_pcap(&merged, &all);
+    let mut c = Command::new(BIN);
+    c.arg("decode").arg(&merged).arg("--json");
+    for f in calibs {
+        c.arg("--calib").arg(f);
+    }
+    let o = c.output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    serde_json::from_slice(&o.stdout).unwrap()
 }
 
 /// Two ATX units of different channel counts in one capture, their `.dat` files given unbound
@@ -1005,32 +1008,20 @@ fn atx_corrections_go_to_the_sensor_of_their_channel_count() {
     let (wide, narrow) = (dir.join("wide.dat"), dir.join("narrow.dat"));
     std::fs::write(&wide, atx_dat_of(100)).unwrap();
     std::fs::write(&narrow, atx_dat_of(64)).unwrap();
-    let mut all: Vec<(i64, [u8; 4], Vec<u8>)> = Vec::new();
     let mut returns = 0;
-    for (n, last) in [(100, 201u8), (64, 202)] {
+    let mut pcaps = Vec::new();
+    for n in [100, 64] {
         let calib = parse_hesai_calibration(&atx_dat_of(n)).unwrap().unwrap();
         let pcap = dir.join(format!("atx{n}.pcap"));
         let (pcap, r) = sim_capture(HesaiModel::PandarAtx, calib, 1_400, &pcap);
         returns += r;
-        for (t, _, p) in common::datagrams(&pcap) {
-            all.push((t + i64::from(last == 202) * 1_000, [192, 168, 1, last], p));
-        }
+        pcaps.push(pcap);
     }
-    all.sort_by_key(|d| d.0);
-    let merged = dir.join("merged.pcap");
-    write_pcap(&merged, &all);
-    let o = Command::new(BIN)
-        .arg("decode")
-        .arg(&merged)
-        .arg("--calib")
-        .arg(&narrow)
-        .arg("--calib")
-        .arg(&wide)
-        .arg("--json")
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let j = decode_merged(
+        &dir,
+        &[(pcaps[0].as_path(), 201), (pcaps[1].as_path(), 202)],
+        &[narrow.as_path(), wide.as_path()],
+    );
     assert_eq!(j["points"].as_u64(), Some(returns as u64), "{j}");
     let by_addr = |a: &str| {
         j["sensors"]

@@ -111,15 +111,14 @@ fn sigint_and_sigterm_mid_run_leave_a_finalised_mcap() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-#[test]
-fn a_full_disk_is_a_clear_error() {
+/// `listen --duration 3` with `args`, the VLP-16 capture replayed to it: its output.
+fn listen_to_the_capture(args: &[&std::ffi::OsStr]) -> std::process::Output {
     let (pcap, _, _) = velodyne_capture();
     let _g = serial();
     let offset = free_offset(&[2368, 8308]);
-    // /dev/full takes the file's creation and fails every write with ENOSPC: at the start
-    // (the header and schemas fill the write buffer) or at the latest when a chunk is written.
     let child = std::process::Command::new(BIN)
-        .args(["listen", "--duration", "3", "--out", "/dev/full"])
+        .args(["listen", "--duration", "3"])
+        .args(args)
         .args(sensor_args(offset, None))
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
@@ -127,7 +126,14 @@ fn a_full_disk_is_a_clear_error() {
         .unwrap();
     std::thread::sleep(Duration::from_millis(300));
     replay(&pcap, offset, "max", &[]);
-    let o = child.wait_with_output().unwrap();
+    child.wait_with_output().unwrap()
+}
+
+#[test]
+fn a_full_disk_is_a_clear_error() {
+    // /dev/full takes the file's creation and fails every write with ENOSPC: at the start
+    // (the header and schemas fill the write buffer) or at the latest when a chunk is written.
+    let o = listen_to_the_capture(&["--out".as_ref(), "/dev/full".as_ref()]);
     let (code, stdout, err) = (
         o.status.code(),
         String::from_utf8_lossy(&o.stdout),
@@ -414,7 +420,6 @@ fn health_goes_to_diagnostics_once_a_second() {
 /// word, only `--json` telling). A VLP-16 replayed with a Hesai correction given.
 #[test]
 fn the_text_summary_warns_of_an_unused_calibration() {
-    let (pcap, _, _) = velodyne_capture();
     let dir = tmpdir("unused-calib");
     let csv = dir.join("hesai32.csv");
     let mut text = String::from("Laser id,Elevation,Azimuth\n");
@@ -422,19 +427,7 @@ fn the_text_summary_warns_of_an_unused_calibration() {
         text.push_str(&format!("{},{},0\n", i + 1, 15.0 - i as f64));
     }
     std::fs::write(&csv, text).unwrap();
-    let _g = serial();
-    let offset = free_offset(&[2368, 8308]);
-    let child = std::process::Command::new(BIN)
-        .args(["listen", "--duration", "3", "--calib"])
-        .arg(&csv)
-        .args(sensor_args(offset, None))
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    std::thread::sleep(Duration::from_millis(300));
-    replay(&pcap, offset, "max", &[]);
-    let o = child.wait_with_output().unwrap();
+    let o = listen_to_the_capture(&["--calib".as_ref(), csv.as_os_str()]);
     let out = String::from_utf8_lossy(&o.stdout);
     assert_eq!(
         o.status.code(),
