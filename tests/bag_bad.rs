@@ -306,3 +306,83 @@ fn a_record_longer_than_its_mcap_chunk_is_an_error() {
         other => panic!("expected an MCAP error, got {other:?}"),
     }
 }
+
+/// An MCAP string or byte array: u32 length, then the bytes.
+fn mcap_bytes(b: &[u8]) -> Vec<u8> {
+    let mut r = (b.len() as u32).to_le_bytes().to_vec();
+    r.extend_from_slice(b);
+    r
+}
+
+/// `ringscan.RawPacket` messages (what `--raw` writes to a foxglove-format MCAP), in an MCAP
+/// written record by record from the specification with messages built by hand from the
+/// protobuf encoding guide: the well-formed one is one datagram with its own addresses; a
+/// broken one is counted malformed; the type on a channel of another encoding, or a ROS type
+/// on a protobuf channel, is a type not read.
+#[test]
+fn hostile_raw_packet_messages_are_counted_not_decoded() {
+    let mut f = b"\x89MCAP0\r\n".to_vec();
+    f.extend(mcap_record(0x01, &[0, 0, 0, 0, 1, 0, 0, 0, b't']));
+    let schema = |id: u16, name: &str, encoding: &str| {
+        let mut b = id.to_le_bytes().to_vec();
+        b.extend(mcap_bytes(name.as_bytes()));
+        b.extend(mcap_bytes(encoding.as_bytes()));
+        b.extend(mcap_bytes(b""));
+        mcap_record(0x03, &b)
+    };
+    let channel = |id: u16, schema: u16, topic: &str, encoding: &str| {
+        let mut b = id.to_le_bytes().to_vec();
+        b.extend_from_slice(&schema.to_le_bytes());
+        b.extend(mcap_bytes(topic.as_bytes()));
+        b.extend(mcap_bytes(encoding.as_bytes()));
+        b.extend_from_slice(&0u32.to_le_bytes()); // metadata: no entry
+        mcap_record(0x04, &b)
+    };
+    let message = |channel: u16, seq: u32, log_time: u64, data: &[u8]| {
+        let mut b = channel.to_le_bytes().to_vec();
+        b.extend_from_slice(&seq.to_le_bytes());
+        b.extend_from_slice(&log_time.to_le_bytes());
+        b.extend_from_slice(&log_time.to_le_bytes());
+        b.extend_from_slice(data);
+        mcap_record(0x05, &b)
+    };
+    f.extend(schema(1, "ringscan.RawPacket", "protobuf"));
+    f.extend(schema(2, "velodyne_msgs/msg/VelodyneScan", "ros2msg"));
+    f.extend(channel(1, 1, "/a/raw", "protobuf"));
+    f.extend(channel(2, 1, "/b/raw", "cdr"));
+    f.extend(channel(3, 2, "/c/velodyne_packets", "protobuf"));
+    // {2: "10.0.0.7", 3: 2368, 4: 2369, 5: [1, 2, 3]}, no timestamp (2368 = 0xc0 0x12).
+    let mut good = vec![0x12, 8];
+    good.extend_from_slice(b"10.0.0.7");
+    good.extend_from_slice(&[0x18, 0xc0, 0x12, 0x20, 0xc1, 0x12, 0x2a, 3, 1, 2, 3]);
+    let mut bad_address = vec![0x12, 9];
+    bad_address.extend_from_slice(b"10.0.0.7x");
+    f.extend(message(1, 0, 5_000_000_000, &good));
+    f.extend(message(1, 1, 5_000_000_001, &bad_address));
+    f.extend(message(1, 2, 5_000_000_002, &good[..good.len() - 1]));
+    f.extend(message(2, 0, 5_000_000_003, &good));
+    f.extend(message(3, 0, 5_000_000_004, &good));
+    f.extend(mcap_record(0x0f, &[0; 4])); // data end
+    f.extend(mcap_record(0x02, &[0; 20])); // footer
+    f.extend_from_slice(b"\x89MCAP0\r\n");
+    let path = tmp("raw-packets.mcap", &f);
+    let mut src = BagSource::open(&path, BagOptions::default()).unwrap();
+    let d = src
+        .next_datagram()
+        .unwrap()
+        .expect("the well-formed message");
+    assert_eq!(d.time_ns, 5_000_000_000, "no timestamp: the log time");
+    assert_eq!(d.src, "10.0.0.7:2368".parse().unwrap());
+    assert_eq!(d.dst.port(), 2369);
+    assert_eq!(d.payload, [1, 2, 3]);
+    assert!(src.next_datagram().unwrap().is_none());
+    let st = src.stats();
+    assert_eq!((st.messages, st.packet_messages), (5, 1));
+    assert_eq!((st.malformed, st.unknown_type), (2, 2));
+    let first = st.first_malformed.unwrap();
+    assert!(
+        first.contains("/a/raw (ringscan.RawPacket)") && first.contains("IPv4"),
+        "{first}"
+    );
+    assert!(src.sensors().is_empty(), "raw packets are no bag sensor");
+}

@@ -344,3 +344,85 @@ fn summaries_name_the_bag_container() {
         "rosbag2 sqlite3 file"
     );
 }
+
+/// `decode --raw` keeps every datagram of its sensors in the MCAP it writes (`<sensor>/raw`,
+/// `ringscan.RawPacket`), so that MCAP is a source again: the same datagrams as the capture
+/// (time, source address and port, destination port, payload), and `decode` of it, with the
+/// calibrations the MCAP carries as attachments, gives the capture's sensors, sweeps and
+/// points. Two Ouster units sending to the same ports (`same_ports_nonlegacy.pcap`) are told
+/// apart only by their addresses, which the raw messages keep.
+#[test]
+fn a_raw_mcap_gives_back_the_captures_datagrams() {
+    let mut cases = vec![(fixtures().join("demo-vlp16.pcap"), Vec::new())];
+    match common::captures() {
+        Some(root) => {
+            let d = root.join("ouster-lidar__ouster-sdk/tests/pcaps");
+            cases.push((
+                d.join("same_ports_nonlegacy.pcap"),
+                vec![
+                    d.join("same_ports_nonlegacy.1.json"),
+                    d.join("same_ports_nonlegacy.2.json"),
+                ],
+            ));
+        }
+        None => eprintln!("SKIP: ../shared/captures not found: the two-Ouster case"),
+    }
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("raw_mcap");
+    std::fs::create_dir_all(&dir).unwrap();
+    let run = |args: &[&std::ffi::OsStr]| -> serde_json::Value {
+        let o = Command::new(env!("CARGO_BIN_EXE_ringscan"))
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        serde_json::from_slice(&o.stdout).unwrap()
+    };
+    let sensors = |j: &serde_json::Value| -> Vec<(String, u64, u64, String)> {
+        let mut v: Vec<_> = (j["sensors"].as_array().unwrap().iter())
+            .map(|s| {
+                (
+                    s["address"].as_str().unwrap().to_string(),
+                    s["sweeps"].as_u64().unwrap(),
+                    s["points"].as_u64().unwrap(),
+                    s["calibration_file"].to_string(),
+                )
+            })
+            .collect();
+        v.sort();
+        v
+    };
+    for (pcap, calibs) in cases {
+        let out = dir.join(pcap.file_stem().unwrap()).with_extension("mcap");
+        let _ = std::fs::remove_file(&out);
+        let mut args: Vec<&std::ffi::OsStr> = vec![
+            "decode".as_ref(),
+            pcap.as_os_str(),
+            "--raw".as_ref(),
+            "--json".as_ref(),
+            "--out".as_ref(),
+            out.as_os_str(),
+        ];
+        for c in &calibs {
+            args.extend(["--calib".as_ref(), c.as_os_str()]);
+        }
+        let wrote = run(&args);
+        let want = pcap_datagrams(&pcap);
+        let (got, _) = bag_datagrams(&out);
+        assert_eq!(got.len(), want.len(), "{}: datagrams", pcap.display());
+        for (i, (w, g)) in want.iter().zip(&got).enumerate() {
+            assert_eq!((w.0, w.1, w.2), (g.0, g.1, g.2), "datagram {i}");
+            assert!(w.3 == g.3, "payload of datagram {i}");
+        }
+        let again = run(&["decode".as_ref(), out.as_os_str(), "--json".as_ref()]);
+        let (a, b) = (sensors(&wrote), sensors(&again));
+        assert_eq!(a.len(), calibs.len().max(1), "{wrote}");
+        assert_eq!(
+            a,
+            b,
+            "{}: the capture's sensors, then the MCAP's",
+            pcap.display()
+        );
+        assert!(a.iter().all(|s| s.2 > 0), "{a:?}");
+        eprintln!("{}: {} datagrams, sensors {b:?}", pcap.display(), got.len());
+    }
+}

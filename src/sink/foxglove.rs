@@ -648,21 +648,66 @@ mod tests {
         }
     }
 
+    /// The schema of [`RAW_PACKET_SCHEMA`], as prost derives it from the `.proto` text.
+    #[derive(Clone, PartialEq, prost::Message)]
+    struct RawPacket {
+        #[prost(message, optional, tag = "1")]
+        timestamp: Option<prost_types::Timestamp>,
+        #[prost(string, tag = "2")]
+        source_address: String,
+        #[prost(uint32, tag = "3")]
+        source_port: u32,
+        #[prost(uint32, tag = "4")]
+        destination_port: u32,
+        #[prost(bytes = "vec", tag = "5")]
+        payload: Vec<u8>,
+    }
+
+    /// The bag reader (which `decode drive.mcap` uses) reads what prost writes, and knows
+    /// the schema by this module's name.
+    #[cfg(feature = "bag")]
+    #[test]
+    fn the_bag_reader_reads_raw_packets_prost_writes() {
+        use crate::source::bag::messages::{raw_packet, Encoding, RAW_PACKET_TYPE};
+        assert_eq!(RAW_PACKET_SCHEMA, RAW_PACKET_TYPE);
+        for (seconds, nanos, addr, sport, dport, payload) in [
+            (
+                1_700_000_000,
+                999_999_999,
+                "10.1.2.3",
+                65_535,
+                0,
+                vec![7; 1206],
+            ),
+            (0, 0, "0.0.0.0", 0, 7502, vec![]),
+            (-5, 1, "255.255.255.255", 2368, 2369, vec![0]),
+        ] {
+            let m = RawPacket {
+                timestamp: Some(prost_types::Timestamp { seconds, nanos }),
+                source_address: addr.into(),
+                source_port: sport,
+                destination_port: dport,
+                payload: payload.clone(),
+            };
+            let bytes = m.encode_to_vec();
+            let r = raw_packet(Encoding::Protobuf, &bytes).unwrap();
+            let p = r.packet;
+            assert_eq!(p.stamp_ns, Some(seconds * 1_000_000_000 + i64::from(nanos)));
+            assert_eq!(r.source.to_string(), format!("{addr}:{sport}"));
+            assert_eq!(u32::from(r.destination_port), dport);
+            assert_eq!(bytes[p.start..p.start + p.len], payload[..]);
+        }
+        // A port prost can write but no UDP datagram has.
+        let m = RawPacket {
+            source_address: "10.1.2.3".into(),
+            source_port: 65_536,
+            ..Default::default()
+        };
+        assert!(raw_packet(Encoding::Protobuf, &m.encode_to_vec()).is_err());
+    }
+
     #[test]
     fn raw_packet_round_trips_through_prost() {
-        #[derive(Clone, PartialEq, prost::Message)]
-        struct RawPacket {
-            #[prost(message, optional, tag = "1")]
-            timestamp: Option<prost_types::Timestamp>,
-            #[prost(string, tag = "2")]
-            source_address: String,
-            #[prost(uint32, tag = "3")]
-            source_port: u32,
-            #[prost(uint32, tag = "4")]
-            destination_port: u32,
-            #[prost(bytes = "vec", tag = "5")]
-            payload: Vec<u8>,
-        }
         let mut buf = Vec::new();
         let src = std::net::SocketAddrV4::new([192, 168, 1, 201].into(), 2368);
         encode_raw_packet(&mut buf, 5_000_000_001, src, 2368, &[1, 2, 3]).unwrap();

@@ -2261,6 +2261,33 @@ fn bag_check_packets(
     if let Ok((a, n)) = messages::string(enc, msg) {
         assert!(a + n <= msg.len());
     }
+    // ringscan.RawPacket: a payload inside the message; written again by the MCAP sink's
+    // encoder, it reads back the same.
+    if let Ok(r) = messages::raw_packet(messages::Encoding::Protobuf, msg) {
+        let p = r.packet;
+        assert!(p.start.checked_add(p.len).is_some_and(|e| e <= msg.len()));
+        let payload = &msg[p.start..p.start + p.len];
+        let t = p.stamp_ns.and_then(|t| u64::try_from(t).ok());
+        if let Some(t) = t {
+            let mut again = Vec::new();
+            ringscan::sink::foxglove::encode_raw_packet(
+                &mut again,
+                t,
+                r.source,
+                r.destination_port,
+                payload,
+            )
+            .expect("a payload read from a message fits one");
+            let back = messages::raw_packet(messages::Encoding::Protobuf, &again)
+                .expect("the encoder's message reads back");
+            assert_eq!(
+                (back.source, back.destination_port),
+                (r.source, r.destination_port)
+            );
+            assert_eq!(back.packet.stamp_ns, p.stamp_ns);
+            assert_eq!(&again[back.packet.start..][..back.packet.len], payload);
+        }
+    }
     // Livox CustomMsg: a whole points frame of no more points than 19-byte groups of the
     // message, or nothing.
     let mut frame = Vec::new();

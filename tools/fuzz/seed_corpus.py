@@ -578,6 +578,43 @@ def bag_seeds():
     cm1 = struct.pack("<IIII", 1, 1, 2, 1) + b"f" + struct.pack("<QIB3x", 10**18, 2, 3) \
         + struct.pack("<I", 2) + pt(0) + pt(1)
     put("bag_messages", b"\x08" + cm1, "livox-custom-ros1")
+    # ringscan.RawPacket (protobuf, what --raw writes to a foxglove MCAP): a message, and an MCAP
+    # of its records (schema, channel, messages; no chunk, no summary).
+    raw_msg = raw_packet_proto(1_700_000_000, 250_000_000, "192.168.1.201", 2368, 2368, bytes(range(40)))
+    put("bag_messages", b"\x00" + raw_msg, "raw-packet")
+    put("bag_mcap", raw_packet_mcap([raw_msg, raw_msg[:-3], raw_msg]), "raw-packets")
+
+
+def varint(n):
+    out = bytearray()
+    while True:
+        b, n = n & 0x7F, n >> 7
+        out.append(b | (0x80 if n else 0))
+        if not n:
+            return bytes(out)
+
+
+def raw_packet_proto(sec, nanos, address, sport, dport, payload):
+    """A ringscan.RawPacket by the protobuf encoding guide (field number << 3 | wire type)."""
+    ts = b"\x08" + varint(sec) + b"\x10" + varint(nanos)
+    addr = address.encode()
+    return (b"\x0a" + varint(len(ts)) + ts + b"\x12" + varint(len(addr)) + addr
+            + b"\x18" + varint(sport) + b"\x20" + varint(dport)
+            + b"\x2a" + varint(len(payload)) + payload)
+
+
+def raw_packet_mcap(messages):
+    """An MCAP of ringscan.RawPacket messages, record by record from the MCAP specification."""
+    rec = lambda op, body: bytes([op]) + struct.pack("<Q", len(body)) + body
+    s = lambda b: struct.pack("<I", len(b)) + b
+    out = b"\x89MCAP0\r\n" + rec(0x01, s(b"") + s(b"seed"))
+    out += rec(0x03, struct.pack("<H", 1) + s(b"ringscan.RawPacket") + s(b"protobuf") + s(b""))
+    out += rec(0x04, struct.pack("<HH", 1, 1) + s(b"/s/raw") + s(b"protobuf") + struct.pack("<I", 0))
+    for i, m in enumerate(messages):
+        t = 1_700_000_000_000_000_000 + i
+        out += rec(0x05, struct.pack("<HIQQ", 1, i, t, t) + m)
+    out += rec(0x0F, struct.pack("<I", 0)) + rec(0x02, bytes(20)) + b"\x89MCAP0\r\n"
+    return out
 
 
 def lvx_seeds():

@@ -71,6 +71,7 @@ fn encoding_of(message_encoding: &str) -> Option<Encoding> {
     match message_encoding {
         "ros1" => Some(Encoding::Ros1),
         "cdr" => Some(Encoding::Cdr),
+        "protobuf" => Some(Encoding::Protobuf),
         _ => None,
     }
 }

@@ -19,14 +19,20 @@
 //! | `std_msgs/msg/String` | string data (Ouster metadata JSON) | — |
 //! | `livox_ros_driver2/msg/CustomMsg`, `livox_ros_driver/CustomMsg` | Header, uint64 timebase, uint32 point_num, uint8 lidar_id, uint8\[3\] rsvd, `CustomPoint[]` = {uint32 offset_time, float32 x y z, uint8 reflectivity, tag, line}: points, not packets ([`livox_custom`]) | its header's |
 //! | `sensor_msgs/msg/Imu` (a Livox driver's IMU topic beside its `CustomMsg` one) | Header, orientation {float64 x y z w}, float64\[9\] covariance, angular_velocity {float64 x y z}, float64\[9\], linear_acceleration {float64 x y z}, float64\[9\]: one sample ([`imu`]) | its header's |
+//! | `ringscan.RawPacket` (protobuf; what `--raw` writes to an MCAP of the foxglove format) | `Timestamp timestamp = 1`, `string source_address = 2`, `uint32 source_port = 3`, `uint32 destination_port = 4`, `bytes payload = 5`: one datagram with its own addresses ([`raw_packet`]) | its `timestamp` |
 //!
 //! ROS 1 serialization: little-endian, no padding, `time` = u32 sec + u32 nsec, Header = u32
 //! seq + time + string, strings and arrays prefixed by a u32 count. CDR (ROS 2): a 4-byte
 //! encapsulation header (`00 01` little-endian, `00 00` big-endian), then every primitive aligned
 //! to its size counted from the end of that header; `builtin_interfaces/Time` = i32 sec + u32
-//! nanosec; Header = Time + string; strings carry their NUL in the count.
+//! nanosec; Header = Time + string; strings carry their NUL in the count. Protobuf (the wire
+//! format of protobuf.dev/programming-guides/encoding): a sequence of fields, each a varint key
+//! (field number << 3 | wire type) then a varint (type 0), 8 bytes (1), a varint length and
+//! that many bytes (2) or 4 bytes (5); fields in any order, a repeated scalar's last value wins,
+//! an embedded message's occurrences merge, unknown fields are skipped.
 
 use core::fmt;
+use std::net::{Ipv4Addr, SocketAddrV4};
 
 /// A decoded message's packets are never more than this many (a bound on the caller's `Vec`).
 pub const MAX_PACKETS_PER_MESSAGE: usize = 1 << 20;
@@ -38,6 +44,8 @@ pub enum Encoding {
     Ros1,
     /// CDR (rosbag2; MCAP `cdr`).
     Cdr,
+    /// Protobuf (MCAP `protobuf`): ringscan's own `ringscan.RawPacket` only.
+    Protobuf,
 }
 
 /// The message types ringscan reads, by recorded type name.
@@ -64,12 +72,17 @@ pub enum MsgKind {
     LivoxCustomMsg,
     /// `sensor_msgs/Imu`: one IMU sample (read for a Livox `CustomMsg` sensor's IMU topic).
     Imu,
+    /// `ringscan.RawPacket` (protobuf): one datagram as `--raw` kept it, with its addresses.
+    RawPacket,
 }
 
 impl MsgKind {
     /// The kind of a recorded type name (`pkg/Type` or `pkg/msg/Type`), if ringscan reads it.
     pub fn from_type_name(name: &str) -> Option<Self> {
         let name = name.trim();
+        if name == RAW_PACKET_TYPE {
+            return Some(Self::RawPacket);
+        }
         let (pkg, ty) = name.split_once('/')?;
         let ty = ty.strip_prefix("msg/").unwrap_or(ty);
         Some(match (pkg, ty) {
@@ -94,7 +107,17 @@ impl MsgKind {
     pub fn carries_packets(self) -> bool {
         !matches!(self, Self::StdString | Self::LivoxCustomMsg | Self::Imu)
     }
+
+    /// Whether `enc` is this kind's serialization: protobuf for `ringscan.RawPacket`, ROS 1
+    /// or CDR for the ROS types.
+    pub fn serialized_as(self, enc: Encoding) -> bool {
+        (self == Self::RawPacket) == (enc == Encoding::Protobuf)
+    }
 }
+
+/// The schema name of ringscan's raw datagram message (the MCAP sink's
+/// `RAW_PACKET_SCHEMA`, repeated here because the bag reader is built without the sink).
+pub const RAW_PACKET_TYPE: &str = "ringscan.RawPacket";
 
 /// One packet inside a message.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -135,6 +158,17 @@ pub enum MsgError {
     /// More packets than a message may hold.
     #[error("{0} packets claimed, more than the bytes or the limit allow")]
     TooManyPackets(u64),
+    /// A message of another serialization than the reader's (a ROS reader given protobuf).
+    #[error("a {0:?} message where another serialization was expected")]
+    Serialization(Encoding),
+    /// A protobuf field that breaks the wire format or its type's range.
+    #[error("protobuf field at byte {offset}: {what}")]
+    Protobuf {
+        /// Offset of the field's key.
+        offset: usize,
+        /// What is wrong.
+        what: &'static str,
+    },
 }
 
 /// A cursor over message bytes that cannot panic (rustls' `Reader` pattern).
@@ -178,6 +212,7 @@ impl<'a> Cursor<'a> {
                     big_endian,
                 })
             }
+            Encoding::Protobuf => Err(MsgError::Serialization(enc)),
         }
     }
 
@@ -305,7 +340,7 @@ pub fn packets(
         MsgKind::HesaiUdpFrame => scan_var(enc, msg, true, out),
         MsgKind::RobosenseScan => robosense(enc, msg, out),
         MsgKind::RslidarPacket => rslidar(enc, msg, out),
-        MsgKind::StdString | MsgKind::LivoxCustomMsg | MsgKind::Imu => Ok(()),
+        MsgKind::StdString | MsgKind::LivoxCustomMsg | MsgKind::Imu | MsgKind::RawPacket => Ok(()),
     };
     if r.is_err() {
         out.clear();
@@ -522,6 +557,204 @@ fn rslidar(enc: Encoding, msg: &[u8], out: &mut Vec<PacketRef>) -> Result<(), Ms
     Ok(())
 }
 
+/// One `ringscan.RawPacket`: a datagram as the `--raw` output of an MCAP kept it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RawPacketMsg {
+    /// The payload's byte range in the message, and its `timestamp` (ns since the Unix
+    /// epoch; `None` when the field is absent, then the record time serves).
+    pub packet: PacketRef,
+    /// `source_address`:`source_port`.
+    pub source: SocketAddrV4,
+    /// `destination_port`.
+    pub destination_port: u16,
+}
+
+/// Reads a `ringscan.RawPacket` (protobuf). The sender's address must be an IPv4 dotted quad
+/// and the ports below 65536: anything else is not a datagram ringscan wrote, and is refused
+/// rather than guessed at.
+pub fn raw_packet(enc: Encoding, msg: &[u8]) -> Result<RawPacketMsg, MsgError> {
+    if enc != Encoding::Protobuf {
+        return Err(MsgError::Serialization(enc));
+    }
+    let mut r = Proto::new(msg);
+    let mut stamp: Option<(i64, i64)> = None;
+    let (mut address, mut source_port, mut destination_port) = (None, 0, 0);
+    let mut payload = (0, 0);
+    while let Some((at, field, value)) = r.field()? {
+        let bad = |what| MsgError::Protobuf { offset: at, what };
+        match (field, value) {
+            (1, Value::Bytes(start, len)) => {
+                // Timestamp {int64 seconds = 1; int32 nanos = 2}; occurrences merge.
+                let (seconds, nanos) = stamp.get_or_insert((0, 0));
+                let mut t = Proto::new(&msg[start..start + len]);
+                while let Some((_, f, v)) = t.field().map_err(|_| bad("a broken Timestamp"))? {
+                    match (f, v) {
+                        (1, Value::Varint(s)) => *seconds = s as i64,
+                        (2, Value::Varint(n)) => *nanos = i64::from(n as i32),
+                        (1 | 2, _) => return Err(bad("a Timestamp field of the wrong wire type")),
+                        _ => {}
+                    }
+                }
+            }
+            (2, Value::Bytes(start, len)) => address = Some((at, start, len)),
+            (3, Value::Varint(v)) => source_port = v as u32,
+            (4, Value::Varint(v)) => destination_port = v as u32,
+            (5, Value::Bytes(start, len)) => payload = (start, len),
+            (1..=5, _) => return Err(bad("a known field of the wrong wire type")),
+            _ => {}
+        }
+    }
+    let stamp_ns = match stamp {
+        None => None,
+        Some((s, n)) if (0..1_000_000_000).contains(&n) => Some(
+            s.checked_mul(1_000_000_000)
+                .and_then(|t| t.checked_add(n))
+                .ok_or(MsgError::Protobuf {
+                    offset: 0,
+                    what: "a timestamp beyond the ns range of an i64",
+                })?,
+        ),
+        Some(_) => {
+            return Err(MsgError::Protobuf {
+                offset: 0,
+                what: "timestamp nanos outside 0..1e9",
+            })
+        }
+    };
+    let (at, start, len) = address.ok_or(MsgError::Protobuf {
+        offset: msg.len(),
+        what: "no source_address",
+    })?;
+    let ip = core::str::from_utf8(&msg[start..start + len])
+        .ok()
+        .and_then(|s| s.parse::<Ipv4Addr>().ok())
+        .ok_or(MsgError::Protobuf {
+            offset: at,
+            what: "source_address is not an IPv4 dotted quad",
+        })?;
+    let port = |p: u32| {
+        u16::try_from(p).map_err(|_| MsgError::Protobuf {
+            offset: 0,
+            what: "a port above 65535",
+        })
+    };
+    Ok(RawPacketMsg {
+        packet: PacketRef {
+            start: payload.0,
+            len: payload.1,
+            stamp_ns,
+            difop: false,
+        },
+        source: SocketAddrV4::new(ip, port(source_port)?),
+        destination_port: port(destination_port)?,
+    })
+}
+
+/// A protobuf field's value: a varint, or a byte range (length-delimited); fixed-size values
+/// are skipped, as no field read here has one.
+#[derive(Clone, Copy)]
+enum Value {
+    Varint(u64),
+    Bytes(usize, usize),
+    Fixed,
+}
+
+/// A cursor over protobuf wire-format bytes that cannot panic.
+struct Proto<'a> {
+    buf: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Proto<'a> {
+    fn new(buf: &'a [u8]) -> Self {
+        Self { buf, at: 0 }
+    }
+
+    fn varint(&mut self, key_at: usize) -> Result<u64, MsgError> {
+        let mut v = 0u64;
+        for i in 0..=9 {
+            let Some(&b) = self.buf.get(self.at) else {
+                return Err(MsgError::Protobuf {
+                    offset: key_at,
+                    what: "the message ends inside a varint",
+                });
+            };
+            self.at += 1;
+            // The tenth byte holds bit 63 only.
+            if i == 9 && b > 1 {
+                return Err(MsgError::Protobuf {
+                    offset: key_at,
+                    what: "a varint longer than 64 bits",
+                });
+            }
+            v |= u64::from(b & 0x7f) << (7 * i);
+            if b & 0x80 == 0 {
+                return Ok(v);
+            }
+        }
+        // Not reached: the tenth byte is either ≤ 1 (and ends the varint) or refused.
+        Err(MsgError::Protobuf {
+            offset: key_at,
+            what: "a varint longer than 64 bits",
+        })
+    }
+
+    fn skip(&mut self, n: u64, key_at: usize) -> Result<(usize, usize), MsgError> {
+        let start = self.at;
+        let left = self.buf.len() - start;
+        match usize::try_from(n).ok().filter(|&n| n <= left) {
+            Some(n) => {
+                self.at += n;
+                Ok((start, n))
+            }
+            None => Err(MsgError::Protobuf {
+                offset: key_at,
+                what: "a field longer than the bytes left",
+            }),
+        }
+    }
+
+    /// The next field: the offset of its key, its number and its value; `None` at the end.
+    fn field(&mut self) -> Result<Option<(usize, u64, Value)>, MsgError> {
+        if self.at >= self.buf.len() {
+            return Ok(None);
+        }
+        let at = self.at;
+        let key = self.varint(at)?;
+        let (field, wire) = (key >> 3, key & 7);
+        if field == 0 || field > (1 << 29) - 1 {
+            return Err(MsgError::Protobuf {
+                offset: at,
+                what: "a field number outside 1..2^29",
+            });
+        }
+        let value = match wire {
+            0 => Value::Varint(self.varint(at)?),
+            1 => {
+                self.skip(8, at)?;
+                Value::Fixed
+            }
+            2 => {
+                let n = self.varint(at)?;
+                let (start, len) = self.skip(n, at)?;
+                Value::Bytes(start, len)
+            }
+            5 => {
+                self.skip(4, at)?;
+                Value::Fixed
+            }
+            _ => {
+                // 3 and 4 are the deprecated groups, 6 and 7 do not exist.
+                return Err(MsgError::Protobuf {
+                    offset: at,
+                    what: "a group or unknown wire type",
+                });
+            }
+        };
+        Ok(Some((at, field, value)))
+    }
+}
+
 impl fmt::Display for MsgKind {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let s = match self {
@@ -535,6 +768,7 @@ impl fmt::Display for MsgKind {
             Self::StdString => "std_msgs/String",
             Self::LivoxCustomMsg => "livox_ros_driver CustomMsg",
             Self::Imu => "sensor_msgs/Imu",
+            Self::RawPacket => RAW_PACKET_TYPE,
         };
         f.write_str(s)
     }
@@ -713,5 +947,106 @@ mod tests {
         assert_eq!(out.len(), 1);
         assert_eq!(out[0].len, 1080);
         assert_eq!(out[0].stamp_ns, Some(1_000_000_002));
+    }
+
+    /// A `ringscan.RawPacket` written byte by byte from the protobuf encoding guide (varints
+    /// worked out by hand), its fields out of order and with an unknown field between.
+    fn raw_packet_bytes() -> Vec<u8> {
+        let mut m = vec![0x2a, 3, 0xde, 0xad, 0x01]; // 5 payload: LEN 3
+        m.extend_from_slice(&[0x12, 13]); // 2 source_address: LEN 13
+        m.extend_from_slice(b"169.254.92.15");
+        m.extend_from_slice(&[0x18, 0xce, 0x3a]); // 3 source_port: 7502
+        m.extend_from_slice(&[0x35, 1, 2, 3, 4]); // 6 (unknown): I32, skipped
+        m.extend_from_slice(&[0x20, 0xce, 0x3a]); // 4 destination_port: 7502
+                                                  // 1 timestamp: {1 seconds: 1_700_000_000, 2 nanos: 250_000_001}
+        m.extend_from_slice(&[0x0a, 11, 0x08, 0x80, 0xe2, 0xcf, 0xaa, 0x06]);
+        m.extend_from_slice(&[0x10, 0x81, 0xe5, 0x9a, 0x77]);
+        m
+    }
+
+    #[test]
+    fn raw_packet_fields_in_any_order() {
+        let m = raw_packet_bytes();
+        let r = raw_packet(Encoding::Protobuf, &m).unwrap();
+        assert_eq!(
+            &m[r.packet.start..r.packet.start + r.packet.len],
+            [0xde, 0xad, 0x01]
+        );
+        assert_eq!(r.packet.stamp_ns, Some(1_700_000_000_250_000_001));
+        assert_eq!(r.source, "169.254.92.15:7502".parse().unwrap());
+        assert_eq!(r.destination_port, 7502);
+        assert_eq!(
+            MsgKind::from_type_name("ringscan.RawPacket"),
+            Some(MsgKind::RawPacket)
+        );
+        // Not a ROS message, and no ROS message is protobuf.
+        assert!(raw_packet(Encoding::Cdr, &m).is_err());
+        assert!(!MsgKind::RawPacket.serialized_as(Encoding::Ros1));
+        assert!(!MsgKind::VelodyneScan.serialized_as(Encoding::Protobuf));
+        let mut out = Vec::new();
+        assert!(packets(MsgKind::VelodyneScan, Encoding::Protobuf, &m, &mut out).is_err());
+        // A later scalar wins; a later Timestamp merges into the first (nanos only here).
+        let mut later = m.clone();
+        later.extend_from_slice(&[0x20, 0xb0, 0xea, 0x01, 0x0a, 2, 0x10, 0x05]);
+        let r = raw_packet(Encoding::Protobuf, &later).unwrap();
+        assert_eq!(r.destination_port, 30_000);
+        assert_eq!(r.packet.stamp_ns, Some(1_700_000_000_000_000_005));
+        // No timestamp: the record time serves.
+        let r = raw_packet(Encoding::Protobuf, &m[..m.len() - 13]).unwrap();
+        assert_eq!(r.packet.stamp_ns, None);
+    }
+
+    #[test]
+    fn hostile_raw_packets_are_errors_not_panics() {
+        let m = raw_packet_bytes();
+        // Every cut but the ones at a field's end breaks a field.
+        let ends = [5, 20, 23, 28, 31, 44];
+        for cut in 0..m.len() {
+            let r = raw_packet(Encoding::Protobuf, &m[..cut]);
+            let whole = ends.contains(&cut);
+            // Before the source address there is none.
+            assert_eq!(r.is_ok(), whole && cut >= 20, "cut at {cut}: {r:?}");
+        }
+        let with = |extra: &[u8]| {
+            let mut b = m.clone();
+            b.extend_from_slice(extra);
+            raw_packet(Encoding::Protobuf, &b)
+        };
+        for (extra, what) in [
+            (&[0x18, 0xf0, 0xa2, 0x04][..], "a port above 65535"),
+            (
+                &[0x12, 3, b'a', b'b', b'c'],
+                "source_address is not an IPv4 dotted quad",
+            ),
+            (
+                &[0x12, 2, b':', b':'],
+                "source_address is not an IPv4 dotted quad",
+            ),
+            (&[0x1a, 2, 0, 0], "a known field of the wrong wire type"),
+            (&[0x0b], "a group or unknown wire type"),
+            (&[0x07, 0], "a field number outside 1..2^29"),
+            (
+                &[0x2a, 0x80, 0x80, 0x80, 0x80, 0x10],
+                "a field longer than the bytes left",
+            ),
+            (
+                &[
+                    0x20, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0x02,
+                ],
+                "a varint longer than 64 bits",
+            ),
+            (&[0x0a, 2, 0x10, 0x80], "a broken Timestamp"),
+        ] {
+            match with(extra) {
+                Err(MsgError::Protobuf { what: w, .. }) => assert_eq!(w, what, "{extra:02x?}"),
+                r => panic!("{extra:02x?}: {r:?}"),
+            }
+        }
+        // nanos out of range (2^31 − 1) and seconds whose ns overflow an i64.
+        assert!(with(&[0x0a, 6, 0x10, 0xff, 0xff, 0xff, 0xff, 0x07]).is_err());
+        let big = [
+            0x0a, 10, 0x08, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0x7f,
+        ];
+        assert!(with(&big).is_err());
     }
 }

@@ -10,7 +10,7 @@
 //! | ROS 1 bag (chunks none / bz2 / lz4) | `#ROSBAG V2.0\n` | [`ros1`] |
 //! | rosbag2 directory | a `metadata.yaml` with `rosbag2_bagfile_information` | [`rosbag2`]: its files in order |
 //! | sqlite3 (`.db3`), also bare | `SQLite format 3\0` | [`rosbag2::SqliteReader`] |
-//! | MCAP (`ros1msg` or `ros2msg` / CDR schemas) | `\x89MCAP0\r\n` | [`mcap_in`] |
+//! | MCAP (`ros1msg` or `ros2msg` / CDR schemas; ringscan's `ringscan.RawPacket`, protobuf) | `\x89MCAP0\r\n` | [`mcap_in`] |
 //! | a zstd-compressed storage file (rosbag2 `FILE` mode) | zstd magic `28 b5 2f fd`, then the inner magic | sqlite3: decompressed to a temporary file (SQLite needs one); MCAP: decompressed as it is read |
 //!
 //! rosbag2 `MESSAGE` compression (each message one zstd frame) is undone per message (in a
@@ -50,6 +50,10 @@
 //!
 //! The source port equals the destination port; the destination address is 127.0.0.1.
 //! [`BagSource::sensors`] lists the assignment.
+//!
+//! `ringscan.RawPacket` messages (the `--raw` output of an MCAP in the foxglove format) need
+//! none of this: each is one datagram that keeps the address and ports it was received with
+//! (destination address 127.0.0.1), and belongs to no bag sensor.
 //!
 //! The attachments of an MCAP bag ([`BagSource::attachments`], through the summary's
 //! attachment indexes) are the calibration files a bag ringscan wrote carries; the command line
@@ -968,6 +972,9 @@ enum Role {
     Unknown,
     /// Over the sensor limit.
     Dropped,
+    /// `ringscan.RawPacket`: each message is one datagram with its own addresses, of no
+    /// sensor of the bag's.
+    Raw,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -1009,6 +1016,9 @@ pub struct BagSource {
     /// its first sample has told the unit.
     imu_accel_scale: Vec<Option<f64>>,
     frame_current: bool,
+    /// The source and destination port of the current message when it is a
+    /// `ringscan.RawPacket`, which carries its own.
+    raw_current: Option<(SocketAddrV4, u16)>,
     cursor: usize,
     current: (usize, i64, bool),
     first_message_ns: Option<i64>,
@@ -1092,6 +1102,7 @@ impl BagSource {
             packets: Vec::new(),
             frame: Vec::new(),
             frame_current: false,
+            raw_current: None,
             imu_accel_scale: Vec::new(),
             cursor: 0,
             current: (0, 0, false),
@@ -1176,6 +1187,9 @@ impl BagSource {
             encoding,
             role: Role::Unknown,
         };
+        if !kind.serialized_as(encoding) {
+            return unknown;
+        }
         if kind == MsgKind::StdString {
             return if c.topic.ends_with("/metadata") {
                 Route {
@@ -1192,6 +1206,13 @@ impl BagSource {
                 kind: Some(kind),
                 encoding,
                 role: Role::Unselected,
+            };
+        }
+        if kind == MsgKind::RawPacket {
+            return Route {
+                kind: Some(kind),
+                encoding,
+                role: Role::Raw,
             };
         }
         if kind == MsgKind::Imu {
@@ -1305,20 +1326,26 @@ impl BagSource {
         let p = self.packets[self.cursor];
         self.cursor += 1;
         let (sensor, msg_time, imu) = self.current;
-        if self.sensors[sensor].family == Family::Unknown {
-            let payload = (self.messages.message())
-                .get(p.start..p.start + p.len)
-                .unwrap_or(&[]);
-            if let Some((family, data, aux)) = sniff(payload) {
-                let s = &mut self.sensors[sensor];
-                (s.family, s.data_port, s.aux_port) = (family, data, aux);
+        let (src, port) = match self.raw_current {
+            Some(addresses) => addresses,
+            None => {
+                if self.sensors[sensor].family == Family::Unknown {
+                    let payload = (self.messages.message())
+                        .get(p.start..p.start + p.len)
+                        .unwrap_or(&[]);
+                    if let Some((family, data, aux)) = sniff(payload) {
+                        let s = &mut self.sensors[sensor];
+                        (s.family, s.data_port, s.aux_port) = (family, data, aux);
+                    }
+                }
+                let s = &self.sensors[sensor];
+                let port = if imu || p.difop {
+                    s.aux_port
+                } else {
+                    s.data_port
+                };
+                (SocketAddrV4::new(s.address, port), port)
             }
-        }
-        let s = &self.sensors[sensor];
-        let port = if imu || p.difop {
-            s.aux_port
-        } else {
-            s.data_port
         };
         let time_ns = p.stamp_ns.unwrap_or(msg_time);
         self.stats.datagrams += 1;
@@ -1331,7 +1358,7 @@ impl BagSource {
         };
         Ok(Some(Datagram {
             time_ns,
-            src: SocketAddrV4::new(s.address, port),
+            src,
             dst: SocketAddrV4::new(Ipv4Addr::LOCALHOST, port),
             payload: bytes.get(p.start..p.start + p.len).unwrap_or(&[]),
         }))
@@ -1371,12 +1398,24 @@ impl BagSource {
                     }
                 }
                 Role::Dropped => self.stats.sensor_limit += 1,
-                Role::Packets { .. } if m.time_ns < start || m.time_ns > end => {
+                Role::Packets { .. } | Role::Raw if m.time_ns < start || m.time_ns > end => {
                     self.stats.outside_time += 1;
                 }
+                Role::Raw => match messages::raw_packet(route.encoding, self.messages.message()) {
+                    Ok(r) => {
+                        self.stats.packet_messages += 1;
+                        self.packets.push(r.packet);
+                        self.raw_current = Some((r.source, r.destination_port));
+                        self.frame_current = false;
+                        self.current = (0, m.time_ns, false);
+                        return Ok(true);
+                    }
+                    Err(e) => self.count_malformed(m, MsgKind::RawPacket, e),
+                },
                 Role::Packets { sensor, imu } => {
                     let kind = route.kind.unwrap_or(MsgKind::StdString);
                     let msg = self.messages.message();
+                    self.raw_current = None;
                     self.frame_current = matches!(kind, MsgKind::LivoxCustomMsg | MsgKind::Imu);
                     let stamp = match kind {
                         MsgKind::LivoxCustomMsg => {
@@ -1417,21 +1456,23 @@ impl BagSource {
                                 return Ok(true);
                             }
                         }
-                        Err(e) => {
-                            self.stats.malformed += 1;
-                            if self.stats.first_malformed.is_none() {
-                                let topic = self
-                                    .messages
-                                    .connection(m.conn)
-                                    .map(|c| c.topic.clone())
-                                    .unwrap_or_default();
-                                self.stats.first_malformed =
-                                    Some(format!("{topic} ({kind}) at {} ns: {e}", m.time_ns));
-                            }
-                        }
+                        Err(e) => self.count_malformed(m, kind, e),
                     }
                 }
             }
+        }
+    }
+
+    /// Counts a message that does not parse as its type; the first one is described.
+    fn count_malformed(&mut self, m: RawMessage, kind: MsgKind, e: messages::MsgError) {
+        self.stats.malformed += 1;
+        if self.stats.first_malformed.is_none() {
+            let topic = self
+                .messages
+                .connection(m.conn)
+                .map(|c| c.topic.clone())
+                .unwrap_or_default();
+            self.stats.first_malformed = Some(format!("{topic} ({kind}) at {} ns: {e}", m.time_ns));
         }
     }
 }
