@@ -5,7 +5,7 @@ mod common;
 use common::Scratch;
 
 use std::net::{Ipv4Addr, SocketAddrV4};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use ringscan::sensor::velodyne::calib::builtin::builtin;
@@ -733,4 +733,112 @@ fn a_bag_that_could_not_be_written_leaves_no_metadata() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(bag.join("metadata.yaml").is_file());
     assert_not_corrupt(&bag.join("drive_0.mcap"));
+}
+
+/// A run that finds no sensor has decoded nothing: exit 1 with the reason, and nothing written
+/// (a file already at `--out` is left as it was; no bag directory is made), as a sensor that
+/// cannot be decoded (Hesai or VLS-128 without their file) already was. It used to exit 0 and
+/// write an empty MCAP over `--out`. `info` still reports the reason and exits 0; of an MCAP
+/// of decoded points that ringscan wrote, it says so, and no longer warns that the
+/// calibration attached to it "was used by no sensor", as if the user had given it.
+#[test]
+fn a_run_that_finds_no_sensor_fails_and_writes_nothing() {
+    let bytes = capture(40, &|_, _| {});
+    let vlp16 = write("nosensor-vlp16.pcap", &bytes);
+    // The file header and the start of the first record: no datagram.
+    let header_only = write("nosensor-header.pcap", &bytes[..30]);
+    let bag = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/bags/demo-vlp16.ros1-lz4.bag");
+    let dir = Scratch::dir("no-sensor");
+    let points_of = |capture: &Path, calib: Option<&Path>, name: &str| {
+        let out = dir.join(name);
+        let mut c = Command::new(bin());
+        c.arg("decode").arg(capture).arg("--out").arg(&out);
+        if let Some(calib) = calib {
+            c.arg("--calib").arg(calib);
+        }
+        assert!(c.output().unwrap().status.success());
+        out
+    };
+    let points = points_of(&vlp16, None, "points.mcap");
+    let mut cases: Vec<(PathBuf, Vec<&str>, String)> = vec![
+        (
+            points,
+            vec![],
+            "the bag holds decoded point clouds (/points), not packets".into(),
+        ),
+        (
+            header_only.to_path_buf(),
+            vec![],
+            "no datagram was read: the capture ends at byte 24, inside its first record".into(),
+        ),
+        (
+            vlp16.to_path_buf(),
+            vec!["--model", "pandarxt32"],
+            "40 datagrams, none of them a packet of --model pandarxt32".into(),
+        ),
+        (
+            bag,
+            vec!["--topic", "/velodyne_packet"],
+            "--topic /velodyne_packet is none of the bag's packet topics (/velodyne_packets)"
+                .into(),
+        ),
+    ];
+    match common::captures() {
+        Some(root) => {
+            let pcap =
+                root.join("ouster-lidar__ouster-sdk/tests/pcaps/OS-2-128-U1_v2.3.0_1024x10.pcap");
+            let n = common::datagrams(&pcap).len();
+            cases.push((
+                pcap,
+                vec![],
+                format!("{n} datagrams that no sensor family recognised"),
+            ));
+            let nv = root.join("tier4__nebula/src/nebula_velodyne");
+            let points = points_of(
+                &nv.join("nebula_velodyne/test_resources/decoder_ground_truth/vlp16/1673400471837873222/1673400471837873222_0.pcap"),
+                Some(&nv.join("nebula_velodyne_decoders/calibration/VLP16.yaml")),
+                "points-attached.mcap",
+            );
+            cases.push((
+                points,
+                vec![],
+                "the bag holds decoded point clouds (/points), not packets".into(),
+            ));
+        }
+        None => eprintln!("SKIP: ../shared/captures not found: the Ouster case"),
+    }
+    for (input, extra, why) in &cases {
+        let out = dir.join("keep.mcap");
+        std::fs::write(&out, b"an earlier run's file").unwrap();
+        let mut args = extra.clone();
+        args.extend(["--out", out.to_str().unwrap()]);
+        let r = decode(input, &args);
+        assert_eq!(r.code, 1, "{input:?} {extra:?}: {}", r.stderr);
+        assert!(
+            r.stderr.contains(&format!("no sensor found: {why}"))
+                && r.stderr.trim_end().ends_with("; nothing written"),
+            "{input:?} {extra:?}: {}",
+            r.stderr
+        );
+        assert_eq!(std::fs::read(&out).unwrap(), b"an earlier run's file");
+        let bag_dir = dir.join("bag");
+        let mut args = extra.clone();
+        args.extend(["--format", "ros2", "--out", bag_dir.to_str().unwrap()]);
+        let r = decode(input, &args);
+        assert_eq!(r.code, 1, "{input:?} {extra:?}: {}", r.stderr);
+        assert!(
+            !bag_dir.exists(),
+            "{input:?} {extra:?}: a bag directory was left"
+        );
+        let o = Command::new(bin())
+            .arg("info")
+            .arg(input)
+            .args(extra)
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&o.stdout);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert!(text.contains(&format!("no sensor found: {why}")), "{text}");
+        assert!(!text.contains("was used by no sensor"), "{text}");
+    }
 }

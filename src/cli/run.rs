@@ -134,6 +134,14 @@ pub enum RunError {
     /// A file could not be read or written (`render`'s MCAP and PNG), with its path.
     #[error("{0}")]
     File(String),
+    /// `decode` found no sensor in its input: nothing was decoded, and nothing written.
+    #[error("{path}: no sensor found: {why}{}", if *.wrote_nothing { "; nothing written" } else { "" })]
+    NoSensor {
+        path: String,
+        why: String,
+        /// An output was asked for (and not written).
+        wrote_nothing: bool,
+    },
 }
 
 fn parse_model(m: Option<&str>) -> Result<Option<String>, RunError> {
@@ -209,6 +217,8 @@ struct Output {
     pool: Option<Arc<BufferPool>>,
     /// Options given that only one family reads: (option, family, where the others have it).
     family_options: Vec<(&'static str, &'static str, &'static str)>,
+    /// Names of the calibrations that came attached to the input, not from the user.
+    from_input: Vec<String>,
 }
 
 /// Point and column buffers that the consumer of handed-out sweeps gives back (the Python
@@ -685,6 +695,8 @@ pub struct Session {
     demux: Demux,
     out: Output,
     chooser: std::rc::Rc<std::cell::RefCell<Chooser>>,
+    /// `--model`, as given.
+    model: Option<String>,
 }
 
 /// Why [`Session::push`] or [`Session::finish_streams`] stopped.
@@ -828,11 +840,79 @@ impl Session {
             .filter(|(given, ..)| *given)
             .map(|(_, o, f, h)| (o, f, h))
             .collect(),
+            from_input: Vec::new(),
         };
         Ok(Self {
             demux,
             out,
             chooser,
+            model: opts.model.clone(),
+        })
+    }
+
+    /// Why no sensor was found in `src`, if none was: nothing was read (a bag's `--topic`
+    /// that names none of its packet topics is told), or what was read fitted no sensor
+    /// family (or not the `--model` given).
+    pub fn no_sensor_reason<R: Read>(&self, src: &Input<R>) -> Option<String> {
+        if self.demux.sensors().next().is_some() {
+            return None;
+        }
+        let ignored = self.demux.stats().ignored;
+        let missed = src.bag().and_then(|b| b.topics_missed());
+        let points = src
+            .bag()
+            .filter(|b| b.stats().packet_messages == 0)
+            .map(|b| b.point_cloud_topics())
+            .unwrap_or_default();
+        Some(match (ignored, missed, &self.model) {
+            (0, Some((given, known)), _) => {
+                format!(
+                    "--topic {} is none of the bag's packet topics ({})",
+                    given.join(" --topic "),
+                    if known.is_empty() {
+                        "it has none".to_string()
+                    } else {
+                        known.join(", ")
+                    }
+                )
+            }
+            (0, None, _) if !points.is_empty() => format!(
+                "the bag holds decoded point clouds ({}), not packets (an MCAP that ringscan \
+                 writes with --raw keeps the packets too, and decodes again)",
+                points.join(", ")
+            ),
+            (0, None, _) => {
+                // What the input's own counters tell of why (records skipped, a cut).
+                let c = src.capture_json();
+                let n = |k: &str| c[k].as_u64().unwrap_or(0);
+                let skipped: Vec<String> = [
+                    ("malformed (headers that contradict the record, or longer than the snaplen)", n("malformed_records")),
+                    ("truncated by the capture's snaplen", n("truncated_records")),
+                    ("not IPv4 UDP", n("non_udp")),
+                ]
+                .iter()
+                .filter(|(_, k)| *k > 0)
+                .map(|(what, k)| format!("{k} {what}"))
+                .collect();
+                let records = n("records");
+                if !skipped.is_empty() {
+                    format!(
+                        "no datagram was read: of the {records} records, {}",
+                        skipped.join(", ")
+                    )
+                } else if let (0, Some(at)) = (records, c["truncated_tail_offset"].as_u64()) {
+                    format!("no datagram was read: the capture ends at byte {at}, inside its first record")
+                } else {
+                    "no datagram was read (an empty capture, or none selected by --topic, \
+                     --start, --end)"
+                        .to_string()
+                }
+            }
+            (n, _, Some(m)) => format!("{n} datagrams, none of them a packet of --model {m}"),
+            (n, _, None) => format!(
+                "{n} datagrams that no sensor family recognised (Ouster packets need their \
+                 metadata: --calib META.json; the others are known by their size and layout)"
+            ),
         })
     }
 
@@ -877,6 +957,7 @@ impl Session {
     /// seen; it is attached to the output like a `--calib` file.
     pub fn add_calib(&mut self, spec: Calibration) {
         self.chooser.borrow_mut().add(&spec);
+        self.out.from_input.retain(|n| n != &spec.file_name);
         self.out
             .calibs
             .push((spec.addr, spec.file_name, spec.bytes.to_vec()));
@@ -1006,7 +1087,16 @@ impl Session {
         })
     }
 
-    /// The `--calib` files no sensor took, by name.
+    /// A calibration attached to the input (a bag ringscan wrote carries the files it decoded
+    /// with): used as [`Self::add_calib`] does, but not reported when no sensor takes it, as
+    /// the user did not give it.
+    pub fn add_attached_calib(&mut self, spec: Calibration) {
+        let name = spec.file_name.clone();
+        self.add_calib(spec);
+        self.out.from_input.push(name);
+    }
+
+    /// The `--calib` files no sensor took, by name (not the input's own attachments).
     fn unused_calibrations(&self) -> Vec<&str> {
         let out = &self.out;
         let used: std::collections::BTreeSet<&str> = out
@@ -1018,7 +1108,7 @@ impl Session {
         out.calibs
             .iter()
             .map(|(_, n, _)| n.as_str())
-            .filter(|n| !used.contains(n))
+            .filter(|n| !used.contains(n) && !out.from_input.iter().any(|a| a == n))
             .collect()
     }
 
@@ -1457,6 +1547,9 @@ fn summary_json(
     elapsed_s: f64,
 ) -> Summary {
     let (mut m, lost) = session.summary();
+    if let Some(why) = session.no_sensor_reason(src) {
+        m.insert("no_sensor".into(), json!(why));
+    }
     m.insert("input".into(), json!(path));
     m.insert("capture".into(), src.capture_json());
     m.insert("output".into(), output);
@@ -1553,7 +1646,22 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
             }
         }
     };
-    if let Err(e) = pump(&mut src, &mut session, total) {
+    let pumped = pump(&mut src, &mut session, total);
+    // A run that found no sensor decoded nothing: an error, as a sensor that cannot be
+    // decoded is, rather than a success with an empty output. `info` reports it.
+    if pumped.is_ok() && !args.inspect {
+        if let Some(why) = session.no_sensor_reason(&src) {
+            let wrote_nothing = session.out.sink.is_some();
+            session.abort_sink();
+            discard_bag();
+            return Err(RunError::NoSensor {
+                path: path_s,
+                why,
+                wrote_nothing,
+            });
+        }
+    }
+    if let Err(e) = pumped {
         let kept = session.out.sweeps > 0
             && match session.close_sink() {
                 Ok(s) => commit_bag(&s).is_ok(),
@@ -1718,7 +1826,7 @@ fn add_bag_metadata(session: &mut Session, bag: &crate::source::bag::BagSource, 
             match sensors::calibration(bytes, name, None) {
                 Ok(spec) => {
                     tracing::info!("{name}: the calibration attached to the bag is used");
-                    session.add_calib(spec);
+                    session.add_attached_calib(spec);
                 }
                 Err(e) => tracing::debug!("attachment {name}: not a calibration: {e}"),
             }
@@ -1937,21 +2045,8 @@ fn print_text(j: &Value) {
             outln!("{line}");
         }
     }
-    if j["sensors"].as_array().is_none_or(|a| a.is_empty()) {
-        // Say why, as far as the counts tell: nothing read, or datagrams no family knew.
-        let ignored = g(&j["packets"]["ignored"]);
-        if ignored == 0 {
-            outln!(
-                "  no sensor found: no datagram was read (an empty capture, or none selected by \
-                 --topic, --start, --end)"
-            );
-        } else {
-            outln!(
-                "  no sensor found: {ignored} datagrams that no sensor family recognised (Ouster \
-                 packets need their metadata: --calib META.json; the others are known by their \
-                 size and layout)"
-            );
-        }
+    if let Some(why) = j["no_sensor"].as_str() {
+        outln!("  no sensor found: {why}");
     }
     let p = &j["packets"];
     print_warnings(j);

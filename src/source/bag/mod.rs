@@ -1128,6 +1128,45 @@ impl BagSource {
         &self.attachments
     }
 
+    /// The topics of point clouds (`foxglove.PointCloud`, `sensor_msgs/PointCloud2`) among
+    /// the connections seen so far, sorted: what a bag of decoded points, not packets, holds
+    /// (an MCAP ringscan wrote without `--raw`).
+    pub fn point_cloud_topics(&self) -> Vec<String> {
+        let mut t: Vec<String> = (self.messages.conns.iter())
+            .filter(|c| {
+                matches!(
+                    c.type_name.trim(),
+                    "foxglove.PointCloud"
+                        | "sensor_msgs/msg/PointCloud2"
+                        | "sensor_msgs/PointCloud2"
+                )
+            })
+            .map(|c| c.topic.clone())
+            .collect();
+        t.sort();
+        t.dedup();
+        t
+    }
+
+    /// When `--topic` ([`BagOptions::topics`]) names none of the packet topics seen so far:
+    /// what it named and those topics, sorted (say, a mistyped name).
+    pub fn topics_missed(&self) -> Option<(Vec<String>, Vec<String>)> {
+        let given = &self.options.topics;
+        let mut known: Vec<String> = (self.messages.conns.iter())
+            .filter(|c| {
+                MsgKind::from_type_name(&c.type_name)
+                    .is_some_and(|k| !matches!(k, MsgKind::StdString | MsgKind::Imu))
+            })
+            .map(|c| c.topic.clone())
+            .collect();
+        known.sort();
+        known.dedup();
+        if given.is_empty() || given.iter().any(|t| known.contains(t)) {
+            return None;
+        }
+        Some((given.clone(), known))
+    }
+
     /// The sensors known so far, in address order.
     pub fn sensors(&self) -> &[BagSensor] {
         &self.sensors
