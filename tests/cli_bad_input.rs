@@ -842,3 +842,24 @@ fn a_run_that_finds_no_sensor_fails_and_writes_nothing() {
         assert!(!text.contains("was used by no sensor"), "{text}");
     }
 }
+
+/// A `--model` that the packets contradict still wins, but is warned of: a VLP-16 capture
+/// (product id 0x22) decoded as an HDL-32E gave wrong points without a word. The right model
+/// gives no warning.
+#[test]
+fn a_model_the_packets_contradict_is_warned_of() {
+    let p = write("contradicted.pcap", &capture(40, &|_, _| {}));
+    let r = decode(&p, &["--model", "hdl32e"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(
+        r.stdout.contains(
+            "warning: sensor 192.168.1.201: --model hdl32e, though the packets say VLP-16: \
+             product id 0x22"
+        ),
+        "{}",
+        r.stdout
+    );
+    let r = decode(&p, &["--model", "vlp16"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(!r.stdout.contains("warning"), "{}", r.stdout);
+}

@@ -2107,6 +2107,20 @@ pub(crate) fn print_warnings(j: &Value) {
     {
         outln!("  warning: {w}");
     }
+    // A --model the packets contradict (the sensor's `detection` says so).
+    for s in j["sensors"].as_array().into_iter().flatten() {
+        if let Some((_, seen)) = s["detection"]
+            .as_str()
+            .and_then(|d| d.split_once(", though the packets say "))
+        {
+            outln!(
+                "  warning: sensor {}: --model {}, though the packets say {seen}; its points are \
+                 likely wrong",
+                s["address"].as_str().unwrap_or(""),
+                s["model_id"].as_str().unwrap_or("")
+            );
+        }
+    }
     if let Some(n) = j["pipeline"]["deskew_skipped"].as_u64().filter(|&n| n > 0) {
         let why = j["pipeline"]["sensors"]
             .as_array()

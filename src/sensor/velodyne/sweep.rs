@@ -363,7 +363,17 @@ impl VelodyneStream {
             VelodyneModel::from_product_id(p.factory_product())
         };
         let (model, how) = if let Some(m) = self.cfg.model {
-            (m, format!("named by the user ({})", m.id()))
+            // The user's model wins, but a contradiction the packets show is told: decoding a
+            // VLP-16 as an HDL-32E gives wrong points without any other sign.
+            let how = match choose_model(id_model, hdl64, mode, period) {
+                Some((seen, why)) if seen != m => format!(
+                    "named by the user ({}), though the packets say {}: {why}",
+                    m.id(),
+                    seen.name()
+                ),
+                _ => format!("named by the user ({})", m.id()),
+            };
+            (m, how)
         } else {
             choose_model(id_model, hdl64, mode, period).ok_or(StreamError::UnknownModel {
                 product_id: p.factory_product(),
