@@ -863,3 +863,45 @@ fn a_model_the_packets_contradict_is_warned_of() {
     assert_eq!(r.code, 0, "{}", r.stderr);
     assert!(!r.stdout.contains("warning"), "{}", r.stdout);
 }
+
+/// A pipe as the input (`cat X | ringscan info /dev/stdin`) is refused with the reason: the
+/// input is opened more than once, and the second reader met bytes from the middle of the
+/// stream ("expected magic … found 39093634"). `-` says standard input is not read. The same
+/// path redirected from a file is a file, and works.
+#[test]
+fn a_pipe_as_input_is_refused_with_the_reason() {
+    use std::io::Write as _;
+    use std::process::Stdio;
+    let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo-vlp16.pcap");
+    let mut child = Command::new(bin())
+        .args(["info", "/dev/stdin"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let bytes = std::fs::read(&demo).unwrap();
+    // The reader may refuse before reading: a closed pipe is no failure here.
+    let _ = child.stdin.take().unwrap().write_all(&bytes);
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("/dev/stdin: a pipe, socket or device, not a file"),
+        "{err}"
+    );
+    let out = Command::new(bin()).args(["info", "-"]).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("-: standard input, not a file"), "{err}");
+    let out = Command::new(bin())
+        .args(["info", "/dev/stdin"])
+        .stdin(std::fs::File::open(&demo).unwrap())
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}

@@ -72,6 +72,21 @@ pub fn open_with(
             path.display()
         ))
     };
+    // The input is opened more than once (its kind is told from its first bytes, and the
+    // sensors are counted before the output is named), so a pipe would be read from where
+    // the last reader left it: refused with the reason, not with bytes from its middle.
+    let stream = |what: &str| {
+        RunError::Usage(format!(
+            "{}: {what}, not a file: ringscan reads its input from the start more than once \
+             (to tell its format and count its sensors); save the stream to a file first",
+            path.display()
+        ))
+    };
+    match std::fs::metadata(path) {
+        Ok(m) if !m.is_file() && !m.is_dir() => return Err(stream("a pipe, socket or device")),
+        Err(_) if path.as_os_str() == "-" => return Err(stream("standard input")),
+        _ => {}
+    }
     match crate::source::input::open_with(path, bag_args.options()?, read_ahead) {
         Ok(input) if bag_args.given() && input.bag().is_none() => Err(not_a_bag()),
         Ok(input) => Ok(input),
