@@ -126,6 +126,21 @@ fn wrong_magic_names_the_bytes_found() {
         "{}",
         r.stderr
     );
+    // Every format the input may be is named, not pcap alone (a `.bag`, `.mcap` or `.db3`
+    // of random bytes was told it was no pcap).
+    for format in ["pcapng", "ROS 1 bag", "sqlite3", "MCAP", "lvx2"] {
+        assert!(r.stderr.contains(format), "{format}: {}", r.stderr);
+    }
+    // A directory is no rosbag2 one without its metadata.yaml (it was "Is a directory").
+    let dir = Scratch::dir("plain-dir");
+    let r = decode(&dir, &[]);
+    assert_eq!(r.code, 1, "{}", r.stderr);
+    assert!(
+        r.stderr
+            .contains("a directory without a metadata.yaml: not a rosbag2 directory"),
+        "{}",
+        r.stderr
+    );
 }
 
 #[test]

@@ -90,7 +90,9 @@ pub fn open_with(
     match crate::source::input::open_with(path, bag_args.options()?, read_ahead) {
         Ok(input) if bag_args.given() && input.bag().is_none() => Err(not_a_bag()),
         Ok(input) => Ok(input),
-        Err(InputError::Pcap(_)) if bag_args.given() => Err(not_a_bag()),
+        Err(InputError::Pcap(_) | InputError::Unrecognised { .. }) if bag_args.given() => {
+            Err(not_a_bag())
+        }
         Err(err) => Err(RunError::Source {
             path: path.display().to_string(),
             err,

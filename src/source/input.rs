@@ -28,6 +28,28 @@ pub enum InputError {
     /// A Livox recording.
     #[error(transparent)]
     Lvx(#[from] LvxError),
+    /// A file whose first bytes are the magic of no format ringscan reads.
+    #[error(
+        "not a capture, bag or Livox recording: its first bytes {} are the magic number of none \
+         of pcap (a1b2c3d4 or a1b23c4d, either byte order), pcapng (0a0d0d0a), ROS 1 bag \
+         (#ROSBAG V2.0), rosbag2 sqlite3 (SQLite format 3), MCAP (89 MCAP0), zstd (28b52ffd) \
+         or Livox .lvx / .lvx2 (livox_tech)",
+        hex(found)
+    )]
+    Unrecognised {
+        /// The first bytes of the file (at most 16).
+        found: Vec<u8>,
+    },
+    /// A directory that is no rosbag2 one.
+    #[error("a directory without a metadata.yaml: not a rosbag2 directory")]
+    NotABagDirectory,
+}
+
+fn hex(b: &[u8]) -> String {
+    b.iter()
+        .map(|x| format!("{x:02x}"))
+        .collect::<Vec<_>>()
+        .join(" ")
 }
 
 /// A capture, a bag or a Livox recording.
@@ -63,13 +85,26 @@ pub fn open_with(
         let source = BagSource::open(path, bag_options)?;
         return Ok(Input::Bag(Box::new(source)));
     }
+    if path.is_dir() {
+        return Err(InputError::NotABagDirectory);
+    }
+    // The capture reader is the last tried: when it finds no magic either, no format's was
+    // there.
+    let capture = |r: Result<PcapSource<Box<dyn Read>>, SourceError>| match r {
+        Ok(p) => Ok(Input::Pcap(Box::new(p))),
+        Err(SourceError::BadMagic { .. }) => {
+            let mut found = Vec::with_capacity(16);
+            let _ = File::open(path).and_then(|f| f.take(16).read_to_end(&mut found));
+            Err(InputError::Unrecognised { found })
+        }
+        Err(e) => Err(e.into()),
+    };
     if read_ahead {
         if let Ok(ahead) = ReadAhead::spawn(open_file(path)?, "ringscan-read-ahead") {
-            return Ok(Input::Pcap(Box::new(PcapSource::read_ahead(ahead)?)));
+            return capture(PcapSource::read_ahead(ahead));
         }
     }
-    let reader = file_reader(path, false)?;
-    Ok(Input::Pcap(Box::new(PcapSource::new(reader)?)))
+    capture(PcapSource::new(file_reader(path, false)?))
 }
 
 fn open_file(path: &Path) -> Result<File, SourceError> {
