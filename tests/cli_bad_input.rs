@@ -920,3 +920,39 @@ fn a_pipe_as_input_is_refused_with_the_reason() {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// An `--extrinsics` for a sensor name that does not exist is a warning of the summary (it was
+/// only a log line, and `--json`'s `pipeline.extrinsics_unused`), and log lines written to a
+/// file or pipe carry no terminal colour codes.
+#[test]
+fn unused_extrinsics_are_warned_of_and_logs_to_a_pipe_have_no_colours() {
+    let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo-vlp16.pcap");
+    let out = Command::new(bin())
+        .arg("decode")
+        .arg(&demo)
+        .args([
+            "--pipeline",
+            "default",
+            "--extrinsics",
+            "wrongname=0,0,1.8,0,0,0",
+        ])
+        .env("RINGSCAN_LOG", "debug")
+        .output()
+        .unwrap();
+    let r = Run {
+        code: out.status.code().unwrap_or(-1),
+        stdout: String::from_utf8_lossy(&out.stdout).into_owned(),
+        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
+    };
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(
+        r.stdout.contains(
+            "warning: --extrinsics wrongname=…: no sensor of that name (sensor names: \
+             vlp16-201); not applied"
+        ),
+        "{}",
+        r.stdout
+    );
+    assert!(r.stderr.contains("DEBUG"), "debug logs: {}", r.stderr);
+    assert!(!r.stderr.contains('\x1b'), "colour codes: {:?}", r.stderr);
+}

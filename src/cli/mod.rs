@@ -466,9 +466,11 @@ fn init_logging(verbose: u8) {
     };
     let filter =
         EnvFilter::try_from_env("RINGSCAN_LOG").unwrap_or_else(|_| EnvFilter::new(default));
+    // Colours only for a terminal: escape codes in a log file or a pipe are noise.
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .try_init();
 }
 

@@ -2107,6 +2107,20 @@ pub(crate) fn print_warnings(j: &Value) {
     {
         outln!("  warning: {w}");
     }
+    let names: Vec<&str> = (j["sensors"].as_array().into_iter().flatten())
+        .filter_map(|s| s["name"].as_str())
+        .collect();
+    for n in (j["pipeline"]["extrinsics_unused"]
+        .as_array()
+        .into_iter()
+        .flatten())
+    .filter_map(Value::as_str)
+    {
+        outln!(
+            "  warning: --extrinsics {n}=…: no sensor of that name (sensor names: {}); not applied",
+            names.join(", ")
+        );
+    }
     // A --model the packets contradict (the sensor's `detection` says so).
     for s in j["sensors"].as_array().into_iter().flatten() {
         if let Some((_, seen)) = s["detection"]
