@@ -372,7 +372,22 @@ fn a_run_that_decodes_nothing_leaves_the_output_path_as_it_was() {
     let summary = mcap::Summary::read(&std::fs::read(&out).unwrap())
         .unwrap()
         .unwrap();
-    assert!(summary.stats.unwrap().message_count > 0);
+    assert!(summary.stats.as_ref().unwrap().message_count > 0);
+    // The error says the file was written after all, with the sweeps it holds.
+    let points = summary
+        .channels
+        .values()
+        .find(|c| c.topic == "/points")
+        .expect("a /points channel");
+    let sweeps = summary.stats.as_ref().unwrap().channel_message_counts[&points.id];
+    assert!(
+        r.stderr.trim_end().ends_with(&format!(
+            "; {} was written with the {sweeps} sweeps decoded before",
+            out.display()
+        )),
+        "{}",
+        r.stderr
+    );
 }
 
 /// `replay` says in its text output how many datagrams an offset pushed past port 65535 (they

@@ -72,6 +72,7 @@ pub(crate) fn kind_of(e: &RunError) -> ErrKind {
         RunError::Usage(_) => ErrKind::Usage,
         RunError::Source { .. } => ErrKind::Input,
         RunError::Calib { .. } => ErrKind::Calib,
+        RunError::Kept { err, .. } => kind_of(err),
         _ => ErrKind::Decode,
     }
 }

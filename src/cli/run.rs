@@ -134,6 +134,13 @@ pub enum RunError {
     /// A file could not be read or written (`render`'s MCAP and PNG), with its path.
     #[error("{0}")]
     File(String),
+    /// A run that failed after decoding sweeps: they were written to `out` (a valid file).
+    #[error("{err}; {out} was written with the {sweeps} sweeps decoded before")]
+    Kept {
+        err: Box<RunError>,
+        out: String,
+        sweeps: u64,
+    },
     /// `decode` found no sensor in its input: nothing was decoded, and nothing written.
     #[error("{path}: no sensor found: {why}{}", if *.wrote_nothing { "; nothing written" } else { "" })]
     NoSensor {
@@ -1671,7 +1678,16 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
             session.abort_sink();
             discard_bag();
         }
-        return Err(session.run_error(e, &path_s));
+        let err = session.run_error(e, &path_s);
+        return Err(match (&args.out, kept) {
+            // The user is told that a file was written after all, and what it holds.
+            (Some(out), true) => RunError::Kept {
+                err: Box::new(err),
+                out: out.display().to_string(),
+                sweeps: session.out.sweeps,
+            },
+            _ => err,
+        });
     }
     let sink_summary = match session
         .close_sink()
