@@ -559,7 +559,7 @@ impl PipelineRunner {
             .filter(|n| !all.iter().any(|s| s.name == *n))
             .collect();
         for n in &unused {
-            tracing::debug!(
+            tracing::warn!(
                 "--extrinsics {n}=…: no sensor of that name (sensor names: {:?})",
                 all.iter().map(|s| s.name.as_str()).collect::<Vec<_>>()
             );
