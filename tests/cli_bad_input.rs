@@ -624,8 +624,10 @@ fn render_exit_codes_and_output_path() {
 
     let (c, err) = render(&mcap, "0", dir);
     assert_eq!(c, Some(2), "a directory: {err}");
+    // A directory that does not exist is a mistake in the path, named before drawing.
     let (c, err) = render(&mcap, "0", &dir.join("no/such/dir/b.png"));
-    assert_eq!(c, Some(1), "an unwritable path: {err}");
+    assert_eq!(c, Some(2), "a path whose directory does not exist: {err}");
+    assert!(err.contains("does not exist; create it first"), "{err}");
     let (c, err) = render(&cap, "0", &png);
     assert_eq!(c, Some(1), "not an MCAP: {err}");
     let (c, err) = render(&mcap, "9999", &png);
@@ -969,4 +971,45 @@ fn unused_extrinsics_are_warned_of_and_logs_to_a_pipe_have_no_colours() {
     );
     assert!(r.stderr.contains("WARN"), "the log line: {}", r.stderr);
     assert!(!r.stderr.contains('\x1b'), "colour codes: {:?}", r.stderr);
+}
+
+/// `--out` mistakes are bad usage (exit 2), named before decoding: a directory that does not
+/// exist (it was exit 1, naming ringscan's temporary file), `--format ros2` onto an existing
+/// file (exit 1, "File exists"); negative numbers reach the options' own checks (clap took
+/// `-1` for an option and asked for `--min-range=-1`).
+#[test]
+fn out_mistakes_and_negative_values_are_named() {
+    let p = write("out-mistakes.pcap", &capture(20, &|_, _| {}));
+    let dir = Scratch::dir("out-mistakes");
+    let missing = dir.join("no/such/dir/x.mcap");
+    let r = decode(&p, &["--out", missing.to_str().unwrap()]);
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(
+        r.stderr.contains(&format!(
+            "its directory {} does not exist; create it first",
+            missing.parent().unwrap().display()
+        )),
+        "{}",
+        r.stderr
+    );
+    let file = dir.join("afile");
+    std::fs::write(&file, b"kept").unwrap();
+    let r = decode(&p, &["--format", "ros2", "--out", file.to_str().unwrap()]);
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(r.stderr.contains("it is a file"), "{}", r.stderr);
+    assert_eq!(std::fs::read(&file).unwrap(), b"kept");
+    for (args, says) in [
+        (
+            ["--min-range", "-1"],
+            "--min-range -1: expected a distance of 0 m or more",
+        ),
+        (
+            ["--cut-angle", "-10"],
+            "--cut-angle -10: expected [0, 360) degrees",
+        ),
+    ] {
+        let r = decode(&p, &args);
+        assert_eq!(r.code, 2, "{args:?}: {}", r.stderr);
+        assert!(r.stderr.contains(says), "{args:?}: {}", r.stderr);
+    }
 }

@@ -175,13 +175,13 @@ struct DecodeCmd {
     #[arg(long)]
     port: Option<u16>,
     /// Azimuth at which sweeps are cut, degrees.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 0.0)]
     cut_angle: f64,
     /// Drop points closer than this, metres.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     min_range: Option<f32>,
     /// Drop points farther than this, metres.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     max_range: Option<f32>,
     /// Hesai multi-return: also drop a return that is not its firing's last when within this
     /// many metres of another (nebula's dual_return_distance_threshold, e.g. 0.1); default:
@@ -242,7 +242,8 @@ struct DecodeCmd {
 
 #[derive(clap::Args, Debug)]
 struct InfoCmd {
-    /// Input capture (.pcap or .pcapng) or ROS bag, as for `decode`.
+    /// Input capture (.pcap or .pcapng), ROS bag or Livox recording (.lvx, .lvx2), as for
+    /// `decode`.
     input: PathBuf,
     /// Sensor model, overriding detection.
     #[arg(long)]
@@ -319,13 +320,13 @@ struct ListenCmd {
     #[arg(long, value_name = "IP", default_value = "0.0.0.0")]
     interface: std::net::Ipv4Addr,
     /// Azimuth at which sweeps are cut, degrees.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 0.0)]
     cut_angle: f64,
     /// Drop points closer than this, metres.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     min_range: Option<f32>,
     /// Drop points farther than this, metres.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     max_range: Option<f32>,
     /// Hesai multi-return: also drop a return that is not its firing's last when within this
     /// many metres of another (nebula's dual_return_distance_threshold, e.g. 0.1); default:
@@ -399,7 +400,8 @@ struct ReplayCmd {
           value_parser = clap::value_parser!(i32).range(-65535..=65535))]
     port_offset: i32,
     /// Speed: a factor of real time (`1.0`, `10`) or `max`.
-    #[arg(long, default_value = "1.0", value_parser = replay::parse_rate)]
+    #[arg(long, default_value = "1.0", allow_negative_numbers = true,
+          value_parser = replay::parse_rate)]
     rate: crate::source::udp::Rate,
     /// Send the capture this many times (1 or more).
     #[arg(long = "loop", default_value_t = 1,

@@ -1585,7 +1585,15 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
         .as_deref()
         .filter(|p| args.format == FormatArg::Ros2 && crate::sink::rosbag2::is_bag_dir(p));
     let out_path = match (&args.out, bag_dir) {
-        (Some(p), None) => Some(output_file_path(p, "MCAP")?),
+        // `demo` has no output-less run to advise.
+        (Some(p), None) => Some(output_file_path(
+            p,
+            if args.input_bytes.is_some() {
+                "demo's MCAP"
+            } else {
+                "MCAP"
+            },
+        )?),
         _ => None,
     };
     // A bag is never overwritten: refused as the other unusable --out paths are, before
@@ -1593,6 +1601,13 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
     if let Some(dir) = bag_dir.filter(|d| d.join("metadata.yaml").exists()) {
         return Err(RunError::Usage(format!(
             "--out {}: already holds a rosbag2 (metadata.yaml); choose another --out",
+            dir.display()
+        )));
+    }
+    if let Some(dir) = bag_dir.filter(|d| d.exists() && !d.is_dir()) {
+        return Err(RunError::Usage(format!(
+            "--out {}: --format ros2 writes a rosbag2 directory there, and it is a file (a name \
+             ending in .mcap writes one MCAP file instead)",
             dir.display()
         )));
     }
@@ -1930,8 +1945,8 @@ pub fn decode_command(args: &DecodeArgs) -> Result<ExitCode, RunError> {
 pub(crate) fn output_file_path(path: &Path, kind: &str) -> Result<PathBuf, RunError> {
     let refuse = |what: &str| {
         RunError::Usage(format!(
-            "--out {}: {what}, not a file (ringscan writes the {kind} beside it and renames it \
-             into place); give a file path{}",
+            "--out {}: {what} (ringscan writes the {kind} beside it and renames it into place); \
+             give a file path{}",
             path.display(),
             if kind == "MCAP" {
                 ", or leave out --out to decode without writing"
@@ -1942,7 +1957,18 @@ pub(crate) fn output_file_path(path: &Path, kind: &str) -> Result<PathBuf, RunEr
     };
     let meta = match std::fs::symlink_metadata(path) {
         Ok(m) => m,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(path.to_path_buf()),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            // Said now, not as a failure to create the temporary file beside it.
+            let dir = path.parent().filter(|d| !d.as_os_str().is_empty());
+            if let Some(d) = dir.filter(|d| !d.is_dir()) {
+                return Err(RunError::Usage(format!(
+                    "--out {}: its directory {} does not exist; create it first",
+                    path.display(),
+                    d.display()
+                )));
+            }
+            return Ok(path.to_path_buf());
+        }
         Err(e) => return Err(refuse(&format!("cannot be inspected ({e})"))),
     };
     let ft = meta.file_type();
@@ -1956,9 +1982,9 @@ pub(crate) fn output_file_path(path: &Path, kind: &str) -> Result<PathBuf, RunEr
             Err(_) => Err(refuse("a symbolic link to nothing")),
         }
     } else if ft.is_dir() {
-        Err(refuse("a directory"))
+        Err(refuse("a directory, not a file"))
     } else {
-        Err(refuse("a device, pipe or socket"))
+        Err(refuse("a device, pipe or socket, not a file"))
     }
 }
 
