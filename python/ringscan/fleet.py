@@ -224,6 +224,10 @@ def decode_one(
             pq_local = os.path.join(scratch, name + ".parquet")
             _write_parquet(src, pq_local)
             summary = src.summary
+            if summary.get("no_sensor"):
+                # As `ringscan decode` (and the MCAP output below): nothing decoded is an
+                # error of the capture, and nothing is published.
+                raise ringscan.DecodeError(f"{local}: no sensor found: {summary['no_sensor']}")
             row["parquet"] = _publish(pq_local, out, "points")
         if mcap:
             mc_local = os.path.join(scratch, name + ".mcap")

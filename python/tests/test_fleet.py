@@ -161,3 +161,21 @@ def test_object_store_uris(tmp_path):
     # An object that is not there: the capture's error (a row), not the task's.
     gone = fleet.decode_one(prefix + "/day1/gone.pcap", out)
     assert (gone["status"], gone["error_type"]) == ("error", "InputError"), gone
+
+
+def test_a_capture_with_no_sensor_is_an_error_row(tmp_path):
+    """As ``ringscan decode`` exits 1 when it finds no sensor, a fleet task that decodes
+    nothing is an error row (``DecodeError``, the reason given) with nothing published, whether
+    it writes Parquet, MCAP or both."""
+    demo = (REPO / "fixtures" / "demo-vlp16.pcap").read_bytes()
+    header_only = tmp_path / "header-only.pcap"
+    header_only.write_bytes(demo[:24])
+    r = subprocess.run([sys.executable, "-m", "ringscan", "decode", str(header_only)], capture_output=True, text=True)
+    assert r.returncode == 1 and "no sensor found: no datagram was read" in r.stderr, r.stderr
+    for parquet, mcap in [(True, False), (False, True), (True, True)]:
+        out = tmp_path / f"out-{parquet}-{mcap}"
+        row = fleet.decode_one(str(header_only), str(out), parquet=parquet, mcap=mcap)
+        assert (row["status"], row["error_type"]) == ("error", "DecodeError"), row
+        assert "no sensor found: no datagram was read" in row["error"], row
+        assert row["parquet"] is None and row["mcap"] is None
+        assert not any(p.is_file() for p in out.rglob("*")) if out.exists() else True
