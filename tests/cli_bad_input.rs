@@ -632,6 +632,15 @@ fn render_exit_codes_and_output_path() {
     assert_eq!(c, Some(1), "not an MCAP: {err}");
     let (c, err) = render(&mcap, "9999", &png);
     assert_eq!(c, Some(2), "a sweep the file does not hold: {err}");
+    // It says how many the file holds: its sweeps, as decode counted them.
+    let sweeps = json(&decode(&cap, &["--json"]))["sweeps"].as_u64().unwrap();
+    assert!(
+        err.contains(&format!(
+            "which holds {sweeps} (--sweep 0 … {})",
+            sweeps - 1
+        )),
+        "{err}"
+    );
     assert_eq!(
         std::fs::read(&*png).unwrap(),
         drawn,

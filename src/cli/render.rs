@@ -97,6 +97,8 @@ fn read_frame(cmd: &RenderCmd) -> Result<Frame, RunError> {
     let mut frame = Frame::default();
     // Every pipeline prefix in the file, to name them when the one asked for is absent.
     let mut prefixes: Vec<String> = Vec::new();
+    // Sweeps the file holds (its ground messages), for the error of a sweep it does not.
+    let mut ground_messages = 0u64;
     while let Some(event) = reader.next_event() {
         match event.map_err(|e| failed(&path, e))? {
             LinearReadEvent::ReadRequest(n) => {
@@ -121,6 +123,9 @@ fn read_frame(cmd: &RenderCmd) -> Result<Frame, RunError> {
                         else {
                             continue;
                         };
+                        if i == 0 {
+                            ground_messages += 1;
+                        }
                         if header.sequence != cmd.sweep || got[i] {
                             continue;
                         }
@@ -186,7 +191,11 @@ fn read_frame(cmd: &RenderCmd) -> Result<Frame, RunError> {
     }
     Err(bad(
         &path,
-        format!("sweep {} is not in the file", cmd.sweep),
+        format!(
+            "sweep {} is not in the file, which holds {ground_messages} (--sweep 0 … {})",
+            cmd.sweep,
+            ground_messages.saturating_sub(1)
+        ),
     ))
 }
 
