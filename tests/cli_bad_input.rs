@@ -1022,3 +1022,22 @@ fn out_mistakes_and_negative_values_are_named() {
         assert!(r.stderr.contains(says), "{args:?}: {}", r.stderr);
     }
 }
+
+/// A bag reader's error names its file once (it was `error: x.bag: x.bag: record header …`).
+#[test]
+fn a_damaged_bag_is_named_once() {
+    let mut bag = b"#ROSBAG V2.0\n".to_vec();
+    // A record header length far beyond the limit.
+    bag.extend_from_slice(&0x0435_6870_u32.to_le_bytes());
+    bag.extend_from_slice(&[0; 64]);
+    let p = write("damaged.bag", &bag);
+    let r = decode(&p, &[]);
+    assert_eq!(r.code, 1, "{}", r.stderr);
+    let name = p.display().to_string();
+    assert_eq!(r.stderr.matches(&name).count(), 1, "{}", r.stderr);
+    assert!(
+        r.stderr.contains("record header at byte 13"),
+        "{}",
+        r.stderr
+    );
+}

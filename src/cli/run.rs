@@ -109,7 +109,7 @@ pub enum RunError {
     #[error("{0}")]
     Usage(String),
     /// The capture or bag could not be read.
-    #[error("{path}: {err}")]
+    #[error("{}", with_path(path, err))]
     Source { path: String, err: InputError },
     /// A calibration file could not be used.
     #[error("calibration {path}: {msg}")]
@@ -149,6 +149,17 @@ pub enum RunError {
         /// An output was asked for (and not written).
         wrote_nothing: bool,
     },
+}
+
+/// `path: err`, without the path twice where the error names it first (the bag readers'
+/// errors do).
+fn with_path(path: &str, err: &InputError) -> String {
+    let e = err.to_string();
+    if e.starts_with(&format!("{path}: ")) {
+        e
+    } else {
+        format!("{path}: {e}")
+    }
 }
 
 fn parse_model(m: Option<&str>) -> Result<Option<String>, RunError> {
