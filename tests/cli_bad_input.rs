@@ -160,6 +160,17 @@ fn truncated_last_record_is_reported_not_fatal() {
         Some((full - 1248 - 16) as u64)
     );
     assert_not_corrupt(&out);
+    // --strict fails on it: the tail is lost, though no packet counter sees it (it exited 0).
+    let r = decode(&p, &["--strict"]);
+    assert_eq!(r.code, 1, "{}", r.stderr);
+    assert!(
+        r.stderr.contains(&format!(
+            "--strict: the input is cut short at byte {}",
+            full - 1248 - 16
+        )),
+        "{}",
+        r.stderr
+    );
 }
 
 #[test]

@@ -1946,6 +1946,15 @@ pub fn decode_command(args: &DecodeArgs) -> Result<ExitCode, RunError> {
             s.lost
         )));
     }
+    // An input cut short lost its tail, which no packet counter sees.
+    if let Some(at) = s.json["capture"]["truncated_tail_offset"]
+        .as_u64()
+        .filter(|_| args.strict)
+    {
+        return Err(RunError::Strict(format!(
+            "--strict: the input is cut short at byte {at} (its last record is incomplete)"
+        )));
+    }
     Ok(ExitCode::SUCCESS)
 }
 
