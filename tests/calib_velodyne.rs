@@ -605,7 +605,8 @@ fn non_finite_and_absurd_numbers_are_refused() {
         expect(&s, &["`vert_correction`", "lasers[1] (laser_id 1)"]);
     }
     let s = t.replacen("vert_correction: -0.19\n", "vert_correction: 1e300\n", 1);
-    expect(&s, &["laser 1", "vert_correction", "outside"]);
+    // The value as written, not in 301 digits.
+    expect(&s, &["laser 1", "vert_correction = 1e300 is outside"]);
     let s = t.replacen("rot_correction: 0.0\n", "rot_correction: -1e300\n", 1);
     expect(&s, &["laser 0", "rot_correction"]);
     let s = t.replacen(

@@ -143,8 +143,14 @@ impl VelodyneCalibration {
             ];
             for (name, v, limit) in checks {
                 if !v.is_finite() || v.abs() > limit {
+                    // 1e300 in full is 301 digits: large values in exponent form.
+                    let shown = if v.abs() < 1e6 {
+                        format!("{v}")
+                    } else {
+                        format!("{v:e}")
+                    };
                     return Err(CalibError::Invalid(format!(
-                        "laser {i}: {name} = {v} is outside [-{limit}, {limit}]"
+                        "laser {i}: {name} = {shown} is outside [-{limit}, {limit}]"
                     )));
                 }
             }
