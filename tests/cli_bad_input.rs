@@ -964,22 +964,15 @@ fn a_pipe_as_input_is_refused_with_the_reason() {
 #[test]
 fn unused_extrinsics_are_warned_of_and_logs_to_a_pipe_have_no_colours() {
     let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo-vlp16.pcap");
-    let out = Command::new(bin())
-        .arg("decode")
-        .arg(&demo)
-        .args([
+    let r = decode(
+        &demo,
+        &[
             "--pipeline",
             "default",
             "--extrinsics",
             "wrongname=0,0,1.8,0,0,0",
-        ])
-        .output()
-        .unwrap();
-    let r = Run {
-        code: out.status.code().unwrap_or(-1),
-        stdout: String::from_utf8_lossy(&out.stdout).into_owned(),
-        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
-    };
+        ],
+    );
     assert_eq!(r.code, 0, "{}", r.stderr);
     assert!(
         r.stdout.contains(
