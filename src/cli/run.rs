@@ -2183,12 +2183,9 @@ pub(crate) fn print_warnings(j: &Value) {
             names.join(", ")
         );
     }
-    // A --model the packets contradict (the sensor's `detection` says so).
+    // A --model the packets contradict (a family that can tell says so in its summary).
     for s in j["sensors"].as_array().into_iter().flatten() {
-        if let Some((_, seen)) = s["detection"]
-            .as_str()
-            .and_then(|d| d.split_once(", though the packets say "))
-        {
+        if let Some(seen) = s["model_contradicted"].as_str() {
             outln!(
                 "  warning: sensor {}: --model {}, though the packets say {seen}; its points are \
                  likely wrong",

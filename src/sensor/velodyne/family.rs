@@ -227,6 +227,7 @@ impl SensorStream for VelodyneStream {
             "return_mode": f.mode.map(|m| m.name()),
             "product_id": f.product_id.map(|p| format!("{p:#04x}")),
             "detection": f.detection,
+            "model_contradicted": f.model_contradicted,
             "packet_period_us": f.period_us,
             "calibration": f.calibration,
             "clock": f.clock.name(),

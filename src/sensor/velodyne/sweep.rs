@@ -112,6 +112,8 @@ pub struct SensorFacts {
     pub mode_byte: Option<u8>,
     /// How the model was chosen, in words.
     pub detection: String,
+    /// The model the packets say, in words, where a `--model` contradicts them.
+    pub model_contradicted: Option<String>,
     /// Smallest packet stamp difference seen during detection, µs.
     pub period_us: Option<f64>,
     /// Calibration source.
@@ -365,14 +367,14 @@ impl VelodyneStream {
         let (model, how) = if let Some(m) = self.cfg.model {
             // The user's model wins, but a contradiction the packets show is told: decoding a
             // VLP-16 as an HDL-32E gives wrong points without any other sign.
-            let how = match choose_model(id_model, hdl64, mode, period) {
-                Some((seen, why)) if seen != m => format!(
-                    "named by the user ({}), though the packets say {}: {why}",
-                    m.id(),
-                    seen.name()
-                ),
-                _ => format!("named by the user ({})", m.id()),
+            let seen = choose_model(id_model, hdl64, mode, period)
+                .filter(|(seen, _)| *seen != m)
+                .map(|(seen, why)| format!("{}: {why}", seen.name()));
+            let how = match &seen {
+                Some(s) => format!("named by the user ({}), though the packets say {s}", m.id()),
+                None => format!("named by the user ({})", m.id()),
             };
+            self.facts.model_contradicted = seen;
             (m, how)
         } else {
             choose_model(id_model, hdl64, mode, period).ok_or(StreamError::UnknownModel {
