@@ -418,13 +418,22 @@ fn replay_reports_datagrams_its_port_offset_skips() {
             String::from_utf8_lossy(&o.stderr).into_owned(),
         )
     };
-    // 2368 + 63200 = 65568: every data packet is skipped.
+    // 2368 + 63200 = 65568: every data packet is skipped, so the replay failed at its one
+    // job: exit 1 (it was 0), after the summary that says why.
     let (code, out, err) = run("63200");
-    assert_eq!(code, 0, "{err}");
+    assert_eq!(code, 1, "{err}");
     assert!(out.contains("sent 0 datagrams"), "{out}");
     assert!(out.contains("skipped 20 datagrams"), "{out}");
+    assert!(
+        err.contains("no datagram was sent (20 outside the port range with --port-offset 63200"),
+        "{err}"
+    );
     let (code, _, err) = run("70000");
     assert_eq!(code, 2, "{err}");
+    // One port in range: sent, exit 0.
+    let (code, out, err) = run("1");
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("sent 20 datagrams"), "{out}");
 }
 
 /// Values that would do nothing, or something other than asked, are bad usage (exit 2) with a
@@ -662,36 +671,102 @@ fn render_exit_codes_and_output_path() {
 /// `--port` that no data packet went to: the run says how many went elsewhere (counted from
 /// the capture: every 1206-byte datagram to 2368) instead of listing a sensor of "unknown
 /// model" with nothing to explain it.
+/// `--port` that no data packet went to: the run found no sensor to decode, so it fails (exit
+/// 1, nothing written) naming the port the packets went to, in text and in the `--json` error
+/// object. It exited 0 over an empty MCAP, with a sensor line of gaps
+/// (`sensor - (…), ports []: model unknown (no data packet decoded) -, `, `calibration: ;`).
 #[test]
 fn a_port_no_data_packet_went_to_is_explained() {
     let Some(c) = common::captures() else {
         return;
     };
     let pcap = c.join("jerry73204__rust-lidar-utils/test_files/hdl32_example.pcap");
-    let data = common::datagrams(&pcap)
+    let data: Vec<u16> = common::datagrams(&pcap)
         .iter()
-        .filter(|(_, port, p)| *port == 2368 && p.len() == 1206)
-        .count() as u64;
-    assert!(data > 0);
+        .filter(|(_, _, p)| p.len() == 1206)
+        .map(|(_, port, _)| *port)
+        .collect();
+    assert!(!data.is_empty());
+    let out = tmp("port.mcap");
     let run = |json: bool| {
-        let mut cmd = Command::new(bin());
-        cmd.arg("decode").arg(&pcap).args(["--port", "9999"]);
+        let mut args = vec!["--port", "9999", "--out", out.to_str().unwrap()];
         if json {
-            cmd.arg("--json");
+            args.push("--json");
         }
-        let o = cmd.output().unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        String::from_utf8(o.stdout).unwrap()
+        decode(&pcap, &args)
     };
-    let j: serde_json::Value = serde_json::from_str(&run(true)).unwrap();
-    assert_eq!(j["packets"]["other_port"], data);
-    assert_eq!(j["points"], 0);
-    let text = run(false);
+    let r = run(false);
+    let why = format!(
+        "{} data packets, none of them to --port 9999 (the first went to port {})",
+        data.len(),
+        data[0]
+    );
+    assert_eq!(r.code, 1, "{}", r.stderr);
+    assert!(r.stderr.contains(&why), "{}", r.stderr);
+    assert!(!out.exists());
+    let r = run(true);
+    assert_eq!(r.code, 1, "{}", r.stderr);
+    let j = json(&r);
+    assert_eq!(j["kind"], "no_sensor", "{j}");
+    assert_eq!(j["no_sensor"], why.as_str(), "{j}");
+    assert!(!out.exists());
+}
+
+/// Two sensors, one sending to `--port` and one to another: the run decodes the first, and
+/// the second is named by its address with what happened to its packets, not with the gaps of
+/// a sensor line (`sensor - (…)`, `ports []`, `model unknown … -, `, `calibration: ;`).
+#[test]
+fn a_sensor_whose_packets_all_went_to_another_port_is_one_plain_line() {
+    let one = capture(60, &|_, _| {});
+    // Each packet sent again by a second address, to port 2369.
+    let mut w = PcapWriter::new(Vec::new()).unwrap();
+    let mut r = ringscan::source::pcap::PcapSource::new(std::io::Cursor::new(one)).unwrap();
+    while let Some(d) = r.next_datagram().unwrap() {
+        let src = *d.src.ip();
+        w.write(
+            d.time_ns,
+            &udp_frame(
+                SocketAddrV4::new(src, 2368),
+                SocketAddrV4::new(Ipv4Addr::new(192, 168, 1, 100), 2368),
+                0,
+                d.payload,
+            ),
+        )
+        .unwrap();
+        w.write(
+            d.time_ns + 1000,
+            &udp_frame(
+                SocketAddrV4::new(Ipv4Addr::new(192, 168, 1, 202), 2368),
+                SocketAddrV4::new(Ipv4Addr::new(192, 168, 1, 100), 2369),
+                0,
+                d.payload,
+            ),
+        )
+        .unwrap();
+    }
+    let p = write("two-ports.pcap", &w.into_inner().unwrap());
+    let r = decode(&p, &["--port", "2368"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
     assert!(
-        text.contains(&format!(
-            "{data} data packets went to other ports than --port: dropped, not decoded"
-        )) && text.contains("model unknown (no data packet decoded)"),
-        "{text}"
+        r.stdout
+            .contains("sensor 192.168.1.202: velodyne, no datagram decoded (none to --port)"),
+        "{}",
+        r.stdout
+    );
+    assert!(
+        r.stdout
+            .contains("sensor vlp16-201 (192.168.1.201), ports [2368]: VLP-16"),
+        "{}",
+        r.stdout
+    );
+    for gap in ["sensor - (", "ports []", " -, ", "calibration: ;"] {
+        assert!(!r.stdout.contains(gap), "{gap:?} in {}", r.stdout);
+    }
+    assert!(
+        r.stdout
+            .contains("60 data packets went to other ports than --port: dropped, not decoded"),
+        "{}",
+        r.stdout
     );
 }
 
@@ -1044,4 +1119,117 @@ fn a_damaged_bag_is_named_once() {
         "{}",
         r.stderr
     );
+}
+
+/// With `--json`, a run that fails prints one JSON object on stdout as a run that succeeds
+/// does (it printed nothing, leaving a script only the exit code and a line of text): the
+/// error, its kind, the exit code, and for a run that kept its first sweeps the file and their
+/// count. `--strict`, which fails on what its summary reports, prints that summary alone.
+#[test]
+fn a_failed_run_with_json_prints_an_error_object() {
+    let one_object = |r: &Run| {
+        assert_eq!(r.stdout.trim().lines().count(), 1, "{}", r.stdout);
+        let j = json(r);
+        assert_eq!(
+            j["error"].as_str().map(|e| format!("error: {e}\n")),
+            Some(r.stderr.clone()),
+            "the object and stderr differ: {j} / {}",
+            r.stderr
+        );
+        assert_eq!(j["exit_code"], r.code, "{j}");
+        j
+    };
+    // Input that cannot be read: exit 1.
+    let missing = tmp("nothing-here.pcap");
+    let r = decode(&missing, &["--json"]);
+    assert_eq!(r.code, 1);
+    assert_eq!(one_object(&r)["kind"], "input");
+    // Bad usage found after the arguments were parsed: exit 2.
+    let p = write("json-fail.pcap", &capture(240, &|_, _| {}));
+    let r = decode(&p, &["--json", "--out", "/nonexistent-dir/x.mcap"]);
+    assert_eq!(r.code, 2);
+    assert_eq!(one_object(&r)["kind"], "usage");
+    // `info` too.
+    let o = Command::new(bin())
+        .args(["info", "--json"])
+        .arg(&missing)
+        .output()
+        .unwrap();
+    let r = Run {
+        code: o.status.code().unwrap_or(-1),
+        stdout: String::from_utf8_lossy(&o.stdout).into_owned(),
+        stderr: String::from_utf8_lossy(&o.stderr).into_owned(),
+    };
+    assert_eq!(r.code, 1);
+    assert_eq!(one_object(&r)["kind"], "input");
+    // Damage after 200 packets: the sweeps before it are kept, and the object says so.
+    let mut bytes = capture(240, &|_, _| {});
+    let off = 24 + 200 * (16 + 42 + 1206);
+    bytes[off + 8..off + 12].copy_from_slice(&1_000_000_000u32.to_le_bytes());
+    let p = write("json-late-huge.pcap", &bytes);
+    let out = tmp("json-kept.mcap");
+    let r = decode(&p, &["--json", "--out", out.to_str().unwrap()]);
+    assert_eq!(r.code, 1);
+    let j = one_object(&r);
+    assert_eq!(j["kind"], "input", "{j}");
+    assert_eq!(j["output"]["path"], out.to_str().unwrap(), "{j}");
+    let summary = mcap::Summary::read(&std::fs::read(&out).unwrap())
+        .unwrap()
+        .unwrap();
+    let points = summary
+        .channels
+        .values()
+        .find(|c| c.topic == "/points")
+        .expect("a /points channel");
+    let sweeps = summary.stats.as_ref().unwrap().channel_message_counts[&points.id];
+    assert_eq!(j["output"]["sweeps"], sweeps, "{j}");
+    // --strict: the summary is the one object.
+    let bytes = capture(60, &|i, p| {
+        if i == 10 {
+            p.truncate(1205)
+        }
+    });
+    let p = write("json-strict.pcap", &bytes);
+    let r = decode(&p, &["--json", "--strict"]);
+    assert_eq!(r.code, 1);
+    assert_eq!(r.stdout.trim().lines().count(), 1, "{}", r.stdout);
+    let j = json(&r);
+    assert_eq!(j["packets"]["malformed"], 1, "{j}");
+    assert!(j.get("error").is_none(), "{j}");
+}
+
+/// An output that cannot grow (a disk full; here a file-size limit, `ulimit -f`, which fails
+/// the write the same way without filling a disk) is an error that names the file. It said
+/// `writing an MCAP chunk: No space left on device`, without saying where. Nothing is left at
+/// the path, in either format.
+#[cfg(unix)]
+#[test]
+fn an_output_that_cannot_grow_is_named() {
+    let p = write("grow.pcap", &capture(2000, &|_, _| {}));
+    let dir = Scratch::dir("grow");
+    for (out, format) in [
+        (dir.join("big.mcap"), "foxglove"),
+        (dir.join("bag"), "ros2"),
+    ] {
+        // SIGXFSZ ignored (an ignored signal stays ignored across exec): the write fails
+        // with EFBIG instead of the process being killed. 64 blocks of 512 bytes.
+        let o = Command::new("sh")
+            .arg("-c")
+            .arg("trap '' XFSZ; ulimit -f 64; exec \"$@\"")
+            .arg("sh")
+            .arg(bin())
+            .arg("decode")
+            .arg(&p)
+            .args(["--compression", "none", "--format", format, "--out"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{err}");
+        assert!(
+            err.starts_with(&format!("error: {}: ", out.display())),
+            "{err}"
+        );
+        assert!(!out.exists(), "{} was left", out.display());
+    }
 }

@@ -160,6 +160,13 @@ fn info_names_model_protocol_return_mode_clock_and_crc() {
         assert!(o.status.success());
         let text = String::from_utf8_lossy(&o.stdout);
         assert!(text.contains(&format!("Hesai {model},")), "{dir}: {text}");
+        // Without its file the sensor decodes no sweep, so has no name: it is named by its
+        // address alone (it was `sensor - (ADDR)`).
+        let addr = s["address"].as_str().unwrap();
+        assert!(
+            text.contains(&format!("\n  sensor {addr}, ports [")),
+            "{dir}: {text}"
+        );
         assert!(text.contains(mode), "{dir}: {text}");
         assert!(text.contains("clock: free-running"), "{dir}: {text}");
         assert!(text.contains(&format!("CRC: {crc}")), "{dir}: {text}");

@@ -101,6 +101,12 @@ fn every_ouster_capture_decodes_to_the_goldens_points_and_frames() {
                 Some(lidar_frames),
                 "{name} sensor {sn}: sweeps"
             );
+            // With its own metadata, the rate the column timestamps give is the metadata's.
+            assert_eq!(
+                ours["warnings"],
+                serde_json::json!([]),
+                "{name} sensor {sn}"
+            );
         }
         assert_eq!(j["points"].as_u64(), Some(want_points), "{name}");
         assert_eq!(j["sweeps"].as_u64(), Some(want_sweeps), "{name}");
@@ -489,4 +495,83 @@ fn a_metadata_file_bound_to_an_address_takes_legacy_packets_on_any_port() {
             assert_eq!(got[&122247000785], want[&122247000785]);
         }
     }
+}
+
+/// LEGACY packets carry no serial, so another unit's metadata of the same packet size is
+/// taken: `OS-2-32-U0_v2.0.0_1024x10.pcap` (INVENTORY.md: 1024x20, its frame spans 49.9 ms)
+/// read with `OS-1-32-G_v2.1.1_1024x10.json` (1024x10) was decoded and relabelled without a
+/// word. Now its column timestamps tell a 20 Hz sensor, and decode and info warn.
+#[test]
+fn another_units_metadata_at_another_rate_is_warned_of() {
+    let Some(root) = common::captures() else {
+        return;
+    };
+    let dir = root.join("ouster-lidar__ouster-sdk/tests/pcaps");
+    let run = |calib: &str, json: bool| {
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_ringscan"));
+        cmd.arg("info")
+            .arg(dir.join("OS-2-32-U0_v2.0.0_1024x10.pcap"))
+            .arg("--calib")
+            .arg(dir.join(calib));
+        if json {
+            cmd.arg("--json");
+        }
+        let o = cmd.output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8(o.stdout).unwrap()
+    };
+    let j: Value = serde_json::from_str(&run("OS-1-32-G_v2.1.1_1024x10.json", true)).unwrap();
+    let s = &j["sensors"][0];
+    assert_eq!(s["lidar_mode"], "1024x10", "{s}");
+    // 1024 columns in 49.9 ms: 20.0 Hz.
+    let fps = s["measured_fps"].as_f64().unwrap();
+    assert!((fps - 1000.0 / 49.9).abs() < 0.2, "{fps}");
+    let w = s["warnings"][0]
+        .as_str()
+        .unwrap_or_else(|| panic!("no warning: {s}"));
+    assert!(
+        w.contains("give 20.0 frames/s") && w.contains("1024x10 says 10"),
+        "{w}"
+    );
+    let text = run("OS-1-32-G_v2.1.1_1024x10.json", false);
+    assert!(
+        text.contains(&format!(
+            "  warning: sensor os-1-32-g-992101000280 (127.0.0.1): {w}"
+        )),
+        "{text}"
+    );
+    // Its own metadata (1024x20): no warning.
+    let j: Value = serde_json::from_str(&run("OS-2-32-U0_v2.0.0_1024x10.json", true)).unwrap();
+    assert_eq!(j["sensors"][0]["lidar_mode"], "1024x20");
+    assert_eq!(j["sensors"][0]["warnings"], serde_json::json!([]));
+}
+
+/// A reduced (legacy `sensor_config`) metadata file has no model, serial or firmware: `info`
+/// says so instead of printing gaps and a serial 0 (`ports [7502,7503]:  sn 0  LEGACY 1024x10`).
+#[test]
+fn a_reduced_metadata_file_is_described_without_gaps() {
+    let Some(root) = common::captures() else {
+        return;
+    };
+    let dir = root.join("ouster-lidar__ouster-sdk/tests/pcaps");
+    let o = Command::new(env!("CARGO_BIN_EXE_ringscan"))
+        .arg("info")
+        .arg(dir.join("OS-1-64_1024x10_fw20.pcap"))
+        .arg("--calib")
+        .arg(dir.join("OS-1-64_sensor_config_reduced.json"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = String::from_utf8(o.stdout).unwrap();
+    let line = text
+        .lines()
+        .find(|l| l.starts_with("  sensor "))
+        .unwrap_or_else(|| panic!("{text}"));
+    assert!(
+        line.ends_with(
+            "ports [7502,7503]: Ouster (model and serial not in the metadata) LEGACY 1024x10, \
+             window [0, 1023]"
+        ),
+        "{line}"
+    );
 }

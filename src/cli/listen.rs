@@ -860,7 +860,7 @@ pub fn listen_command(
         }
     }
     if args.strict && lost > 0 {
-        return Err(RunError::Strict(format!(
+        return Err(RunError::Reported(format!(
             "--strict: {lost} packets missing, dropped or malformed"
         )));
     }

@@ -512,6 +512,14 @@ where
         }
     };
     init_logging(cli.verbose);
+    let json = match &cli.command {
+        Command::Decode(c) => c.json,
+        Command::Info(c) => c.json,
+        Command::Demo(c) => c.json,
+        Command::Listen(c) => c.json,
+        Command::Replay(c) => c.json,
+        Command::Render(_) | Command::HesaiCalib(_) => false,
+    };
     let result = match cli.command {
         Command::Decode(c) => {
             let args = DecodeArgs {
@@ -640,10 +648,16 @@ where
         Ok(_) => 0,
         Err(e) => {
             eprintln!("error: {e}");
-            match e {
+            let code = match e {
                 RunError::Usage(_) => 2,
                 _ => 1,
+            };
+            // A script that asked for JSON gets an object for a failure too; a failure the
+            // run's summary reports (`--strict`) has had its object already.
+            if json && !matches!(e, RunError::Reported(_)) {
+                outln!("{}", e.json(code));
             }
+            code
         }
     };
     let failed = STDOUT_FAILURE.lock().map(|mut f| f.take()).unwrap_or(None);

@@ -201,5 +201,13 @@ pub fn replay_command(args: &ReplayArgs) -> Result<ExitCode, RunError> {
             outln!("skipped {decoded_frames} messages a driver had decoded (never on the wire)");
         }
     }
+    // Datagrams there were to send, and none went: the replay did not do its job.
+    if sent == 0 && skipped + errors > 0 {
+        return Err(RunError::Reported(format!(
+            "no datagram was sent ({skipped} outside the port range with --port-offset {}, \
+             {errors} send errors)",
+            args.port_offset
+        )));
+    }
     Ok(ExitCode::SUCCESS)
 }

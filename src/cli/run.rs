@@ -128,9 +128,10 @@ pub enum RunError {
     /// The live listener could not go on (sockets, threads, the output file), with context.
     #[error("{0}")]
     Live(String),
-    /// `--strict` and something was lost.
+    /// The run finished and printed its summary, which shows it failed: `--strict` and
+    /// something was lost, or a replay that sent nothing.
     #[error("{0}")]
-    Strict(String),
+    Reported(String),
     /// A file could not be read or written (`render`'s MCAP and PNG), with its path.
     #[error("{0}")]
     File(String),
@@ -149,6 +150,45 @@ pub enum RunError {
         /// An output was asked for (and not written).
         wrote_nothing: bool,
     },
+}
+
+impl RunError {
+    /// The failure as `--json` prints it on stdout (a script reads it as it reads a summary):
+    /// the message, the exit code, what failed and, for a run that kept a partial output, the
+    /// file and its sweeps.
+    pub fn json(&self, exit_code: u8) -> Value {
+        let (kind, inner) = match self {
+            RunError::Kept { err, .. } => (err.kind(), err.as_ref()),
+            e => (e.kind(), e),
+        };
+        let mut m = serde_json::Map::new();
+        m.insert("error".into(), json!(self.to_string()));
+        m.insert("kind".into(), json!(kind));
+        m.insert("exit_code".into(), json!(exit_code));
+        if let RunError::NoSensor { why, .. } = inner {
+            m.insert("no_sensor".into(), json!(why));
+        }
+        if let RunError::Kept { out, sweeps, .. } = self {
+            m.insert("output".into(), json!({"path": out, "sweeps": sweeps}));
+        }
+        Value::Object(m)
+    }
+
+    /// What failed, in one word (`kind` of [`RunError::json`]).
+    fn kind(&self) -> &'static str {
+        match self {
+            RunError::Usage(_) => "usage",
+            RunError::Source { .. } => "input",
+            RunError::Calib { .. } => "calibration",
+            RunError::Stream { .. } => "sensor",
+            RunError::Sink(_) => "output",
+            RunError::Live(_) => "live",
+            RunError::Reported(_) => "reported",
+            RunError::File(_) => "file",
+            RunError::Kept { err, .. } => err.kind(),
+            RunError::NoSensor { .. } => "no_sensor",
+        }
+    }
 }
 
 /// `path: err`, without the path twice where the error names it first (the bag readers'
@@ -872,6 +912,22 @@ impl Session {
     /// that names none of its packet topics is told), or what was read fitted no sensor
     /// family (or not the `--model` given).
     pub fn no_sensor_reason<R: Read>(&self, src: &Input<R>) -> Option<String> {
+        // Sensors were recognised, but every data packet of theirs went to another port (what
+        // did reach them, a Velodyne's position packets, gives no point).
+        let st = self.demux.stats();
+        if let (Some(want), Some(first)) = (self.demux.data_port(), st.other_port_first) {
+            if self
+                .demux
+                .sensors()
+                .all(|(_, s, _)| s.summary().1.decoded == 0)
+            {
+                return Some(format!(
+                    "{} data packets, none of them to --port {want} (the first went to port \
+                     {first})",
+                    st.other_port
+                ));
+            }
+        }
         if self.demux.sensors().next().is_some() {
             return None;
         }
@@ -1704,7 +1760,10 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
             session.abort_sink();
             discard_bag();
         }
-        let err = session.run_error(e, &path_s);
+        let err = naming_output(
+            session.run_error(e, &path_s),
+            out_path.as_deref().or(bag_dir),
+        );
         return Err(match (&args.out, kept) {
             // The user is told that a file was written after all, and what it holds.
             (Some(out), true) => RunError::Kept {
@@ -1722,7 +1781,7 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
         Ok(s) => s,
         Err(e) => {
             discard_bag();
-            return Err(e.into());
+            return Err(naming_output(e.into(), out_path.as_deref().or(bag_dir)));
         }
     };
     session.finish_odometry()?;
@@ -1742,6 +1801,22 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
         output,
         started.elapsed().as_secs_f64(),
     ))
+}
+
+/// An output error that names the file it failed on: the sink's own errors say what it was
+/// doing (`writing an MCAP chunk`), not where, and a disk that filled up should say which file.
+fn naming_output(e: RunError, out: Option<&Path>) -> RunError {
+    match (e, out) {
+        (RunError::Sink(SinkError::Io { context, source }), Some(out))
+            if !context.contains(&*out.to_string_lossy()) =>
+        {
+            RunError::Sink(SinkError::Io {
+                context: format!("{}: {context}", out.display()),
+                source,
+            })
+        }
+        (e, _) => e,
+    }
 }
 
 /// A decoded sweep handed out by [`SweepReader`], with the index of its sensor.
@@ -1941,7 +2016,7 @@ pub fn decode_command(args: &DecodeArgs) -> Result<ExitCode, RunError> {
         print_text(&s.json);
     }
     if args.strict && s.lost > 0 {
-        return Err(RunError::Strict(format!(
+        return Err(RunError::Reported(format!(
             "--strict: {} packets missing, dropped or malformed",
             s.lost
         )));
@@ -1951,7 +2026,7 @@ pub fn decode_command(args: &DecodeArgs) -> Result<ExitCode, RunError> {
         .as_u64()
         .filter(|_| args.strict)
     {
-        return Err(RunError::Strict(format!(
+        return Err(RunError::Reported(format!(
             "--strict: the input is cut short at byte {at} (its last record is incomplete)"
         )));
     }
@@ -2103,6 +2178,14 @@ fn print_text(j: &Value) {
             outln!("  sensor of an unknown kind {kind:?}: {s}");
             continue;
         };
+        if s["ports"].as_array().is_some_and(|p| p.is_empty()) {
+            // Recognised, but every datagram of its went to another port than --port.
+            outln!(
+                "  {}: {kind}, no datagram decoded (none to --port)",
+                crate::sensor::heading(s)
+            );
+            continue;
+        }
         for line in family.describe(s) {
             outln!("{line}");
         }
@@ -2182,6 +2265,12 @@ pub(crate) fn print_warnings(j: &Value) {
             "  warning: --extrinsics {n}=…: no sensor of that name (sensor names: {}); not applied",
             names.join(", ")
         );
+    }
+    // What a family found wrong with a sensor's data or its calibration.
+    for s in j["sensors"].as_array().into_iter().flatten() {
+        for w in (s["warnings"].as_array().into_iter().flatten()).filter_map(Value::as_str) {
+            outln!("  warning: {}: {w}", crate::sensor::heading(s));
+        }
     }
     // A --model the packets contradict (a family that can tell says so in its summary).
     for s in j["sensors"].as_array().into_iter().flatten() {

@@ -160,9 +160,8 @@ pub trait Family: Sync {
         let n = |k: &str| sensor[k].as_u64().unwrap_or(0);
         vec![
             format!(
-                "  sensor {} ({}), ports {}: {} {}, {}",
-                s("name"),
-                s("address"),
+                "  {}, ports {}: {} {}, {}",
+                crate::sensor::heading(sensor),
                 sensor["ports"],
                 s("kind"),
                 s("model"),
@@ -185,9 +184,20 @@ pub trait Family: Sync {
     }
 }
 
-/// A summary field as `info` prints it: its text, or `-` when it has none.
+/// How `info` names a sensor: `sensor NAME (ADDRESS)`, or `sensor ADDRESS` for one that has
+/// no name (a sensor is named when its first sweep is written, so one that decoded nothing
+/// has none).
+pub fn heading(sensor: &serde_json::Value) -> String {
+    let addr = summary_str(&sensor["address"]);
+    match sensor["name"].as_str() {
+        Some(name) => format!("sensor {name} ({addr})"),
+        None => format!("sensor {addr}"),
+    }
+}
+
+/// A summary field as `info` prints it: its text, or `-` when it has none or an empty one.
 pub fn summary_str(v: &serde_json::Value) -> &str {
-    v.as_str().unwrap_or("-")
+    v.as_str().filter(|s| !s.is_empty()).unwrap_or("-")
 }
 
 /// What [`Family::claim`] returns: a stream, or why the family's sensor cannot be decoded.

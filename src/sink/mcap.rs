@@ -1530,7 +1530,11 @@ fn sync_parent_dir(path: &Path) {
 /// success.
 pub fn create_file(path: &Path, opts: SinkOptions) -> Result<McapSink<BufWriter<File>>, SinkError> {
     let temp = temp_path(path);
-    let file = File::create(&temp).map_err(io_err(format!("creating {}", temp.display())))?;
+    let file = File::create(&temp).map_err(io_err(format!(
+        "creating {} (written first as {})",
+        path.display(),
+        temp.display()
+    )))?;
     let commit = FileCommit {
         temp: temp.clone(),
         target: path.to_path_buf(),

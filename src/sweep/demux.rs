@@ -46,8 +46,10 @@ pub struct DemuxStats {
     pub routed: u64,
     /// Datagrams from addresses no configuration claims (other traffic).
     pub ignored: u64,
-    /// Velodyne data packets to other ports than the one asked for.
+    /// Lidar datagrams to other ports than the one asked for.
     pub other_port: u64,
+    /// The destination port of the first of them (what a run that decoded nothing names).
+    pub other_port_first: Option<u16>,
     /// Datagrams dropped because [`MAX_SENSORS`] sensors were already tracked.
     pub dropped_sensor_limit: u64,
     /// Datagrams that came before their sensor was recognised, held and routed to it once it
@@ -198,6 +200,11 @@ impl Demux {
     /// Counters.
     pub fn stats(&self) -> &DemuxStats {
         &self.stats
+    }
+
+    /// The one destination port lidar datagrams are decoded from, when one was asked for.
+    pub fn data_port(&self) -> Option<u16> {
+        self.data_port
     }
 
     /// The sensors seen, in order of first appearance, with the destination ports they used.
@@ -361,6 +368,7 @@ impl Demux {
         };
         if self.data_port.is_some_and(|p| p != dst_port) && stream.is_lidar_datagram(payload) {
             self.stats.other_port += 1;
+            self.stats.other_port_first.get_or_insert(dst_port);
             return Ok(false);
         }
         self.stats.routed += 1;

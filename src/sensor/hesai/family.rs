@@ -195,9 +195,8 @@ impl Family for Hesai {
         let g = |v: &Value| v.as_u64().unwrap_or(0);
         let mut out = Vec::with_capacity(4);
         out.push(format!(
-            "  sensor {} ({}), ports {}: Hesai {}, protocol {}, {}; {}",
-            st("name"),
-            st("address"),
+            "  {}, ports {}: Hesai {}, protocol {}, {}; {}",
+            crate::sensor::heading(s),
             s["ports"],
             s["model"].as_str().unwrap_or(crate::sensor::UNKNOWN_MODEL),
             match (&s["model"], s["protocol"].as_str()) {

@@ -114,9 +114,8 @@ impl Family for Livox {
         let d = &s["point_density"];
         vec![
             format!(
-                "  sensor {} ({}), ports {}: {}, protocol {}, data type {}, {} lines; {}",
-                st("name"),
-                st("address"),
+                "  {}, ports {}: {}, protocol {}, data type {}, {} lines; {}",
+                crate::sensor::heading(s),
                 s["ports"],
                 s["model"].as_str().unwrap_or("Livox, model unknown"),
                 st("protocol"),

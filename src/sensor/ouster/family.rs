@@ -171,16 +171,34 @@ impl Family for Ouster {
         let st = |k: &str| summary_str(&s[k]);
         let g = |v: &Value| v.as_u64().unwrap_or(0);
         let mut out = Vec::with_capacity(4);
+        // A reduced metadata file (the legacy sensor_config form) has no model, serial or
+        // firmware: those are left out rather than printed as gaps and a serial 0.
+        let text = |k: &str| s[k].as_str().filter(|t| !t.is_empty());
+        let serial = match &s["serial"] {
+            Value::Number(n) if n.as_u64() != Some(0) => Some(format!("sn {n}")),
+            Value::String(t) if !t.is_empty() && t != "0" => Some(format!("sn {t}")),
+            _ => None,
+        };
+        let mut what: Vec<String> = Vec::with_capacity(5);
+        match text("model") {
+            Some(m) => what.push(m.to_string()),
+            None if serial.is_none() => {
+                what.push("Ouster (model and serial not in the metadata)".to_string())
+            }
+            None => what.push("Ouster".to_string()),
+        }
+        what.extend(serial);
+        what.extend(
+            ["firmware", "profile", "lidar_mode"]
+                .into_iter()
+                .filter_map(text)
+                .map(str::to_string),
+        );
         out.push(format!(
-            "  sensor {} ({}), ports {}: {} sn {} {} {} {}, window [{}, {}]",
-            st("name"),
-            st("address"),
+            "  {}, ports {}: {}, window [{}, {}]",
+            crate::sensor::heading(s),
             s["ports"],
-            st("model"),
-            s["serial"],
-            st("firmware"),
-            st("profile"),
-            st("lidar_mode"),
+            what.join(" "),
             s["column_window"][0],
             s["column_window"][1]
         ));
@@ -337,6 +355,8 @@ impl SensorStream for OusterStream {
             "points": st.points,
             "imu_dropped": st.imu_dropped,
             "zone_dropped": st.zone_dropped,
+            "measured_fps": self.measured_fps(),
+            "warnings": self.rate_mismatch().into_iter().collect::<Vec<_>>(),
             "alert_flags": {
                 "last": f.alert_flags_last,
                 "seen": f.alert_flags_seen,

@@ -191,6 +191,10 @@ pub struct OusterStream {
     facts: OusterFacts,
     next_index: u64,
     frame_bits: u32,
+    /// Column timestamps measured within packets: the time spanned and the columns stepped
+    /// over (first to last valid column of each packet), for [`Self::measured_fps`].
+    column_span_ns: u64,
+    column_steps: u64,
 }
 
 impl OusterStream {
@@ -250,6 +254,8 @@ impl OusterStream {
             facts,
             next_index: 0,
             frame_bits,
+            column_span_ns: 0,
+            column_steps: 0,
         })
     }
 
@@ -277,6 +283,35 @@ impl OusterStream {
     /// Counters.
     pub fn stats(&self) -> &OusterStats {
         &self.stats
+    }
+
+    /// The frame rate the packets' own column timestamps show, at the metadata's columns per
+    /// frame; `None` before a packet with two valid columns. LEGACY packets carry no serial,
+    /// so another unit's metadata (or the same unit's in another mode) is accepted by size:
+    /// a rate far from the metadata's is how such a mix-up shows.
+    pub fn measured_fps(&self) -> Option<f64> {
+        if self.column_steps == 0 || self.column_span_ns == 0 {
+            return None;
+        }
+        let column_ns = self.column_span_ns as f64 / self.column_steps as f64;
+        Some(1e9 / (column_ns * self.cfg.info.columns_per_frame.max(1) as f64))
+    }
+
+    /// Why the frame rate the packets show contradicts the metadata's, when it does by more
+    /// than a fifth (a mode of another rate, at least 2×, is far beyond that; the sensor's
+    /// own jitter is well within).
+    pub fn rate_mismatch(&self) -> Option<String> {
+        let measured = self.measured_fps()?;
+        let fps = f64::from(self.cfg.info.fps);
+        if fps <= 0.0 || (measured / fps - 1.0).abs() <= 0.2 {
+            return None;
+        }
+        Some(format!(
+            "the packets' column timestamps give {measured:.1} frames/s, the metadata's lidar \
+             mode {} says {fps}: it may be another unit's, or of another mode (its beam angles \
+             and column times are then wrong)",
+            self.facts.mode
+        ))
     }
 
     /// What is known of the sensor.
@@ -557,6 +592,20 @@ impl OusterStream {
             .filter(|c| c.valid() && usize::from(c.measurement_id()) < w)
             .map(|c| c.timestamp_ns())
             .min();
+        // The time between the packet's first and last valid columns, per column stepped: a
+        // packet whose columns go back in time or span more than a second (a clock jump) says
+        // nothing of the rate.
+        let mut span = None::<((u16, u64), (u16, u64))>;
+        for c in packet.columns().filter(|c| c.valid()) {
+            let here = (c.measurement_id(), c.timestamp_ns());
+            span = Some(span.map_or((here, here), |(first, _)| (first, here)));
+        }
+        if let Some(((m0, t0), (m1, t1))) = span {
+            if m1 > m0 && t1 > t0 && t1 - t0 < 1_000_000_000 {
+                self.column_span_ns += t1 - t0;
+                self.column_steps += u64::from(m1 - m0);
+            }
+        }
         let opts = self.cfg.decode;
         let (keep_extras, keep_columns) = (self.cfg.keep_extras, self.cfg.keep_columns);
         let o = &mut self.open[idx];

@@ -87,9 +87,8 @@ impl Family for Robosense {
         };
         vec![
             format!(
-                "  sensor {} ({}), ports {}: Robosense {}, {}; {}",
-                st("name"),
-                st("address"),
+                "  {}, ports {}: Robosense {}, {}; {}",
+                crate::sensor::heading(s),
                 s["ports"],
                 s["model"].as_str().unwrap_or(crate::sensor::UNKNOWN_MODEL),
                 st("return_mode"),

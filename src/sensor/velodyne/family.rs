@@ -103,14 +103,25 @@ impl Family for Velodyne {
         let st = |k: &str| summary_str(&s[k]);
         let g = |v: &Value| v.as_u64().unwrap_or(0);
         let mut out = Vec::with_capacity(4);
+        // What is known of the model, its return mode and how it was told, without the gaps
+        // of a sensor whose packets were not decoded.
+        let what: Vec<&str> = [
+            s["model"].as_str().or(Some(crate::sensor::UNKNOWN_MODEL)),
+            s["return_mode"].as_str(),
+        ]
+        .into_iter()
+        .flatten()
+        .collect();
         out.push(format!(
-            "  sensor {} ({}), ports {}: {} {}, {}",
-            st("name"),
-            st("address"),
+            "  {}, ports {}: {}{}",
+            crate::sensor::heading(s),
             s["ports"],
-            s["model"].as_str().unwrap_or(crate::sensor::UNKNOWN_MODEL),
-            st("return_mode"),
-            st("detection")
+            what.join(" "),
+            s["detection"]
+                .as_str()
+                .filter(|d| !d.is_empty())
+                .map(|d| format!(", {d}"))
+                .unwrap_or_default()
         ));
         out.push(format!(
             "    {} data + {} position packets, {} sweeps, {} points; missing {}, malformed {}, discontinuities {}",
