@@ -284,6 +284,24 @@ fn bad_usage_exits_with_2() {
     let cap = write("ok2.pcap", &capture(5, &|_, _| {}));
     let r = decode(&cap, &["--model", "vlp99"]);
     assert_eq!(r.code, 2, "{}", r.stderr);
+    // The names accepted, grouped by family in `decode --help`'s order (it listed Hesai's
+    // first, ungrouped).
+    let help = Command::new(bin())
+        .args(["decode", "--help"])
+        .output()
+        .unwrap();
+    let help = String::from_utf8_lossy(&help.stdout);
+    let listed = help
+        .split("Sensor model, overriding detection. ")
+        .nth(1)
+        .and_then(|h| h.lines().next())
+        .unwrap_or_else(|| panic!("no --model list in {help}"));
+    assert!(
+        r.stderr
+            .contains(&format!("--model vlp99: expected one of {listed}")),
+        "{}\nhelp: {listed}",
+        r.stderr
+    );
     let out = Command::new(bin()).args(["decode"]).output().unwrap();
     assert_eq!(out.status.code(), Some(2));
     let out = Command::new(bin()).args(["frobnicate"]).output().unwrap();
@@ -650,6 +668,15 @@ fn render_exit_codes_and_output_path() {
     assert!(err.contains("does not exist; create it first"), "{err}");
     let (c, err) = render(&cap, "0", &png);
     assert_eq!(c, Some(1), "not an MCAP: {err}");
+    // A name another format's readers would open: refused, nothing written (it wrote PNG
+    // bytes into a .jpg).
+    let jpg = tmp("render.jpg");
+    let (c, err) = render(&mcap, "0", &jpg);
+    assert_eq!(c, Some(2), "a .jpg: {err}");
+    assert!(err.contains("render writes PNG only"), "{err}");
+    assert!(!jpg.exists());
+    let upper = tmp("render.PNG");
+    assert_eq!(render(&mcap, "0", &upper).0, Some(0));
     let (c, err) = render(&mcap, "9999", &png);
     assert_eq!(c, Some(2), "a sweep the file does not hold: {err}");
     // It says how many the file holds: its sweeps, as decode counted them.
@@ -668,9 +695,6 @@ fn render_exit_codes_and_output_path() {
     );
 }
 
-/// `--port` that no data packet went to: the run says how many went elsewhere (counted from
-/// the capture: every 1206-byte datagram to 2368) instead of listing a sensor of "unknown
-/// model" with nothing to explain it.
 /// `--port` that no data packet went to: the run found no sensor to decode, so it fails (exit
 /// 1, nothing written) naming the port the packets went to, in text and in the `--json` error
 /// object. It exited 0 over an empty MCAP, with a sensor line of gaps

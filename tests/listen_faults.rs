@@ -442,3 +442,48 @@ fn the_text_summary_warns_of_an_unused_calibration() {
     assert!(out.contains(", ignored 0,"), "{out}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The text summary's `wrote FILE: {…}` is the topics' counts as JSON, as `decode` prints
+/// them (it was Rust's debug form, `{"/points": 3, …}`), and they are the file's.
+#[test]
+fn the_text_summary_names_the_file_and_its_topics_as_json() {
+    let dir = tmpdir("wrote-json");
+    let out = dir.join("live.mcap");
+    let o = listen_to_the_capture(&["--out".as_ref(), out.as_os_str()]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(o.status.code(), Some(0), "{text}");
+    let prefix = format!("  wrote {}: ", out.display());
+    let line = text
+        .lines()
+        .find_map(|l| l.strip_prefix(&prefix))
+        .unwrap_or_else(|| panic!("no wrote line: {text}"));
+    let counts: std::collections::BTreeMap<String, u64> =
+        serde_json::from_str(line).unwrap_or_else(|e| panic!("{line}: {e}"));
+    assert!(!line.contains(": "), "not compact JSON: {line}");
+    assert_eq!(counts, read_finalised(&out).0);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// An `--out` in a directory that does not exist is bad usage named before any socket is
+/// opened (exit 2), as in `decode`; it was exit 1 once the first file was created.
+#[test]
+fn an_out_in_a_missing_directory_is_refused_first() {
+    let o = std::process::Command::new(BIN)
+        .args([
+            "listen",
+            "--sensor",
+            "127.0.0.1:9",
+            "--duration",
+            "5",
+            "--out",
+        ])
+        .arg("/nonexistent-ringscan-dir/live.mcap")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("its directory /nonexistent-ringscan-dir does not exist; create it first"),
+        "{err}"
+    );
+}

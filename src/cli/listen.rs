@@ -856,7 +856,12 @@ pub fn listen_command(
         );
         super::run::print_warnings(&json_out);
         for (path, s) in &files {
-            outln!("  wrote {}: {:?}", path.display(), s.messages);
+            // The topics' counts as `decode` prints them (JSON).
+            outln!(
+                "  wrote {}: {}",
+                path.display(),
+                serde_json::json!(s.messages)
+            );
         }
     }
     if args.strict && lost > 0 {
@@ -905,6 +910,9 @@ pub fn listen_run_with(
     }
     if args.split_every.is_some() && args.out.is_none() {
         return Err(RunError::Usage("--split-every needs --out".into()));
+    }
+    if let Some(out) = &args.out {
+        super::run::out_dir_exists(out)?;
     }
     let started = Instant::now();
     // The fetched files live as long as this run (`_fetched` is dropped on every return).

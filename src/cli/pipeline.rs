@@ -23,8 +23,9 @@ use serde_json::{json, Value};
 #[derive(clap::Args, Debug, Clone, Default)]
 pub struct PipelineArgs {
     /// Perception pipeline run on every sweep: `none`, `default`, or a TOML file of
-    /// parameters (see `crate::pipeline::config`). Writes `ground`, `obstacles` and
-    /// `clusters` per sensor.
+    /// parameters (`deskew.*`, `filter.*`, `voxel.leaf_m`, `ground.*`, `cluster.*`: the
+    /// README's "Perception pipeline" lists them). Writes `ground`, `obstacles` and `clusters`
+    /// per sensor.
     #[arg(long, value_name = "none|default|FILE.toml")]
     pub pipeline: Option<String>,
     /// Motion correction of every sweep: `none`, `constant-velocity` (the twist of the

@@ -36,7 +36,7 @@ pub struct RenderCmd {
     /// Half-width of the square drawn, metres (0.5 … 10000).
     #[arg(long, default_value_t = 40.0, value_parser = parse_range_m)]
     range_m: f64,
-    /// Image side, pixels (64 ..= 4096).
+    /// Image side, pixels (64 … 4096).
     #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u32).range(64..=4096))]
     size_px: u32,
 }
@@ -425,6 +425,15 @@ fn draw(frame: &Frame, cmd: &RenderCmd) -> Canvas {
 
 /// Runs `ringscan render`.
 pub fn render_command(cmd: &RenderCmd) -> Result<ExitCode, RunError> {
+    // Only PNG is written: a `.jpg` name would hold PNG bytes that its readers refuse.
+    if let Some(ext) = cmd.out.extension() {
+        if !ext.eq_ignore_ascii_case("png") {
+            return Err(RunError::Usage(format!(
+                "--out {}: render writes PNG only; give a name ending in .png",
+                cmd.out.display()
+            )));
+        }
+    }
     // A device or directory at --out would be replaced by the rename: refused first.
     let target = crate::cli::run::output_file_path(&cmd.out, "PNG")?;
     let frame = read_frame(cmd)?;

@@ -207,13 +207,30 @@ fn parse_model(m: Option<&str>) -> Result<Option<String>, RunError> {
         None => Ok(None),
         Some(s) if crate::sensor::family_of_model(s).is_some() => Ok(Some(s.to_string())),
         Some(s) => {
-            let all: Vec<&str> = crate::sensor::FAMILIES
+            // Grouped by family, in `--help`'s order (Velodyne first), not in the order the
+            // families are asked to claim a sensor.
+            let mut order: Vec<&dyn crate::sensor::Family> =
+                ["velodyne", "hesai", "robosense", "livox"]
+                    .into_iter()
+                    .filter_map(crate::sensor::family)
+                    .collect();
+            for f in crate::sensor::FAMILIES {
+                if !order.iter().any(|g| g.name() == f.name()) {
+                    order.push(*f);
+                }
+            }
+            let by_family: Vec<String> = order
                 .iter()
-                .flat_map(|f| f.models().iter().copied())
+                .filter(|f| !f.models().is_empty())
+                .map(|f| {
+                    let name = f.name();
+                    let title = name[..1].to_uppercase() + &name[1..];
+                    format!("{title}: {}", f.models().join(", "))
+                })
                 .collect();
             Err(RunError::Usage(format!(
                 "--model {s}: expected one of {}",
-                all.join(", ")
+                by_family.join("; ")
             )))
         }
     }
@@ -2054,14 +2071,7 @@ pub(crate) fn output_file_path(path: &Path, kind: &str) -> Result<PathBuf, RunEr
         Ok(m) => m,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
             // Said now, not as a failure to create the temporary file beside it.
-            let dir = path.parent().filter(|d| !d.as_os_str().is_empty());
-            if let Some(d) = dir.filter(|d| !d.is_dir()) {
-                return Err(RunError::Usage(format!(
-                    "--out {}: its directory {} does not exist; create it first",
-                    path.display(),
-                    d.display()
-                )));
-            }
+            out_dir_exists(path)?;
             return Ok(path.to_path_buf());
         }
         Err(e) => return Err(refuse(&format!("cannot be inspected ({e})"))),
@@ -2080,6 +2090,19 @@ pub(crate) fn output_file_path(path: &Path, kind: &str) -> Result<PathBuf, RunEr
         Err(refuse("a directory, not a file"))
     } else {
         Err(refuse("a device, pipe or socket, not a file"))
+    }
+}
+
+/// Refuses an `--out` whose directory does not exist (bad usage, named before any work)
+/// rather than failing on the first file created there.
+pub(crate) fn out_dir_exists(path: &Path) -> Result<(), RunError> {
+    match path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        Some(d) if !d.is_dir() => Err(RunError::Usage(format!(
+            "--out {}: its directory {} does not exist; create it first",
+            path.display(),
+            d.display()
+        ))),
+        _ => Ok(()),
     }
 }
 
