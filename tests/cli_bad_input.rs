@@ -1257,3 +1257,51 @@ fn an_output_that_cannot_grow_is_named() {
         assert!(!out.exists(), "{} was left", out.display());
     }
 }
+
+/// A range option that keeps no point of the packets decoded is warned of, one rule for every
+/// family: a Hesai XT32 (120 m) with `--min-range 150` failed with `invalid option: range
+/// 150–120 m is empty` (exit 1, and once blaming its calibration), a Velodyne exited 0 with
+/// 0 points and no word.
+#[test]
+fn a_range_that_keeps_no_point_is_warned_of_in_every_family() {
+    let p = write("range.pcap", &capture(200, &|_, _| {}));
+    let warned = |r: &Run, n: u64, opt: &str| {
+        assert_eq!(r.code, 0, "{}", r.stderr);
+        assert!(
+            r.stdout.contains(&format!(
+                "  warning: {opt}: no point of the {n} packets decoded is in that range"
+            )),
+            "{}",
+            r.stdout
+        );
+    };
+    // The simulated room is 10 × 8 m: nothing is 150 m away, nor within 1 cm.
+    warned(&decode(&p, &["--min-range", "150"]), 200, "--min-range 150");
+    warned(
+        &decode(&p, &["--max-range", "0.01"]),
+        200,
+        "--max-range 0.01",
+    );
+    let r = decode(&p, &["--max-range", "50"]);
+    assert!(!r.stdout.contains("warning"), "{}", r.stdout);
+    let j = json(&decode(&p, &["--min-range", "150", "--json"]));
+    assert_eq!(j["points"], 0);
+    assert_eq!(j["warnings"].as_array().map(Vec::len), Some(1), "{j}");
+    let Some(c) = common::captures() else {
+        return;
+    };
+    let nh = c.join("tier4__nebula/src/nebula_hesai");
+    let pcap = nh.join(
+        "nebula_hesai/test_resources/decoder_ground_truth/xt32/1673400677802009732/1673400677802009732_0.pcap",
+    );
+    let n = common::datagrams(&pcap).len() as u64;
+    let csv = nh.join("nebula_hesai_decoders/calibration/PandarXT32.csv");
+    warned(
+        &decode(
+            &pcap,
+            &["--calib", csv.to_str().unwrap(), "--min-range", "150"],
+        ),
+        n,
+        "--min-range 150",
+    );
+}

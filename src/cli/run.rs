@@ -294,6 +294,8 @@ struct Output {
     family_options: Vec<(&'static str, &'static str, &'static str)>,
     /// Names of the calibrations that came attached to the input, not from the user.
     from_input: Vec<String>,
+    /// `--min-range` / `--max-range` as given, for the warning of a range that kept no point.
+    range_given: Option<String>,
 }
 
 /// Point and column buffers that the consumer of handed-out sweeps gives back (the Python
@@ -891,6 +893,12 @@ impl Session {
             live: None,
             tap: None,
             pool: None,
+            range_given: match (opts.min_range, opts.max_range) {
+                (None, None) => None,
+                (Some(a), None) => Some(format!("--min-range {a}")),
+                (None, Some(b)) => Some(format!("--max-range {b}")),
+                (Some(a), Some(b)) => Some(format!("--min-range {a} --max-range {b}")),
+            },
             family_options: [
                 (
                     opts.fov_deg.is_some(),
@@ -1434,6 +1442,16 @@ impl Session {
             })
             .collect();
         m.insert("unused_options".into(), json!(unused_options));
+        // A range that kept no point of the packets decoded (beyond the sensor's reach, or
+        // a typo) gives an empty output that would otherwise pass for a quiet scene.
+        let warnings: Vec<String> = out
+            .range_given
+            .as_ref()
+            .filter(|_| decoded > 0 && out.points == 0)
+            .map(|r| format!("{r}: no point of the {decoded} packets decoded is in that range"))
+            .into_iter()
+            .collect();
+        m.insert("warnings".into(), json!(warnings));
         m.insert(
             "packets".into(),
             json!({
@@ -2266,6 +2284,9 @@ pub(crate) fn print_warnings(j: &Value) {
             "  warning: calibration {name} was used by no sensor: it fits none of the sensors \
              found (family, model, laser count, serial or address)"
         );
+    }
+    for w in (j["warnings"].as_array().into_iter().flatten()).filter_map(Value::as_str) {
+        outln!("  warning: {w}");
     }
     for w in j["unused_options"]
         .as_array()

@@ -365,9 +365,11 @@ impl HesaiDecoder {
             min_m = min_m.max(spec.min_range_m);
             max_m = max_m.min(spec.max_range_m);
         }
-        if min_m.is_nan() || max_m.is_nan() || min_m > max_m {
+        // A range the model cannot reach (`--min-range 150` on a 120 m sensor) is no error:
+        // it keeps no point, as it does for every family, and the run warns of it.
+        if min_m.is_nan() || max_m.is_nan() {
             return Err(DecodeError::Option(format!(
-                "range {min_m}–{max_m} m is empty"
+                "range {min_m}–{max_m} m is not a number"
             )));
         }
         if opts.dual_return_threshold_m.is_nan() || opts.dual_return_threshold_m < 0.0 {
