@@ -29,9 +29,14 @@ def cli_decode(case: dict, out) -> dict:
         args += ["--calib", abspath(c)]
     r = subprocess.run(args, capture_output=True, text=True, timeout=300)
     if r.returncode == 1 and "no sensor found: " in r.stderr:
-        # Nothing decoded (an empty capture, packets of no family): an error, nothing written.
+        # Nothing decoded (an empty capture, packets of no family): an error, nothing written;
+        # --json gives the error as an object, with the reason stderr has.
         assert not out.exists()
-        return {"no_sensor": r.stderr.split("no sensor found: ", 1)[1].removesuffix("\n").removesuffix("; nothing written")}
+        err = json.loads(r.stdout)
+        assert err["kind"] == "no_sensor" and err["exit_code"] == 1, err
+        assert r.stderr == f"error: {err['error']}\n"
+        assert err["error"].endswith(f"no sensor found: {err['no_sensor']}; nothing written")
+        return {"no_sensor": err["no_sensor"]}
     assert r.returncode == 0, f"{' '.join(args)}: {r.stderr}"
     return json.loads(r.stdout)
 

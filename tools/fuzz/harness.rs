@@ -2012,6 +2012,11 @@ pub fn ouster_stream(data: &[u8]) {
     );
     assert_eq!(st.sweeps, sweeps);
     assert_eq!(st.points, points);
+    // The rate the column timestamps give is a finite positive number, or none.
+    if let Some(fps) = stream.measured_fps() {
+        assert!(fps.is_finite() && fps > 0.0, "{fps}");
+    }
+    let _ = stream.rate_mismatch();
 }
 
 /// The Ouster sensor of `decode_to_mcap`: a small OS-1-16 in one of three profiles (single,

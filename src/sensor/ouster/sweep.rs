@@ -602,8 +602,9 @@ impl OusterStream {
         }
         if let Some(((m0, t0), (m1, t1))) = span {
             if m1 > m0 && t1 > t0 && t1 - t0 < 1_000_000_000 {
-                self.column_span_ns += t1 - t0;
-                self.column_steps += u64::from(m1 - m0);
+                // Saturating: a hostile stream of one-second spans must not wrap (or panic).
+                self.column_span_ns = self.column_span_ns.saturating_add(t1 - t0);
+                self.column_steps = self.column_steps.saturating_add(u64::from(m1 - m0));
             }
         }
         let opts = self.cfg.decode;
