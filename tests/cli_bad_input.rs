@@ -1305,3 +1305,204 @@ fn a_range_that_keeps_no_point_is_warned_of_in_every_family() {
         "--min-range 150",
     );
 }
+
+/// An output path that names a file the run reads (the input, a calibration, through a link
+/// or not) or another output of the run is bad usage, refused before anything is written: the
+/// capture was replaced by the MCAP (or by the trajectory's text), exit 0.
+#[test]
+fn an_output_over_an_input_is_refused() {
+    let dir = Scratch::dir("over-input");
+    let cap = dir.join("in.pcap");
+    let bytes = capture(240, &|_, _| {});
+    std::fs::write(&cap, &bytes).unwrap();
+    let yaml = dir.join("vlp16.yaml");
+    let mut text = String::from("lasers:\n");
+    for i in 0..16 {
+        text.push_str(&format!(
+            "- {{laser_id: {i}, rot_correction: 0.0, vert_correction: {}, dist_correction: 0.0, vert_offset_correction: 0.0, horiz_offset_correction: 0.0}}\n",
+            (-15.0 + 2.0 * i as f64).to_radians()
+        ));
+    }
+    std::fs::write(&yaml, &text).unwrap();
+    #[cfg(unix)]
+    std::os::unix::fs::symlink(&cap, dir.join("link.mcap")).unwrap();
+    let p = |name: &str| dir.join(name).to_str().unwrap().to_string();
+    let cases: Vec<(Vec<String>, &str)> = vec![
+        (vec!["--out".into(), p("in.pcap")], "--out"),
+        (
+            vec!["--out".into(), format!("{}/./in.pcap", dir.display())],
+            "--out",
+        ),
+        (
+            vec![
+                "--calib".into(),
+                p("vlp16.yaml"),
+                "--out".into(),
+                p("vlp16.yaml"),
+            ],
+            "--out",
+        ),
+        (
+            vec!["--odometry".into(), "--trajectory".into(), p("in.pcap")],
+            "--trajectory",
+        ),
+        (
+            vec![
+                "--odometry".into(),
+                "--trajectory".into(),
+                p("o.mcap"),
+                "--out".into(),
+                p("o.mcap"),
+            ],
+            "--trajectory",
+        ),
+        #[cfg(unix)]
+        (vec!["--out".into(), p("link.mcap")], "--out"),
+    ];
+    for (args, flag) in cases {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let r = decode(&cap, &args);
+        assert_eq!(r.code, 2, "{args:?}: {}", r.stderr);
+        assert!(
+            r.stderr.starts_with(&format!("error: {flag} "))
+                && r.stderr.contains("the same file as"),
+            "{args:?}: {}",
+            r.stderr
+        );
+        assert_eq!(
+            std::fs::read(&cap).unwrap(),
+            bytes,
+            "{args:?}: the capture changed"
+        );
+        assert_eq!(std::fs::read_to_string(&yaml).unwrap(), text);
+        assert!(!dir.join("o.mcap").exists());
+    }
+    // render: its PNG over the MCAP it reads.
+    let mcap = dir.join("run");
+    let r = decode(
+        &cap,
+        &["--pipeline", "default", "--out", mcap.to_str().unwrap()],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let before = std::fs::read(&mcap).unwrap();
+    let o = Command::new(bin())
+        .arg("render")
+        .arg(&mcap)
+        .arg("--out")
+        .arg(&mcap)
+        .output()
+        .unwrap();
+    assert_eq!(
+        o.status.code(),
+        Some(2),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert_eq!(std::fs::read(&mcap).unwrap(), before);
+}
+
+/// Flags named before any work: `--trajectory` in a missing directory (the whole capture was
+/// decoded and written, then the run failed), odometry flags without `--odometry` (the method
+/// and range were accepted and did nothing), `--format ros2` in a missing directory (made
+/// silently, where every other `--out` is refused).
+#[test]
+fn odometry_and_bag_paths_are_checked_first() {
+    let p = write("first.pcap", &capture(240, &|_, _| {}));
+    let dir = Scratch::dir("checked-first");
+    let out = dir.join("o.mcap");
+    let r = decode(
+        &p,
+        &[
+            "--odometry",
+            "--trajectory",
+            dir.join("nodir/t.tum").to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ],
+    );
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(
+        r.stderr.contains("does not exist; create it first"),
+        "{}",
+        r.stderr
+    );
+    assert!(!out.exists());
+    for flag in [
+        ["--odometry-method", "point-to-point"],
+        ["--odometry-max-range", "5"],
+    ] {
+        let r = decode(&p, &flag);
+        assert_eq!(r.code, 2, "{flag:?}: {}", r.stderr);
+        assert!(
+            r.stderr.contains(&format!("{} needs --odometry", flag[0])),
+            "{}",
+            r.stderr
+        );
+    }
+    let bag = dir.join("nodir/bag");
+    let r = decode(&p, &["--format", "ros2", "--out", bag.to_str().unwrap()]);
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(!dir.join("nodir").exists());
+}
+
+/// `--json` with arguments that do not parse (an unknown value, a missing INPUT) prints the
+/// error object too; `--help` is not an error. A `replay` of an input with nothing to send
+/// exits 1 (it exited 0 unless an offset had pushed ports out of range).
+#[test]
+fn json_usage_errors_and_a_replay_with_nothing_to_send() {
+    let p = write("usage.pcap", &capture(5, &|_, _| {}));
+    let run = |args: &[&str]| {
+        let o = Command::new(bin()).args(args).output().unwrap();
+        Run {
+            code: o.status.code().unwrap_or(-1),
+            stdout: String::from_utf8_lossy(&o.stdout).into_owned(),
+            stderr: String::from_utf8_lossy(&o.stderr).into_owned(),
+        }
+    };
+    let ps = p.to_str().unwrap();
+    for args in [
+        vec!["decode", ps, "--json", "--compression", "gzip"],
+        vec!["decode", "--json"],
+        vec!["info", "--json", ps, "--bogus"],
+    ] {
+        let r = run(&args);
+        assert_eq!(r.code, 2, "{args:?}");
+        let j = json(&r);
+        assert_eq!(j["kind"], "usage", "{j}");
+        assert_eq!(j["exit_code"], 2, "{j}");
+        let first = r
+            .stderr
+            .lines()
+            .next()
+            .unwrap()
+            .trim_start_matches("error: ");
+        assert!(
+            j["error"].as_str().unwrap().starts_with(first),
+            "{j} / {}",
+            r.stderr
+        );
+    }
+    // Not an error, and `--json` after `--` is no flag.
+    assert_eq!(run(&["decode", "--help", "--json"]).code, 0);
+    let r = run(&["decode", "--", "--json"]);
+    assert_eq!(r.code, 1);
+    assert!(r.stdout.is_empty(), "{}", r.stdout);
+    // A capture of no datagram: nothing to send.
+    let empty = write("nothing.pcap", &capture(0, &|_, _| {}));
+    let r = run(&[
+        "replay",
+        empty.to_str().unwrap(),
+        "--to",
+        "127.0.0.1",
+        "--rate",
+        "max",
+    ]);
+    assert_eq!(r.code, 1, "{}", r.stderr);
+    assert!(r.stdout.contains("sent 0 datagrams"), "{}", r.stdout);
+    assert!(
+        r.stderr
+            .contains("no datagram was sent: the input holds none"),
+        "{}",
+        r.stderr
+    );
+}

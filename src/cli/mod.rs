@@ -503,12 +503,31 @@ where
     I: IntoIterator<Item = T>,
     T: Into<std::ffi::OsString> + Clone,
 {
-    let cli = match Cli::try_parse_from(args) {
+    let args: Vec<std::ffi::OsString> = args.into_iter().map(Into::into).collect();
+    let cli = match Cli::try_parse_from(&args) {
         Ok(c) => c,
         Err(e) => {
             // --help and --version are "errors" that print to stdout and exit 0.
             let _ = e.print();
-            return u8::try_from(e.exit_code()).unwrap_or(2);
+            let code = u8::try_from(e.exit_code()).unwrap_or(2);
+            // A script that asked for JSON gets its error object for bad usage too (the
+            // arguments did not parse, so `--json` is looked for among them as given).
+            if code != 0 && args_ask_for_json(&args) {
+                // clap's message up to its usage block, on one line.
+                let rendered = e.to_string();
+                let msg: Vec<&str> = rendered
+                    .lines()
+                    .take_while(|l| !l.trim().is_empty())
+                    .map(str::trim)
+                    .collect();
+                let msg = msg.join(" ");
+                let msg = msg.strip_prefix("error: ").unwrap_or(&msg);
+                outln!(
+                    "{}",
+                    serde_json::json!({"error": msg, "kind": "usage", "exit_code": code})
+                );
+            }
+            return code;
         }
     };
     init_logging(cli.verbose);
@@ -670,6 +689,14 @@ where
         }
         _ => code,
     }
+}
+
+/// Whether `--json` is among the arguments as given (before a `--` that ends the options).
+fn args_ask_for_json(args: &[std::ffi::OsString]) -> bool {
+    args.iter()
+        .skip(1)
+        .take_while(|a| *a != "--")
+        .any(|a| a == "--json")
 }
 
 /// The first error writing a command's output to stdout, for [`run`]'s exit code.

@@ -158,6 +158,10 @@ impl OdometryArgs {
             Some("--odometry-voxel")
         } else if self.map_every != d.map_every {
             Some("--map-every")
+        } else if self.odometry_method != d.odometry_method {
+            Some("--odometry-method")
+        } else if self.odometry_max_range != d.odometry_max_range {
+            Some("--odometry-max-range")
         } else {
             None
         }
@@ -205,6 +209,25 @@ impl OdometryArgs {
         Odometry::new(config).map_err(|e| format!("--odometry: {e}"))?;
         if self.map_every == 0 {
             return Err("--map-every 0: expected at least 1".into());
+        }
+        // Said now, not after the whole run when the file is first written.
+        if let Some(t) = &self.trajectory {
+            match t.parent().filter(|d| !d.as_os_str().is_empty()) {
+                Some(d) if !d.is_dir() => {
+                    return Err(format!(
+                        "--trajectory {}: its directory {} does not exist; create it first",
+                        t.display(),
+                        d.display()
+                    ))
+                }
+                _ if t.is_dir() => {
+                    return Err(format!(
+                        "--trajectory {}: a directory, not a file",
+                        t.display()
+                    ))
+                }
+                _ => {}
+            }
         }
         Ok(Some(OdometrySetup {
             config,

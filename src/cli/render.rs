@@ -434,6 +434,12 @@ pub fn render_command(cmd: &RenderCmd) -> Result<ExitCode, RunError> {
             )));
         }
     }
+    if crate::cli::run::same_file(&cmd.out, &cmd.input) {
+        return Err(RunError::Usage(format!(
+            "--out {}: the same file as the input; the picture would replace the MCAP",
+            cmd.out.display()
+        )));
+    }
     // A device or directory at --out would be replaced by the rename: refused first.
     let target = crate::cli::run::output_file_path(&cmd.out, "PNG")?;
     let frame = read_frame(cmd)?;

@@ -201,13 +201,24 @@ pub fn replay_command(args: &ReplayArgs) -> Result<ExitCode, RunError> {
             outln!("skipped {decoded_frames} messages a driver had decoded (never on the wire)");
         }
     }
-    // Datagrams there were to send, and none went: the replay did not do its job.
-    if sent == 0 && skipped + errors > 0 {
-        return Err(RunError::Reported(format!(
-            "no datagram was sent ({skipped} outside the port range with --port-offset {}, \
-             {errors} send errors)",
-            args.port_offset
-        )));
+    // A replay that sent nothing did not do its job, whatever the reason.
+    if sent == 0 {
+        return Err(RunError::Reported(if skipped + errors > 0 {
+            format!(
+                "no datagram was sent ({skipped} outside the port range with --port-offset {}, \
+                 {errors} send errors)",
+                args.port_offset
+            )
+        } else if decoded_frames > 0 {
+            format!(
+                "no datagram was sent: the input holds no packet, only {decoded_frames} \
+                 messages a driver had decoded"
+            )
+        } else {
+            "no datagram was sent: the input holds none (or none within --topic, --start, \
+             --end, --duration)"
+                .to_string()
+        }));
     }
     Ok(ExitCode::SUCCESS)
 }

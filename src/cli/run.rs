@@ -1673,7 +1673,6 @@ fn summary_json(
 pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
     let started = Instant::now();
     let path_s = args.input.display().to_string();
-    let (mut session, mut src) = start_session(args)?;
     let sink_opts = sink_options_with(
         args.format,
         args.compression,
@@ -1713,6 +1712,48 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
             dir.display()
         )));
     }
+    if let Some(dir) = bag_dir {
+        out_dir_exists(dir)?;
+    }
+    // An output over a file this run reads would destroy it (the rename replaces it at the
+    // end, or the trajectory is written over it as the run goes): refused before anything.
+    let inputs: Vec<(&str, &Path)> = std::iter::once(("INPUT", args.input.as_path()))
+        .chain(args.calib.iter().map(|c| {
+            let file = c.split_once('=').map_or(c.as_str(), |(_, f)| f);
+            ("--calib", Path::new(file))
+        }))
+        .collect();
+    let outputs: Vec<(&str, &Path)> = (args.out.as_deref().filter(|_| bag_dir.is_none()))
+        .map(|p| ("--out", p))
+        .into_iter()
+        .chain(
+            args.odometry
+                .trajectory
+                .as_deref()
+                .map(|p| ("--trajectory", p)),
+        )
+        .collect();
+    for (i, (what, out)) in outputs.iter().enumerate() {
+        let clash = |(other, path): &(&str, &Path), why: &str| {
+            (same_file(out, path) || *out == *path).then(|| {
+                RunError::Usage(format!(
+                    "{what} {}: the same file as {other} {}; {why}",
+                    out.display(),
+                    path.display()
+                ))
+            })
+        };
+        let read = inputs
+            .iter()
+            .find_map(|x| clash(x, "writing it would destroy what is read"));
+        let written = outputs[..i]
+            .iter()
+            .find_map(|x| clash(x, "one would overwrite the other"));
+        if let Some(e) = read.or(written) {
+            return Err(e);
+        }
+    }
+    let (mut session, mut src) = start_session(args)?;
     let bag_dir_existed = bag_dir.is_some_and(Path::exists);
     let sink = match (&out_path, bag_dir) {
         (_, Some(dir)) => {
@@ -2108,6 +2149,14 @@ pub(crate) fn output_file_path(path: &Path, kind: &str) -> Result<PathBuf, RunEr
         Err(refuse("a directory, not a file"))
     } else {
         Err(refuse("a device, pipe or socket, not a file"))
+    }
+}
+
+/// Whether `a` and `b` name one existing file (through links, `.` and `..` alike).
+pub(crate) fn same_file(a: &Path, b: &Path) -> bool {
+    match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
+        (Ok(x), Ok(y)) => x == y,
+        _ => false,
     }
 }
 
