@@ -91,6 +91,19 @@ fn assert_not_corrupt(path: &Path) {
     mcap::Summary::read(&bytes).unwrap().expect("summary");
 }
 
+/// The `/points` messages of a finished MCAP (one per sweep), from its summary section.
+fn points_messages(path: &Path) -> u64 {
+    let summary = mcap::Summary::read(&std::fs::read(path).unwrap())
+        .unwrap()
+        .unwrap();
+    let points = summary
+        .channels
+        .values()
+        .find(|c| c.topic == "/points")
+        .expect("a /points channel");
+    summary.stats.as_ref().unwrap().channel_message_counts[&points.id]
+}
+
 fn write(name: &str, bytes: &[u8]) -> Scratch {
     let p = tmp(name);
     std::fs::write(&p, bytes).unwrap();
@@ -398,17 +411,9 @@ fn a_run_that_decodes_nothing_leaves_the_output_path_as_it_was() {
     let r = decode(&p, &["--out", out.to_str().unwrap()]);
     assert_eq!(r.code, 1, "{}", r.stderr);
     assert_not_corrupt(&out);
-    let summary = mcap::Summary::read(&std::fs::read(&out).unwrap())
-        .unwrap()
-        .unwrap();
-    assert!(summary.stats.as_ref().unwrap().message_count > 0);
     // The error says the file was written after all, with the sweeps it holds.
-    let points = summary
-        .channels
-        .values()
-        .find(|c| c.topic == "/points")
-        .expect("a /points channel");
-    let sweeps = summary.stats.as_ref().unwrap().channel_message_counts[&points.id];
+    let sweeps = points_messages(&out);
+    assert!(sweeps > 0);
     assert!(
         r.stderr.trim_end().ends_with(&format!(
             "; {} was written with the {sweeps} sweeps decoded before",
@@ -1197,16 +1202,7 @@ fn a_failed_run_with_json_prints_an_error_object() {
     let j = one_object(&r);
     assert_eq!(j["kind"], "input", "{j}");
     assert_eq!(j["output"]["path"], out.to_str().unwrap(), "{j}");
-    let summary = mcap::Summary::read(&std::fs::read(&out).unwrap())
-        .unwrap()
-        .unwrap();
-    let points = summary
-        .channels
-        .values()
-        .find(|c| c.topic == "/points")
-        .expect("a /points channel");
-    let sweeps = summary.stats.as_ref().unwrap().channel_message_counts[&points.id];
-    assert_eq!(j["output"]["sweeps"], sweeps, "{j}");
+    assert_eq!(j["output"]["sweeps"], points_messages(&out), "{j}");
     // --strict: the summary is the one object.
     let bytes = capture(60, &|i, p| {
         if i == 10 {
