@@ -1015,6 +1015,13 @@ fn a_model_the_packets_contradict_is_warned_of() {
         "{}",
         r.stdout
     );
+    // Told from the first packet (a forced model is not waited on): not "one packet" of 40.
+    assert!(
+        r.stdout
+            .contains("not checked against the cadence (told from the first packet alone)"),
+        "{}",
+        r.stdout
+    );
     let r = decode(&p, &["--model", "vlp16"]);
     assert_eq!(r.code, 0, "{}", r.stderr);
     assert!(!r.stdout.contains("warning"), "{}", r.stdout);
@@ -1498,6 +1505,45 @@ fn json_usage_errors_and_a_replay_with_nothing_to_send() {
     assert!(
         r.stderr
             .contains("no datagram was sent: the input holds none"),
+        "{}",
+        r.stderr
+    );
+}
+
+/// Flags that only work with another: `--serve-rate` and `--serve-queue` without `--serve`
+/// were accepted and did nothing; one sensor placed twice with `--extrinsics` kept the first
+/// placement without a word.
+#[test]
+fn flags_that_would_do_nothing_are_refused() {
+    let p = write("nothing-done.pcap", &capture(5, &|_, _| {}));
+    for args in [
+        vec!["--serve-rate", "2"],
+        vec!["--serve-queue", "3"],
+        vec![
+            "--pipeline",
+            "default",
+            "--extrinsics",
+            "vlp16-201=1,0,0,0,0,0",
+            "--extrinsics",
+            "vlp16-201=5,0,0,0,0,0",
+        ],
+    ] {
+        let r = decode(&p, &args);
+        assert_eq!(r.code, 2, "{args:?}: {}", r.stderr);
+    }
+    let r = decode(
+        &p,
+        &[
+            "--pipeline",
+            "default",
+            "--extrinsics",
+            "vlp16-201=1,0,0,0,0,0",
+            "--extrinsics",
+            "vlp16-201=5,0,0,0,0,0",
+        ],
+    );
+    assert!(
+        r.stderr.contains("--extrinsics vlp16-201=…: given twice"),
         "{}",
         r.stderr
     );

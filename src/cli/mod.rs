@@ -236,7 +236,7 @@ struct DecodeCmd {
     bag: bag_args::BagArgs,
     /// With --serve: publish sweeps at this speed of their capture times (`1.0` = as recorded,
     /// `2`, `0.5`, or `max` = as fast as they are decoded).
-    #[arg(long, value_name = "FACTOR|max", default_value = "1.0", value_parser = replay::parse_rate)]
+    #[arg(long, value_name = "FACTOR|max", default_value = "1.0", value_parser = replay::parse_rate, requires = "serve")]
     serve_rate: crate::source::udp::Rate,
 }
 

@@ -100,6 +100,15 @@ impl PipelineArgs {
             .iter()
             .map(|e| Extrinsics::parse(e).map_err(|e| format!("--extrinsics: {e}")))
             .collect::<Result<Vec<_>, _>>()?;
+        // A sensor placed twice: only the first would be used.
+        for (i, e) in extrinsics.iter().enumerate() {
+            if extrinsics[..i].iter().any(|o| o.name == e.name) {
+                return Err(format!(
+                    "--extrinsics {}=…: given twice; one placement per sensor",
+                    e.name
+                ));
+            }
+        }
         if !outputs && config.deskew.mode == DeskewMode::None {
             if !extrinsics.is_empty() {
                 return Err("--extrinsics needs --pipeline".to_string());

@@ -40,7 +40,7 @@ pub struct ServeArgs {
     pub serve: Option<SocketAddr>,
     /// Messages queued per live view client; a client slower than the sensor misses the
     /// messages that do not fit (counted in `serve.messages_dropped`).
-    #[arg(long, value_name = "N", default_value_t = DEFAULT_QUEUE_MESSAGES)]
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_QUEUE_MESSAGES, requires = "serve")]
     pub serve_queue: usize,
 }
 

@@ -713,7 +713,7 @@ fn choose_model(
                     (
                         m,
                         format!(
-                            "product id {:#04x} ({}), not checked against the cadence (one packet)",
+                            "product id {:#04x} ({}), not checked against the cadence (told from the first packet alone)",
                             m.product_id().unwrap_or(0),
                             m.name()
                         ),
