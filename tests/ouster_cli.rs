@@ -575,3 +575,68 @@ fn a_reduced_metadata_file_is_described_without_gaps() {
         "{line}"
     );
 }
+
+/// A bag's own metadata (an Ouster driver's metadata topic) is the input's, as its attached
+/// files are: not warned of as "used by no sensor" when the file attached beside it served
+/// instead (a `--raw --format ros2` bag ringscan wrote carries both), nor when `--topic`
+/// leaves only IMU packets.
+#[test]
+fn a_bags_own_metadata_is_not_an_unused_calibration() {
+    let Some(root) = common::captures() else {
+        return;
+    };
+    let dir = root.join("ouster-lidar__ouster-sdk/tests");
+    let scratch = std::env::temp_dir().join(format!("ringscan-own-meta-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&scratch);
+    std::fs::create_dir_all(&scratch).unwrap();
+    let bag = scratch.join("raw");
+    let run = |args: &[&std::ffi::OsStr]| {
+        let o = Command::new(env!("CARGO_BIN_EXE_ringscan"))
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8(o.stdout).unwrap()
+    };
+    let written: Value = serde_json::from_str(&run(&[
+        "decode".as_ref(),
+        "--json".as_ref(),
+        dir.join("pcaps/OS-1-32-G_v2.1.1_1024x10.pcap").as_os_str(),
+        "--calib".as_ref(),
+        dir.join("pcaps/OS-1-32-G_v2.1.1_1024x10.json").as_os_str(),
+        "--raw".as_ref(),
+        "--format".as_ref(),
+        "ros2".as_ref(),
+        "--out".as_ref(),
+        bag.as_os_str(),
+    ]))
+    .unwrap();
+    // The bag decodes to the capture's points, with its own metadata.
+    let again: Value = serde_json::from_str(&run(&[
+        "decode".as_ref(),
+        bag.as_os_str(),
+        "--json".as_ref(),
+    ]))
+    .unwrap();
+    assert_eq!(again["points"], written["points"]);
+    assert!(again["points"].as_u64() > Some(0));
+    let ros1 = dir.join("bags/512x10_raw.bag");
+    for args in [
+        vec!["info".as_ref(), bag.as_os_str(), "--json".as_ref()],
+        vec![
+            "info".as_ref(),
+            ros1.as_os_str(),
+            "--topic".as_ref(),
+            "/os_node0/imu_packets".as_ref(),
+            "--json".as_ref(),
+        ],
+    ] {
+        let j: Value = serde_json::from_str(&run(&args)).unwrap();
+        assert_eq!(
+            j["unused_calibrations"],
+            serde_json::json!([]),
+            "{args:?}: {j}"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&scratch);
+}

@@ -2041,8 +2041,10 @@ fn add_bag_metadata(session: &mut Session, bag: &crate::source::bag::BagSource, 
         } else {
             format!("{ns}.metadata.json")
         };
+        // The bag's own, as its attachments are: not the user's to be told of when a file
+        // attached beside it served instead.
         match sensors::calibration(text.as_bytes(), &name, Some(s.address)) {
-            Ok(spec) => session.add_calib(spec),
+            Ok(spec) => session.add_attached_calib(spec),
             Err(e) => tracing::warn!("{}: the bag's metadata is not used: {e}", s.namespace),
         }
     }
