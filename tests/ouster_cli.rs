@@ -640,3 +640,28 @@ fn a_bags_own_metadata_is_not_an_unused_calibration() {
     }
     let _ = std::fs::remove_dir_all(&scratch);
 }
+
+/// `--port` selects the packets of sensors told by their data port (Velodyne, Hesai,
+/// Robosense, Livox); an Ouster sensor is told by its metadata, so the flag did nothing on an
+/// Ouster capture, without a word. Now it is an unused option, warned of.
+#[test]
+fn port_on_an_ouster_capture_is_warned_of() {
+    let Some(root) = common::captures() else {
+        return;
+    };
+    let dir = root.join("ouster-lidar__ouster-sdk/tests/pcaps");
+    let o = Command::new(env!("CARGO_BIN_EXE_ringscan"))
+        .arg("decode")
+        .arg(dir.join("OS-2-128-U1_v2.3.0_1024x10.pcap"))
+        .arg("--calib")
+        .arg(dir.join("OS-2-128-U1_v2.3.0_1024x10.json"))
+        .args(["--port", "9999"])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        text.contains("warning: --port 9999 selects nothing on Ouster sensors"),
+        "{text}"
+    );
+}

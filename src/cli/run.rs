@@ -1429,7 +1429,7 @@ impl Session {
         // did nothing: say so rather than let it pass for applied.
         let kinds: std::collections::BTreeSet<&str> =
             sensors.iter().filter_map(|s| s["kind"].as_str()).collect();
-        let unused_options: Vec<String> = out
+        let mut unused_options: Vec<String> = out
             .family_options
             .iter()
             .filter(|(_, family, _)| !kinds.is_empty() && !kinds.contains(family))
@@ -1441,6 +1441,16 @@ impl Session {
                 format!("{option} applies to {name} sensors only, and none was found{hint}")
             })
             .collect();
+        // `--port` selects the packets of sensors told by their data port; an Ouster sensor is
+        // told by its metadata, so on a run of only those it selected nothing.
+        if let Some(p) = demux.data_port() {
+            if !kinds.is_empty() && kinds.iter().all(|k| *k == "ouster") {
+                unused_options.push(format!(
+                    "--port {p} selects nothing on Ouster sensors: they are told by their \
+                     metadata (udp_port_lidar), and all their packets were decoded"
+                ));
+            }
+        }
         m.insert("unused_options".into(), json!(unused_options));
         // A range that kept no point of the packets decoded (beyond the sensor's reach, or
         // a typo) gives an empty output that would otherwise pass for a quiet scene.
