@@ -529,7 +529,7 @@ fn the_drivers_imu_topic_gives_the_imu_packets_samples() {
             assert_eq!(imu_msgs, imu as u64, "{name}");
             assert_eq!(j["pipeline"]["deskew"], "imu", "{name}");
             // `replay` sends none of it: points and IMU samples a driver decoded were never
-            // on the wire.
+            // on the wire. Having sent nothing, it fails (exit 1) after its summary.
             let out = std::process::Command::new(env!("CARGO_BIN_EXE_ringscan"))
                 .arg("replay")
                 .arg(&path)
@@ -544,10 +544,15 @@ fn the_drivers_imu_topic_gives_the_imu_packets_samples() {
                 ])
                 .output()
                 .unwrap();
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert_eq!(out.status.code(), Some(1), "{err}");
             assert!(
-                out.status.success(),
-                "{}",
-                String::from_utf8_lossy(&out.stderr)
+                err.contains(&format!(
+                    "no datagram was sent: the input holds no packet, only {} messages a \
+                     driver had decoded",
+                    sweeps.len() + imu
+                )),
+                "{err}"
             );
             let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
             assert_eq!(r["sent"], 0, "{name}: {r}");
