@@ -661,7 +661,7 @@ fn port_on_an_ouster_capture_is_warned_of() {
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(
-        text.contains("warning: --port 9999 selects nothing on Ouster sensors"),
+        text.contains("warning: --port 9999 selects nothing on Ouster sensors: they are told by their calibration"),
         "{text}"
     );
 }

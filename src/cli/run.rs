@@ -222,11 +222,7 @@ fn parse_model(m: Option<&str>) -> Result<Option<String>, RunError> {
             let by_family: Vec<String> = order
                 .iter()
                 .filter(|f| !f.models().is_empty())
-                .map(|f| {
-                    let name = f.name();
-                    let title = name[..1].to_uppercase() + &name[1..];
-                    format!("{title}: {}", f.models().join(", "))
-                })
+                .map(|f| format!("{}: {}", title_case(f.name()), f.models().join(", ")))
                 .collect();
             Err(RunError::Usage(format!(
                 "--model {s}: expected one of {}",
@@ -234,6 +230,15 @@ fn parse_model(m: Option<&str>) -> Result<Option<String>, RunError> {
             )))
         }
     }
+}
+
+/// A family's name as prose writes it (`velodyne` → `Velodyne`).
+fn title_case(name: &str) -> String {
+    let mut t = name.to_string();
+    if let Some(c) = t.get_mut(..1) {
+        c.make_ascii_uppercase();
+    }
+    t
 }
 
 /// The topic prefix of sensor `idx` named `name` among `n_sensors` counted: none for the
@@ -1434,20 +1439,20 @@ impl Session {
             .iter()
             .filter(|(_, family, _)| !kinds.is_empty() && !kinds.contains(family))
             .map(|(option, family, hint)| {
-                let mut name = family.to_string();
-                if let Some(c) = name.get_mut(..1) {
-                    c.make_ascii_uppercase();
-                }
+                let name = title_case(family);
                 format!("{option} applies to {name} sensors only, and none was found{hint}")
             })
             .collect();
-        // `--port` selects the packets of sensors told by their data port; an Ouster sensor is
-        // told by its metadata, so on a run of only those it selected nothing.
+        // `--port` selects the packets of sensors told by their data port; on a run of only
+        // sensors told by their calibration it selected nothing.
         if let Some(p) = demux.data_port() {
-            if !kinds.is_empty() && kinds.iter().all(|k| *k == "ouster") {
+            let by_port = |k: &&str| crate::sensor::family(k).is_none_or(|f| f.selected_by_port());
+            if !kinds.is_empty() && !kinds.iter().any(by_port) {
+                let names: Vec<String> = kinds.iter().map(|k| title_case(k)).collect();
                 unused_options.push(format!(
-                    "--port {p} selects nothing on Ouster sensors: they are told by their \
-                     metadata (udp_port_lidar), and all their packets were decoded"
+                    "--port {p} selects nothing on {} sensors: they are told by their \
+                     calibration (its ports), and all their packets were decoded",
+                    names.join(", ")
                 ));
             }
         }

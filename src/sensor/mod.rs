@@ -145,6 +145,12 @@ pub trait Family: Sync {
     /// decode with what it was given.
     fn claim(&self, datagram: &FirstDatagram<'_>, pool: &mut CalibrationPool) -> Option<Claimed>;
 
+    /// Whether `--port` selects its sensors' packets (they are told by the port they go to);
+    /// a family told by its calibration instead (Ouster's metadata) says no.
+    fn selected_by_port(&self) -> bool {
+        true
+    }
+
     /// Whether `payload` is not a packet but data a ROS driver decoded already, handed on by
     /// a bag source in a layout of the family's own (Livox `CustomMsg` points and IMU samples):
     /// it was never on the wire, so `replay` does not send it.

@@ -167,6 +167,10 @@ impl Family for Ouster {
         )
     }
 
+    fn selected_by_port(&self) -> bool {
+        false
+    }
+
     fn describe(&self, s: &Value) -> Vec<String> {
         let st = |k: &str| summary_str(&s[k]);
         let g = |v: &Value| v.as_u64().unwrap_or(0);
