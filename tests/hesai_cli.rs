@@ -409,6 +409,40 @@ fn hesai_calib_fetches_the_correction_from_a_fake_sensor_over_ptc() {
     assert!(String::from_utf8_lossy(&o.stderr).contains(&closed.to_string()));
 }
 
+/// A Hesai sensor whose angle correction `listen` has not (no `--calib`, no `--hesai-ptc`)
+/// stops the run with the reason, and the run writes nothing: a file already at `--out` is left
+/// as it was. It left an empty MCAP in its place.
+#[test]
+fn listen_without_the_hesai_file_leaves_out_as_it_was() {
+    let Some(c) = common::captures() else { return };
+    let _guard = serial();
+    let tmp = std::env::temp_dir().join(format!("ringscan-hesai-nofile-{}", std::process::id()));
+    std::fs::create_dir_all(&tmp).unwrap();
+    let out = tmp.join("earlier.mcap");
+    std::fs::write(&out, b"an earlier recording").unwrap();
+    let offset = free_offset(&[2368]);
+    let l = start_listen(&[
+        "--sensor".into(),
+        format!("127.0.0.1:{}", 2368 + offset),
+        "--out".into(),
+        out.display().to_string(),
+    ]);
+    replay(&pcap_in(&c.join(GT).join("xt32")), offset, "1", &[]);
+    let (code, stdout, err) = l.wait_or_stop(std::time::Duration::from_secs(10));
+    assert_eq!(code, Some(1), "{stdout} {err}");
+    assert!(
+        err.contains("PandarXT32") && err.contains("--calib"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(&out).unwrap(), b"an earlier recording");
+    let left: Vec<_> = std::fs::read_dir(&tmp)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(left.len(), 1, "{left:?}");
+    let _ = std::fs::remove_dir_all(&tmp);
+}
+
 #[test]
 fn nebula_filters_are_command_line_options() {
     let Some(c) = common::captures() else { return };

@@ -131,9 +131,14 @@ fn listen_to_the_capture(args: &[&std::ffi::OsStr]) -> std::process::Output {
 
 #[test]
 fn a_full_disk_is_a_clear_error() {
-    // /dev/full takes the file's creation and fails every write with ENOSPC: at the start
-    // (the header and schemas fill the write buffer) or at the latest when a chunk is written.
-    let o = listen_to_the_capture(&["--out".as_ref(), "/dev/full".as_ref()]);
+    // The first file is written as `<out>.tmp-ringscan` until the sensor is recognised: a link
+    // there to /dev/full takes the file's creation and fails every write with ENOSPC, at the
+    // start (the header and schemas fill the write buffer) or at the latest when a chunk is
+    // written.
+    let dir = tmpdir("full-disk");
+    let out = dir.join("live.mcap");
+    std::os::unix::fs::symlink("/dev/full", dir.join("live.mcap.tmp-ringscan")).unwrap();
+    let o = listen_to_the_capture(&["--out".as_ref(), out.as_os_str()]);
     let (code, stdout, err) = (
         o.status.code(),
         String::from_utf8_lossy(&o.stdout),
@@ -141,9 +146,22 @@ fn a_full_disk_is_a_clear_error() {
     );
     assert_eq!(code, Some(1), "stdout {stdout}\nstderr {err}");
     assert!(
-        err.contains("/dev/full") && err.contains("No space left on device"),
+        err.contains(&out.display().to_string()) && err.contains("No space left on device"),
         "error does not say what and where: {err}"
     );
+    // The device itself is not an output: renaming onto it would replace it.
+    let o = std::process::Command::new(BIN)
+        .args(["listen", "--sensor", "127.0.0.1:9", "--out", "/dev/full"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("a device, pipe or socket, not a file"),
+        "{err}"
+    );
+    assert!(std::fs::metadata("/dev/full").is_ok_and(|m| !m.is_file()));
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
@@ -485,5 +503,79 @@ fn an_out_in_a_missing_directory_is_refused_first() {
     assert!(
         err.contains("its directory /nonexistent-ringscan-dir does not exist; create it first"),
         "{err}"
+    );
+}
+
+/// A run that receives nothing of a sensor (a wrong port, a sensor switched off) fails as
+/// `decode` finding no sensor does (exit 1, with what came), and writes nothing: a file already
+/// at `--out` is left as it was, no temporary file stays, and a rosbag2 directory it would have
+/// made is not left behind. It exited 0 over an empty MCAP that replaced the file.
+#[test]
+fn a_run_that_receives_nothing_writes_nothing() {
+    let _guard = serial();
+    let dir = tmpdir("nothing");
+    let offset = free_offset(&[2368]);
+    let port = (2368 + offset).to_string();
+    let earlier = dir.join("earlier.mcap");
+    std::fs::write(&earlier, b"an earlier recording").unwrap();
+    let bag = dir.join("bag");
+    for (out, format) in [(&earlier, "foxglove"), (&bag, "ros2")] {
+        let o = std::process::Command::new(BIN)
+            .args(["listen", "--sensor"])
+            .arg(format!("127.0.0.1:{port}"))
+            .args(["--duration", "1", "--json", "--format", format, "--out"])
+            .arg(out)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{format}: {err}");
+        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(j["kind"], "no_sensor", "{j}");
+        assert_eq!(
+            j["no_sensor"].as_str().unwrap(),
+            format!("in 1.0 s, no datagram came to UDP port {port}"),
+            "{j}"
+        );
+        assert!(
+            j["error"].as_str().unwrap().ends_with("; nothing written"),
+            "{j}"
+        );
+    }
+    assert_eq!(std::fs::read(&earlier).unwrap(), b"an earlier recording");
+    assert!(!bag.exists(), "the rosbag2 directory was left");
+    let left: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(left, vec![std::ffi::OsString::from("earlier.mcap")]);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Datagrams from another address than `--sensor`'s are counted, not recorded, and the
+/// failure says so.
+#[test]
+fn datagrams_from_other_addresses_only_are_explained() {
+    let _guard = serial();
+    let offset = free_offset(&[2368]);
+    let port = 2368 + offset;
+    let l = start_listen(&["--sensor".into(), format!("127.0.0.9:{port}")]);
+    let sock = UdpSocket::bind((Ipv4Addr::LOCALHOST, 0)).unwrap();
+    for _ in 0..5 {
+        sock.send_to(
+            &[0u8; 1206],
+            SocketAddrV4::new(Ipv4Addr::LOCALHOST, port as u16),
+        )
+        .unwrap();
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    let (code, out, err) = l.stop("INT");
+    assert_eq!(code, Some(1), "{err}");
+    let j: serde_json::Value = serde_json::from_str(&out).unwrap_or_else(|e| panic!("{e}: {out}"));
+    let why = j["no_sensor"].as_str().unwrap();
+    assert!(
+        why.contains(&format!(
+            "no datagram came from 127.0.0.9 to UDP port {port}; 5 came from other addresses"
+        )),
+        "{why}"
     );
 }

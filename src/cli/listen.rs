@@ -174,6 +174,12 @@ struct Files {
     closed: Vec<(PathBuf, SinkSummary)>,
     /// `--format ros2` into a rosbag2 directory: `base` is the directory.
     bag_dir: bool,
+    /// The rosbag2 directory was made by this run (removed again if it records nothing).
+    made_dir: bool,
+    /// The first file is written as this temporary file until a sensor is recognised, then
+    /// renamed to its path: a run that receives nothing of a sensor (a wrong port, a sensor
+    /// switched off) leaves no empty file, and a file already at the path as it was.
+    pending: Option<PathBuf>,
 }
 
 /// In a rosbag2 directory without `--split-every`, the file is closed and a new one started
@@ -206,6 +212,35 @@ impl Files {
             source,
         })?;
         McapSink::new(std::io::BufWriter::new(f), self.opts.clone())
+    }
+
+    /// Moves the first file to its path, now that it records a sensor (the open file is
+    /// renamed under the writer, which goes on writing to it).
+    fn promote(&mut self) -> Result<(), SinkError> {
+        let Some(temp) = self.pending.take() else {
+            return Ok(());
+        };
+        std::fs::rename(&temp, &self.current).map_err(|source| SinkError::Io {
+            context: format!("renaming {} to {}", temp.display(), self.current.display()),
+            source,
+        })?;
+        // Its split or checkpoint period starts with the recording.
+        self.opened = Instant::now();
+        Ok(())
+    }
+
+    /// Removes what a run that recorded no sensor made: the first file's temporary file and,
+    /// for a rosbag2, the empty `metadata.yaml` (and the directory, if this run made it).
+    fn discard(&mut self) {
+        if let Some(temp) = self.pending.take() {
+            let _ = std::fs::remove_file(temp);
+            if self.bag_dir {
+                let _ = std::fs::remove_file(self.base.join("metadata.yaml"));
+                if self.made_dir {
+                    let _ = std::fs::remove_dir(&self.base);
+                }
+            }
+        }
     }
 
     /// The file `index` of the run.
@@ -242,6 +277,9 @@ impl Files {
     }
 
     fn due(&self) -> bool {
+        if self.pending.is_some() {
+            return false;
+        }
         let split = match (self.split, self.bag_dir) {
             (None, true) => Some(BAG_CHECKPOINT),
             (s, _) => s,
@@ -499,8 +537,12 @@ impl DecodeThread {
                     let ignored = self.session.demux().stats().ignored;
                     if let Err(e) = self.session.push(r.time_ns, r.src, r.port, &r.payload) {
                         let err = self.session.run_error(e, "listen");
-                        let _ = self.session.close_sink();
+                        self.close_on_error();
                         return Err(self.with_path(err));
+                    }
+                    if let Err(e) = self.promote() {
+                        self.close_on_error();
+                        return Err(self.with_path(RunError::Sink(e)));
                     }
                     if self.session.demux().stats().ignored > ignored {
                         self.unclaimed(r);
@@ -521,7 +563,7 @@ impl DecodeThread {
             if last_check.elapsed() >= Duration::from_millis(100) {
                 last_check = Instant::now();
                 if let Err(e) = self.housekeeping() {
-                    let _ = self.session.close_sink();
+                    self.close_on_error();
                     return Err(self.with_path(e));
                 }
                 self.forward_sweeps();
@@ -533,6 +575,30 @@ impl DecodeThread {
                 (RunError::Sink(e), Some(p)) => file_error(&p, &e),
                 (e, _) => e,
             }),
+        }
+    }
+
+    /// The first file goes to its path once a sensor is recognised ([`Files::pending`]).
+    fn promote(&mut self) -> Result<(), SinkError> {
+        match self.files.as_mut() {
+            Some(f) if f.pending.is_some() && self.session.demux().sensors().next().is_some() => {
+                f.promote()
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// After an error: the output is finalised if it records a sensor (what came before the
+    /// error), else removed.
+    fn close_on_error(&mut self) {
+        match self.files.as_mut() {
+            Some(f) if f.pending.is_some() => {
+                self.session.abort_sink();
+                f.discard();
+            }
+            _ => {
+                let _ = self.session.close_sink();
+            }
         }
     }
 
@@ -615,6 +681,7 @@ impl DecodeThread {
                 Control::Metadata(addr, name, bytes) => self.on_metadata(addr, name, bytes)?,
             }
         }
+        self.promote()?;
         // A sensor re-initialised (Ouster: a new init_id): read its calibration again.
         let mut refetch = Vec::new();
         for (idx, (addr, stream, _)) in self.session.demux().sensors().enumerate() {
@@ -726,13 +793,19 @@ impl DecodeThread {
         let path = self.files.as_ref().map(|f| f.current.clone());
         if let Err(e) = self.session.finish_streams() {
             let err = self.session.run_error(e, "listen");
-            let _ = self.session.close_sink();
+            self.close_on_error();
             return Err((err, path));
         }
         self.forward_sweeps();
         if let Err(e) = self.session.finish_odometry() {
-            let _ = self.session.close_sink();
+            self.close_on_error();
             return Err((e, path));
+        }
+        // No sensor was recognised: nothing is written (the summary says what came).
+        if let Some(f) = self.files.as_mut().filter(|f| f.pending.is_some()) {
+            self.session.abort_sink();
+            f.discard();
+            self.files = None;
         }
         let last = self
             .session
@@ -822,6 +895,52 @@ fn kernel_drops(sockets: &[BoundSocket]) -> u64 {
     sockets.iter().filter_map(BoundSocket::kernel_drops).sum()
 }
 
+/// Why a run recognised no sensor, if it did not (from its summary): nothing came, or what
+/// came was from other addresses, or its sensor's metadata never came, or it was of no sensor
+/// ringscan decodes. Like `decode` finding no sensor, this is a failure, not an empty success.
+fn no_sensor_reason(summary: &Value, args: &ListenArgs) -> Option<String> {
+    if summary["sensors"].as_array().is_some_and(|s| !s.is_empty()) {
+        return None;
+    }
+    let g = |v: &Value| v.as_u64().unwrap_or(0);
+    let r = &summary["receive"];
+    let ports: Vec<String> = r["sockets"]
+        .as_array()
+        .map(|a| a.iter().map(|s| g(&s["port"]).to_string()).collect())
+        .unwrap_or_default();
+    let ports = format!(
+        "UDP port{} {}",
+        if ports.len() == 1 { "" } else { "s" },
+        ports.join(", ")
+    );
+    let mut addrs: Vec<String> = args.sensors.iter().map(|(ip, _)| ip.to_string()).collect();
+    addrs.dedup();
+    let addrs = addrs.join(", ");
+    let secs = summary["elapsed_s"].as_f64().unwrap_or(0.0);
+    let (datagrams, other) = (g(&r["datagrams"]), g(&r["other_source"]));
+    let held = g(&r["held_for_metadata"]["held"]);
+    Some(if datagrams == 0 && other > 0 {
+        format!(
+            "in {secs:.1} s, no datagram came from {addrs} to {ports}; {other} came from other \
+             addresses (--sensor names the sensor's own)"
+        )
+    } else if datagrams == 0 {
+        format!("in {secs:.1} s, no datagram came to {ports}")
+    } else if held > 0 {
+        format!(
+            "{datagrams} datagrams came from {addrs}; {held} were held for their Ouster \
+             metadata, which did not come from http://ADDR:{}{METADATA_PATH} (give it with \
+             --calib)",
+            args.api_port
+        )
+    } else {
+        format!(
+            "{datagrams} datagrams came from {addrs} to {ports}, none of them a packet of a \
+             sensor ringscan decodes"
+        )
+    })
+}
+
 /// `ringscan listen` (`configure`: `--configure`, Livox).
 pub fn listen_command(
     args: &ListenArgs,
@@ -832,6 +951,13 @@ pub fn listen_command(
         lost,
         files,
     } = listen_run_with(args, configure)?;
+    if let Some(why) = no_sensor_reason(&json_out, args) {
+        return Err(RunError::NoSensor {
+            path: "listen".into(),
+            why,
+            wrote_nothing: args.out.is_some(),
+        });
+    }
     if args.json {
         outln!("{json_out}");
     } else {
@@ -911,9 +1037,26 @@ pub fn listen_run_with(
     if args.split_every.is_some() && args.out.is_none() {
         return Err(RunError::Usage("--split-every needs --out".into()));
     }
-    if let Some(out) = &args.out {
-        super::run::out_dir_exists(out)?;
-    }
+    // The first file is written beside its path and renamed into place ([`Files::pending`]),
+    // so a path that is not a regular file is refused as `decode` refuses it (renaming over
+    // a device would replace it). A link to a file records into the file.
+    let resolved;
+    let args = match &args.out {
+        Some(out) => {
+            let bag_dir = args.format == FormatArg::Ros2 && crate::sink::rosbag2::is_bag_dir(out);
+            if bag_dir || args.split_every.is_some() {
+                super::run::out_dir_exists(out)?;
+                args
+            } else {
+                resolved = ListenArgs {
+                    out: Some(super::run::output_file_path(out, "MCAP")?),
+                    ..args.clone()
+                };
+                &resolved
+            }
+        }
+        None => args,
+    };
     let started = Instant::now();
     // The fetched files live as long as this run (`_fetched` is dropped on every return).
     let (fetched, _fetched);
@@ -1001,6 +1144,7 @@ pub fn listen_run_with(
                     session.set_live(live_view);
                     let files = match out {
                         Some(base) => {
+                            let base_existed = base.exists();
                             let bag_dir = opts.format == FormatArg::Ros2
                                 && crate::sink::rosbag2::is_bag_dir(&base);
                             let mut files = Files {
@@ -1012,6 +1156,8 @@ pub fn listen_run_with(
                                 opened: Instant::now(),
                                 closed: Vec::new(),
                                 bag_dir,
+                                made_dir: bag_dir && !base_existed,
+                                pending: None,
                             };
                             let current = files.path(0);
                             files.current = current.clone();
@@ -1036,9 +1182,13 @@ pub fn listen_run_with(
                                     },
                                 )?;
                             }
-                            let sink = files
-                                .create(&current)
-                                .map_err(|e| file_error(&current, &e))?;
+                            let temp = crate::sink::mcap::temp_path(&current);
+                            let sink = files.create(&temp).map_err(|e| {
+                                files.pending = Some(temp.clone());
+                                files.discard();
+                                file_error(&current, &e)
+                            })?;
+                            files.pending = Some(temp);
                             session.set_sink(Some(sink));
                             Some(files)
                         }

@@ -112,6 +112,18 @@ impl Listener {
         self.wait()
     }
 
+    /// Waits for the exit, stopping the run with SIGINT if it has not ended within `limit`.
+    pub fn wait_or_stop(mut self, limit: Duration) -> (Option<i32>, String, String) {
+        let started = Instant::now();
+        while started.elapsed() < limit {
+            if let Ok(Some(_)) = self.child.try_wait() {
+                return self.wait();
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        self.stop("INT")
+    }
+
     /// Waits for the exit.
     pub fn wait(mut self) -> (Option<i32>, String, String) {
         let mut out = String::new();
