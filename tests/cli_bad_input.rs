@@ -1527,10 +1527,35 @@ fn flags_that_would_do_nothing_are_refused() {
             "--extrinsics",
             "vlp16-201=5,0,0,0,0,0",
         ],
+        // Output options without an output (second audit: they were accepted and did nothing).
+        vec!["--raw"],
+        vec!["--format", "ros2"],
+        vec!["--compression", "lz4"],
+        vec!["--threads", "2"],
+        vec!["--chunk-size", "1"],
+        // A field of view beyond a turn was taken modulo 360.
+        vec!["--fov", "400:10"],
+        vec!["--fov", "-10:90"],
     ] {
         let r = decode(&p, &args);
         assert_eq!(r.code, 2, "{args:?}: {}", r.stderr);
     }
+    // A constant-velocity deskew with no twist moves no point.
+    let r = decode(&p, &["--deskew", "constant-velocity"]);
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(r.stderr.contains("the twist is zero"), "{}", r.stderr);
+    let twist = tmp("twist.toml");
+    std::fs::write(&*twist, "[deskew]\nlinear_mps = [3.0, 0, 0]\n").unwrap();
+    let r = decode(
+        &p,
+        &[
+            "--pipeline",
+            twist.to_str().unwrap(),
+            "--deskew",
+            "constant-velocity",
+        ],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
     let r = decode(
         &p,
         &[
@@ -1547,4 +1572,34 @@ fn flags_that_would_do_nothing_are_refused() {
         "{}",
         r.stderr
     );
+}
+
+/// A `--topic` the bag does not have, beside one it has, is warned of (a typo selected
+/// nothing, silently; second audit); the run reads the bag's topic as it would alone.
+#[test]
+fn an_unknown_topic_beside_a_known_one_is_warned_of() {
+    let bag = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/bags/demo-vlp16.ros1-lz4.bag");
+    let run = |extra: &[&str]| {
+        let mut args = vec!["--json"];
+        args.extend(extra);
+        let r = decode(&bag, &args);
+        assert_eq!(r.code, 0, "{}", r.stderr);
+        serde_json::from_str::<serde_json::Value>(&r.stdout).unwrap()
+    };
+    let both = run(&[
+        "--topic",
+        "/velodyne_packets",
+        "--topic",
+        "/velodyne_packet",
+    ]);
+    let known = run(&["--topic", "/velodyne_packets"]);
+    assert_eq!(
+        both["unused_options"],
+        serde_json::json!([
+            "--topic /velodyne_packet: the bag has no such topic (the other --topic values were read)"
+        ])
+    );
+    assert_eq!(known["unused_options"], serde_json::json!([]));
+    assert!(known["points"].as_u64().unwrap() > 0);
+    assert_eq!(both["points"], known["points"]);
 }

@@ -665,3 +665,41 @@ fn port_on_an_ouster_capture_is_warned_of() {
         "{text}"
     );
 }
+
+/// `--cut-angle` on a run of only Ouster sensors is warned of: their sweeps are their frames,
+/// so it cut nothing, silently (second audit); the frames are the same with it and without.
+#[test]
+fn cut_angle_on_an_ouster_capture_is_warned_of() {
+    let Some(root) = common::captures() else {
+        return;
+    };
+    let dir = root.join("ouster-lidar__ouster-sdk/tests/pcaps");
+    let run = |extra: &[&str]| {
+        let o = Command::new(env!("CARGO_BIN_EXE_ringscan"))
+            .arg("decode")
+            .arg(dir.join("OS-2-128-U1_v2.3.0_1024x10.pcap"))
+            .arg("--calib")
+            .arg(dir.join("OS-2-128-U1_v2.3.0_1024x10.json"))
+            .arg("--json")
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        serde_json::from_slice::<serde_json::Value>(&o.stdout).unwrap()
+    };
+    let cut = run(&["--cut-angle", "90"]);
+    let plain = run(&[]);
+    assert_eq!(
+        cut["unused_options"][0]
+            .as_str()
+            .unwrap_or_default()
+            .split(" (")
+            .next(),
+        Some("--cut-angle applies to Velodyne, Hesai, Robosense sensors only, and none was found"),
+        "{cut}"
+    );
+    assert_eq!(plain["unused_options"], serde_json::json!([]));
+    for k in ["sweeps", "points"] {
+        assert_eq!(cut[k], plain[k], "{k}");
+    }
+}

@@ -200,21 +200,21 @@ struct DecodeCmd {
     #[arg(long, value_enum, default_value_t = FieldsArg::Default)]
     fields: FieldsArg,
     /// Message layout.
-    #[arg(long, value_enum, default_value_t = FormatArg::Foxglove)]
+    #[arg(long, value_enum, default_value_t = FormatArg::Foxglove, requires = "out")]
     format: FormatArg,
     /// MCAP chunk compression: `zstd` (level −3, a fast level), `zstd:LEVEL` (−7 … 19; negative levels are
     /// zstd's fast modes), `lz4` or `none`.
-    #[arg(long, default_value = "zstd")]
+    #[arg(long, default_value = "zstd", requires = "out")]
     compression: run::ChunkCompression,
     /// Threads compressing MCAP chunks (default: the machine's cores); 1 = decode and compress
     /// on one thread.
-    #[arg(long, value_name = "N", value_parser = parse_threads)]
+    #[arg(long, value_name = "N", value_parser = parse_threads, requires = "out")]
     threads: Option<usize>,
     /// Uncompressed size of an MCAP chunk, MiB (fractions allowed).
-    #[arg(long, value_name = "MIB", default_value = "4", value_parser = parse_chunk_size)]
+    #[arg(long, value_name = "MIB", default_value = "4", value_parser = parse_chunk_size, requires = "out")]
     chunk_size: u64,
     /// Also write every UDP payload to `/raw`, so the drive can be decoded again later.
-    #[arg(long)]
+    #[arg(long, requires = "out")]
     raw: bool,
     /// Packet CRC checks (Ouster footer CRC-64, Hesai CRC-32, Livox CRC-32): `auto` = where
     /// the sensor writes them (Ouster: firmware ≥ 2.5, not FUSA), `on`, `off`.
@@ -345,18 +345,18 @@ struct ListenCmd {
     #[arg(long, value_enum, default_value_t = FieldsArg::Default)]
     fields: FieldsArg,
     /// Message layout.
-    #[arg(long, value_enum, default_value_t = FormatArg::Foxglove)]
+    #[arg(long, value_enum, default_value_t = FormatArg::Foxglove, requires = "out")]
     format: FormatArg,
     /// Also write every UDP payload to `/raw`.
-    #[arg(long)]
+    #[arg(long, requires = "out")]
     raw: bool,
     /// Threads compressing MCAP chunks (default: the machine's cores). The decode thread never
     /// waits for them: a chunk they cannot take in time is written uncompressed and counted
     /// (`output.chunks_uncompressed`); 1 = compress on the decode thread.
-    #[arg(long, value_name = "N", value_parser = parse_threads)]
+    #[arg(long, value_name = "N", value_parser = parse_threads, requires = "out")]
     threads: Option<usize>,
     /// Uncompressed size of an MCAP chunk, MiB (fractions allowed).
-    #[arg(long, value_name = "MIB", default_value = "4", value_parser = parse_chunk_size)]
+    #[arg(long, value_name = "MIB", default_value = "4", value_parser = parse_chunk_size, requires = "out")]
     chunk_size: u64,
     /// Packet CRC checks (Ouster footer CRC-64, Hesai CRC-32, Livox CRC-32): `auto` = where
     /// the sensor writes them (Ouster: firmware ≥ 2.5, not FUSA).
@@ -488,7 +488,15 @@ fn parse_fov(s: &str) -> Result<(f64, f64), String> {
             .filter(|v| v.is_finite())
             .ok_or_else(|| format!("`{s}`: `{x}` is not a number of degrees"))
     };
-    Ok((num(a)?, num(b)?))
+    let (a, b) = (num(a)?, num(b)?);
+    // A value outside a turn would be taken modulo 360, a field of view other than the one
+    // written.
+    for v in [a, b] {
+        if !(0.0..=360.0).contains(&v) {
+            return Err(format!("`{s}`: {v} is outside 0 … 360 degrees"));
+        }
+    }
+    Ok((a, b))
 }
 
 /// Entry point of the binary: [`run()`] on the process's arguments.

@@ -276,6 +276,22 @@ impl PipelineRunner {
         self.setup.config.deskew.mode != DeskewMode::None
     }
 
+    /// Why an explicit `--deskew constant-velocity` would do nothing, if it would: its twist is
+    /// zero (no `--pipeline FILE` gave one), so no point moves. Said rather than let pass for
+    /// a correction made.
+    pub fn idle_deskew(&self, args: &PipelineArgs) -> Option<String> {
+        let d = &self.setup.config.deskew;
+        (args.deskew.as_deref() == Some("constant-velocity")
+            && d.linear_mps == [0.0; 3]
+            && d.angular_degps == [0.0; 3])
+            .then(|| {
+                "--deskew constant-velocity: the twist is zero, so no point would move; give it \
+                 as deskew.linear_mps / deskew.angular_degps in a --pipeline FILE.toml, or use \
+                 --deskew imu, odometry or poses:FILE"
+                    .to_string()
+            })
+    }
+
     /// Whether the deskew takes its motion from the odometry (`--deskew odometry`).
     pub fn deskews_with_odometry(&self) -> bool {
         self.setup.config.deskew.mode == DeskewMode::Odometry

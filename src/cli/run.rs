@@ -295,8 +295,9 @@ struct Output {
     tap: Option<Vec<(usize, Sweep)>>,
     /// Buffers the tap's consumer gives back, for the next tapped sweeps.
     pool: Option<Arc<BufferPool>>,
-    /// Options given that only one family reads: (option, family, where the others have it).
-    family_options: Vec<(&'static str, &'static str, &'static str)>,
+    /// Options given that only some families read: (option, those families, where the others
+    /// have it).
+    family_options: Vec<(&'static str, &'static [&'static str], &'static str)>,
     /// Names of the calibrations that came attached to the input, not from the user.
     from_input: Vec<String>,
     /// `--min-range` / `--max-range` as given, for the warning of a range that kept no point.
@@ -834,6 +835,12 @@ impl Session {
             .setup(odometry_deskew, pipeline_deskews)
             .map_err(RunError::Usage)?
             .map(OdometryRunner::new);
+        if let Some(why) = pipeline
+            .as_ref()
+            .and_then(|p| p.idle_deskew(&opts.pipeline))
+        {
+            return Err(RunError::Usage(why));
+        }
         if let Some(t) = opts.dual_return_threshold_m {
             if !(t.is_finite() && t >= 0.0) {
                 return Err(RunError::Usage(format!(
@@ -842,9 +849,9 @@ impl Session {
             }
         }
         if let Some((a, b)) = opts.fov_deg {
-            if !(a.is_finite() && b.is_finite()) {
+            if ![a, b].iter().all(|v| (0.0..=360.0).contains(v)) {
                 return Err(RunError::Usage(format!(
-                    "--fov {a}:{b}: expected START:END in degrees"
+                    "--fov {a}:{b}: expected START:END in degrees, each 0 … 360"
                 )));
             }
         }
@@ -908,20 +915,26 @@ impl Session {
                 (
                     opts.fov_deg.is_some(),
                     "--fov",
-                    "hesai",
+                    &["hesai"][..],
                     "; other sensors: the pipeline's filter.azimuth_min_deg / azimuth_max_deg",
                 ),
                 (
                     opts.dual_return_threshold_m.is_some(),
                     "--dual-return-threshold",
-                    "hesai",
+                    &["hesai"],
                     "",
                 ),
                 (
                     opts.integration_ms.is_some(),
                     "--integration-ms",
-                    "livox",
+                    &["livox"],
                     "",
+                ),
+                (
+                    opts.cut_angle_deg != 0.0,
+                    "--cut-angle",
+                    &["velodyne", "hesai", "robosense"],
+                    " (Ouster and Livox sweeps are their frames or integration periods)",
                 ),
             ]
             .into_iter()
@@ -1437,10 +1450,15 @@ impl Session {
         let mut unused_options: Vec<String> = out
             .family_options
             .iter()
-            .filter(|(_, family, _)| !kinds.is_empty() && !kinds.contains(family))
-            .map(|(option, family, hint)| {
-                let name = title_case(family);
-                format!("{option} applies to {name} sensors only, and none was found{hint}")
+            .filter(|(_, families, _)| {
+                !kinds.is_empty() && !families.iter().any(|f| kinds.contains(f))
+            })
+            .map(|(option, families, hint)| {
+                let names: Vec<String> = families.iter().map(|f| title_case(f)).collect();
+                format!(
+                    "{option} applies to {} sensors only, and none was found{hint}",
+                    names.join(", ")
+                )
             })
             .collect();
         // `--port` selects the packets of sensors told by their data port; on a run of only
@@ -1673,6 +1691,18 @@ fn summary_json(
     let (mut m, lost) = session.summary();
     if let Some(why) = session.no_sensor_reason(src) {
         m.insert("no_sensor".into(), json!(why));
+    }
+    // A `--topic` the bag does not have, beside ones it has, selected nothing (a typo).
+    if let Some(b) = src.bag() {
+        let unknown = b.topics_unknown();
+        if !unknown.is_empty() {
+            if let Some(Value::Array(u)) = m.get_mut("unused_options") {
+                u.push(json!(format!(
+                    "--topic {}: the bag has no such topic (the other --topic values were read)",
+                    unknown.join(" --topic ")
+                )));
+            }
+        }
     }
     m.insert("input".into(), json!(path));
     m.insert("capture".into(), src.capture_json());

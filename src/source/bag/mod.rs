@@ -1167,6 +1167,18 @@ impl BagSource {
         Some((given.clone(), known))
     }
 
+    /// The topics of `--topic` that are none of the bag's (of any type), when another one is
+    /// a packet topic of the bag (else [`Self::topics_missed`] tells it).
+    pub fn topics_unknown(&self) -> Vec<String> {
+        if self.topics_missed().is_some() {
+            return Vec::new();
+        }
+        (self.options.topics.iter())
+            .filter(|t| !self.messages.conns.iter().any(|c| &c.topic == *t))
+            .cloned()
+            .collect()
+    }
+
     /// The sensors known so far, in address order.
     pub fn sensors(&self) -> &[BagSensor] {
         &self.sensors
