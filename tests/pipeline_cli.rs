@@ -285,6 +285,8 @@ fn bad_pipeline_settings_are_refused_with_the_key() {
     std::fs::create_dir_all(&dir).unwrap();
     let cfg = dir.join("bad.toml");
     std::fs::write(&cfg, "[voxel]\nleaf_m = -1\n").unwrap();
+    let tiny_leaf = dir.join("tiny-leaf.toml");
+    std::fs::write(&tiny_leaf, "[voxel]\nleaf_m = 0.0001\n").unwrap();
     let pcap = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo-vlp16.pcap");
     for (args, needle) in [
         (vec!["--pipeline", cfg.to_str().unwrap()], "voxel.leaf_m"),
@@ -306,6 +308,11 @@ fn bad_pipeline_settings_are_refused_with_the_key() {
         (
             vec!["--pipeline", "default", "--extrinsics", "a=1,2,3"],
             "found 3",
+        ),
+        // 2^20 leaves of 0.1 mm reach 105 m, short of the filter's 120 m.
+        (
+            vec!["--pipeline", tiny_leaf.to_str().unwrap()],
+            "voxel.leaf_m = 0.0001: expected >= filter.max_range_m / 2^20",
         ),
     ] {
         let mut all = vec!["decode", pcap.to_str().unwrap()];
@@ -556,4 +563,133 @@ fn extrinsics_for_an_unknown_sensor_are_reported() {
         serde_json::json!(["nobody"])
     );
     assert!(String::from_utf8_lossy(&o.stderr).contains("nobody"));
+}
+
+/// `render` draws a `--format ros2` file (CDR `PointCloud2` and `MarkerArray`) as it draws the
+/// same run written in the foxglove format (protobuf, read by prost): the same picture, byte
+/// for byte, so the two writers and the CDR reader agree. It failed with `invalid tag value:
+/// 0`. An input that is not an MCAP is named as such (it was `Bad magic number`).
+#[test]
+fn render_draws_a_ros2_file_as_the_foxglove_one() {
+    let pcap = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo-vlp16.pcap");
+    let bin = env!("CARGO_BIN_EXE_ringscan");
+    let mut pngs = Vec::new();
+    let mut lines = Vec::new();
+    for format in ["foxglove", "ros2"] {
+        let mcap = out_path(&format!("render-{format}.mcap"));
+        let o = std::process::Command::new(bin)
+            .arg("decode")
+            .arg(&pcap)
+            .args(["--pipeline", "default", "--format", format, "--out"])
+            .arg(&mcap)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let png = out_path(&format!("render-{format}.png"));
+        let o = std::process::Command::new(bin)
+            .arg("render")
+            .arg(&mcap)
+            .args(["--sweep", "4", "--out"])
+            .arg(&png)
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "{format}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let line = String::from_utf8_lossy(&o.stdout).into_owned();
+        lines.push(
+            line.split_once(": ")
+                .unwrap()
+                .1
+                .replace(&*mcap.to_string_lossy(), "RUN"),
+        );
+        pngs.push(std::fs::read(&png).unwrap());
+    }
+    assert_eq!(lines[0], lines[1]);
+    let clusters: u32 = lines[0]
+        .trim_end()
+        .strip_suffix(" clusters")
+        .and_then(|l| l.rsplit(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("{}", lines[0]));
+    assert!(clusters > 0, "{}", lines[0]);
+    assert!(pngs[0] == pngs[1], "the two pictures differ");
+    let o = std::process::Command::new(bin)
+        .arg("render")
+        .arg(&pcap)
+        .arg("--out")
+        .arg(out_path("render-pcap.png"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("not an MCAP file"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+/// Points the voxel grid cannot key (more than 2^20 leaves from the origin on some axis) are
+/// counted (`pipeline.counts.voxel_skipped`) and warned of; they left every output after the
+/// voxel stage without a word (second audit). The count is the points of `/points` (the sweep
+/// as decoded, no deskew motion) that the filter keeps (≥ 0.5 m) and that lie beyond
+/// 2^20 × 1 µm = 1.048576 m on some axis, counted here from the file.
+#[test]
+fn points_beyond_the_voxel_grid_are_counted_and_warned_of() {
+    let dir = out_path("tiny-voxel");
+    std::fs::create_dir_all(&dir).unwrap();
+    let cfg = dir.join("leaf.toml");
+    std::fs::write(
+        &cfg,
+        "[voxel]\nleaf_m = 0.000001\n[filter]\nmax_range_m = inf\n",
+    )
+    .unwrap();
+    let out = dir.join("run.mcap");
+    let pcap = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo-vlp16.pcap");
+    let o = ringscan(&[
+        "decode",
+        pcap.to_str().unwrap(),
+        "--pipeline",
+        cfg.to_str().unwrap(),
+        "--json",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let skipped = j["pipeline"]["counts"]["voxel_skipped"].as_u64().unwrap();
+    let reach = f64::from(1u32 << 20) * 1e-6;
+    let beyond = |margin: f64| -> u64 {
+        sweep_points(&out)
+            .iter()
+            .flatten()
+            .filter(|&&(x, y, z, _)| {
+                let (x, y, z) = (f64::from(x), f64::from(y), f64::from(z));
+                (x * x + y * y + z * z).sqrt() >= 0.5
+                    && [x, y, z].iter().any(|v| v.abs() >= reach * margin)
+            })
+            .count() as u64
+    };
+    let (fewest, most) = (beyond(1.0 + 1e-6), beyond(1.0 - 1e-6));
+    assert!(fewest > 0);
+    assert!(
+        (fewest..=most).contains(&skipped),
+        "skipped {skipped}, expected {fewest} … {most}"
+    );
+    let o = ringscan(&[
+        "decode",
+        pcap.to_str().unwrap(),
+        "--pipeline",
+        cfg.to_str().unwrap(),
+    ]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains(&format!(
+            "warning: the voxel grid left out {skipped} points beyond ±2^20 leaves"
+        )),
+        "{text}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -61,6 +61,7 @@ fn replay(file: &str) {
         "livox_packet" => harness::livox_packet(&data),
         "livox_control" => harness::livox_control(&data),
         "lvx" => harness::lvx(&data),
+        "render_messages" => harness::render_messages(&data),
         other => panic!("{file}: no fuzz target named {other:?}"),
     }
 }

@@ -470,6 +470,7 @@ impl PipelineRunner {
         t.input += stats.input;
         t.filtered += stats.filtered;
         t.voxels += stats.voxels;
+        t.voxel_skipped += stats.voxel_skipped;
         t.ground += stats.ground;
         t.obstacles += stats.obstacles;
         t.unclustered += stats.unclustered;
@@ -626,6 +627,7 @@ impl PipelineRunner {
                 "removed_by_range": sum(|t| t.filter.range),
                 "removed_by_fov": sum(|t| t.filter.fov),
                 "removed_by_crop_box": sum(|t| t.filter.crop_box),
+                "voxel_skipped": sum(|t| t.voxel_skipped),
             },
             "deskew_skipped": all.iter().map(|s| s.deskew_skipped).sum::<u64>(),
             "extrinsics_unused": unused,

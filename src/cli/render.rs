@@ -7,7 +7,7 @@
 //! once the sweep's messages are in: memory does not grow with the file.
 
 use std::fs::File;
-use std::io::Read;
+use std::io::{Read, Seek};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -22,7 +22,7 @@ use super::run::RunError;
 /// `ringscan render`.
 #[derive(clap::Args, Debug)]
 pub struct RenderCmd {
-    /// An MCAP written by `ringscan decode --pipeline …`.
+    /// An MCAP written by `ringscan decode --pipeline …` (either `--format`).
     input: PathBuf,
     /// Sweep to draw (0 = the first the pipeline processed).
     #[arg(long, default_value_t = 0)]
@@ -86,6 +86,22 @@ fn points_of(pc: &PointCloud) -> Option<Vec<(f32, f32, u32)>> {
 fn read_frame(cmd: &RenderCmd) -> Result<Frame, RunError> {
     let path = cmd.input.display().to_string();
     let mut file = File::open(&cmd.input).map_err(|e| failed(&path, e))?;
+    // Said plainly, rather than as the MCAP reader's `Bad magic number`.
+    let mut magic = [0u8; 8];
+    let is_mcap = match file.read_exact(&mut magic) {
+        Ok(()) => magic[..] == *mcap::MAGIC,
+        Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => false,
+        Err(e) => return Err(failed(&path, e)),
+    };
+    if !is_mcap {
+        return Err(failed(
+            &path,
+            "not an MCAP file (render draws the MCAP that `ringscan decode --pipeline default \
+             --out RUN.mcap` writes)",
+        ));
+    }
+    file.seek(std::io::SeekFrom::Start(0))
+        .map_err(|e| failed(&path, e))?;
     let mut reader = LinearReader::new();
     let topics = [
         format!("{}/ground", cmd.sensor),
@@ -93,6 +109,8 @@ fn read_frame(cmd: &RenderCmd) -> Result<Frame, RunError> {
         format!("{}/clusters", cmd.sensor),
     ];
     let mut ids: [Option<u16>; 3] = [None; 3];
+    // `--format ros2` files hold the same topics in CDR (`PointCloud2`, `MarkerArray`).
+    let mut cdr = [false; 3];
     let mut got = [false; 3];
     let mut frame = Frame::default();
     // Every pipeline prefix in the file, to name them when the one asked for is absent.
@@ -111,6 +129,7 @@ fn read_frame(cmd: &RenderCmd) -> Result<Frame, RunError> {
                     Record::Channel(c) => {
                         if let Some(i) = topics.iter().position(|t| *t == c.topic) {
                             ids[i] = Some(c.id);
+                            cdr[i] = c.message_encoding == "cdr";
                         }
                         if let Some(p) = c.topic.strip_suffix("/ground") {
                             if prefixes.len() < 64 && !prefixes.iter().any(|q| q == p) {
@@ -131,7 +150,11 @@ fn read_frame(cmd: &RenderCmd) -> Result<Frame, RunError> {
                         }
                         got[i] = true;
                         if i < 2 {
-                            let pc = PointCloud::decode(&data[..]).map_err(|e| failed(&path, e))?;
+                            let pc = if cdr[i] {
+                                PointCloud::from_cdr(&data).map_err(|e| failed(&path, e))?
+                            } else {
+                                PointCloud::decode(&data[..]).map_err(|e| failed(&path, e))?
+                            };
                             let pts = points_of(&pc)
                                 .ok_or_else(|| failed(&path, "a point cloud without x, y"))?;
                             frame.frame_id = pc.frame_id.clone();
@@ -141,7 +164,12 @@ fn read_frame(cmd: &RenderCmd) -> Result<Frame, RunError> {
                                 frame.obstacles = pts;
                             }
                         } else {
-                            let u = SceneUpdate::decode(&data[..]).map_err(|e| failed(&path, e))?;
+                            let u = if cdr[i] {
+                                SceneUpdate::from_cdr_markers(&data)
+                                    .map_err(|e| failed(&path, e))?
+                            } else {
+                                SceneUpdate::decode(&data[..]).map_err(|e| failed(&path, e))?
+                            };
                             for e in &u.entities {
                                 let k: u32 = e.id.parse().unwrap_or(0);
                                 for c in &e.cubes {

@@ -2432,6 +2432,18 @@ pub(crate) fn print_warnings(j: &Value) {
             .unwrap_or("");
         outln!("  warning: deskew skipped on {n} sweeps (kept as measured): {why}");
     }
+    if let Some(n) = j["pipeline"]["counts"]["voxel_skipped"]
+        .as_u64()
+        .filter(|&n| n > 0)
+    {
+        let leaf = j["pipeline"]["parameters"]["voxel.leaf_m"]
+            .as_f64()
+            .unwrap_or(0.0);
+        outln!(
+            "  warning: the voxel grid left out {n} points beyond ±2^20 leaves of {leaf} m ({:.1} m) from the origin; raise voxel.leaf_m",
+            leaf * f64::from(1u32 << 20)
+        );
+    }
 }
 
 /// A zone-monitor report as the `/zones` message (`ringscan.ZoneStates`).

@@ -352,6 +352,16 @@ impl PipelineConfig {
         }
         self.filter.validate()?;
         positive("voxel.leaf_m", self.voxel_leaf_m)?;
+        // The grid keys ±2^20 leaves around the origin: a leaf so small that this does not
+        // reach the farthest point the filter keeps would drop every point beyond it.
+        let reach = self.voxel_leaf_m * f64::from(1u32 << 20);
+        if self.filter.max_range_m.is_finite() && reach < self.filter.max_range_m {
+            return Err(invalid(
+                "voxel.leaf_m",
+                self.voxel_leaf_m,
+                ">= filter.max_range_m / 2^20 (the grid reaches ±2^20 leaves around the origin)",
+            ));
+        }
         let g = &self.ground;
         positive("ground.distance_threshold_m", g.distance_threshold_m)?;
         if !(4..=4096).contains(&g.sectors) {

@@ -71,6 +71,9 @@ pub struct SweepStats {
     pub filtered: usize,
     /// Points after voxel downsampling.
     pub voxels: usize,
+    /// Points the voxel grid could not key (beyond ±2^20 leaves of the origin on some axis,
+    /// or not finite), left out of every output after it.
+    pub voxel_skipped: usize,
     /// Of those, ground.
     pub ground: usize,
     /// Non-ground points in kept clusters.
@@ -298,8 +301,9 @@ impl Pipeline {
             .apply(&sweep.points, &mut self.filtered, &self.base_from_sensor);
         stats.filtered = self.filtered.len();
         let t2 = clock();
-        self.voxel.downsample(&self.filtered, &mut self.voxels);
+        let v = self.voxel.downsample(&self.filtered, &mut self.voxels);
         stats.voxels = self.voxels.len();
+        stats.voxel_skipped = v.out_of_range + v.non_finite;
         let t3 = clock();
         self.ground.segment(&self.voxels, &mut self.labels);
         self.ground_points.clear();

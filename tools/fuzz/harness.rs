@@ -2988,3 +2988,57 @@ pub fn lvx(data: &[u8]) {
     let ls = s.stats();
     assert_eq!(ls.packets + ls.imu_packets + ls.malformed, pushed);
 }
+
+/// `render_messages`: byte 0 picks the reader, the rest is one CDR message as `render` reads
+/// a `--format ros2` file's (`sink::read::PointCloud::from_cdr`, `SceneUpdate::from_cdr_markers`).
+/// No panic; a cloud that reads holds no more record bytes and fields than the message has
+/// bytes, a marker array no more cubes than one per 16 bytes. Then the ROS 2 sink's encoder
+/// writes a `PointCloud2` of the fuzzed records (a frame id and stride from the bytes) that
+/// reads back with the same frame, stride, fields and records.
+pub fn render_messages(data: &[u8]) {
+    use ringscan::point::FieldType;
+    use ringscan::sink::read::{PointCloud, SceneUpdate};
+    let Some((&sel, msg)) = data.split_first() else {
+        return;
+    };
+    if sel % 2 == 0 {
+        if let Ok(pc) = PointCloud::from_cdr(msg) {
+            assert!(pc.data.len() <= msg.len());
+            assert!(pc.fields.len() * 13 <= msg.len());
+            let stride = pc.point_stride as usize;
+            for f in &pc.fields {
+                let _ = pc.f32s(f.offset as usize).count();
+            }
+            if let Some(records) = pc.data.len().checked_div(stride) {
+                assert!(pc.f32s(0).count() <= records);
+            }
+        }
+    } else if let Ok(u) = SceneUpdate::from_cdr_markers(msg) {
+        assert!((u.entities.len() + u.deletions.len()) * 16 <= msg.len());
+        for e in &u.entities {
+            assert_eq!(e.cubes.len(), 1);
+        }
+    }
+    // The encoder's output reads back.
+    let stride = usize::from(sel % 32) + 4;
+    let frame: String = msg
+        .iter()
+        .take(12)
+        .map(|b| char::from(b'a' + b % 26))
+        .collect();
+    let records = &msg[..msg.len() / stride * stride];
+    let fields = [("x", 0usize, FieldType::F32)];
+    let mut buf = Vec::new();
+    if ringscan::sink::ros2::encode_point_cloud2_fields(
+        &mut buf, 1, &frame, stride, &fields, records,
+    )
+    .is_ok()
+    {
+        let pc = PointCloud::from_cdr(&buf).expect("the encoder's PointCloud2 reads back");
+        assert_eq!(pc.frame_id, frame);
+        assert_eq!(pc.point_stride as usize, stride);
+        assert_eq!(pc.data, records);
+        assert_eq!(pc.fields.len(), 1);
+        assert_eq!((pc.fields[0].name.as_str(), pc.fields[0].offset), ("x", 0));
+    }
+}

@@ -15,7 +15,7 @@ set -euo pipefail
 
 SECONDS_PER_TARGET=${1:-20}
 shift || true
-ALL_TARGETS=(pcap reassembly velodyne_packet velodyne_stream calib_velodyne decode_to_mcap calib_ouster ouster_packet ouster_stream pipeline_config tum_poses http_response live_view_requests bag_ros1 bag_mcap bag_messages bag_metadata hesai_packet calib_hesai robosense_packet calib_robosense livox_packet livox_control lvx)
+ALL_TARGETS=(pcap reassembly velodyne_packet velodyne_stream calib_velodyne decode_to_mcap calib_ouster ouster_packet ouster_stream pipeline_config tum_poses http_response live_view_requests bag_ros1 bag_mcap bag_messages bag_metadata hesai_packet calib_hesai robosense_packet calib_robosense livox_packet livox_control lvx render_messages)
 if [ $# -gt 0 ]; then TARGETS=("$@"); else TARGETS=("${ALL_TARGETS[@]}"); fi
 SANITIZER=${FUZZ_SANITIZER:-none}
 
