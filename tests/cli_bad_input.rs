@@ -144,6 +144,34 @@ fn wrong_magic_names_the_bytes_found() {
     for format in ["pcapng", "ROS 1 bag", "sqlite3", "MCAP", "lvx2"] {
         assert!(r.stderr.contains(format), "{format}: {}", r.stderr);
     }
+    // A zstd file that does not decompress to a bag is said to be one, with why (it was told
+    // its zstd magic was none of the formats', zstd's among them).
+    let zstd = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("fixtures/bags/demo-vlp16.mcap-file/demo-vlp16.mcap-file.mcap.zstd");
+    let whole = std::fs::read(&zstd).unwrap();
+    let cut = write("cut.mcap.zstd", &whole[..whole.len() / 2]);
+    let r = decode(&cut, &[]);
+    assert_eq!(r.code, 1, "{}", r.stderr);
+    assert!(
+        r.stderr.contains(
+            "a zstd-compressed file (magic 28 b5 2f fd) whose start does not decompress to a \
+             rosbag2 storage file (sqlite3 or MCAP): it does not decompress ("
+        ) && r.stderr.contains("; cut short or damaged)"),
+        "{}",
+        r.stderr
+    );
+    // `echo hello | zstd`: one frame, a raw block, its checksum.
+    let hello = [
+        0x28, 0xb5, 0x2f, 0xfd, 0x04, 0x58, 0x31, 0x00, 0x00, b'h', b'e', b'l', b'l', b'o', b'\n',
+        0x53, 0x88, 0xbd, 0x91,
+    ];
+    let r = decode(&write("hello.zst", &hello), &[]);
+    assert_eq!(r.code, 1, "{}", r.stderr);
+    assert!(
+        r.stderr.contains("it decompresses to 68 65 6c 6c 6f 0a"),
+        "{}",
+        r.stderr
+    );
     // A directory is no rosbag2 one without its metadata.yaml (it was "Is a directory").
     let dir = Scratch::dir("plain-dir");
     let r = decode(&dir, &[]);
@@ -319,6 +347,61 @@ fn bad_usage_exits_with_2() {
     assert_eq!(out.status.code(), Some(2));
     let out = Command::new(bin()).args(["frobnicate"]).output().unwrap();
     assert_eq!(out.status.code(), Some(2));
+    // A negative value reaches its option's own check (second audit: clap took `-1` for a
+    // flag and said `unexpected argument '-1'`, so `--start=-1` was needed to see it).
+    let o = tmp("negative.mcap");
+    for (args, said) in [
+        (
+            vec!["--start", "-1"],
+            "--start: expected a non-negative number of seconds",
+        ),
+        (
+            vec!["--end", "-1"],
+            "--end: expected a non-negative number of seconds",
+        ),
+        (
+            vec!["--out", o.to_str().unwrap(), "--chunk-size", "-1"],
+            "expected MiB",
+        ),
+        (
+            vec!["--out", o.to_str().unwrap(), "--threads", "-1"],
+            "'-1' for '--threads",
+        ),
+        (
+            vec!["--odometry", "--map-every", "-1"],
+            "'-1' for '--map-every",
+        ),
+    ] {
+        let r = decode(&cap, &args);
+        assert_eq!(r.code, 2, "{args:?}: {}", r.stderr);
+        assert!(r.stderr.contains(said), "{args:?}: {}", r.stderr);
+        assert!(!r.stderr.contains("unexpected argument"), "{}", r.stderr);
+    }
+    let r = Command::new(bin())
+        .args(["render", "x.mcap", "--out", "x.png", "--range-m", "-1"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert_eq!(r.status.code(), Some(2), "{err}");
+    assert!(err.contains("expected metres, 0.5 … 10000"), "{err}");
+    // A unicast address is no multicast group: bad usage, before any socket (it was exit 1,
+    // from the kernel's refusal to join).
+    let r = Command::new(bin())
+        .args([
+            "listen",
+            "--sensor",
+            "127.0.0.1:9",
+            "--multicast",
+            "192.168.1.77",
+        ])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert_eq!(r.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("--multicast 192.168.1.77: not a multicast group"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -680,6 +763,12 @@ fn render_exit_codes_and_output_path() {
     assert_eq!(c, Some(2), "a .jpg: {err}");
     assert!(err.contains("render writes PNG only"), "{err}");
     assert!(!jpg.exists());
+    // Nor a name without an extension (it wrote PNG bytes there).
+    let bare = tmp("render-bare");
+    let (c, err) = render(&mcap, "0", &bare);
+    assert_eq!(c, Some(2), "no extension: {err}");
+    assert!(err.contains("render writes PNG only"), "{err}");
+    assert!(!bare.exists());
     let upper = tmp("render.PNG");
     assert_eq!(render(&mcap, "0", &upper).0, Some(0));
     let (c, err) = render(&mcap, "9999", &png);

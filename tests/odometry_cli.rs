@@ -275,7 +275,10 @@ fn simulated_capture(seconds: f64) -> Vec<u8> {
 
 /// Decodes the simulated 3 s drive with `args` after the input, writing a trajectory; the
 /// end pose's error (m, °) against the truth, the distance travelled and the JSON summary.
-fn simulated_drive_end_error(name: &str, args: &[&str]) -> (f64, f64, f64, serde_json::Value) {
+fn simulated_drive_end_error(
+    name: &str,
+    args: &[&str],
+) -> (f64, f64, f64, serde_json::Value, Vec<(f64, Isometry3<f64>)>) {
     let pcap = out_path(&format!("{name}.pcap"));
     std::fs::write(&pcap, simulated_capture(3.0)).unwrap();
     let tum = out_path(&format!("{name}.tum"));
@@ -313,17 +316,34 @@ fn simulated_drive_end_error(name: &str, args: &[&str]) -> (f64, f64, f64, serde
     for p in [&pcap, &tum] {
         let _ = std::fs::remove_file(p);
     }
-    (err, rot_err, travelled, summary)
+    (err, rot_err, travelled, summary, traj)
 }
 
 #[test]
 fn simulated_drive_ends_within_one_percent_of_the_truth() {
-    let (err, _, travelled, summary) = simulated_drive_end_error("sim", &["--deskew", "odometry"]);
+    let (err, _, travelled, summary, estimated) =
+        simulated_drive_end_error("sim", &["--deskew", "odometry"]);
     assert_eq!(summary["odometry"]["deskew"], true, "{summary}");
     assert!(travelled > 20.0, "travelled {travelled} m");
     assert!(
         err <= 0.01 * travelled,
         "end error {err:.3} m over {travelled:.2} m"
+    );
+    // The distance driven, at the top of the summary as in its sensor's entry, is the length
+    // of the trajectory written (summed here from the TUM file).
+    let distance = summary["odometry"]["distance_m"].as_f64().unwrap();
+    assert_eq!(
+        summary["odometry"]["distance_m"],
+        summary["odometry"]["sensors"][0]["distance_m"]
+    );
+    let path: f64 = estimated
+        .windows(2)
+        .map(|w| (w[1].1.translation.vector - w[0].1.translation.vector).norm())
+        .sum();
+    assert!(
+        (distance - path).abs() <= 1e-6 * path,
+        "distance_m {distance} against the trajectory's {path} m: {}",
+        summary["odometry"]
     );
 }
 
@@ -331,7 +351,7 @@ fn simulated_drive_ends_within_one_percent_of_the_truth() {
 /// sweep's last point; the same drive, the same bound. With a pipeline deskew it is refused.
 #[test]
 fn continuous_time_odometry_from_the_cli() {
-    let (err, _, travelled, summary) = simulated_drive_end_error(
+    let (err, _, travelled, summary, _) = simulated_drive_end_error(
         "sim-ct",
         &["--odometry", "--odometry-method", "continuous-time"],
     );

@@ -703,3 +703,29 @@ fn cut_angle_on_an_ouster_capture_is_warned_of() {
         assert_eq!(cut[k], plain[k], "{k}");
     }
 }
+
+/// A capture read with another unit's metadata whose packets it cannot read finds no sensor,
+/// and the reason names the file given (it said Ouster packets need their metadata, as if
+/// none had been given; second audit).
+#[test]
+fn metadata_that_fits_no_packet_is_named() {
+    let Some(root) = common::captures() else {
+        return;
+    };
+    let dir = root.join("ouster-lidar__ouster-sdk/tests/pcaps");
+    let o = Command::new(env!("CARGO_BIN_EXE_ringscan"))
+        .arg("decode")
+        .arg(dir.join("OS-2-128-U1_v2.3.0_1024x10.pcap"))
+        .arg("--calib")
+        .arg(dir.join("OS-0-128_v3.0.1_1024x10.json"))
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let why = j["no_sensor"].as_str().unwrap_or_default();
+    assert!(
+        why.contains("; OS-0-128_v3.0.1_1024x10.json was given, but no packet fits it"),
+        "{j}"
+    );
+}

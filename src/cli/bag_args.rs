@@ -18,10 +18,10 @@ pub struct BagArgs {
     pub topics: Vec<String>,
     /// Bags: skip messages recorded before this, seconds after the bag's first message (or, above
     /// 1e9, seconds since the Unix epoch).
-    #[arg(long, value_name = "S")]
+    #[arg(long, value_name = "S", allow_negative_numbers = true)]
     pub start: Option<f64>,
     /// Bags: skip messages recorded after this (seconds, as --start).
-    #[arg(long, value_name = "S")]
+    #[arg(long, value_name = "S", allow_negative_numbers = true)]
     pub end: Option<f64>,
 }
 

@@ -1034,6 +1034,12 @@ pub fn listen_run_with(
             "listen: give at least one --sensor IP[:PORT]".into(),
         ));
     }
+    if let Some(g) = args.multicast.filter(|g| !g.is_multicast()) {
+        return Err(RunError::Usage(format!(
+            "--multicast {g}: not a multicast group (224.0.0.0 … 239.255.255.255); a sensor \
+             sending to this host's address needs no --multicast"
+        )));
+    }
     if args.split_every.is_some() && args.out.is_none() {
         return Err(RunError::Usage("--split-every needs --out".into()));
     }

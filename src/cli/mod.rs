@@ -208,10 +208,10 @@ struct DecodeCmd {
     compression: run::ChunkCompression,
     /// Threads compressing MCAP chunks (default: the machine's cores); 1 = decode and compress
     /// on one thread.
-    #[arg(long, value_name = "N", value_parser = parse_threads, requires = "out")]
+    #[arg(long, value_name = "N", value_parser = parse_threads, requires = "out", allow_negative_numbers = true)]
     threads: Option<usize>,
     /// Uncompressed size of an MCAP chunk, MiB (fractions allowed).
-    #[arg(long, value_name = "MIB", default_value = "4", value_parser = parse_chunk_size, requires = "out")]
+    #[arg(long, value_name = "MIB", default_value = "4", value_parser = parse_chunk_size, requires = "out", allow_negative_numbers = true)]
     chunk_size: u64,
     /// Also write every UDP payload to `/raw`, so the drive can be decoded again later.
     #[arg(long, requires = "out")]
@@ -353,10 +353,10 @@ struct ListenCmd {
     /// Threads compressing MCAP chunks (default: the machine's cores). The decode thread never
     /// waits for them: a chunk they cannot take in time is written uncompressed and counted
     /// (`output.chunks_uncompressed`); 1 = compress on the decode thread.
-    #[arg(long, value_name = "N", value_parser = parse_threads, requires = "out")]
+    #[arg(long, value_name = "N", value_parser = parse_threads, requires = "out", allow_negative_numbers = true)]
     threads: Option<usize>,
     /// Uncompressed size of an MCAP chunk, MiB (fractions allowed).
-    #[arg(long, value_name = "MIB", default_value = "4", value_parser = parse_chunk_size, requires = "out")]
+    #[arg(long, value_name = "MIB", default_value = "4", value_parser = parse_chunk_size, requires = "out", allow_negative_numbers = true)]
     chunk_size: u64,
     /// Packet CRC checks (Ouster footer CRC-64, Hesai CRC-32, Livox CRC-32): `auto` = where
     /// the sensor writes them (Ouster: firmware ≥ 2.5, not FUSA).

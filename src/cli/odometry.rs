@@ -121,7 +121,12 @@ pub struct OdometryArgs {
     #[arg(long, value_name = "FILE.tum")]
     pub trajectory: Option<PathBuf>,
     /// With --odometry: write the local map every N sweeps.
-    #[arg(long, value_name = "N", default_value_t = 10)]
+    #[arg(
+        long,
+        value_name = "N",
+        default_value_t = 10,
+        allow_negative_numbers = true
+    )]
     pub map_every: u32,
     /// With --odometry: the ICP residual.
     #[arg(long, value_enum, default_value_t = MethodArg::PointToPlane)]
@@ -580,11 +585,15 @@ impl OdometryRunner {
         if step.degenerate {
             so.degenerate += 1;
         }
+        // The length of the trajectory written: a lost sweep's pose is a prediction, and not
+        // in it.
         let position = pose.translation.vector;
-        if let Some(last) = so.last_position {
-            so.distance_m += (position - last).norm();
+        if !lost {
+            if let Some(last) = so.last_position {
+                so.distance_m += (position - last).norm();
+            }
+            so.last_position = Some(position);
         }
-        so.last_position = Some(position);
         let mut write_error = None;
         if let (false, Some((path, w))) = (lost, so.trajectory.as_mut()) {
             let q = pose.rotation;
@@ -768,6 +777,8 @@ impl OdometryRunner {
             "imu_priors": all.iter().map(|s| s.imu_priors).sum::<u64>(),
             "median_ms": median_ms(&times),
             "max_ms": all.iter().map(|s| s.max_ns).max().filter(|_| !times.is_empty()).map(|n| n as f64 * 1e-6),
+            // The first sensor's, as `final_pose` (each sensor's are in `sensors`).
+            "distance_m": all.first().map(|s| s.distance_m),
             "final_pose": all.first().map(|s| final_pose(s)),
             "sensors": per_sensor,
         })

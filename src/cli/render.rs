@@ -34,7 +34,7 @@ pub struct RenderCmd {
     #[arg(long, default_value = "")]
     sensor: String,
     /// Half-width of the square drawn, metres (0.5 … 10000).
-    #[arg(long, default_value_t = 40.0, value_parser = parse_range_m)]
+    #[arg(long, default_value_t = 40.0, value_parser = parse_range_m, allow_negative_numbers = true)]
     range_m: f64,
     /// Image side, pixels (64 … 4096).
     #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u32).range(64..=4096))]
@@ -454,17 +454,20 @@ fn draw(frame: &Frame, cmd: &RenderCmd) -> Canvas {
 /// Runs `ringscan render`.
 pub fn render_command(cmd: &RenderCmd) -> Result<ExitCode, RunError> {
     // Only PNG is written: a `.jpg` name would hold PNG bytes that its readers refuse.
-    if let Some(ext) = cmd.out.extension() {
-        if !ext.eq_ignore_ascii_case("png") {
-            return Err(RunError::Usage(format!(
-                "--out {}: render writes PNG only; give a name ending in .png",
-                cmd.out.display()
-            )));
-        }
-    }
     if crate::cli::run::same_file(&cmd.out, &cmd.input) {
         return Err(RunError::Usage(format!(
             "--out {}: the same file as the input; the picture would replace the MCAP",
+            cmd.out.display()
+        )));
+    }
+    // Without an extension, a viewer would not know the file for a picture.
+    if !cmd
+        .out
+        .extension()
+        .is_some_and(|ext| ext.eq_ignore_ascii_case("png"))
+    {
+        return Err(RunError::Usage(format!(
+            "--out {}: render writes PNG only; give a name ending in .png",
             cmd.out.display()
         )));
     }

@@ -1026,10 +1026,20 @@ impl Session {
                 }
             }
             (n, _, Some(m)) => format!("{n} datagrams, none of them a packet of --model {m}"),
-            (n, _, None) => format!(
-                "{n} datagrams that no sensor family recognised (Ouster packets need their \
-                 metadata: --calib META.json; the others are known by their size and layout)"
-            ),
+            (n, _, None) => match self.unused_calibrations().as_slice() {
+                [] => format!(
+                    "{n} datagrams that no sensor family recognised (Ouster packets need their \
+                     metadata: --calib META.json; the others are known by their size and layout)"
+                ),
+                given => format!(
+                    "{n} datagrams that no sensor family recognised; {} {} given, but no \
+                     packet fits {} (an Ouster metadata file names its packets' size and \
+                     ports: another sensor's, or another lidar mode's?)",
+                    given.join(", "),
+                    if given.len() == 1 { "was" } else { "were" },
+                    if given.len() == 1 { "it" } else { "them" },
+                ),
+            },
         })
     }
 

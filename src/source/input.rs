@@ -40,6 +40,15 @@ pub enum InputError {
         /// The first bytes of the file (at most 16).
         found: Vec<u8>,
     },
+    /// A zstd file that does not decompress to a bag's storage file.
+    #[error(
+        "a zstd-compressed file (magic 28 b5 2f fd) whose start does not decompress to a \
+         rosbag2 storage file (sqlite3 or MCAP): {why}"
+    )]
+    ZstdNotABag {
+        /// What decompressing its first bytes gave.
+        why: String,
+    },
     /// A directory that is no rosbag2 one.
     #[error("a directory without a metadata.yaml: not a rosbag2 directory")]
     NotABagDirectory,
@@ -95,6 +104,9 @@ pub fn open_with(
         Err(SourceError::BadMagic { .. }) => {
             let mut found = Vec::with_capacity(16);
             let _ = File::open(path).and_then(|f| f.take(16).read_to_end(&mut found));
+            if let Some(why) = bag::zstd_start(path) {
+                return Err(InputError::ZstdNotABag { why });
+            }
             Err(InputError::Unrecognised { found })
         }
         Err(e) => Err(e.into()),

@@ -363,6 +363,30 @@ pub fn file_kind(path: &Path) -> Result<Option<FileKind>, BagError> {
     Ok(None)
 }
 
+/// For a file that starts with the zstd magic: what its first bytes decompress to, or why they
+/// do not (for the error of a zstd file that is no bag storage file). `None`: not zstd.
+pub fn zstd_start(path: &Path) -> Option<String> {
+    if !head(path, 4).is_ok_and(|b| b.starts_with(&ZSTD_MAGIC)) {
+        return None;
+    }
+    let mut inner = Vec::with_capacity(16);
+    let read = File::open(path)
+        .and_then(zstd::stream::read::Decoder::new)
+        .and_then(|d| d.take(16).read_to_end(&mut inner));
+    Some(match read {
+        Err(e) => format!("it does not decompress ({e}; cut short or damaged)"),
+        Ok(0) => "it decompresses to nothing".into(),
+        Ok(_) => format!(
+            "it decompresses to {}",
+            inner
+                .iter()
+                .map(|x| format!("{x:02x}"))
+                .collect::<Vec<_>>()
+                .join(" ")
+        ),
+    })
+}
+
 /// What `path` is, if a bag: a directory with a rosbag2 `metadata.yaml`, that yaml itself, or a
 /// storage file recognised by its magic number. `Ok(None)`: not a bag (a pcap, for instance).
 pub fn detect(path: &Path) -> Result<Option<BagKind>, BagError> {
@@ -614,10 +638,18 @@ impl Messages {
                     let p = dir.join(&f);
                     let k = file_kind(&p)?.ok_or_else(|| BagError::Metadata {
                         path: yaml.clone(),
-                        reason: format!(
-                            "{f}: neither sqlite3 nor MCAP ({:?} storage)",
-                            meta.storage
-                        ),
+                        reason: match zstd_start(&p) {
+                            Some(why) => format!(
+                                "{f}: zstd-compressed, but its start does not decompress to \
+                                 sqlite3 or MCAP: {why}"
+                            ),
+                            None => {
+                                format!(
+                                    "{f}: neither sqlite3 nor MCAP ({:?} storage)",
+                                    meta.storage
+                                )
+                            }
+                        },
                     })?;
                     // A file whose kind differs from the yaml's storage identifier is read by
                     // its bytes, like every input.
