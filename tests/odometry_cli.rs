@@ -273,12 +273,13 @@ fn simulated_capture(seconds: f64) -> Vec<u8> {
     w.into_inner().unwrap()
 }
 
+/// (end error m, end error °, distance travelled m, summary, trajectory).
+type DriveResult = (f64, f64, f64, serde_json::Value, Vec<(f64, Isometry3<f64>)>);
+
 /// Decodes the simulated 3 s drive with `args` after the input, writing a trajectory; the
-/// end pose's error (m, °) against the truth, the distance travelled and the JSON summary.
-fn simulated_drive_end_error(
-    name: &str,
-    args: &[&str],
-) -> (f64, f64, f64, serde_json::Value, Vec<(f64, Isometry3<f64>)>) {
+/// end pose's error (m, °) against the truth, the distance travelled, the JSON summary and the
+/// trajectory written.
+fn simulated_drive_end_error(name: &str, args: &[&str]) -> DriveResult {
     let pcap = out_path(&format!("{name}.pcap"));
     std::fs::write(&pcap, simulated_capture(3.0)).unwrap();
     let tum = out_path(&format!("{name}.tum"));
