@@ -638,6 +638,24 @@ fn a_bags_own_metadata_is_not_an_unused_calibration() {
             "{args:?}: {j}"
         );
     }
+    // Its IMU packets alone start no sensor: the reason says the bag's metadata was read (it
+    // said Ouster packets need their metadata, as if the bag had none).
+    let j: Value = serde_json::from_str(&run(&[
+        "info".as_ref(),
+        ros1.as_os_str(),
+        "--topic".as_ref(),
+        "/os_node0/imu_packets".as_ref(),
+        "--json".as_ref(),
+    ]))
+    .unwrap();
+    assert!(
+        j["no_sensor"].as_str().is_some_and(|w| w.contains(
+            "the input's own calibration (os_node0.metadata.json) was read, but none of its \
+             sensor's lidar packets came (an Ouster sensor starts on them: does --topic select \
+             only its IMU packets?)"
+        )),
+        "{j}"
+    );
     let _ = std::fs::remove_dir_all(&scratch);
 }
 

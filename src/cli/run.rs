@@ -1027,6 +1027,19 @@ impl Session {
             }
             (n, _, Some(m)) => format!("{n} datagrams, none of them a packet of --model {m}"),
             (n, _, None) => match self.unused_calibrations().as_slice() {
+                // The input brought its sensor's metadata (a bag's metadata topic), but no
+                // lidar packet that would start the sensor came.
+                [] if !self.out.from_input.is_empty() => format!(
+                    "{n} datagrams that no sensor family recognised; the input's own \
+                     calibration ({}) was read, but none of its sensor's lidar packets came \
+                     (an Ouster sensor starts on them{})",
+                    self.out.from_input.join(", "),
+                    if src.bag().is_some_and(|b| !b.topics_given().is_empty()) {
+                        ": does --topic select only its IMU packets?"
+                    } else {
+                        ""
+                    }
+                ),
                 [] => format!(
                     "{n} datagrams that no sensor family recognised (Ouster packets need their \
                      metadata: --calib META.json; the others are known by their size and layout)"

@@ -1199,6 +1199,11 @@ impl BagSource {
         Some((given.clone(), known))
     }
 
+    /// The topics `--topic` selects (empty: all).
+    pub fn topics_given(&self) -> &[String] {
+        &self.options.topics
+    }
+
     /// The topics of `--topic` that are none of the bag's (of any type), when another one is
     /// a packet topic of the bag (else [`Self::topics_missed`] tells it).
     pub fn topics_unknown(&self) -> Vec<String> {
