@@ -70,6 +70,9 @@ pub mod deskew;
 pub mod pipeline;
 pub mod point;
 pub mod registration;
+// ROS 1 / CDR message bytes read back: shared by the bag reader and `render`'s reader.
+#[cfg(any(feature = "bag", feature = "mcap"))]
+mod ros_serial;
 pub mod sensor;
 #[cfg(feature = "sim")]
 pub mod sim;

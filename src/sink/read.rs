@@ -20,6 +20,8 @@
 //! assert_eq!(back.child_frame_id, "lidar");
 //! ```
 
+use crate::ros_serial::{Cursor, Fault};
+
 /// `foxglove.PackedElementField`: one field of a point record.
 #[derive(Clone, PartialEq, prost::Message)]
 pub struct PackedElementField {
@@ -238,120 +240,44 @@ pub struct FrameTransform {
 }
 
 /// Why a CDR message could not be read back.
-#[derive(Debug, thiserror::Error)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
 pub enum CdrError {
     /// The message ends before a field it declares.
-    #[error("the CDR message ends at byte {at}, inside its {what}")]
+    #[error("the CDR message ends at byte {len}, a field at byte {offset} needs {need} bytes")]
     Short {
-        /// Offset reached (after the 4-byte encapsulation header).
-        at: usize,
-        /// The field being read.
-        what: &'static str,
+        /// Offset of the field.
+        offset: usize,
+        /// Bytes the field needs.
+        need: usize,
+        /// Message length.
+        len: usize,
     },
-    /// Not little-endian plain CDR (the only encapsulation the ROS 2 sinks write).
-    #[error("CDR encapsulation {0:02x?}: only little-endian plain CDR (00 01) is read")]
-    Encapsulation([u8; 2]),
+    /// Not plain CDR (big or little endian).
+    #[error("CDR encapsulation {0:#06x}: expected 0x0000 or 0x0001 (plain CDR)")]
+    Encapsulation(u16),
+    /// A sequence longer than the bytes left could hold (refused before any allocation).
+    #[error("a sequence of {0} elements, more than the message holds")]
+    Count(u64),
     /// A field holds what ringscan never writes there.
     #[error("{0}")]
     Invalid(&'static str),
 }
 
-/// A little-endian CDR cursor over a message body (alignment counts from the body's start,
-/// after the encapsulation header, as the ROS 2 middleware writes it).
-struct CdrReader<'a> {
-    body: &'a [u8],
-    at: usize,
+impl From<Fault> for CdrError {
+    fn from(f: Fault) -> Self {
+        match f {
+            Fault::Short { offset, need, len } => Self::Short { offset, need, len },
+            Fault::Encapsulation(k) => Self::Encapsulation(k),
+            Fault::Count(n) => Self::Count(n),
+            Fault::Trailing { .. } => Self::Invalid("bytes left after the last field"),
+        }
+    }
 }
 
-impl<'a> CdrReader<'a> {
-    fn new(msg: &'a [u8]) -> Result<Self, CdrError> {
-        let head = msg.get(..4).ok_or(CdrError::Short {
-            at: 0,
-            what: "encapsulation header",
-        })?;
-        if head[..2] != [0, 1] {
-            return Err(CdrError::Encapsulation([head[0], head[1]]));
-        }
-        Ok(Self {
-            body: &msg[4..],
-            at: 0,
-        })
-    }
-
-    fn take(&mut self, n: usize, what: &'static str) -> Result<&'a [u8], CdrError> {
-        let short = CdrError::Short { at: self.at, what };
-        let end = self
-            .at
-            .checked_add(n)
-            .ok_or(CdrError::Short { at: self.at, what })?;
-        let b = self.body.get(self.at..end).ok_or(short)?;
-        self.at = end;
-        Ok(b)
-    }
-
-    fn align(&mut self, n: usize) {
-        self.at = self.at.next_multiple_of(n);
-    }
-
-    fn u8(&mut self, what: &'static str) -> Result<u8, CdrError> {
-        Ok(self.take(1, what)?[0])
-    }
-
-    fn u32(&mut self, what: &'static str) -> Result<u32, CdrError> {
-        self.align(4);
-        let b = self.take(4, what)?;
-        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-    }
-
-    fn f32(&mut self, what: &'static str) -> Result<f32, CdrError> {
-        self.u32(what).map(f32::from_bits)
-    }
-
-    fn f64(&mut self, what: &'static str) -> Result<f64, CdrError> {
-        self.align(8);
-        let b = self.take(8, what)?;
-        let mut a = [0u8; 8];
-        a.copy_from_slice(b);
-        Ok(f64::from_le_bytes(a))
-    }
-
-    /// A sequence's length, bounded by the bytes left at `min_bytes` per element (a hostile
-    /// length allocates nothing).
-    fn len(&mut self, min_bytes: usize, what: &'static str) -> Result<usize, CdrError> {
-        let n = self.u32(what)? as usize;
-        let left = self.body.len().saturating_sub(self.at);
-        if n.saturating_mul(min_bytes.max(1)) > left {
-            return Err(CdrError::Short { at: self.at, what });
-        }
-        Ok(n)
-    }
-
-    fn bytes(&mut self, what: &'static str) -> Result<&'a [u8], CdrError> {
-        let n = self.len(1, what)?;
-        self.take(n, what)
-    }
-
-    /// A string: its length with the terminating NUL, then its bytes.
-    fn string(&mut self, what: &'static str) -> Result<String, CdrError> {
-        let b = self.bytes(what)?;
-        let b = b.strip_suffix(&[0]).unwrap_or(b);
-        Ok(String::from_utf8_lossy(b).into_owned())
-    }
-
-    /// `std_msgs/Header`: its frame id (the stamp is skipped).
-    fn header(&mut self) -> Result<String, CdrError> {
-        self.u32("header stamp")?;
-        self.u32("header stamp")?;
-        self.string("header frame_id")
-    }
-
-    fn f64s<const N: usize>(&mut self, what: &'static str) -> Result<[f64; N], CdrError> {
-        let mut v = [0.0; N];
-        for x in &mut v {
-            *x = self.f64(what)?;
-        }
-        Ok(v)
-    }
+/// A CDR string as text (a frame id, a field name).
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
 }
 
 impl PointCloud {
@@ -360,29 +286,31 @@ impl PointCloud {
     /// and offset; ROS `PointField` datatypes, which agree with Foxglove's for `FLOAT32` = 7)
     /// and records. Big-endian records are refused.
     pub fn from_cdr(msg: &[u8]) -> Result<Self, CdrError> {
-        let mut r = CdrReader::new(msg)?;
-        let frame_id = r.header()?;
-        r.u32("height")?;
-        r.u32("width")?;
-        let n = r.len(13, "fields")?;
+        let mut r = Cursor::cdr(msg)?;
+        let frame_id = text(r.header()?.frame_id);
+        r.u32()?; // height
+        r.u32()?; // width
+                  // A field is at least a 4-byte name length, an offset, a datatype and a count.
+        let n = r.count(13, usize::MAX)?;
         let mut fields = Vec::with_capacity(n);
         for _ in 0..n {
-            let name = r.string("field name")?;
-            let offset = r.u32("field offset")?;
-            let datatype = r.u8("field datatype")?;
-            r.u32("field count")?;
+            let name = text(r.string()?);
+            let offset = r.u32()?;
+            let datatype = r.u8()?;
+            r.u32()?; // count
             fields.push(PackedElementField {
                 name,
                 offset,
                 r#type: i32::from(datatype),
             });
         }
-        if r.u8("is_bigendian")? != 0 {
+        if r.u8()? != 0 {
             return Err(CdrError::Invalid("big-endian point records are not read"));
         }
-        let point_stride = r.u32("point_step")?;
-        r.u32("row_step")?;
-        let data = r.bytes("data")?.to_vec();
+        let point_stride = r.u32()?;
+        r.u32()?; // row_step
+        let (start, len) = r.bytes()?;
+        let data = msg[start..start + len].to_vec();
         Ok(Self {
             timestamp: None,
             frame_id,
@@ -404,44 +332,38 @@ impl SceneUpdate {
         const CUBE: u32 = 1;
         const ADD: u32 = 0;
         const DELETEALL: u32 = 3;
-        let mut r = CdrReader::new(msg)?;
+        let mut r = Cursor::cdr(msg)?;
         // A marker is more than 100 bytes; 16 bounds the count for the allocation.
-        let n = r.len(16, "markers")?;
+        let n = r.count(16, usize::MAX)?;
         let mut out = SceneUpdate::default();
         for _ in 0..n {
-            let frame_id = r.header()?;
-            r.string("marker ns")?;
-            let id = r.u32("marker id")? as i32;
-            let kind = r.u32("marker type")?;
-            let action = r.u32("marker action")?;
-            let [px, py, pz, qx, qy, qz, qw] = r.f64s::<7>("marker pose")?;
-            let [sx, sy, sz] = r.f64s::<3>("marker scale")?;
-            let [cr, cg, cb, ca] = [
-                r.f32("marker color")?,
-                r.f32("marker color")?,
-                r.f32("marker color")?,
-                r.f32("marker color")?,
-            ];
-            r.u32("marker lifetime")?;
-            r.u32("marker lifetime")?;
-            r.u8("marker frame_locked")?;
-            let points = r.len(24, "marker points")?;
+            let frame_id = text(r.header()?.frame_id);
+            r.string()?; // ns
+            let id = r.u32()? as i32;
+            let kind = r.u32()?;
+            let action = r.u32()?;
+            let [px, py, pz, qx, qy, qz, qw] = r.f64s::<7>()?; // pose
+            let [sx, sy, sz] = r.f64s::<3>()?; // scale
+            let [cr, cg, cb, ca] = [r.f32()?, r.f32()?, r.f32()?, r.f32()?];
+            r.time()?; // lifetime
+            r.u8()?; // frame_locked
+            let points = r.count(24, usize::MAX)?;
             for _ in 0..points {
-                r.f64s::<3>("marker points")?;
+                r.f64s::<3>()?;
             }
-            let colors = r.len(16, "marker colors")?;
-            r.take(colors * 16, "marker colors")?;
-            r.string("marker texture_resource")?;
-            r.header()?;
-            r.string("marker texture format")?;
-            r.bytes("marker texture data")?;
-            let uv = r.len(8, "marker uv_coordinates")?;
-            r.take(uv * 8, "marker uv_coordinates")?;
-            r.string("marker text")?;
-            r.string("marker mesh_resource")?;
-            r.string("marker mesh_file filename")?;
-            r.bytes("marker mesh_file data")?;
-            r.u8("marker mesh_use_embedded_materials")?;
+            let colors = r.count(16, usize::MAX)?;
+            r.take(colors * 16)?;
+            r.string()?; // texture_resource
+            r.header()?; // texture (sensor_msgs/CompressedImage): header,
+            r.string()?; // format
+            r.bytes()?; // and data
+            let uv = r.count(8, usize::MAX)?;
+            r.take(uv * 8)?; // uv_coordinates
+            r.string()?; // text
+            r.string()?; // mesh_resource
+            r.string()?; // mesh_file: filename
+            r.bytes()?; // and data
+            r.u8()?; // mesh_use_embedded_materials
             match (action, kind) {
                 (DELETEALL, _) => out.deletions.push(SceneEntityDeletion {
                     timestamp: None,
@@ -493,38 +415,46 @@ mod tests {
     use super::*;
 
     /// A hand-written `PointCloud2` (layout of `sensor_msgs/msg/PointCloud2.msg`, CDR
-    /// alignment rules), not one from the project's encoder.
-    fn cloud() -> Vec<u8> {
-        let mut b = vec![0u8, 1, 0, 0];
+    /// alignment rules), not one from the project's encoder; its CDR in either byte order, its
+    /// point records little-endian.
+    fn cloud(big: bool) -> Vec<u8> {
+        let u32b = |v: u32| {
+            if big {
+                v.to_be_bytes()
+            } else {
+                v.to_le_bytes()
+            }
+        };
+        let mut b = vec![0u8, u8::from(!big), 0, 0];
         let mut body = Vec::new();
-        body.extend(7i32.to_le_bytes()); // stamp.sec
-        body.extend(9u32.to_le_bytes()); // stamp.nanosec
-        body.extend(4u32.to_le_bytes());
+        body.extend(u32b(7)); // stamp.sec
+        body.extend(u32b(9)); // stamp.nanosec
+        body.extend(u32b(4));
         body.extend(b"map\0");
-        body.extend(1u32.to_le_bytes()); // height
-        body.extend(2u32.to_le_bytes()); // width
-        body.extend(2u32.to_le_bytes()); // fields
+        body.extend(u32b(1)); // height
+        body.extend(u32b(2)); // width
+        body.extend(u32b(2)); // fields
         for (name, off) in [("x", 0u32), ("y", 4)] {
-            body.extend(2u32.to_le_bytes());
+            body.extend(u32b(2));
             body.extend(name.as_bytes());
             body.push(0);
             while body.len() % 4 != 0 {
                 body.push(0);
             }
-            body.extend(off.to_le_bytes());
+            body.extend(u32b(off));
             body.push(7); // FLOAT32
             while body.len() % 4 != 0 {
                 body.push(0);
             }
-            body.extend(1u32.to_le_bytes());
+            body.extend(u32b(1));
         }
         body.push(0); // is_bigendian
         while body.len() % 4 != 0 {
             body.push(0);
         }
-        body.extend(8u32.to_le_bytes()); // point_step
-        body.extend(16u32.to_le_bytes()); // row_step
-        body.extend(16u32.to_le_bytes());
+        body.extend(u32b(8)); // point_step
+        body.extend(u32b(16)); // row_step
+        body.extend(u32b(16));
         for v in [1.5f32, -2.0, 3.25, 4.0] {
             body.extend(v.to_le_bytes());
         }
@@ -535,17 +465,19 @@ mod tests {
 
     #[test]
     fn a_hand_written_point_cloud2_reads_back() {
-        let pc = PointCloud::from_cdr(&cloud()).unwrap();
-        assert_eq!(pc.frame_id, "map");
-        assert_eq!(pc.point_stride, 8);
-        assert_eq!((pc.offset("x"), pc.offset("y")), (Some(0), Some(4)));
-        assert_eq!(pc.f32s(0).collect::<Vec<_>>(), [1.5, 3.25]);
-        assert_eq!(pc.f32s(4).collect::<Vec<_>>(), [-2.0, 4.0]);
+        for big in [false, true] {
+            let pc = PointCloud::from_cdr(&cloud(big)).unwrap();
+            assert_eq!(pc.frame_id, "map");
+            assert_eq!(pc.point_stride, 8);
+            assert_eq!((pc.offset("x"), pc.offset("y")), (Some(0), Some(4)));
+            assert_eq!(pc.f32s(0).collect::<Vec<_>>(), [1.5, 3.25]);
+            assert_eq!(pc.f32s(4).collect::<Vec<_>>(), [-2.0, 4.0]);
+        }
     }
 
     #[test]
     fn cut_or_lying_messages_are_errors() {
-        let full = cloud();
+        let full = cloud(false);
         for n in 0..full.len() - 1 {
             assert!(PointCloud::from_cdr(&full[..n]).is_err(), "cut at {n}");
         }
@@ -553,12 +485,12 @@ mod tests {
         let mut lying = full.clone();
         lying[4 + 24..4 + 28].copy_from_slice(&u32::MAX.to_le_bytes());
         assert!(PointCloud::from_cdr(&lying).is_err());
-        let mut big_endian = full;
-        big_endian[1] = 0;
-        assert!(matches!(
-            PointCloud::from_cdr(&big_endian),
-            Err(CdrError::Encapsulation(_))
-        ));
+        let mut parameter_list = full;
+        parameter_list[1] = 2; // PL_CDR_BE: not the plain CDR of ROS 2 messages
+        assert_eq!(
+            PointCloud::from_cdr(&parameter_list),
+            Err(CdrError::Encapsulation(2))
+        );
         for n in 0..64 {
             let m = vec![0u8, 1, 0, 0, 0xff, 0xff, 0xff, 0x7f][..n.min(8)].to_vec();
             assert!(SceneUpdate::from_cdr_markers(&m).is_err());

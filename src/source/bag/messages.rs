@@ -21,11 +21,7 @@
 //! | `sensor_msgs/msg/Imu` (a Livox driver's IMU topic beside its `CustomMsg` one) | Header, orientation {float64 x y z w}, float64\[9\] covariance, angular_velocity {float64 x y z}, float64\[9\], linear_acceleration {float64 x y z}, float64\[9\]: one sample ([`imu`]) | its header's |
 //! | `ringscan.RawPacket` (protobuf; what `--raw` writes to an MCAP of the foxglove format) | `Timestamp timestamp = 1`, `string source_address = 2`, `uint32 source_port = 3`, `uint32 destination_port = 4`, `bytes payload = 5`: one datagram with its own addresses ([`raw_packet`]) | its `timestamp` |
 //!
-//! ROS 1 serialization: little-endian, no padding, `time` = u32 sec + u32 nsec, Header = u32
-//! seq + time + string, strings and arrays prefixed by a u32 count. CDR (ROS 2): a 4-byte
-//! encapsulation header (`00 01` little-endian, `00 00` big-endian), then every primitive aligned
-//! to its size counted from the end of that header; `builtin_interfaces/Time` = i32 sec + u32
-//! nanosec; Header = Time + string; strings carry their NUL in the count. Protobuf (the wire
+//! ROS 1 serialization and CDR (ROS 2) are read by `crate::ros_serial`. Protobuf (the wire
 //! format of protobuf.dev/programming-guides/encoding): a sequence of fields, each a varint key
 //! (field number << 3 | wire type) then a varint (type 0), 8 bytes (1), a varint length and
 //! that many bytes (2) or 4 bytes (5); fields in any order, a repeated scalar's last value wins,
@@ -33,6 +29,8 @@
 
 use core::fmt;
 use std::net::{Ipv4Addr, SocketAddrV4};
+
+use crate::ros_serial::{Cursor, Fault};
 
 /// A decoded message's packets are never more than this many (a bound on the caller's `Vec`).
 pub const MAX_PACKETS_PER_MESSAGE: usize = 1 << 20;
@@ -171,155 +169,23 @@ pub enum MsgError {
     },
 }
 
-/// A cursor over message bytes that cannot panic (rustls' `Reader` pattern).
-struct Cursor<'a> {
-    buf: &'a [u8],
-    at: usize,
-    /// CDR: offsets are aligned relative to this (the end of the encapsulation header).
-    origin: usize,
-    /// CDR alignment on (ROS 1: off).
-    align: bool,
-    big_endian: bool,
+impl From<Fault> for MsgError {
+    fn from(f: Fault) -> Self {
+        match f {
+            Fault::Short { offset, need, len } => Self::Short { offset, need, len },
+            Fault::Encapsulation(k) => Self::Encapsulation(k),
+            Fault::Count(n) => Self::TooManyPackets(n),
+            Fault::Trailing { extra } => Self::Trailing { extra },
+        }
+    }
 }
 
-impl<'a> Cursor<'a> {
-    fn new(buf: &'a [u8], enc: Encoding) -> Result<Self, MsgError> {
-        match enc {
-            Encoding::Ros1 => Ok(Self {
-                buf,
-                at: 0,
-                origin: 0,
-                align: false,
-                big_endian: false,
-            }),
-            Encoding::Cdr => {
-                let head = buf.get(..4).ok_or(MsgError::Short {
-                    offset: 0,
-                    need: 4,
-                    len: buf.len(),
-                })?;
-                let kind = u16::from_be_bytes([head[0], head[1]]);
-                let big_endian = match kind {
-                    0x0000 => true,
-                    0x0001 => false,
-                    k => return Err(MsgError::Encapsulation(k)),
-                };
-                Ok(Self {
-                    buf,
-                    at: 4,
-                    origin: 4,
-                    align: true,
-                    big_endian,
-                })
-            }
-            Encoding::Protobuf => Err(MsgError::Serialization(enc)),
-        }
-    }
-
-    fn align_to(&mut self, n: usize) {
-        if self.align {
-            let rel = self.at - self.origin;
-            let pad = (n - rel % n) % n;
-            self.at = self.at.saturating_add(pad);
-        }
-    }
-
-    fn take(&mut self, n: usize) -> Result<&'a [u8], MsgError> {
-        let end = self.at.checked_add(n).filter(|&e| e <= self.buf.len());
-        match end {
-            Some(end) => {
-                let s = &self.buf[self.at..end];
-                self.at = end;
-                Ok(s)
-            }
-            None => Err(MsgError::Short {
-                offset: self.at,
-                need: n,
-                len: self.buf.len(),
-            }),
-        }
-    }
-
-    fn u8(&mut self) -> Result<u8, MsgError> {
-        Ok(self.take(1)?[0])
-    }
-
-    fn u64(&mut self) -> Result<u64, MsgError> {
-        self.align_to(8);
-        let b: [u8; 8] = self.take(8)?.try_into().unwrap_or([0; 8]);
-        Ok(if self.big_endian {
-            u64::from_be_bytes(b)
-        } else {
-            u64::from_le_bytes(b)
-        })
-    }
-
-    fn f64(&mut self) -> Result<f64, MsgError> {
-        Ok(f64::from_bits(self.u64()?))
-    }
-
-    fn u32(&mut self) -> Result<u32, MsgError> {
-        self.align_to(4);
-        let b: [u8; 4] = self.take(4)?.try_into().unwrap_or([0; 4]);
-        Ok(if self.big_endian {
-            u32::from_be_bytes(b)
-        } else {
-            u32::from_le_bytes(b)
-        })
-    }
-
-    /// `time` (ROS 1: u32 sec) / `builtin_interfaces/Time` (CDR: i32 sec), as ns.
-    fn time(&mut self) -> Result<i64, MsgError> {
-        let sec = self.u32()?;
-        let nsec = self.u32()?;
-        let sec = if self.align {
-            i64::from(sec as i32)
-        } else {
-            i64::from(sec)
-        };
-        Ok(sec
-            .saturating_mul(1_000_000_000)
-            .saturating_add(i64::from(nsec)))
-    }
-
-    /// A string or byte sequence: u32 count then the bytes.
-    fn bytes(&mut self) -> Result<(usize, usize), MsgError> {
-        let n = self.u32()? as usize;
-        let start = self.at;
-        self.take(n)?;
-        Ok((start, n))
-    }
-
-    /// A std_msgs/Header (its stamp).
-    fn header(&mut self) -> Result<i64, MsgError> {
-        if !self.align {
-            self.u32()?; // seq
-        }
-        let stamp = self.time()?;
-        self.bytes()?; // frame_id
-        Ok(stamp)
-    }
-
-    /// The element count of a sequence whose elements take at least `min_elem` bytes.
-    fn count(&mut self, min_elem: usize) -> Result<usize, MsgError> {
-        let n = u64::from(self.u32()?);
-        let left = (self.buf.len() - self.at.min(self.buf.len())) as u64;
-        if n > MAX_PACKETS_PER_MESSAGE as u64 || n.saturating_mul(min_elem as u64) > left {
-            return Err(MsgError::TooManyPackets(n));
-        }
-        Ok(n as usize)
-    }
-
-    fn end(&self) -> Result<(), MsgError> {
-        // CDR writers may pad the end to a multiple of 4 (rosbag2's serializers do not, but
-        // some DDS ones do): up to 3 zero bytes are accepted.
-        let extra = self.buf.len().saturating_sub(self.at);
-        let pad_ok = self.align && extra < 4 && self.buf[self.at..].iter().all(|&b| b == 0);
-        if extra == 0 || pad_ok {
-            Ok(())
-        } else {
-            Err(MsgError::Trailing { extra })
-        }
+/// A reader of `msg` in the ROS serialization `enc`.
+fn cursor(msg: &[u8], enc: Encoding) -> Result<Cursor<'_>, MsgError> {
+    match enc {
+        Encoding::Ros1 => Ok(Cursor::ros1(msg)),
+        Encoding::Cdr => Ok(Cursor::cdr(msg)?),
+        Encoding::Protobuf => Err(MsgError::Serialization(enc)),
     }
 }
 
@@ -350,13 +216,12 @@ pub fn packets(
 
 /// The text of a `std_msgs/String` message: the byte range of its data (without a trailing NUL).
 pub fn string(enc: Encoding, msg: &[u8]) -> Result<(usize, usize), MsgError> {
-    let mut c = Cursor::new(msg, enc)?;
-    let (start, mut len) = c.bytes()?;
+    let mut c = cursor(msg, enc)?;
+    let (start, len) = c.bytes()?;
     c.end()?;
-    if enc == Encoding::Cdr && len > 0 && msg.get(start + len - 1) == Some(&0) {
-        len -= 1;
-    }
-    Ok((start, len))
+    let nul =
+        enc == Encoding::Cdr && msg.get(start..start + len).and_then(<[u8]>::last) == Some(&0);
+    Ok((start, len - usize::from(nul)))
 }
 
 /// Reads a Livox `CustomMsg` into a points frame ([`crate::sensor::livox::frame`]) in `out`;
@@ -365,20 +230,20 @@ pub fn string(enc: Encoding, msg: &[u8]) -> Result<(usize, usize), MsgError> {
 pub fn livox_custom(enc: Encoding, msg: &[u8], out: &mut Vec<u8>) -> Result<i64, MsgError> {
     use crate::sensor::livox::frame::{self, FramePoint};
     let r = (|| {
-        let mut c = Cursor::new(msg, enc)?;
-        let stamp = c.header()?;
+        let mut c = cursor(msg, enc)?;
+        let stamp = c.header()?.stamp_ns;
         let timebase = c.u64()?;
         c.u32()?; // point_num
         let lidar_id = c.u8()?;
         c.take(3)?; // rsvd
-        let n = c.count(frame::POINT_LEN)?;
+        let n = c.count(frame::POINT_LEN, MAX_PACKETS_PER_MESSAGE)?;
         frame::write_header(out, timebase, lidar_id, n as u32);
         out.reserve(n * frame::POINT_LEN);
         for _ in 0..n {
             let offset_time_ns = c.u32()?;
-            let x = f32::from_bits(c.u32()?);
-            let y = f32::from_bits(c.u32()?);
-            let z = f32::from_bits(c.u32()?);
+            let x = c.f32()?;
+            let y = c.f32()?;
+            let z = c.f32()?;
             let b = c.take(3)?;
             frame::push_point(
                 out,
@@ -415,24 +280,14 @@ pub struct ImuMsg {
 /// kept: the Livox drivers send none (zeros). The type says rad/s and m/s²; the Livox drivers
 /// publish the acceleration in g as the sensor sends it, so the caller decides the unit.
 pub fn imu(enc: Encoding, msg: &[u8]) -> Result<ImuMsg, MsgError> {
-    let mut c = Cursor::new(msg, enc)?;
-    let stamp_ns = c.header()?;
-    let vec3 =
-        |c: &mut Cursor<'_>| -> Result<[f64; 3], MsgError> { Ok([c.f64()?, c.f64()?, c.f64()?]) };
-    for _ in 0..4 {
-        c.f64()?; // orientation
-    }
-    for _ in 0..9 {
-        c.f64()?;
-    }
-    let angular_velocity = vec3(&mut c)?;
-    for _ in 0..9 {
-        c.f64()?;
-    }
-    let linear_acceleration = vec3(&mut c)?;
-    for _ in 0..9 {
-        c.f64()?;
-    }
+    let mut c = cursor(msg, enc)?;
+    let stamp_ns = c.header()?.stamp_ns;
+    c.f64s::<4>()?; // orientation
+    c.f64s::<9>()?; // its covariance
+    let angular_velocity = c.f64s()?;
+    c.f64s::<9>()?;
+    let linear_acceleration = c.f64s()?;
+    c.f64s::<9>()?;
     c.end()?;
     Ok(ImuMsg {
         stamp_ns,
@@ -449,13 +304,13 @@ fn scan_fixed(
     sized: bool,
     out: &mut Vec<PacketRef>,
 ) -> Result<(), MsgError> {
-    let mut c = Cursor::new(msg, enc)?;
+    let mut c = cursor(msg, enc)?;
     c.header()?;
-    let count = c.count(8 + n)?;
+    let count = c.count(8 + n, MAX_PACKETS_PER_MESSAGE)?;
     out.reserve(count);
     for _ in 0..count {
         let stamp = c.time()?;
-        let start = c.at;
+        let start = c.at();
         c.take(n)?;
         let len = if sized { (c.u32()? as usize).min(n) } else { n };
         out.push(PacketRef {
@@ -465,7 +320,7 @@ fn scan_fixed(
             difop: false,
         });
     }
-    c.end()
+    Ok(c.end()?)
 }
 
 /// Header + Packet[] where a packet is {time, uint8[] data[, uint32 size]}.
@@ -475,9 +330,9 @@ fn scan_var(
     sized: bool,
     out: &mut Vec<PacketRef>,
 ) -> Result<(), MsgError> {
-    let mut c = Cursor::new(msg, enc)?;
+    let mut c = cursor(msg, enc)?;
     c.header()?;
-    let count = c.count(12)?;
+    let count = c.count(12, MAX_PACKETS_PER_MESSAGE)?;
     out.reserve(count);
     for _ in 0..count {
         let stamp = c.time()?;
@@ -492,12 +347,12 @@ fn scan_var(
             difop: false,
         });
     }
-    c.end()
+    Ok(c.end()?)
 }
 
 /// `uint8[] buf`: the whole message is one packet.
 fn single_buf(enc: Encoding, msg: &[u8], out: &mut Vec<PacketRef>) -> Result<(), MsgError> {
-    let mut c = Cursor::new(msg, enc)?;
+    let mut c = cursor(msg, enc)?;
     let (start, len) = c.bytes()?;
     c.end()?;
     out.push(PacketRef {
@@ -512,14 +367,14 @@ fn single_buf(enc: Encoding, msg: &[u8], out: &mut Vec<PacketRef>) -> Result<(),
 /// Both RobosensePacket layouts; the one that consumes the message exactly wins.
 fn robosense(enc: Encoding, msg: &[u8], out: &mut Vec<PacketRef>) -> Result<(), MsgError> {
     let with_difop = |out: &mut Vec<PacketRef>| -> Result<(), MsgError> {
-        let mut c = Cursor::new(msg, enc)?;
+        let mut c = cursor(msg, enc)?;
         c.header()?;
-        let count = c.count(8 + 1 + 1500)?;
+        let count = c.count(8 + 1 + 1500, MAX_PACKETS_PER_MESSAGE)?;
         out.reserve(count);
         for _ in 0..count {
             let stamp = c.time()?;
             let difop = c.u8()? != 0;
-            let start = c.at;
+            let start = c.at();
             c.take(1500)?;
             let len = (c.u32()? as usize).min(1500);
             out.push(PacketRef {
@@ -529,7 +384,7 @@ fn robosense(enc: Encoding, msg: &[u8], out: &mut Vec<PacketRef>) -> Result<(), 
                 difop,
             });
         }
-        c.end()
+        Ok(c.end()?)
     };
     match with_difop(out) {
         Ok(()) => Ok(()),
@@ -542,8 +397,8 @@ fn robosense(enc: Encoding, msg: &[u8], out: &mut Vec<PacketRef>) -> Result<(), 
 
 /// RslidarPacket: Header, is_difop, is_frame_begin, uint8[] data; stamp = the header's.
 fn rslidar(enc: Encoding, msg: &[u8], out: &mut Vec<PacketRef>) -> Result<(), MsgError> {
-    let mut c = Cursor::new(msg, enc)?;
-    let stamp = c.header()?;
+    let mut c = cursor(msg, enc)?;
+    let stamp = c.header()?.stamp_ns;
     let difop = c.u8()? != 0;
     c.u8()?;
     let (start, len) = c.bytes()?;
