@@ -18,7 +18,8 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use ringscan::cli::bag_args::BagArgs;
-use ringscan::cli::run::{decode_capture, BufferPool, DecodeArgs, RunError, SweepReader};
+use ringscan::cli::run::{decode_capture, DecodeArgs, RunError, SweepReader};
+use ringscan::cli::session::BufferPool;
 use ringscan::point::{interleave_extended, Point, EXTENDED_STRIDE, POINT_STRIDE};
 
 mod compat;
@@ -226,8 +227,8 @@ pub(crate) enum Msg<T> {
 
 /// A sweep and its sensor, from the reader's thread.
 type SweepMsg = Box<(
-    ringscan::cli::run::ReadSweep,
-    Option<ringscan::cli::run::SensorDesc>,
+    ringscan::cli::session::ReadSweep,
+    Option<ringscan::cli::session::SensorDesc>,
 )>;
 
 /// The next item from a decoding thread: `None` at its end (the summary kept in `summary`),
@@ -267,8 +268,8 @@ pub(crate) fn next_item<T: Send>(
 
 pub(crate) fn raw_sweep(
     py: Python<'_>,
-    rs: ringscan::cli::run::ReadSweep,
-    desc: Option<ringscan::cli::run::SensorDesc>,
+    rs: ringscan::cli::session::ReadSweep,
+    desc: Option<ringscan::cli::session::SensorDesc>,
     pool: Option<&Arc<BufferPool>>,
 ) -> PyResult<RawSweep> {
     let mut sw = rs.sweep;
@@ -290,7 +291,7 @@ pub(crate) fn raw_sweep(
     } else {
         None
     };
-    let desc = desc.unwrap_or(ringscan::cli::run::SensorDesc {
+    let desc = desc.unwrap_or(ringscan::cli::session::SensorDesc {
         name: String::new(),
         family: "",
         address: std::net::Ipv4Addr::UNSPECIFIED,

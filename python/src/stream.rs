@@ -16,7 +16,8 @@ use pyo3::types::{PyBytes, PyDict};
 
 use ringscan::cli::listen::{listen_run, parse_sensor, ListenArgs, ListenHooks, TappedSweep};
 use ringscan::cli::odometry::{MethodArg, OdometryArgs};
-use ringscan::cli::run::{DecodeArgs, Session};
+use ringscan::cli::run::DecodeArgs;
+use ringscan::cli::session::Session;
 use ringscan::deskew::{Deskewer, Twist};
 use ringscan::pipeline::cluster::{Clusterer, Clusters};
 use ringscan::pipeline::config::PipelineConfig;
@@ -464,7 +465,7 @@ impl Odometry {
 /// MCAP files with the command line's schemas and channels.
 #[pyclass(module = "ringscan._ringscan", unsendable)]
 pub struct McapWriter {
-    sink: Option<ringscan::cli::run::Sink>,
+    sink: Option<ringscan::cli::session::Sink>,
     sensors: Vec<SensorId>,
     path: PathBuf,
 }
@@ -489,7 +490,7 @@ impl McapWriter {
             .map_err(|e: String| to_py_err(ErrKind::Usage, format!("compression {e}")))?;
         let d = DecodeArgs::new(path.clone());
         let opts =
-            ringscan::cli::run::sink_options_with(fmt, comp, threads.max(1), d.chunk_size, false);
+            ringscan::cli::session::sink_options_with(fmt, comp, threads.max(1), d.chunk_size, false);
         let sink =
             create_file(&path, opts).map_err(|e| to_py_err(ErrKind::Decode, e.to_string()))?;
         Ok(Self {
@@ -561,7 +562,7 @@ impl McapWriter {
 }
 
 impl McapWriter {
-    fn open(&mut self) -> PyResult<&mut ringscan::cli::run::Sink> {
+    fn open(&mut self) -> PyResult<&mut ringscan::cli::session::Sink> {
         self.sink
             .as_mut()
             .ok_or_else(|| to_py_err(ErrKind::Usage, "the MCAP writer is closed".into()))

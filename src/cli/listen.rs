@@ -26,11 +26,12 @@ use crate::sink::{McapSink, SinkError};
 use crate::source::udp::{self, BoundSocket, Queue, ReceiveStats, Received, SocketOptions};
 use serde_json::{json, Value};
 
-use super::run::{
-    fields_name, output_json, sink_options_with, ChunkCompression, ReadSweep, RunError, SensorDesc,
-    Session, SessionOptions, Sink,
-};
+use super::run::RunError;
 use super::sensors::load_calibs;
+use super::session::{
+    fields_name, output_json, sink_options_with, ChunkCompression, ReadSweep, SensorDesc, Session,
+    SessionOptions, Sink,
+};
 use super::FormatArg;
 
 /// The Ouster HTTP API path of the sensor metadata.
@@ -980,7 +981,7 @@ pub fn listen_command(
             g(&p["ignored"]),
             g(&r["other_source"]),
         );
-        super::run::print_warnings(&json_out);
+        super::report::print_warnings(&json_out);
         for (path, s) in &files {
             // The topics' counts as `decode` prints them (JSON).
             outln!(

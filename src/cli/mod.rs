@@ -17,9 +17,11 @@ pub mod pipeline;
 pub mod ptc;
 pub mod render;
 pub mod replay;
+pub mod report;
 pub mod run;
 pub mod sensors;
 pub mod serve;
+pub mod session;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -205,7 +207,7 @@ struct DecodeCmd {
     /// MCAP chunk compression: `zstd` (level −3, a fast level), `zstd:LEVEL` (−7 … 19; negative levels are
     /// zstd's fast modes), `lz4` or `none`.
     #[arg(long, default_value = "zstd", requires = "out")]
-    compression: run::ChunkCompression,
+    compression: session::ChunkCompression,
     /// Threads compressing MCAP chunks (default: the machine's cores); 1 = decode and compress
     /// on one thread.
     #[arg(long, value_name = "N", value_parser = parse_threads, requires = "out", allow_negative_numbers = true)]
@@ -605,7 +607,7 @@ where
                 sensors: c.sensors,
                 out: c.out,
                 split_every: c.split_every,
-                session: run::SessionOptions {
+                session: session::SessionOptions {
                     model: c.model,
                     calib: c.calib,
                     name: c.name,
