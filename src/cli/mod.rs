@@ -72,7 +72,7 @@ struct HesaiCalibCmd {
     /// that `--calib` joins to the `.dat`.
     #[arg(long, value_name = "CSV")]
     firetimes: Option<PathBuf>,
-    /// Seconds to wait for the sensor.
+    /// Seconds the sensor has to answer in full (connecting, and each command's whole reply).
     #[arg(long, default_value_t = 5.0)]
     timeout: f64,
 }

@@ -12,7 +12,7 @@
 
 use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpStream};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// The PTC port.
 pub const PTC_PORT: u16 = 9347;
@@ -23,16 +23,17 @@ pub const GET_FIRETIMES: u8 = 0xA9;
 /// Largest response accepted (real correction files are < 100 kB).
 const MAX_RESPONSE: usize = 4 << 20;
 
-/// Sends one PTC command and returns the response payload.
+/// Sends one PTC command and returns the response payload, all of it within `timeout`: a
+/// sensor that answers a byte at a time cannot hold the caller (`listen --hesai-ptc` waits on
+/// it before listening) longer than that.
 pub fn command(
     addr: SocketAddr,
     cmd: u8,
     payload: &[u8],
     timeout: Duration,
 ) -> Result<Vec<u8>, String> {
+    let deadline = Instant::now() + timeout;
     let mut s = TcpStream::connect_timeout(&addr, timeout).map_err(|e| format!("{addr}: {e}"))?;
-    s.set_read_timeout(Some(timeout))
-        .map_err(|e| e.to_string())?;
     s.set_write_timeout(Some(timeout))
         .map_err(|e| e.to_string())?;
     let mut req = vec![0x47, 0x74, cmd, 0];
@@ -41,8 +42,12 @@ pub fn command(
     s.write_all(&req)
         .map_err(|e| format!("{addr}: sending the PTC request: {e}"))?;
     let mut head = [0u8; 8];
-    s.read_exact(&mut head)
-        .map_err(|e| format!("{addr}: reading the PTC response header: {e}"))?;
+    read_by(&mut s, &mut head, deadline).map_err(|e| {
+        format!(
+            "{addr}: reading the PTC response header: {}",
+            late(e, timeout)
+        )
+    })?;
     if head[..2] != [0x47, 0x74] || head[2] != cmd {
         return Err(format!(
             "{addr}: not a PTC response to command {cmd:#04x}: header {:02x?}",
@@ -62,9 +67,45 @@ pub fn command(
         ));
     }
     let mut body = vec![0u8; len];
-    s.read_exact(&mut body)
-        .map_err(|e| format!("{addr}: reading {len} bytes of PTC payload: {e}"))?;
+    read_by(&mut s, &mut body, deadline).map_err(|e| {
+        format!(
+            "{addr}: reading {len} bytes of PTC payload: {}",
+            late(e, timeout)
+        )
+    })?;
     Ok(body)
+}
+
+/// Fills `buf` from `s` before `deadline` (each read waits only for the time left).
+fn read_by(s: &mut TcpStream, buf: &mut [u8], deadline: Instant) -> std::io::Result<()> {
+    use std::io::ErrorKind;
+    let mut got = 0;
+    while got < buf.len() {
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return Err(ErrorKind::TimedOut.into());
+        }
+        s.set_read_timeout(Some(left))?;
+        match s.read(&mut buf[got..]) {
+            Ok(0) => return Err(ErrorKind::UnexpectedEof.into()),
+            Ok(n) => got += n,
+            Err(e) if e.kind() == ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(())
+}
+
+/// A read error, said as the time limit where it was one.
+fn late(e: std::io::Error, timeout: Duration) -> String {
+    use std::io::ErrorKind;
+    match e.kind() {
+        ErrorKind::TimedOut | ErrorKind::WouldBlock => {
+            format!("no complete response within {timeout:?}")
+        }
+        ErrorKind::UnexpectedEof => "the sensor closed the connection".to_string(),
+        _ => e.to_string(),
+    }
 }
 
 /// The angle-correction file of the Hesai sensor at `addr` (its PTC port), checked to be one
@@ -164,6 +205,40 @@ mod tests {
         });
         let e = fetch_angle_correction(addr, Duration::from_secs(5)).unwrap_err();
         assert!(e.contains("refused"), "{e}");
+    }
+
+    /// A sensor that sends its answer a byte every 20 ms (a 1 MB file would take 6 hours)
+    /// is given up at the time limit of the whole exchange, not of each read. This one stops
+    /// after 3 s and closes: a limit per read would have waited for that and reported the
+    /// closed connection instead.
+    #[test]
+    fn a_dripping_sensor_is_given_up_at_the_time_limit() {
+        let l = TcpListener::bind("127.0.0.1:0").unwrap();
+        let addr = l.local_addr().unwrap();
+        std::thread::spawn(move || {
+            if let Ok((mut s, _)) = l.accept() {
+                let mut head = [0u8; 8];
+                let _ = s.read_exact(&mut head);
+                for b in response(GET_ANGLE_CORRECTION, 0, &[b'x'; 1 << 20])
+                    .into_iter()
+                    .take(150)
+                {
+                    if s.write_all(&[b]).is_err() {
+                        return;
+                    }
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+            }
+        });
+        let started = Instant::now();
+        let e = fetch_angle_correction(addr, Duration::from_millis(500)).unwrap_err();
+        assert!(e.contains("no complete response within 500ms"), "{e}");
+        // Each read got a byte well within 500 ms: only a limit on the whole exchange ends it.
+        assert!(
+            started.elapsed() < Duration::from_secs(30),
+            "{:?}",
+            started.elapsed()
+        );
     }
 
     /// The ATX's firetimes come as the binary form (built here from the SDK's struct) and are
