@@ -52,7 +52,7 @@ fn sweep_reader_ends_with_the_summary_decode_gives() {
     };
     for (pcap, calib) in CASES {
         let mut args = DecodeArgs::new(caps.join(pcap));
-        args.calib = calib
+        args.session.calib = calib
             .iter()
             .map(|c| caps.join(c).display().to_string())
             .collect();

@@ -19,7 +19,7 @@ use pyo3::types::PyDict;
 
 use ringscan::cli::bag_args::BagArgs;
 use ringscan::cli::run::{decode_capture, DecodeArgs, RunError, SweepReader};
-use ringscan::cli::session::BufferPool;
+use ringscan::cli::session::{BufferPool, SessionOptions};
 use ringscan::point::{interleave_extended, Point, EXTENDED_STRIDE, POINT_STRIDE};
 
 mod compat;
@@ -341,17 +341,20 @@ pub(crate) fn decode_args(
     integration_ms: Option<f64>,
 ) -> DecodeArgs {
     DecodeArgs {
-        model,
-        calib,
-        port,
-        cut_angle_deg,
-        min_range,
-        max_range,
-        fields_all,
-        crc,
-        dual_return_threshold_m,
-        fov_deg,
-        integration_ms,
+        session: SessionOptions {
+            model,
+            calib,
+            port,
+            cut_angle_deg,
+            min_range,
+            max_range,
+            fields_all,
+            crc,
+            dual_return_threshold_m,
+            fov_deg,
+            integration_ms,
+            ..SessionOptions::default()
+        },
         bag: BagArgs { topics, start, end },
         // One thread: a fleet runs one decoding thread per task.
         threads: 1,
@@ -467,7 +470,7 @@ impl Reader {
             fov,
             integration_ms,
         );
-        args.keep_columns = keep_columns;
+        args.session.keep_columns = keep_columns;
         args.read_ahead = read_ahead;
         let pool = Arc::new(BufferPool::default());
         Ok(Self {
@@ -518,7 +521,7 @@ fn info(
         None,
     );
     // As `ringscan info`: a sensor without the calibration its points need is still read.
-    args.inspect = true;
+    args.session.inspect = true;
     run_decode(py, &args)
 }
 

@@ -17,7 +17,7 @@ use pyo3::types::{PyBytes, PyDict};
 use ringscan::cli::listen::{listen_run, parse_sensor, ListenArgs, ListenHooks, TappedSweep};
 use ringscan::cli::odometry::{MethodArg, OdometryArgs};
 use ringscan::cli::run::DecodeArgs;
-use ringscan::cli::session::Session;
+use ringscan::cli::session::{Session, SessionOptions};
 use ringscan::deskew::{Deskewer, Twist};
 use ringscan::pipeline::cluster::{Clusterer, Clusters};
 use ringscan::pipeline::config::PipelineConfig;
@@ -82,9 +82,9 @@ impl Decoder {
             None,
             None,
         );
-        args.keep_columns = keep_columns;
-        let mut session = Session::new(&args.session_options())
-            .map_err(|e| to_py_err(kind_of(&e), e.to_string()))?;
+        args.session.keep_columns = keep_columns;
+        let mut session =
+            Session::new(&args.session).map_err(|e| to_py_err(kind_of(&e), e.to_string()))?;
         session.enable_tap();
         Ok(Self { session })
     }
@@ -193,9 +193,12 @@ impl Listener {
             None => None,
         };
         let d = DecodeArgs {
-            model,
-            calib,
-            keep_columns: true,
+            session: SessionOptions {
+                model,
+                calib,
+                keep_columns: true,
+                ..SessionOptions::default()
+            },
             ..DecodeArgs::new(PathBuf::from("udp"))
         };
         let (tx, rx) = mpsc::sync_channel::<TappedSweep>(queue.max(1));
@@ -204,8 +207,7 @@ impl Listener {
             sensors,
             out,
             split_every: None,
-            session: d.session_options(),
-            format: d.format,
+            session: d.session,
             fields_minimal: false,
             threads: 1,
             chunk_size: d.chunk_size,
@@ -489,8 +491,13 @@ impl McapWriter {
             .parse()
             .map_err(|e: String| to_py_err(ErrKind::Usage, format!("compression {e}")))?;
         let d = DecodeArgs::new(path.clone());
-        let opts =
-            ringscan::cli::session::sink_options_with(fmt, comp, threads.max(1), d.chunk_size, false);
+        let opts = ringscan::cli::session::sink_options_with(
+            fmt,
+            comp,
+            threads.max(1),
+            d.chunk_size,
+            false,
+        );
         let sink =
             create_file(&path, opts).map_err(|e| to_py_err(ErrKind::Decode, e.to_string()))?;
         Ok(Self {

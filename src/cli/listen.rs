@@ -89,8 +89,8 @@ pub struct ListenArgs {
     pub sensors: Vec<(Ipv4Addr, Option<u16>)>,
     pub out: Option<PathBuf>,
     pub split_every: Option<Split>,
+    /// How datagrams become sweeps and messages, as for `decode`.
     pub session: SessionOptions,
-    pub format: FormatArg,
     /// `--fields minimal`.
     pub fields_minimal: bool,
     /// `--threads`: MCAP chunk compression threads.
@@ -299,7 +299,7 @@ fn listen_sink_options(args: &ListenArgs) -> SinkOptions {
     SinkOptions {
         behind: Behind::WriteUncompressed,
         ..sink_options_with(
-            args.format,
+            args.session.format,
             ChunkCompression::default(),
             args.threads,
             args.chunk_size,
@@ -1050,7 +1050,8 @@ pub fn listen_run_with(
     let resolved;
     let args = match &args.out {
         Some(out) => {
-            let bag_dir = args.format == FormatArg::Ros2 && crate::sink::rosbag2::is_bag_dir(out);
+            let bag_dir =
+                args.session.format == FormatArg::Ros2 && crate::sink::rosbag2::is_bag_dir(out);
             if bag_dir || args.split_every.is_some() {
                 super::run::out_dir_exists(out)?;
                 args

@@ -120,9 +120,10 @@ fn hesai_calib_command(c: &HesaiCalibCmd) -> Result<ExitCode, RunError> {
 }
 
 /// Point cloud message layout.
-#[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, ValueEnum, PartialEq, Eq)]
 pub enum FormatArg {
     /// foxglove.PointCloud (protobuf).
+    #[default]
     Foxglove,
     /// sensor_msgs/msg/PointCloud2 (CDR).
     Ros2,
@@ -150,32 +151,12 @@ pub enum FieldsArg {
     All,
 }
 
+/// How datagrams become sweeps and messages: the options `decode` and `listen` share.
 #[derive(clap::Args, Debug)]
-struct DecodeCmd {
-    /// Input capture (.pcap or .pcapng), ROS bag (ROS 1 .bag; rosbag2 directory, .db3 or
-    /// .mcap) or Livox recording (.lvx, .lvx2), told apart by its bytes.
-    input: PathBuf,
-    /// Output MCAP file (omit to decode and count only).
-    #[arg(long, short)]
-    out: Option<PathBuf>,
-    /// Sensor model, overriding detection. Velodyne: vlp16, puck-hires, hdl32e, vlp32c,
-    /// hdl64e-s2, hdl64e-s3, vls128; Hesai: pandar40p, pandar64, pandarqt64, pandarqt128,
-    /// pandarxt16, pandarxt32, pandarxt32m, pandarat128, pandarot128, pandaratx; Robosense:
-    /// rs16, rs32, rsbpearl, rshelios, rshelios16p, rsruby128, rsm1; Livox: mid360, hap, avia,
-    /// horizon, tele15, mid40, mid70.
-    #[arg(long)]
-    model: Option<String>,
-    /// Calibration file: Velodyne ROS yaml, VeloView xml or HDL-64E db.xml; Ouster metadata
-    /// JSON; Hesai angle-correction CSV, AT128 or ATX .dat; Robosense angle CSV. `ADDR=FILE` gives
-    /// it to the sensor at that source address only. Repeatable.
-    #[arg(long = "calib", value_name = "[ADDR=]FILE")]
-    calib: Vec<String>,
+struct SweepOpts {
     /// Sensor name (frame id and topic prefix); only with a single sensor.
     #[arg(long, value_parser = parse_name)]
     name: Option<String>,
-    /// Only data packets sent to this UDP port.
-    #[arg(long)]
-    port: Option<u16>,
     /// Azimuth at which sweeps are cut, degrees.
     #[arg(long, allow_negative_numbers = true, default_value_t = 0.0)]
     cut_angle: f64,
@@ -204,6 +185,79 @@ struct DecodeCmd {
     /// Message layout.
     #[arg(long, value_enum, default_value_t = FormatArg::Foxglove, requires = "out")]
     format: FormatArg,
+    /// Also write every UDP payload to `/raw`, so the drive can be decoded again later.
+    #[arg(long, requires = "out")]
+    raw: bool,
+    /// Packet CRC checks (Ouster footer CRC-64, Hesai CRC-32, Livox CRC-32): `auto` = where
+    /// the sensor writes them (Ouster: firmware ≥ 2.5, not FUSA), `on`, `off`.
+    #[arg(long, value_enum, default_value_t = CrcArg::Auto)]
+    crc: CrcArg,
+    #[command(flatten)]
+    pipeline: pipeline::PipelineArgs,
+    #[command(flatten)]
+    odometry: odometry::OdometryArgs,
+}
+
+impl SweepOpts {
+    /// The session's options, with the sensor selection each command reads its own way.
+    fn session(
+        self,
+        model: Option<String>,
+        calib: Vec<String>,
+        port: Option<u16>,
+    ) -> session::SessionOptions {
+        session::SessionOptions {
+            model,
+            calib,
+            name: self.name,
+            port,
+            cut_angle_deg: self.cut_angle,
+            min_range: self.min_range,
+            max_range: self.max_range,
+            dual_return_threshold_m: self.dual_return_threshold,
+            fov_deg: self.fov,
+            integration_ms: self.integration_ms,
+            fields_all: self.fields == FieldsArg::All,
+            raw: self.raw,
+            crc: match self.crc {
+                CrcArg::Auto => None,
+                CrcArg::On => Some(true),
+                CrcArg::Off => Some(false),
+            },
+            pipeline: self.pipeline,
+            format: self.format,
+            odometry: self.odometry,
+            keep_columns: false,
+            inspect: false,
+        }
+    }
+}
+
+#[derive(clap::Args, Debug)]
+struct DecodeCmd {
+    /// Input capture (.pcap or .pcapng), ROS bag (ROS 1 .bag; rosbag2 directory, .db3 or
+    /// .mcap) or Livox recording (.lvx, .lvx2), told apart by its bytes.
+    input: PathBuf,
+    /// Output MCAP file (omit to decode and count only).
+    #[arg(long, short)]
+    out: Option<PathBuf>,
+    /// Sensor model, overriding detection. Velodyne: vlp16, puck-hires, hdl32e, vlp32c,
+    /// hdl64e-s2, hdl64e-s3, vls128; Hesai: pandar40p, pandar64, pandarqt64, pandarqt128,
+    /// pandarxt16, pandarxt32, pandarxt32m, pandarat128, pandarot128, pandaratx; Robosense:
+    /// rs16, rs32, rsbpearl, rshelios, rshelios16p, rsruby128, rsm1; Livox: mid360, hap, avia,
+    /// horizon, tele15, mid40, mid70.
+    #[arg(long)]
+    model: Option<String>,
+    /// Calibration file: Velodyne ROS yaml, VeloView xml or HDL-64E db.xml; Ouster metadata
+    /// JSON; Hesai angle-correction CSV, AT128 or ATX .dat; Robosense angle CSV. `ADDR=FILE` gives
+    /// it to the sensor at that source address only. Repeatable.
+    #[arg(long = "calib", value_name = "[ADDR=]FILE")]
+    calib: Vec<String>,
+    /// Only data packets sent to this UDP port.
+    #[arg(long)]
+    port: Option<u16>,
+    #[command(flatten)]
+    sweeps: SweepOpts,
     /// MCAP chunk compression: `zstd` (level −3, a fast level), `zstd:LEVEL` (−7 … 19; negative levels are
     /// zstd's fast modes), `lz4` or `none`.
     #[arg(long, default_value = "zstd", requires = "out")]
@@ -215,23 +269,12 @@ struct DecodeCmd {
     /// Uncompressed size of an MCAP chunk, MiB (fractions allowed).
     #[arg(long, value_name = "MIB", default_value = "4", value_parser = parse_chunk_size, requires = "out", allow_negative_numbers = true)]
     chunk_size: u64,
-    /// Also write every UDP payload to `/raw`, so the drive can be decoded again later.
-    #[arg(long, requires = "out")]
-    raw: bool,
-    /// Packet CRC checks (Ouster footer CRC-64, Hesai CRC-32, Livox CRC-32): `auto` = where
-    /// the sensor writes them (Ouster: firmware ≥ 2.5, not FUSA), `on`, `off`.
-    #[arg(long, value_enum, default_value_t = CrcArg::Auto)]
-    crc: CrcArg,
     /// Exit with an error if any packet was missing, dropped or malformed.
     #[arg(long)]
     strict: bool,
     /// Print one JSON summary object on stdout at the end.
     #[arg(long)]
     json: bool,
-    #[command(flatten)]
-    pipeline: pipeline::PipelineArgs,
-    #[command(flatten)]
-    odometry: odometry::OdometryArgs,
     #[command(flatten)]
     serve: serve::ServeArgs,
     #[command(flatten)]
@@ -294,9 +337,6 @@ struct ListenCmd {
     /// from http://SENSOR/api/v1/sensor/metadata (again after an init_id change).
     #[arg(long = "calib", value_name = "[ADDR=]FILE")]
     calib: Vec<String>,
-    /// Sensor name (frame id and topic prefix); only with a single sensor.
-    #[arg(long, value_parser = parse_name)]
-    name: Option<String>,
     /// Before listening, fetch the angle correction of every --sensor without its own --calib
     /// over Hesai's TCP control protocol (port 9347, or PORT); for a Pandar ATX, its firetime
     /// correction too.
@@ -321,37 +361,8 @@ struct ListenCmd {
     /// Interface address for --multicast.
     #[arg(long, value_name = "IP", default_value = "0.0.0.0")]
     interface: std::net::Ipv4Addr,
-    /// Azimuth at which sweeps are cut, degrees.
-    #[arg(long, allow_negative_numbers = true, default_value_t = 0.0)]
-    cut_angle: f64,
-    /// Drop points closer than this, metres.
-    #[arg(long, allow_negative_numbers = true)]
-    min_range: Option<f32>,
-    /// Drop points farther than this, metres.
-    #[arg(long, allow_negative_numbers = true)]
-    max_range: Option<f32>,
-    /// Hesai multi-return: also drop a return that is not its firing's last when within this
-    /// many metres of another (nebula's dual_return_distance_threshold, e.g. 0.1); default:
-    /// only identical returns are merged.
-    #[arg(long, value_name = "M")]
-    dual_return_threshold: Option<f32>,
-    /// Hesai: keep only points whose corrected azimuth lies between START and END degrees
-    /// (clockwise from forward), e.g. 30:150.
-    #[arg(long, value_name = "START:END", value_parser = parse_fov)]
-    fov: Option<(f64, f64)>,
-    /// Sensors that do not spin (Livox): a sweep per integration period of this many ms
-    /// (default 100).
-    #[arg(long, value_name = "MS")]
-    integration_ms: Option<f64>,
-    /// Point fields written.
-    #[arg(long, value_enum, default_value_t = FieldsArg::Default)]
-    fields: FieldsArg,
-    /// Message layout.
-    #[arg(long, value_enum, default_value_t = FormatArg::Foxglove, requires = "out")]
-    format: FormatArg,
-    /// Also write every UDP payload to `/raw`.
-    #[arg(long, requires = "out")]
-    raw: bool,
+    #[command(flatten)]
+    sweeps: SweepOpts,
     /// Threads compressing MCAP chunks (default: the machine's cores). The decode thread never
     /// waits for them: a chunk they cannot take in time is written uncompressed and counted
     /// (`output.chunks_uncompressed`); 1 = compress on the decode thread.
@@ -360,10 +371,6 @@ struct ListenCmd {
     /// Uncompressed size of an MCAP chunk, MiB (fractions allowed).
     #[arg(long, value_name = "MIB", default_value = "4", value_parser = parse_chunk_size, requires = "out", allow_negative_numbers = true)]
     chunk_size: u64,
-    /// Packet CRC checks (Ouster footer CRC-64, Hesai CRC-32, Livox CRC-32): `auto` = where
-    /// the sensor writes them (Ouster: firmware ≥ 2.5, not FUSA).
-    #[arg(long, value_enum, default_value_t = CrcArg::Auto)]
-    crc: CrcArg,
     /// Port of the sensors' HTTP API (Ouster metadata).
     #[arg(long, default_value_t = 80)]
     api_port: u16,
@@ -379,10 +386,6 @@ struct ListenCmd {
     /// Print one JSON summary object on stdout at the end.
     #[arg(long)]
     json: bool,
-    #[command(flatten)]
-    pipeline: pipeline::PipelineArgs,
-    #[command(flatten)]
-    odometry: odometry::OdometryArgs,
     #[command(flatten)]
     serve: serve::ServeArgs,
 }
@@ -424,7 +427,6 @@ struct ReplayCmd {
     bag: bag_args::BagArgs,
 }
 
-/// `--threads`: a positive number.
 /// `--name`: a frame id and topic segment, so not empty and without `/` or spaces (ROS names:
 /// letters, digits, `_`, `-`, `.`).
 fn parse_name(s: &str) -> Result<String, String> {
@@ -441,6 +443,7 @@ fn parse_name(s: &str) -> Result<String, String> {
     }
 }
 
+/// `--threads`: a positive number.
 fn parse_threads(s: &str) -> Result<usize, String> {
     match s.parse::<usize>() {
         Ok(n) if (1..=1024).contains(&n) => Ok(n),
@@ -551,42 +554,22 @@ where
     };
     let result = match cli.command {
         Command::Decode(c) => {
+            let fields_minimal = c.sweeps.fields == FieldsArg::Minimal;
             let args = DecodeArgs {
                 input: c.input,
                 out: c.out,
-                model: c.model,
-                calib: c.calib,
-                name: c.name,
-                port: c.port,
-                cut_angle_deg: c.cut_angle,
-                min_range: c.min_range,
-                max_range: c.max_range,
-                dual_return_threshold_m: c.dual_return_threshold,
-                fov_deg: c.fov,
-                integration_ms: c.integration_ms,
-                fields_all: c.fields == FieldsArg::All,
-                fields_minimal: c.fields == FieldsArg::Minimal,
-                format: c.format,
+                session: c.sweeps.session(c.model, c.calib, c.port),
+                fields_minimal,
                 compression: c.compression,
                 threads: c.threads.unwrap_or_else(default_threads),
                 chunk_size: c.chunk_size,
-                raw: c.raw,
                 strict: c.strict,
-                crc: match c.crc {
-                    CrcArg::Auto => None,
-                    CrcArg::On => Some(true),
-                    CrcArg::Off => Some(false),
-                },
                 json: c.json,
                 input_bytes: None,
                 read_ahead: false,
-                pipeline: c.pipeline,
-                odometry: c.odometry,
                 serve: c.serve,
                 serve_rate: c.serve_rate,
                 bag: c.bag,
-                keep_columns: false,
-                inspect: false,
             };
             run::decode_command(&args)
         }
@@ -603,36 +586,13 @@ where
                 }
                 None => None,
             };
+            let fields_minimal = c.sweeps.fields == FieldsArg::Minimal;
             let args = listen::ListenArgs {
                 sensors: c.sensors,
                 out: c.out,
                 split_every: c.split_every,
-                session: session::SessionOptions {
-                    model: c.model,
-                    calib: c.calib,
-                    name: c.name,
-                    port: None,
-                    cut_angle_deg: c.cut_angle,
-                    min_range: c.min_range,
-                    max_range: c.max_range,
-                    dual_return_threshold_m: c.dual_return_threshold,
-                    fov_deg: c.fov,
-                    integration_ms: c.integration_ms,
-                    fields_all: c.fields == FieldsArg::All,
-                    raw: c.raw,
-                    crc: match c.crc {
-                        CrcArg::Auto => None,
-                        CrcArg::On => Some(true),
-                        CrcArg::Off => Some(false),
-                    },
-                    pipeline: c.pipeline,
-                    format: c.format,
-                    odometry: c.odometry,
-                    keep_columns: false,
-                    inspect: false,
-                },
-                format: c.format,
-                fields_minimal: c.fields == FieldsArg::Minimal,
+                session: c.sweeps.session(c.model, c.calib, None),
+                fields_minimal,
                 threads: c.threads.unwrap_or_else(default_threads),
                 chunk_size: c.chunk_size,
                 multicast: c.multicast,

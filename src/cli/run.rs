@@ -17,8 +17,6 @@ use crate::source::Datagram;
 use serde_json::{json, Value};
 
 use super::bag_args::{self as input, BagArgs, Input, InputError};
-use super::odometry::OdometryArgs;
-use super::pipeline::PipelineArgs;
 use super::report::print_text;
 use super::sensors;
 use super::session::{
@@ -44,20 +42,8 @@ const PRESCAN_BYTES: u64 = 8 << 20;
 pub struct DecodeArgs {
     pub input: PathBuf,
     pub out: Option<PathBuf>,
-    pub model: Option<String>,
-    pub calib: Vec<String>,
-    pub name: Option<String>,
-    pub port: Option<u16>,
-    pub cut_angle_deg: f64,
-    pub min_range: Option<f32>,
-    pub max_range: Option<f32>,
-    /// `--dual-return-threshold` (Hesai).
-    pub dual_return_threshold_m: Option<f32>,
-    /// `--fov START:END`, degrees (Hesai).
-    pub fov_deg: Option<(f64, f64)>,
-    /// `--integration-ms` (Livox).
-    pub integration_ms: Option<f64>,
-    pub fields_all: bool,
+    /// How datagrams become sweeps and messages, as for `listen`.
+    pub session: SessionOptions,
     /// `--fields minimal`: x, y, z, intensity only.
     pub fields_minimal: bool,
     /// `--compression`.
@@ -66,11 +52,7 @@ pub struct DecodeArgs {
     pub threads: usize,
     /// `--chunk-size`, bytes.
     pub chunk_size: u64,
-    pub format: FormatArg,
-    pub raw: bool,
     pub strict: bool,
-    /// Ouster CRC check: `None` = the firmware rule.
-    pub crc: Option<bool>,
     pub json: bool,
     /// Decode these bytes instead of reading `input` (the demo).
     pub input_bytes: Option<&'static [u8]>,
@@ -81,17 +63,8 @@ pub struct DecodeArgs {
     pub serve: super::serve::ServeArgs,
     /// `--serve-rate`: publishing speed of the live view.
     pub serve_rate: crate::source::udp::Rate,
-    /// `--pipeline`, `--deskew`, `--extrinsics`.
-    pub pipeline: PipelineArgs,
-    /// `--odometry`, `--trajectory`, `--map-every`.
-    pub odometry: OdometryArgs,
     /// `--topic`, `--start`, `--end` (bags).
     pub bag: BagArgs,
-    /// Keep each point's firing column in the sweeps ([`SweepReader`]'s organised images).
-    pub keep_columns: bool,
-    /// `info`: read a sensor that lacks a calibration without points instead of failing
-    /// ([`crate::sensor::StreamSettings::inspect`]).
-    pub inspect: bool,
 }
 
 /// Why a run failed.
@@ -261,59 +234,18 @@ impl DecodeArgs {
         Self {
             input,
             out: None,
-            model: None,
-            calib: Vec::new(),
-            name: None,
-            port: None,
-            cut_angle_deg: 0.0,
-            min_range: None,
-            max_range: None,
-            dual_return_threshold_m: None,
-            fov_deg: None,
-            integration_ms: None,
-            fields_all: false,
+            session: SessionOptions::default(),
             fields_minimal: false,
             compression: ChunkCompression::default(),
             threads: super::default_threads(),
             chunk_size: crate::sink::mcap::DEFAULT_CHUNK_SIZE,
-            format: FormatArg::Foxglove,
-            raw: false,
             strict: false,
-            crc: None,
             json: false,
             input_bytes: None,
             read_ahead: false,
-            pipeline: PipelineArgs::default(),
-            odometry: OdometryArgs::default(),
             serve: Default::default(),
             serve_rate: crate::source::udp::Rate::Max,
             bag: BagArgs::default(),
-            keep_columns: false,
-            inspect: false,
-        }
-    }
-
-    /// The options of the [`Session`] this run uses.
-    pub fn session_options(&self) -> SessionOptions {
-        SessionOptions {
-            model: self.model.clone(),
-            calib: self.calib.clone(),
-            name: self.name.clone(),
-            port: self.port,
-            cut_angle_deg: self.cut_angle_deg,
-            min_range: self.min_range,
-            max_range: self.max_range,
-            dual_return_threshold_m: self.dual_return_threshold_m,
-            fov_deg: self.fov_deg,
-            integration_ms: self.integration_ms,
-            fields_all: self.fields_all,
-            raw: self.raw,
-            crc: self.crc,
-            pipeline: self.pipeline.clone(),
-            format: self.format,
-            odometry: self.odometry.clone(),
-            keep_columns: self.keep_columns,
-            inspect: self.inspect,
         }
     }
 }
@@ -324,7 +256,7 @@ fn start_session(args: &DecodeArgs) -> Result<(Session, Capture), RunError> {
     let (mut session, mut first, mut count) = open_session(args, false)?;
     prescan(&mut first, &mut count);
     let n = count.sensors();
-    if args.name.is_some() && n > 1 {
+    if args.session.name.is_some() && n > 1 {
         return Err(RunError::Usage(format!(
             "--name: the capture holds {n} sensors; names are given per sensor automatically"
         )));
@@ -358,16 +290,16 @@ fn open_session(
     read_ahead: bool,
 ) -> Result<(Session, Capture, SensorCount), RunError> {
     let first = open_input(args, read_ahead && args.read_ahead)?;
-    let mut options = args.session_options();
+    let mut options = args.session.clone();
     // A Livox recording names its devices' model, which SDK1 packets do not.
     if options.model.is_none() {
         options.model = first.model_hint().map(str::to_string);
     }
     let mut session = Session::new(&options)?;
     if let Some(b) = first.bag() {
-        add_bag_metadata(&mut session, b, &args.calib);
+        add_bag_metadata(&mut session, b, &args.session.calib);
     }
-    let count = SensorCount::new(session.lidar_sizes(), args.port);
+    let count = SensorCount::new(session.lidar_sizes(), args.session.port);
     Ok((session, first, count))
 }
 
@@ -410,7 +342,7 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
     let started = Instant::now();
     let path_s = args.input.display().to_string();
     let sink_opts = sink_options_with(
-        args.format,
+        args.session.format,
         args.compression,
         args.threads,
         args.chunk_size,
@@ -420,7 +352,7 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
     let bag_dir = args
         .out
         .as_deref()
-        .filter(|p| args.format == FormatArg::Ros2 && crate::sink::rosbag2::is_bag_dir(p));
+        .filter(|p| args.session.format == FormatArg::Ros2 && crate::sink::rosbag2::is_bag_dir(p));
     let out_path = match (&args.out, bag_dir) {
         // `demo` has no output-less run to advise.
         (Some(p), None) => Some(output_file_path(
@@ -454,7 +386,7 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
     // An output over a file this run reads would destroy it (the rename replaces it at the
     // end, or the trajectory is written over it as the run goes): refused before anything.
     let inputs: Vec<(&str, &Path)> = std::iter::once(("INPUT", args.input.as_path()))
-        .chain(args.calib.iter().map(|c| {
+        .chain(args.session.calib.iter().map(|c| {
             let file = c.split_once('=').map_or(c.as_str(), |(_, f)| f);
             ("--calib", Path::new(file))
         }))
@@ -463,7 +395,8 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
         .map(|p| ("--out", p))
         .into_iter()
         .chain(
-            args.odometry
+            args.session
+                .odometry
                 .trajectory
                 .as_deref()
                 .map(|p| ("--trajectory", p)),
@@ -550,7 +483,7 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
     let pumped = pump(&mut src, &mut session, total);
     // A run that found no sensor decoded nothing: an error, as a sensor that cannot be
     // decoded is, rather than a success with an empty output. `info` reports it.
-    if pumped.is_ok() && !args.inspect {
+    if pumped.is_ok() && !args.session.inspect {
         if let Some(why) = session.no_sensor_reason(&src) {
             let wrote_nothing = session.chunk_stats().is_some();
             session.abort_sink();
@@ -602,7 +535,7 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
             s,
             args.out.as_deref(),
             &sink_opts,
-            fields_name(args.fields_all, args.fields_minimal),
+            fields_name(args.session.fields_all, args.fields_minimal),
         ),
         None => Value::Null,
     };
@@ -899,11 +832,14 @@ pub fn info_command(
     json_out: bool,
 ) -> Result<ExitCode, RunError> {
     let args = DecodeArgs {
-        model: model.map(str::to_string),
-        calib: calib.to_vec(),
+        session: SessionOptions {
+            model: model.map(str::to_string),
+            calib: calib.to_vec(),
+            inspect: true,
+            ..SessionOptions::default()
+        },
         json: json_out,
         bag: bag.clone(),
-        inspect: true,
         ..DecodeArgs::new(input.to_path_buf())
     };
     let s = decode_capture(&args)?;

@@ -452,22 +452,35 @@ impl Output {
     }
 }
 
-/// Settings of a [`Session`], whatever the datagrams come from.
-#[derive(Debug, Clone)]
+/// Settings of a [`Session`], whatever the datagrams come from. The default is `decode`'s:
+/// every sensor, no range limits, the calibrations built in.
+#[derive(Debug, Clone, Default)]
 pub struct SessionOptions {
+    /// `--model`: overrides detection.
     pub model: Option<String>,
+    /// `--calib`, as given (`[ADDR=]FILE`).
     pub calib: Vec<String>,
+    /// `--name`: frame id and topic prefix of a single sensor.
     pub name: Option<String>,
+    /// `--port`: only datagrams sent to this UDP port.
     pub port: Option<u16>,
+    /// `--cut-angle`, degrees.
     pub cut_angle_deg: f64,
+    /// `--min-range`, metres.
     pub min_range: Option<f32>,
+    /// `--max-range`, metres.
     pub max_range: Option<f32>,
+    /// `--dual-return-threshold` (Hesai), metres.
     pub dual_return_threshold_m: Option<f32>,
+    /// `--fov START:END`, degrees (Hesai).
     pub fov_deg: Option<(f64, f64)>,
     /// `--integration-ms` (Livox).
     pub integration_ms: Option<f64>,
+    /// `--fields all`.
     pub fields_all: bool,
+    /// `--raw`: every UDP payload to `/raw` as well.
     pub raw: bool,
+    /// Packet CRC checks: `None` = where the sensor writes them.
     pub crc: Option<bool>,
     /// `--pipeline`, `--deskew`, `--extrinsics`.
     pub pipeline: PipelineArgs,
