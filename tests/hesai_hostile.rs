@@ -275,6 +275,89 @@ fn hesai_csv_goes_to_hesai_and_its_errors_say_what_is_wrong() {
     assert!(e.to_string().contains("AT128"), "{e}");
 }
 
+/// Packets of every model from the simulator (tail time `T0`).
+fn sim_packets(model: HesaiModel, n: usize) -> Vec<Vec<u8>> {
+    const T0: i64 = 1_714_564_800_000_000_000;
+    let scene = ringscan::sim::scenes::named("urban").unwrap();
+    let mut sim =
+        ringscan::sensor::hesai::sim::HesaiSim::new(model, harness::hesai_correction(model), T0);
+    (0..n)
+        .map(|_| sim.next_packet(&scene, &mut Vec::new()).1)
+        .collect()
+}
+
+/// A capture time at either end of `i64` (an MCAP log time of 2^64 − 1 read as i64::MAX, a
+/// pcapng interface whose negative `if_tsoffset` saturates to i64::MIN): every model's stream
+/// decodes on without overflowing its time arithmetic, and does not call such a host clock
+/// synchronised with the tail's. (Debug builds check overflow: the old code panicked here.)
+#[test]
+fn host_times_at_the_ends_of_i64_do_not_overflow() {
+    use ringscan::sensor::hesai::model::ALL_MODELS;
+    for model in ALL_MODELS {
+        let packets = sim_packets(model, 40);
+        for host in [i64::MAX, i64::MIN, i64::MAX - 1_000] {
+            let mut stream = stream_for(model);
+            let mut points = 0usize;
+            let mut on_sweep = |sw: &mut ringscan::sweep::Sweep, _: &_| points += sw.points.len();
+            for p in &packets {
+                stream.push(host, p, &mut on_sweep).unwrap();
+            }
+            stream.finish(&mut on_sweep);
+            assert_eq!(stream.stats().packets, 40, "{model:?} at host time {host}");
+            assert!(points > 0, "{model:?} at host time {host}");
+            assert_eq!(
+                stream.facts().clock_synchronised,
+                Some(false),
+                "{model:?} at host time {host}"
+            );
+        }
+    }
+}
+
+/// A tail whose date is no date (a zero month or day): its time is the host's, which is no
+/// evidence of a synchronised sensor clock, so the clock is reported free-running. Which byte
+/// holds the date is found by trying every tail byte, not taken from the layout the decoder
+/// uses.
+#[test]
+fn a_tail_without_a_valid_date_is_not_a_synchronised_clock() {
+    use ringscan::sensor::hesai::model::ALL_MODELS;
+    use ringscan::sensor::hesai::HesaiPacket;
+    let mut tried = Vec::new();
+    for model in ALL_MODELS {
+        let packets = sim_packets(model, 2);
+        let good = &packets[0];
+        let Ok(p) = HesaiPacket::new(good, model) else {
+            panic!("{model:?}: the simulator's packet is refused");
+        };
+        let host = p.stamp_ns().expect("the simulator writes a valid date");
+        // The last 64 bytes hold every model's tail.
+        let dateless = (good.len().saturating_sub(64)..good.len()).find_map(|i| {
+            let mut b = good.clone();
+            b[i] = 0;
+            HesaiPacket::new(&b, model)
+                .is_ok_and(|p| p.stamp_ns().is_none())
+                .then_some(b)
+        });
+        let Some(bad) = dateless else {
+            // AT128: its tail time is Unix seconds, valid whatever its bytes.
+            continue;
+        };
+        let mut cfg = HesaiConfig::new(Some(harness::hesai_correction(model)), "test");
+        cfg.model = Some(model);
+        cfg.check_crc = false;
+        let mut stream = HesaiStream::new(cfg);
+        stream.push(host, &bad, &mut |_, _| {}).unwrap();
+        assert_eq!(stream.stats().packets, 1, "{model:?}");
+        assert_eq!(
+            stream.facts().clock_synchronised,
+            Some(false),
+            "{model:?}: a dateless tail called synchronised"
+        );
+        tried.push(model);
+    }
+    assert!(tried.len() >= 8, "only {tried:?} have a date to break");
+}
+
 #[test]
 fn real_packets_and_files_mutated_through_the_fuzz_harnesses() {
     let mut rng = Rng(0x9E37_79B9_7F4A_7C15);

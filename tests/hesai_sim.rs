@@ -124,8 +124,13 @@ fn run(model: HesaiModel, calib: HesaiCalibration, mode: u8) -> Figures {
     let mut stream = HesaiStream::new(cfg);
     let mut fig = Figures::default();
     let mut streamed = 0usize;
+    let mut sweep_azimuths = Vec::new();
+    // Every block azimuth sent, in 0.01° from the layouts' units (AT128: 1/25 600°, ATX:
+    // 1/256°, the rest 0.01°): a sweep's first and last azimuth must be among them.
+    let mut block_cdeg = std::collections::HashSet::new();
     let mut on_sweep = |sw: &mut ringscan::sweep::Sweep, _: &_| {
         streamed += sw.points.len();
+        sweep_azimuths.push((sw.first_azimuth, sw.last_azimuth));
         for p in &sw.points {
             assert!(i64::from(p.t) < 200_000_000, "t {} ns", p.t);
         }
@@ -140,6 +145,14 @@ fn run(model: HesaiModel, calib: HesaiCalibration, mode: u8) -> Figures {
         let p = HesaiPacket::new(&bytes, model).unwrap();
         assert_eq!(HesaiModel::detect(&bytes), Some(model));
         let stamp = p.stamp_ns().unwrap();
+        for b in 0..p.layout().blocks {
+            let raw = u64::from(p.azimuth(b));
+            block_cdeg.insert(match model {
+                HesaiModel::PandarAt128 => raw / 256 % 36_000,
+                HesaiModel::PandarAtx => raw * 100 / 256 % 36_000,
+                _ => raw % 36_000,
+            });
+        }
         let t0 = stamp - 1_000_000;
         let mut pts = Vec::new();
         dec.decode_packet(&p, stamp, t0, &mut pts).unwrap();
@@ -173,6 +186,12 @@ fn run(model: HesaiModel, calib: HesaiCalibration, mode: u8) -> Figures {
     );
     assert_eq!(stream.stats().missing, 0);
     assert_eq!(stream.stats().malformed, 0);
+    for (first, last) in sweep_azimuths {
+        assert!(
+            block_cdeg.contains(&u64::from(first)) && block_cdeg.contains(&u64::from(last)),
+            "{model:?}: sweep azimuths {first}, {last} (0.01°) are no block's"
+        );
+    }
     fig.sweeps = stream.stats().sweeps;
     fig
 }

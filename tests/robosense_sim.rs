@@ -287,3 +287,47 @@ fn m1_within_1cm_and_1us() {
         assert_eq!(pk as usize, if i < 3 { 630 } else { packets - 3 * 630 });
     }
 }
+
+/// A capture time at either end of `i64` (an MCAP log time of 2^64 − 1 read as i64::MAX, a
+/// pcapng interface whose negative `if_tsoffset` saturates to i64::MIN): every model's stream
+/// (the DIFOP first, then a sweep and more of packets) decodes on without overflowing its time
+/// arithmetic, and does not call such a host clock synchronised with the header's. (Debug
+/// builds check overflow: the old code panicked here.)
+#[test]
+fn host_times_at_the_ends_of_i64_do_not_overflow() {
+    let scene = scenes::named("urban").unwrap();
+    for model in ALL_MODELS {
+        let mut packets = Vec::new();
+        if model == RobosenseModel::M1 {
+            let mut sim = M1Sim::new(T0);
+            for _ in 0..700 {
+                packets.push(sim.next_packet(&scene, &mut Vec::new()).1);
+            }
+        } else {
+            let mut sim = RobosenseSim::new(model, synthetic(model), T0);
+            packets.push(sim.difop());
+            let n = (150_000_000.0 / model.spec().packet_period_ns(false)) as usize;
+            for _ in 0..n {
+                packets.push(sim.next_packet(&scene, &mut Vec::new()).1);
+            }
+        }
+        for host in [i64::MAX, i64::MIN, i64::MAX - 1_000] {
+            let mut cfg = RobosenseConfig::new(None);
+            cfg.model = Some(model);
+            let mut stream = RobosenseStream::new(cfg);
+            let mut points = 0usize;
+            let mut on_sweep = |sw: &mut ringscan::sweep::Sweep, _: &_| points += sw.points.len();
+            for p in &packets {
+                stream.push(host, p, &mut on_sweep).unwrap();
+            }
+            stream.finish(&mut on_sweep);
+            assert_eq!(stream.stats().malformed, 0, "{model:?} at host time {host}");
+            assert!(points > 0, "{model:?} at host time {host}");
+            assert_eq!(
+                stream.facts().clock_synchronised,
+                Some(false),
+                "{model:?} at host time {host}"
+            );
+        }
+    }
+}

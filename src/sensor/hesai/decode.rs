@@ -494,6 +494,19 @@ impl HesaiDecoder {
         }
     }
 
+    /// A block azimuth in 0.01° of a turn, the unit of a sweep's first and last azimuth
+    /// (the AT128's block azimuth counts 1/25 600°, the ATX's 1/256°).
+    pub fn block_azimuth_cdeg(&self, block_az: u32) -> u16 {
+        let cdeg = if self.at128.is_some() {
+            block_az / 256
+        } else if self.atx.is_some() {
+            (u64::from(block_az) * 100 / 256) as u32
+        } else {
+            block_az
+        };
+        (cdeg % 36_000) as u16
+    }
+
     /// Per-channel azimuth offsets, µ° (`None` for the AT128 and the ATX, whose channel
     /// azimuths are not the block azimuth plus a constant).
     pub fn azimuth_offsets_udeg(&self) -> Option<Vec<i64>> {

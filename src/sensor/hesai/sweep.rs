@@ -381,21 +381,21 @@ impl HesaiStream {
         self.facts.return_mode = Some(mode);
         self.facts.dis_unit_mm = Some(p.dis_unit_mm());
         self.facts.motor_rpm = Some(p.motor_rpm());
-        let stamp = p.stamp_ns().unwrap_or(host_ns);
-        let synced = (stamp - host_ns).abs() < 10_000_000_000;
+        // A tail without a valid date gives no sensor time: the host's stands in, and is no
+        // evidence of a synchronised clock. Host times can lie anywhere in i64 (a corrupt
+        // capture), so every difference with them saturates.
+        let (stamp, synced) = match p.stamp_ns() {
+            Some(t) => (t, t.abs_diff(host_ns) < 10_000_000_000),
+            None => (host_ns, false),
+        };
         self.facts.clock_synchronised = Some(synced);
         self.facts.last_stamp_ns = Some(stamp);
 
         // Loss and discontinuities.
         let blocks = p.layout().blocks;
         let period_ns = (blocks / n) as i64 * i64::from(model.spec().block_period_ns);
-        let mut discontinuity = false;
-        if let Some(prev) = self.prev_stamp {
-            let d = stamp - prev;
-            if d < 0 || d > self.cfg.max_gap_ns {
-                discontinuity = true;
-            }
-        }
+        let step = self.prev_stamp.map(|prev| stamp.saturating_sub(prev));
+        let discontinuity = step.is_some_and(|d| d < 0 || d > self.cfg.max_gap_ns);
         match (p.udp_seq(), self.prev_seq) {
             (Some(s), Some(prev)) => {
                 let gap = s.wrapping_sub(prev);
@@ -404,9 +404,9 @@ impl HesaiStream {
                 }
             }
             (None, _) => {
-                if let (Some(prev), false) = (self.prev_stamp, discontinuity) {
+                if let (Some(d), false) = (step, discontinuity) {
                     if period_ns > 0 {
-                        let m = ((stamp - prev) as f64 / period_ns as f64).round() as i64 - 1;
+                        let m = (d as f64 / period_ns as f64).round() as i64 - 1;
                         if m > 0 {
                             self.add_missing(m as u64);
                         }
@@ -451,6 +451,7 @@ impl HesaiStream {
         let mut g = 0;
         while g < blocks {
             let block_az = p.azimuth(g);
+            let az_cdeg = dec.block_azimuth_cdeg(block_az);
             let azimuths = dec.block_azimuths(block_az);
             // Per-channel cut. The first group after a start or a discontinuity may straddle
             // the cut: its channels already past it (within a quarter turn) open the next
@@ -525,7 +526,7 @@ impl HesaiStream {
                 }
                 self.gens_changed();
             }
-            let group_t0 = stamp + dec.group_earliest_ns(g);
+            let group_t0 = stamp.saturating_add(dec.group_earliest_ns(g));
             // Keep at most two sweeps open: a channel two sweeps ahead closes the oldest.
             let (lo, hi) = (self.gen_lo, self.gen_hi);
             while hi >= self.base_gen + 2 {
@@ -536,7 +537,7 @@ impl HesaiStream {
             } else {
                 ClockSource::Host
             };
-            let host_t0 = host_ns + (group_t0 - stamp);
+            let host_t0 = host_ns.saturating_add(group_t0.saturating_sub(stamp));
             let packet_no = self.packet_no;
             // Open the sweeps this group's channels need (up to the greatest generation's).
             let idx = hi.saturating_sub(self.base_gen) as usize;
@@ -549,7 +550,7 @@ impl HesaiStream {
                 sw.clock = clock;
                 sw.device_time_ns = group_t0;
                 sw.first_host_ns = host_ns;
-                sw.first_azimuth = (block_az % 36_000) as u16;
+                sw.first_azimuth = az_cdeg;
                 self.open.push_back(Open {
                     sweep: sw,
                     t0_ns: group_t0,
@@ -561,10 +562,10 @@ impl HesaiStream {
                 // Every channel in one sweep (all but the groups at the cut): straight in.
                 if let Some(o) = open.get_mut(lo.saturating_sub(base) as usize) {
                     let before = o.sweep.points.len();
-                    let t_base = stamp - o.t0_ns;
+                    let t_base = stamp.saturating_sub(o.t0_ns);
                     let pts = &mut o.sweep.points;
                     dec.decode_group(&p, g, n, |d| {
-                        let t = t_base + i64::from(d.firing_ns);
+                        let t = t_base.saturating_add(i64::from(d.firing_ns));
                         let mut pt = d.point;
                         pt.t = t.clamp(0, i64::from(u32::MAX)) as u32;
                         pts.push(pt);
@@ -578,7 +579,9 @@ impl HesaiStream {
                 dec.decode_group(&p, g, n, |d| {
                     let idx = (gens[d.channel].saturating_sub(base)) as usize;
                     if let Some(o) = open.get_mut(idx) {
-                        let t = stamp + i64::from(d.firing_ns) - o.t0_ns;
+                        let t = stamp
+                            .saturating_add(i64::from(d.firing_ns))
+                            .saturating_sub(o.t0_ns);
                         let mut pt = d.point;
                         pt.t = t.clamp(0, i64::from(u32::MAX)) as u32;
                         o.sweep.points.push(pt);
@@ -591,7 +594,7 @@ impl HesaiStream {
             }
             for o in self.open.iter_mut() {
                 o.sweep.last_host_ns = host_ns;
-                o.sweep.last_azimuth = (block_az % 36_000) as u16;
+                o.sweep.last_azimuth = az_cdeg;
                 o.sweep.columns_count += 1;
             }
             // Every channel past the cut: the oldest sweep is complete.

@@ -434,13 +434,15 @@ impl RobosenseStream {
             return;
         };
         self.facts.protocol = p.protocol_version();
-        let synced = (stamp - host_ns).abs() < 10_000_000_000;
+        // Host times can lie anywhere in i64 (a corrupt capture): differences with them
+        // saturate.
+        let synced = stamp.abs_diff(host_ns) < 10_000_000_000;
         self.facts.clock_synchronised = Some(synced);
         let dual = self.dual;
         let period = spec.packet_period_ns(dual);
         let mut discontinuity = false;
         if let Some(prev) = self.prev_stamp {
-            let d = stamp - prev;
+            let d = stamp.saturating_sub(prev);
             if d < 0 || d > self.cfg.max_gap_ns {
                 discontinuity = true;
             } else if period > 0.0 {
@@ -521,7 +523,10 @@ impl RobosenseStream {
                     col_base = sw.columns_count;
                 }
                 let mut pt = d.point;
-                pt.t = (stamp + d.offset_ns - *t0).clamp(0, i64::from(u32::MAX)) as u32;
+                pt.t = stamp
+                    .saturating_add(d.offset_ns)
+                    .saturating_sub(*t0)
+                    .clamp(0, i64::from(u32::MAX)) as u32;
                 sw.points.push(pt);
                 if keep_columns {
                     sw.columns.push(col_base + d.firing as u32);
@@ -599,7 +604,7 @@ impl RobosenseStream {
         if self.facts.calibration.is_empty() || self.cfg.angles.is_some() {
             self.facts.calibration = "none needed (M1 points carry their angles)".into();
         }
-        let synced = (stamp - host_ns).abs() < 10_000_000_000;
+        let synced = stamp.abs_diff(host_ns) < 10_000_000_000;
         self.facts.clock_synchronised = Some(synced);
         let clock = if synced {
             ClockSource::SensorPtp
@@ -631,7 +636,9 @@ impl RobosenseStream {
         self.m1_max_seq = self.m1_max_seq.max(seq);
         // The latest header time seen: a late packet does not move it back.
         self.prev_stamp = match self.prev_stamp {
-            Some(prev) if (-M1_REORDER_NS..=self.cfg.max_gap_ns).contains(&(stamp - prev)) => {
+            Some(prev)
+                if (-M1_REORDER_NS..=self.cfg.max_gap_ns).contains(&stamp.saturating_sub(prev)) =>
+            {
                 Some(prev.max(stamp))
             }
             Some(_) => {
@@ -643,7 +650,7 @@ impl RobosenseStream {
             None => Some(stamp),
         };
         if let Some((_, t0)) = &self.open {
-            if stamp - *t0 >= M1_MAX_SWEEP_NS {
+            if stamp.saturating_sub(*t0) >= M1_MAX_SWEEP_NS {
                 cut = true;
             }
         }
@@ -677,7 +684,10 @@ impl RobosenseStream {
             let t0 = *t0;
             dec.decode(&p, |d| {
                 let mut pt = d.point;
-                pt.t = (stamp + d.offset_ns - t0).clamp(0, i64::from(u32::MAX)) as u32;
+                pt.t = stamp
+                    .saturating_add(d.offset_ns)
+                    .saturating_sub(t0)
+                    .clamp(0, i64::from(u32::MAX)) as u32;
                 sw.points.push(pt);
                 if keep_columns {
                     sw.columns.push(col_base + d.block as u32);
@@ -704,14 +714,14 @@ impl RobosenseStream {
             self.emit(on_sweep);
         }
         if self.open.is_none() {
-            let t0 = stamp + roles[b].0 as i64 * period_ns;
+            let t0 = stamp.saturating_add(roles[b].0 as i64 * period_ns);
             let mut sw = self.spare.take().unwrap_or_default();
             sw.clear();
             sw.index = self.next_index;
             self.next_index += 1;
             sw.device_time_ns = t0;
             sw.timestamp_ns = if clock == ClockSource::Host {
-                host_ns + (t0 - stamp)
+                host_ns.saturating_add(t0.saturating_sub(stamp))
             } else {
                 t0
             };
