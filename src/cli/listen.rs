@@ -778,7 +778,15 @@ impl DecodeThread {
         };
         let next_path = files.path(files.index + 1);
         let next = files.create(&next_path)?;
-        let closed = self.session.rotate(next)?;
+        let closed = match self.session.rotate(next) {
+            Ok(c) => c,
+            Err(e) => {
+                // The current file could not be finished: the error names it, and the next
+                // one, never used, goes.
+                let _ = std::fs::remove_file(&next_path);
+                return Err(e.into());
+            }
+        };
         let prev = std::mem::replace(&mut files.current, next_path);
         files.index += 1;
         files.opened = Instant::now();
@@ -1137,7 +1145,10 @@ pub fn listen_run_with(
         let stats = stats.clone();
         let live = live.clone();
         let sensors = addrs.clone();
-        let ev = ev_tx.clone();
+        // The thread holds the only sender: when it ends for any reason, a panic included,
+        // the main loop's `ev_rx.recv()` sees the channel closed and stops the run (a copy
+        // kept here would leave it receiving, at 0 points/s, until a signal).
+        let ev = ev_tx;
         let hooks_sweeps = args.hooks.sweeps.clone();
         let hooks_dropped = args.hooks.sweeps_dropped.clone();
         std::thread::Builder::new()
@@ -1349,9 +1360,13 @@ pub fn listen_run_with(
         eprintln!();
     }
     let control = configured.map(super::livox_ctl::Configured::finish);
+    // With the runtime gone, no sender of datagrams is left: the decode thread finishes its
+    // file and ends. Wait for it even when the loop failed, so the process never exits with
+    // the file half finished.
+    let joined = decode.join();
     let reason = reason?;
     tracing::info!("stopping: {reason}");
-    let result = match decode.join() {
+    let result = match joined {
         Ok(r) => r?,
         Err(_) => return Err(RunError::Live("the decode thread panicked".into())),
     };

@@ -851,16 +851,14 @@ impl Session {
 
     /// Closes the current output and continues into `next` (`--split-every`): every sensor
     /// already known is registered again in the new file. Returns the closed file's summary.
+    /// If the current output cannot be finished, the session is left without one and `next`
+    /// is dropped unused (nothing goes to a file after a failed one).
     pub fn rotate(&mut self, next: Sink) -> Result<Option<SinkSummary>, SinkError> {
-        let old = self.out.sink.replace(next);
-        let closed = match old {
+        let closed = match self.out.sink.take() {
             Some(s) => Some(s.finish()?),
             None => None,
         };
-        let sink = self.out.sink.as_mut().ok_or_else(|| SinkError::Io {
-            context: "rotating the output".into(),
-            source: std::io::Error::other("no output"),
-        })?;
+        let sink = self.out.sink.insert(next);
         for s in self.out.sensors.iter_mut() {
             s.id = match &s.info {
                 Some(info) => Some(sink.add_sensor(info)?),

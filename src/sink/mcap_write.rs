@@ -819,11 +819,22 @@ impl<W: Write> ChunkedWriter<W> {
             bounds: open.bounds.unwrap_or((0, 0)),
             uncompressed_size: open.records.len() as u64,
         };
+        // The chunk's messages are already counted in the channels' statistics and the file's
+        // time bounds: if it does not reach the file, neither may the summary that counts them.
+        let r = self.hand_over(meta, open.records);
+        if r.is_err() {
+            self.out.failed = true;
+        }
+        r
+    }
+
+    /// Compresses and writes a sealed chunk here, or queues it for the workers.
+    fn hand_over(&mut self, meta: ChunkMeta, records: Vec<u8>) -> Result<(), SinkError> {
         if self.pool.is_none() {
             // One thread (or no compression): compress here and write at once. Nothing is in
             // flight, so the order is kept.
             self.write_ready()?;
-            return self.write_here(&meta, open.records);
+            return self.write_here(&meta, records);
         }
         // Make room: the memory bound.
         let limit = in_flight_limit(self.opts.threads);
@@ -841,7 +852,7 @@ impl<W: Write> ChunkedWriter<W> {
                 Behind::WriteUncompressed => self.write_oldest_uncompressed()?,
             }
         }
-        let records = Arc::new(open.records);
+        let records = Arc::new(records);
         let shared = Arc::new(Shared {
             records: Mutex::new(Some(records.clone())),
         });
