@@ -239,3 +239,56 @@ fn dual_return_models_decode_back_to_the_truth() {
         check(&format!("{} synthetic, last+strongest", model.name()), &fig);
     }
 }
+
+/// Packets lost for most of a turn, or for more than one, within the stream's gap limit (1 s):
+/// the azimuth step across the loss can be three quarters of a turn or more, which alone reads
+/// as blocks out of order; the time between the packets tells the turn. Every sweep still
+/// ends at the cut, so none holds more than one turn (a missed cut gave one of 1.8 turns), and
+/// every point decoded is handed over once.
+#[test]
+fn a_loss_of_most_of_a_turn_or_more_still_cuts_every_turn() {
+    let scene = scenes::named("urban").unwrap();
+    for model in [
+        HesaiModel::PandarXt32,
+        HesaiModel::Pandar64,
+        HesaiModel::PandarQt128,
+    ] {
+        // (azimuth where the loss starts, turns lost): 600 rpm, a turn is 100 ms.
+        for (from_deg, turns) in [(9.0, 0.81), (200.0, 0.9), (100.0, 1.3), (350.0, 0.76)] {
+            let mut sim = HesaiSim::new(model, synthetic(model), T0);
+            let period = sim.period_ns();
+            let turn_ns: i64 = 100_000_000;
+            let lost_from = T0 + turn_ns + (from_deg / 360.0 * turn_ns as f64) as i64;
+            let lost_to = lost_from + (turns * turn_ns as f64) as i64;
+            let mut cfg = HesaiConfig::new(Some(synthetic(model)), "sim");
+            cfg.model = Some(model);
+            let mut stream = HesaiStream::new(cfg);
+            let (mut sent, mut got, mut longest) = (0usize, 0usize, 0u32);
+            let mut on_sweep = |sw: &mut ringscan::sweep::Sweep, _: &_| {
+                got += sw.points.len();
+                longest = longest.max(sw.points.iter().map(|p| p.t).max().unwrap_or(0));
+            };
+            for k in 0..(4 * turn_ns / period) {
+                let mut truth = Vec::new();
+                let (host, bytes) = sim.next_packet(&scene, &mut truth);
+                let t = T0 + k * period;
+                if (lost_from..lost_to).contains(&t) {
+                    continue;
+                }
+                sent += truth.len();
+                stream.push(host, &bytes, &mut on_sweep).unwrap();
+            }
+            stream.finish(&mut on_sweep);
+            let label = format!("{model:?}, {turns} turn lost from {from_deg}°");
+            assert_eq!(got, sent, "{label}: every point once");
+            assert!(stream.stats().missing > 0, "{label}");
+            assert_eq!(stream.stats().discontinuities, 0, "{label}");
+            // One turn, and the spread of the channels' azimuth offsets (±6°: 3.3 ms) that
+            // cuts each channel at its own time.
+            assert!(
+                i64::from(longest) < turn_ns * 11 / 10,
+                "{label}: a sweep of {longest} ns"
+            );
+        }
+    }
+}

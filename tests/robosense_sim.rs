@@ -331,3 +331,54 @@ fn host_times_at_the_ends_of_i64_do_not_overflow() {
         }
     }
 }
+
+/// Packets lost for most of a turn, or for more than one, within the stream's gap limit (1 s):
+/// the azimuth step across the loss can be three quarters of a turn or more, which alone reads
+/// as a block out of order; the time between the packets tells the turn. Every sweep still
+/// ends at the cut, so none holds more than one turn (a missed cut gave one of 1.8 turns), and
+/// every point decoded is handed over once.
+#[test]
+fn a_loss_of_most_of_a_turn_or_more_still_cuts_every_turn() {
+    let scene = scenes::named("urban").unwrap();
+    let turn_ns: i64 = 100_000_000; // 600 rpm
+    for model in [
+        RobosenseModel::Rs32,
+        RobosenseModel::Helios,
+        RobosenseModel::Ruby128,
+    ] {
+        for (from_deg, turns) in [(9.0, 0.81), (350.0, 0.8), (100.0, 1.3), (200.0, 0.76)] {
+            let mut sim = RobosenseSim::new(model, synthetic(model), T0);
+            let lost_from = T0 + turn_ns + (from_deg / 360.0 * turn_ns as f64) as i64;
+            let lost_to = lost_from + (turns * turn_ns as f64) as i64;
+            let mut cfg = RobosenseConfig::new(None);
+            cfg.model = Some(model);
+            let mut stream = RobosenseStream::new(cfg);
+            let (mut sent, mut got, mut longest) = (0usize, 0usize, 0u32);
+            let mut on_sweep = |sw: &mut ringscan::sweep::Sweep, _: &_| {
+                got += sw.points.len();
+                longest = longest.max(sw.points.iter().map(|p| p.t).max().unwrap_or(0));
+            };
+            stream.push(0, &sim.difop(), &mut on_sweep).unwrap();
+            let packets = (4.0 * turn_ns as f64 / model.spec().packet_period_ns(false)) as usize;
+            for _ in 0..packets {
+                let t = sim.stamp_of(sim.packet_index);
+                let mut truth = Vec::new();
+                let (host, bytes) = sim.next_packet(&scene, &mut truth);
+                if (lost_from..lost_to).contains(&t) {
+                    continue;
+                }
+                sent += truth.len();
+                stream.push(host, &bytes, &mut on_sweep).unwrap();
+            }
+            stream.finish(&mut on_sweep);
+            let label = format!("{model:?}, {turns} turn lost from {from_deg}°");
+            assert_eq!(got, sent, "{label}: every point once");
+            assert!(stream.stats().missing > 0, "{label}");
+            assert_eq!(stream.stats().discontinuities, 0, "{label}");
+            assert!(
+                i64::from(longest) < turn_ns * 11 / 10,
+                "{label}: a sweep of {longest} ns"
+            );
+        }
+    }
+}

@@ -101,6 +101,49 @@ impl Sweep {
     }
 }
 
+/// What the head did between two consecutive blocks of a spinning sensor, from their azimuth
+/// step (see [`azimuth_step`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Step {
+    /// A block out of azimuth order (the head did not turn back): no progress.
+    Back,
+    /// The head turned forward by the step.
+    Forward {
+        /// At least one whole turn more went by unseen (lost packets): the cut was passed
+        /// whatever the two azimuths.
+        full_turn: bool,
+    },
+}
+
+/// Tells a forward turn from a block out of order. `span` is the azimuth step from the last
+/// block, `0 ≤ span < turn` (any unit of which `turn` is one turn). Alone, a step of three
+/// quarters of a turn or more is a step back. Across packets the caller also gives `turned`,
+/// how far the motor turns in the time between them (same unit): lost packets can make a
+/// forward step of any size, and the time tells it from a step back and counts the whole
+/// turns lost with it.
+pub fn azimuth_step(span: i64, turn: i64, turned: Option<i64>) -> Step {
+    let Some(turned) = turned else {
+        return if span < turn / 4 * 3 {
+            Step::Forward { full_turn: false }
+        } else {
+            Step::Back
+        };
+    };
+    // The rotation the time allows is nearer a step back (span − turn) than a step forward.
+    if span >= turn / 4 * 3 && turned < span - turn / 2 {
+        return Step::Back;
+    }
+    // Whole turns beyond the step: the nearest count to what the time allows.
+    Step::Forward {
+        full_turn: turned.saturating_sub(span) >= turn / 2,
+    }
+}
+
+/// How far a motor at `rpm` turns in `ns`, in units of which `turn` is one turn (saturating).
+pub fn rotation_in(ns: i64, rpm: f64, turn: i64) -> i64 {
+    (ns as f64 * rpm / 60e9 * turn as f64) as i64
+}
+
 /// A sweep laid out as channel (ring) × column, with a validity mask.
 ///
 /// Row `r` is ring `r` (0 = lowest elevation, the ROS convention); column `c` is the firing
@@ -165,5 +208,60 @@ impl Organized {
         }
         let i = (layer * self.rows + row) * self.cols + col;
         self.valid[i].then(|| &self.points[i])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const TURN: i64 = 36_000; // 0.01°
+
+    #[test]
+    fn azimuth_steps_without_time_follow_the_three_quarter_rule() {
+        assert_eq!(
+            azimuth_step(100, TURN, None),
+            Step::Forward { full_turn: false }
+        );
+        assert_eq!(
+            azimuth_step(26_999, TURN, None),
+            Step::Forward { full_turn: false }
+        );
+        assert_eq!(azimuth_step(27_000, TURN, None), Step::Back);
+        assert_eq!(azimuth_step(35_990, TURN, None), Step::Back);
+    }
+
+    #[test]
+    fn the_time_between_packets_tells_a_lost_stretch_from_a_step_back() {
+        // 600 rpm: a turn per 100 ms.
+        let turned = |ms: i64| Some(rotation_in(ms * 1_000_000, 600.0, TURN));
+        assert_eq!(turned(80), Some(28_800));
+        // A packet 0.05 ms after the last, 0.1° behind: out of order.
+        assert_eq!(azimuth_step(35_990, TURN, turned(0)), Step::Back);
+        assert_eq!(
+            azimuth_step(35_990, TURN, Some(rotation_in(50_000, 600.0, TURN))),
+            Step::Back
+        );
+        // 9° then 300° 80 ms later: 291° forward, packets lost (without the time: a step back).
+        assert_eq!(azimuth_step(29_100, TURN, None), Step::Back);
+        assert_eq!(
+            azimuth_step(29_100, TURN, turned(80)),
+            Step::Forward { full_turn: false }
+        );
+        // 100° then 208° 130 ms later: 108° and a whole turn.
+        assert_eq!(
+            azimuth_step(10_800, TURN, turned(130)),
+            Step::Forward { full_turn: true }
+        );
+        // 100° then 208° 30 ms later: 108°, no turn lost.
+        assert_eq!(
+            azimuth_step(10_800, TURN, turned(30)),
+            Step::Forward { full_turn: false }
+        );
+        // Consecutive packets 1.44° apart.
+        assert_eq!(
+            azimuth_step(144, TURN, Some(rotation_in(400_000, 600.0, TURN))),
+            Step::Forward { full_turn: false }
+        );
     }
 }

@@ -448,6 +448,15 @@ impl HesaiStream {
         };
         dec.prepare(n, p.tail_flags());
         let nc = dec.channels();
+        // How far the head turned since the last packet (its motor speed from the tail, else
+        // the usual 600 rpm), for a step the azimuths alone cannot tell.
+        let rpm = match p.motor_rpm() {
+            r @ 60..=3_000 => f64::from(r),
+            _ => 600.0,
+        };
+        let turned_udeg = step
+            .filter(|_| !discontinuity)
+            .map(|d| crate::sweep::rotation_in(d, rpm, TURN_UDEG));
         let mut g = 0;
         while g < blocks {
             let block_az = p.azimuth(g);
@@ -483,19 +492,27 @@ impl HesaiStream {
                     Some(last) => {
                         let span = (cur - last).rem_euclid(TURN_UDEG);
                         // A step back (blocks of one packet out of azimuth order) is not a
-                        // turn forward, and progress stays where it was.
-                        if span < TURN_UDEG / 4 * 3 {
-                            let hits = (w_start - last).rem_euclid(TURN_UDEG) < span
-                                || (last - w_start).rem_euclid(TURN_UDEG) <= *w_width;
-                            if hits {
-                                for (g_c, &t) in self.gen.iter_mut().zip(th) {
-                                    if (t - last).rem_euclid(TURN_UDEG) < span {
-                                        *g_c += 1;
+                        // turn forward, and progress stays where it was. Across packets the
+                        // time between them tells a step back from packets lost.
+                        let turned = (g == 0).then_some(turned_udeg).flatten();
+                        match crate::sweep::azimuth_step(span, TURN_UDEG, turned) {
+                            crate::sweep::Step::Back => {}
+                            crate::sweep::Step::Forward { full_turn } => {
+                                let hits = full_turn
+                                    || (w_start - last).rem_euclid(TURN_UDEG) < span
+                                    || (last - w_start).rem_euclid(TURN_UDEG) <= *w_width;
+                                if hits {
+                                    // Each channel past its cut once, however many turns
+                                    // went by unseen: no empty sweeps for lost ones.
+                                    for (g_c, &t) in self.gen.iter_mut().zip(th) {
+                                        if full_turn || (t - last).rem_euclid(TURN_UDEG) < span {
+                                            *g_c += 1;
+                                        }
                                     }
+                                    self.gens_changed();
                                 }
-                                self.gens_changed();
+                                self.last_block_udeg = Some(cur);
                             }
-                            self.last_block_udeg = Some(cur);
                         }
                     }
                 }

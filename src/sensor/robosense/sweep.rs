@@ -441,11 +441,14 @@ impl RobosenseStream {
         let dual = self.dual;
         let period = spec.packet_period_ns(dual);
         let mut discontinuity = false;
+        // Time since the last packet, for an azimuth step the azimuths alone cannot tell.
+        let mut since_last = None;
         if let Some(prev) = self.prev_stamp {
             let d = stamp.saturating_sub(prev);
             if d < 0 || d > self.cfg.max_gap_ns {
                 discontinuity = true;
             } else if period > 0.0 {
+                since_last = Some(d);
                 let m = (d as f64 / period).round() as i64 - 1;
                 if m > 0 {
                     self.stats.missing += m as u64;
@@ -475,13 +478,28 @@ impl RobosenseStream {
         let cut = i32::from(self.cfg.cut_cdeg % 36_000);
         let mut starts = [false; 12];
         let mut last = self.last_block_az;
+        // The motor speed a DIFOP gave (else the usual 600 rpm).
+        let rpm = match self.facts.rpm {
+            Some(r @ 60..=3_000) => f64::from(r),
+            _ => 600.0,
+        };
         for (b, s) in starts.iter_mut().enumerate().take(blocks) {
             let az = p.azimuth(b);
             if let Some(l) = last {
-                let span = (i32::from(az) - i32::from(l)).rem_euclid(36_000);
-                let to_cut = (cut - i32::from(l)).rem_euclid(36_000);
-                // Crossing forward (a step back within a quarter turn is not a turn).
-                *s = span > 0 && span < 27_000 && to_cut > 0 && to_cut <= span;
+                let span = i64::from((i32::from(az) - i32::from(l)).rem_euclid(36_000));
+                let to_cut = i64::from((cut - i32::from(l)).rem_euclid(36_000));
+                // Crossing forward (a step back within a quarter turn is not a turn); across
+                // packets, the time between them tells a step back from packets lost, and
+                // a whole turn lost passed the cut whatever the azimuths.
+                let turned = since_last
+                    .filter(|_| b == 0)
+                    .map(|d| crate::sweep::rotation_in(d, rpm, 36_000));
+                *s = match crate::sweep::azimuth_step(span, 36_000, turned) {
+                    crate::sweep::Step::Back => false,
+                    crate::sweep::Step::Forward { full_turn } => {
+                        full_turn || (span > 0 && to_cut > 0 && to_cut <= span)
+                    }
+                };
             }
             last = Some(az);
         }
