@@ -35,6 +35,10 @@ use super::wire::{CrcPart, FunctionalSafety, HesaiPacket};
 use crate::sweep::Sweep;
 use crate::time::ClockSource;
 
+/// A packet at most this many packets behind the latest is a late one (reordered on the way),
+/// not the start of a new stretch.
+pub const REORDER_PACKETS: u32 = 10;
+
 /// Configuration of one stream.
 #[derive(Clone, Debug)]
 pub struct HesaiConfig {
@@ -395,8 +399,16 @@ impl HesaiStream {
         let blocks = p.layout().blocks;
         let period_ns = (blocks / n) as i64 * i64::from(model.spec().block_period_ns);
         let step = self.prev_stamp.map(|prev| stamp.saturating_sub(prev));
-        let discontinuity = step.is_some_and(|d| d < 0 || d > self.cfg.max_gap_ns);
+        // A packet a little behind the latest (by its sequence number where it has one, else
+        // by its time) was reordered on the way: it fills a gap already counted as missing,
+        // and the stream goes on from the latest packet, not from it.
+        let late = match (p.udp_seq(), self.prev_seq) {
+            (Some(s), Some(prev)) => (1..=REORDER_PACKETS).contains(&prev.wrapping_sub(s)),
+            _ => step.is_some_and(|d| d < 0 && d >= -i64::from(REORDER_PACKETS) * period_ns),
+        };
+        let discontinuity = !late && step.is_some_and(|d| d < 0 || d > self.cfg.max_gap_ns);
         match (p.udp_seq(), self.prev_seq) {
+            _ if late => self.remove_missing(1),
             (Some(s), Some(prev)) => {
                 let gap = s.wrapping_sub(prev);
                 if gap > 1 && gap < 1 << 20 {
@@ -415,8 +427,10 @@ impl HesaiStream {
             }
             _ => {}
         }
-        self.prev_seq = p.udp_seq();
-        self.prev_stamp = Some(stamp);
+        if !late {
+            self.prev_seq = p.udp_seq();
+            self.prev_stamp = Some(stamp);
+        }
         if discontinuity {
             self.stats.discontinuities += 1;
             self.emit_all(on_sweep);
@@ -631,6 +645,14 @@ impl HesaiStream {
         self.stats.missing += m;
         if let Some(o) = self.open.back_mut() {
             o.sweep.missing_packets += m;
+        }
+    }
+
+    /// A late packet came: one fewer missing (in the open sweep that counted it, if open).
+    fn remove_missing(&mut self, m: u64) {
+        self.stats.missing = self.stats.missing.saturating_sub(m);
+        if let Some(o) = self.open.back_mut() {
+            o.sweep.missing_packets = o.sweep.missing_packets.saturating_sub(m);
         }
     }
 

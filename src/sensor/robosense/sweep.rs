@@ -38,6 +38,10 @@ use crate::time::ClockSource;
 /// MSOP packets held while waiting for the angles.
 pub const MAX_HELD: usize = 4096;
 
+/// A spinning sensor's packet at most this many packet periods older than the latest is a late
+/// one (reordered on the way), not the start of a new stretch.
+pub const REORDER_PACKETS: u16 = 10;
+
 /// M1: a packet counter at most this far below the last one is a late packet, not a new frame
 /// (rs_driver's window).
 pub const M1_REORDER: u16 = 10;
@@ -443,9 +447,18 @@ impl RobosenseStream {
         let mut discontinuity = false;
         // Time since the last packet, for an azimuth step the azimuths alone cannot tell.
         let mut since_last = None;
+        // A packet a little older than the latest was reordered on the way: it fills a gap
+        // already counted as missing, opens no sweep, and the stream goes on from the latest.
+        let mut late = false;
         if let Some(prev) = self.prev_stamp {
             let d = stamp.saturating_sub(prev);
-            if d < 0 || d > self.cfg.max_gap_ns {
+            if d < 0 && period > 0.0 && d as f64 >= -f64::from(REORDER_PACKETS) * period {
+                late = true;
+                self.stats.missing = self.stats.missing.saturating_sub(1);
+                if let Some((sw, _)) = &mut self.open {
+                    sw.missing_packets = sw.missing_packets.saturating_sub(1);
+                }
+            } else if d < 0 || d > self.cfg.max_gap_ns {
                 discontinuity = true;
             } else if period > 0.0 {
                 since_last = Some(d);
@@ -458,7 +471,9 @@ impl RobosenseStream {
                 }
             }
         }
-        self.prev_stamp = Some(stamp);
+        if !late {
+            self.prev_stamp = Some(stamp);
+        }
         if discontinuity {
             self.stats.discontinuities += 1;
             self.emit(on_sweep);
@@ -483,7 +498,7 @@ impl RobosenseStream {
             Some(r @ 60..=3_000) => f64::from(r),
             _ => 600.0,
         };
-        for (b, s) in starts.iter_mut().enumerate().take(blocks) {
+        for (b, s) in starts.iter_mut().enumerate().take(blocks).filter(|_| !late) {
             let az = p.azimuth(b);
             if let Some(l) = last {
                 let span = i64::from((i32::from(az) - i32::from(l)).rem_euclid(36_000));
@@ -503,7 +518,9 @@ impl RobosenseStream {
             }
             last = Some(az);
         }
-        self.last_block_az = last;
+        if !late {
+            self.last_block_az = last;
+        }
         let keep_columns = self.cfg.keep_columns;
         let mut cur_block = usize::MAX;
         let mut counted = false;
