@@ -188,7 +188,7 @@ impl<R: Read> Input<R> {
     /// The summary's `capture` object.
     pub fn capture_json(&self) -> Value {
         let duration = |a: Option<i64>, b: Option<i64>| match (a, b) {
-            (Some(a), Some(b)) => (b - a) as f64 * 1e-9,
+            (Some(a), Some(b)) => span_s(a, b),
             _ => 0.0,
         };
         match self {
@@ -308,5 +308,24 @@ impl<R: Read> Input<R> {
                 })
             }
         }
+    }
+}
+
+/// Seconds from `a` to `b` (ns). A bag's times can lie anywhere in i64 (a header stamp of −1 s,
+/// an MCAP log time of 2^64 − 1 read as i64::MAX), so the difference is taken in i128.
+fn span_s(a: i64, b: i64) -> f64 {
+    (i128::from(b) - i128::from(a)) as f64 * 1e-9
+}
+
+#[cfg(test)]
+mod tests {
+    use super::span_s;
+
+    #[test]
+    fn capture_spans_at_the_ends_of_i64_do_not_overflow() {
+        assert_eq!(span_s(1_000_000_000, 3_500_000_000), 2.5);
+        // 2^63 − 1 ns + 1 s, and −(2^64 − 1) ns, to the µs.
+        assert!((span_s(-1_000_000_000, i64::MAX) - 9_223_372_037.854_776).abs() < 1e-5);
+        assert!((span_s(i64::MAX, i64::MIN) + 18_446_744_073.709_552).abs() < 1e-5);
     }
 }
