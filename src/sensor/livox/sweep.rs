@@ -36,6 +36,9 @@ pub const DEFAULT_PERIOD_NS: u64 = 100_000_000;
 pub const MAX_IMU_QUEUE: usize = 4096;
 /// A `udp_cnt` jump larger than this is a restart, not loss.
 const MAX_COUNTER_GAP: u64 = 4096;
+/// A point packet at most this many packets behind the latest is a late one (reordered on the
+/// way), not a loss or a restart.
+pub const REORDER_PACKETS: u16 = 10;
 
 /// How a stream is set up.
 #[derive(Clone, Debug)]
@@ -404,7 +407,14 @@ impl LivoxStream {
         let (udp, frame) = (p.udp_cnt(), p.frame_cnt());
         let mut frame_start = false;
         let mut lost = 0;
-        if let Some(prev) = self.last_udp {
+        // A packet a little behind the latest was reordered on the way: it fills the gap its
+        // successor counted, cuts nothing, and the counters go on from the latest.
+        let late = self
+            .last_udp
+            .is_some_and(|prev| (1..=REORDER_PACKETS).contains(&prev.wrapping_sub(udp)));
+        if late {
+            self.unmiss();
+        } else if let Some(prev) = self.last_udp {
             let expected = prev.wrapping_add(1);
             if udp == 0 && udp != expected {
                 if self.last_frame.is_some_and(|f| frame == f.wrapping_add(1)) {
@@ -421,19 +431,23 @@ impl LivoxStream {
                 }
             }
         }
-        self.last_udp = Some(udp);
-        self.last_frame = Some(frame);
+        if !late {
+            self.last_udp = Some(udp);
+            self.last_frame = Some(frame);
+        }
         if self.frame_starts >= 2 {
             self.facts.frame_cut = true;
         }
         let n = p.records();
         let interval = p.time_interval_ns();
-        let cut = if self.facts.frame_cut {
+        let cut = if late {
+            false
+        } else if self.facts.frame_cut {
             frame_start || (self.open && self.sweep.frame_id != u32::from(frame))
         } else {
             self.time_cut(ts)
         };
-        let backwards = self.last_packet_ns.is_some_and(|l| ts < l);
+        let backwards = !late && self.last_packet_ns.is_some_and(|l| ts < l);
         if backwards {
             self.stats.discontinuities += 1;
         }
@@ -452,11 +466,15 @@ impl LivoxStream {
             start,
             &mut self.sweep.points,
         );
+        let newest = self.last_packet_ns;
         self.after_packet(
             host_ns,
             ts,
             ts.saturating_add(i64::try_from(interval).unwrap_or(i64::MAX)),
         );
+        if late {
+            self.last_packet_ns = newest;
+        }
         Ok(())
     }
 
@@ -489,8 +507,15 @@ impl LivoxStream {
             .map_or(4_167, LivoxModel::sdk1_point_interval_ns) as i64;
         let n = p.records();
         let mut lost = 0;
-        if let Some(next) = self.sdk1_next_ns {
-            let period = step * n as i64;
+        // A packet a little older than the latest was reordered on the way (these packets
+        // carry no counter: by time).
+        let period = step * n as i64;
+        let late = self
+            .last_packet_ns
+            .is_some_and(|l| ts < l && ts >= l.saturating_sub(i64::from(REORDER_PACKETS) * period));
+        if late {
+            self.unmiss();
+        } else if let Some(next) = self.sdk1_next_ns {
             let gap = ts - next;
             if gap < 0 {
                 if ts < next - period {
@@ -506,11 +531,14 @@ impl LivoxStream {
                 }
             }
         }
-        self.sdk1_next_ns = Some(ts.saturating_add(step * n as i64));
-        let backwards = self.last_packet_ns.is_some_and(|l| ts < l);
-        if self.time_cut(ts) || backwards {
+        if !late {
+            self.sdk1_next_ns = Some(ts.saturating_add(step * n as i64));
+        }
+        let backwards = !late && self.last_packet_ns.is_some_and(|l| ts < l);
+        if !late && (self.time_cut(ts) || backwards) {
             self.emit(on_sweep);
         }
+        let newest = self.last_packet_ns;
         self.begin(host_ns, ts, 0);
         self.sweep.missing_packets += lost;
         let start = self.sweep.device_time_ns;
@@ -525,6 +553,9 @@ impl LivoxStream {
         );
         let last = ts.saturating_add(step.saturating_mul(n.saturating_sub(1) as i64));
         self.after_packet(host_ns, ts, last);
+        if late {
+            self.last_packet_ns = newest;
+        }
         Ok(())
     }
 
@@ -584,6 +615,14 @@ impl LivoxStream {
     /// Whether IMU samples reach `end_ns` (or none has been seen: nothing to wait for).
     fn covered(&self, end_ns: i64) -> bool {
         self.stats.imu_packets == 0 || self.newest_imu_ns.is_some_and(|t| t >= end_ns)
+    }
+
+    /// A late packet came: one fewer missing (in the open sweep too, if it counted it).
+    fn unmiss(&mut self) {
+        self.stats.missing = self.stats.missing.saturating_sub(1);
+        if self.open {
+            self.sweep.missing_packets = self.sweep.missing_packets.saturating_sub(1);
+        }
     }
 
     fn after_packet(&mut self, host_ns: i64, first_ns: i64, last_ns: i64) {
