@@ -260,34 +260,23 @@ fn a_loss_of_most_of_a_turn_or_more_still_cuts_every_turn() {
             let turn_ns: i64 = 100_000_000;
             let lost_from = T0 + turn_ns + (from_deg / 360.0 * turn_ns as f64) as i64;
             let lost_to = lost_from + (turns * turn_ns as f64) as i64;
+            let packets: Vec<common::SimPacket> = (0..4 * turn_ns / period)
+                .map(|k| {
+                    let mut truth = Vec::new();
+                    let (host, bytes) = sim.next_packet(&scene, &mut truth);
+                    (T0 + k * period, host, bytes, truth.len())
+                })
+                .collect();
             let mut cfg = HesaiConfig::new(Some(synthetic(model)), "sim");
             cfg.model = Some(model);
-            let mut stream = HesaiStream::new(cfg);
-            let (mut sent, mut got, mut longest) = (0usize, 0usize, 0u32);
-            let mut on_sweep = |sw: &mut ringscan::sweep::Sweep, _: &_| {
-                got += sw.points.len();
-                longest = longest.max(sw.points.iter().map(|p| p.t).max().unwrap_or(0));
-            };
-            for k in 0..(4 * turn_ns / period) {
-                let mut truth = Vec::new();
-                let (host, bytes) = sim.next_packet(&scene, &mut truth);
-                let t = T0 + k * period;
-                if (lost_from..lost_to).contains(&t) {
-                    continue;
-                }
-                sent += truth.len();
-                stream.push(host, &bytes, &mut on_sweep).unwrap();
-            }
-            stream.finish(&mut on_sweep);
-            let label = format!("{model:?}, {turns} turn lost from {from_deg}°");
-            assert_eq!(got, sent, "{label}: every point once");
-            assert!(stream.stats().missing > 0, "{label}");
-            assert_eq!(stream.stats().discontinuities, 0, "{label}");
             // One turn, and the spread of the channels' azimuth offsets (±6°: 3.3 ms) that
             // cuts each channel at its own time.
-            assert!(
-                i64::from(longest) < turn_ns * 11 / 10,
-                "{label}: a sweep of {longest} ns"
+            common::check_a_loss(
+                &mut HesaiStream::new(cfg),
+                &packets,
+                lost_from..lost_to,
+                turn_ns * 11 / 10,
+                &format!("{model:?}, {turns} turn lost from {from_deg}°"),
             );
         }
     }
@@ -314,26 +303,12 @@ fn reordered_packets_are_late_not_lost() {
         let run = |order: &[usize]| {
             let mut cfg = HesaiConfig::new(Some(synthetic(model)), "sim");
             cfg.model = Some(model);
-            let mut stream = HesaiStream::new(cfg);
-            let mut sweeps = Vec::new();
-            let mut on_sweep =
-                |sw: &mut ringscan::sweep::Sweep, _: &_| sweeps.push((sw.points.len(), sw.packets));
-            for &k in order {
-                stream
-                    .push(packets[k].0, &packets[k].1, &mut on_sweep)
-                    .unwrap();
-            }
-            stream.finish(&mut on_sweep);
-            let st = stream.stats();
-            (sweeps, st.missing, st.discontinuities)
+            common::run_stream(&mut HesaiStream::new(cfg), &packets, order)
         };
-        let mut order: Vec<usize> = (0..n).collect();
-        // Away from the cuts (a turn is n / 3 packets): one swap, one packet three places late.
-        order.swap(n / 6, n / 6 + 1);
-        let late = order.remove(n / 2);
-        order.insert(n / 2 + 3, late);
+        // Away from the cuts (a turn is n / 3 packets).
         let (in_order, _, _) = run(&(0..n).collect::<Vec<_>>());
-        let (reordered, missing, discontinuities) = run(&order);
+        let (reordered, missing, discontinuities) =
+            run(&common::reordered(n, &(0..n).collect::<Vec<_>>()));
         assert_eq!((missing, discontinuities), (0, 0), "{model:?}");
         assert_eq!(
             reordered, in_order,

@@ -8,6 +8,8 @@
 //! frame at its published position), to the f32 precision the packets carry.
 #![cfg(feature = "sim")]
 
+mod common;
+
 use ringscan::sensor::livox::model::LivoxModel;
 use ringscan::sensor::livox::sim::{ImuTruth, LivoxSim, LivoxTruth};
 use ringscan::sensor::livox::{LivoxConfig, LivoxStream};
@@ -371,18 +373,6 @@ fn reordered_packets_are_late_not_lost() {
         let mut sim = LivoxSim::new(model, T0);
         sim.trajectory = Trajectory::route(T0, Route::urban());
         let packets = sim.run_until(&world, T0 + 350_000_000, &mut Vec::new(), &mut Vec::new());
-        let run = |order: &[usize]| {
-            let mut s = LivoxStream::new(LivoxConfig::new(Some(model), model.protocol()));
-            let mut sweeps = Vec::new();
-            for &k in order {
-                let (host, _, b) = &packets[k];
-                s.push(*host, b, &mut |sw, _| {
-                    sweeps.push((sw.points.len(), sw.packets))
-                });
-            }
-            s.finish(&mut |sw, _| sweeps.push((sw.points.len(), sw.packets)));
-            (sweeps, s.stats().missing, s.stats().discontinuities)
-        };
         // The point packets' port (the IMU's packets go to another).
         let mut ports = std::collections::HashMap::new();
         for (_, port, _) in &packets {
@@ -392,13 +382,13 @@ fn reordered_packets_are_late_not_lost() {
         let at: Vec<usize> = (0..packets.len())
             .filter(|&i| packets[i].1 == point_port)
             .collect();
-        let n = at.len();
-        let mut order: Vec<usize> = (0..packets.len()).collect();
-        order.swap(at[n / 6], at[n / 6 + 1]);
-        let late = order.remove(at[n / 2]);
-        order.insert(at[n / 2 + 3], late);
+        let packets: Vec<(i64, Vec<u8>)> = packets.into_iter().map(|(h, _, b)| (h, b)).collect();
+        let run = |order: &[usize]| {
+            let mut s = LivoxStream::new(LivoxConfig::new(Some(model), model.protocol()));
+            common::run_stream(&mut s, &packets, order)
+        };
         let (in_order, _, _) = run(&(0..packets.len()).collect::<Vec<_>>());
-        let (reordered, missing, discontinuities) = run(&order);
+        let (reordered, missing, discontinuities) = run(&common::reordered(packets.len(), &at));
         assert_eq!((missing, discontinuities), (0, 0), "{model:?}");
         assert_eq!(
             reordered, in_order,

@@ -7,6 +7,8 @@
 //! sweep's first firing.
 #![cfg(feature = "sim")]
 
+mod common;
+
 use std::collections::HashMap;
 
 use nalgebra::{Isometry3, Vector3};
@@ -353,31 +355,22 @@ fn a_loss_of_most_of_a_turn_or_more_still_cuts_every_turn() {
             let mut cfg = RobosenseConfig::new(None);
             cfg.model = Some(model);
             let mut stream = RobosenseStream::new(cfg);
-            let (mut sent, mut got, mut longest) = (0usize, 0usize, 0u32);
-            let mut on_sweep = |sw: &mut ringscan::sweep::Sweep, _: &_| {
-                got += sw.points.len();
-                longest = longest.max(sw.points.iter().map(|p| p.t).max().unwrap_or(0));
-            };
-            stream.push(0, &sim.difop(), &mut on_sweep).unwrap();
-            let packets = (4.0 * turn_ns as f64 / model.spec().packet_period_ns(false)) as usize;
-            for _ in 0..packets {
-                let t = sim.stamp_of(sim.packet_index);
-                let mut truth = Vec::new();
-                let (host, bytes) = sim.next_packet(&scene, &mut truth);
-                if (lost_from..lost_to).contains(&t) {
-                    continue;
-                }
-                sent += truth.len();
-                stream.push(host, &bytes, &mut on_sweep).unwrap();
-            }
-            stream.finish(&mut on_sweep);
-            let label = format!("{model:?}, {turns} turn lost from {from_deg}°");
-            assert_eq!(got, sent, "{label}: every point once");
-            assert!(stream.stats().missing > 0, "{label}");
-            assert_eq!(stream.stats().discontinuities, 0, "{label}");
-            assert!(
-                i64::from(longest) < turn_ns * 11 / 10,
-                "{label}: a sweep of {longest} ns"
+            stream.push(0, &sim.difop(), &mut |_, _| {}).unwrap();
+            let n = (4.0 * turn_ns as f64 / model.spec().packet_period_ns(false)) as usize;
+            let packets: Vec<common::SimPacket> = (0..n)
+                .map(|_| {
+                    let t = sim.stamp_of(sim.packet_index);
+                    let mut truth = Vec::new();
+                    let (host, bytes) = sim.next_packet(&scene, &mut truth);
+                    (t, host, bytes, truth.len())
+                })
+                .collect();
+            common::check_a_loss(
+                &mut stream,
+                &packets,
+                lost_from..lost_to,
+                turn_ns * 11 / 10,
+                &format!("{model:?}, {turns} turn lost from {from_deg}°"),
             );
         }
     }
@@ -404,27 +397,15 @@ fn reordered_packets_are_late_not_lost() {
         let run = |order: &[usize]| {
             let mut cfg = RobosenseConfig::new(None);
             cfg.model = Some(model);
+            // The DIFOP first (the angles), then the packets in `order`.
             let mut stream = RobosenseStream::new(cfg);
-            let mut sweeps = Vec::new();
-            let mut on_sweep =
-                |sw: &mut ringscan::sweep::Sweep, _: &_| sweeps.push((sw.points.len(), sw.packets));
-            stream.push(0, &difop, &mut on_sweep).unwrap();
-            for &k in order {
-                stream
-                    .push(packets[k].0, &packets[k].1, &mut on_sweep)
-                    .unwrap();
-            }
-            stream.finish(&mut on_sweep);
-            let st = stream.stats();
-            (sweeps, st.missing, st.discontinuities)
+            stream.push(0, &difop, &mut |_, _| {}).unwrap();
+            common::run_stream(&mut stream, &packets, order)
         };
-        let mut order: Vec<usize> = (0..n).collect();
         // Away from the cuts (a turn is n / 3 packets).
-        order.swap(n / 6, n / 6 + 1);
-        let late = order.remove(n / 2);
-        order.insert(n / 2 + 3, late);
         let (in_order, _, _) = run(&(0..n).collect::<Vec<_>>());
-        let (reordered, missing, discontinuities) = run(&order);
+        let (reordered, missing, discontinuities) =
+            run(&common::reordered(n, &(0..n).collect::<Vec<_>>()));
         assert_eq!((missing, discontinuities), (0, 0), "{model:?}");
         assert_eq!(
             reordered, in_order,

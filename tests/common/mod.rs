@@ -122,3 +122,75 @@ impl AsRef<std::ffi::OsStr> for Scratch {
         self.path.as_os_str()
     }
 }
+
+/// What a stream made of a run of datagrams ([`run_stream`]): each sweep's (points, packets),
+/// and the run's missing packets and discontinuities.
+pub type StreamRun = (Vec<(usize, u32)>, u64, u64);
+
+/// Pushes `packets[k]` (host time, payload) for each `k` of `order` through `stream`, then
+/// finishes it.
+pub fn run_stream(
+    stream: &mut dyn ringscan::sensor::SensorStream,
+    packets: &[(i64, Vec<u8>)],
+    order: &[usize],
+) -> StreamRun {
+    let mut sweeps = Vec::new();
+    let mut on_sweep = |sw: &mut ringscan::sweep::Sweep, _: &dyn ringscan::sensor::Facts| {
+        sweeps.push((sw.points.len(), sw.packets))
+    };
+    for &k in order {
+        stream
+            .push(packets[k].0, &packets[k].1, &mut on_sweep)
+            .unwrap();
+    }
+    stream.finish(&mut on_sweep).unwrap();
+    let (summary, counts) = stream.summary();
+    let discontinuities = summary["discontinuities"].as_u64().unwrap_or(0);
+    (sweeps, counts.missing, discontinuities)
+}
+
+/// `0..len` with two of the `movable` positions swapped (a sixth of the way in) and one moved
+/// three of them later (half way): a packet a place late and one three places late.
+pub fn reordered(len: usize, movable: &[usize]) -> Vec<usize> {
+    let n = movable.len();
+    let mut order: Vec<usize> = (0..len).collect();
+    order.swap(movable[n / 6], movable[n / 6 + 1]);
+    let late = order.remove(movable[n / 2]);
+    order.insert(movable[n / 2 + 3], late);
+    order
+}
+
+/// A packet of a simulated run: (device time, host time, payload, points it holds).
+pub type SimPacket = (i64, i64, Vec<u8>, usize);
+
+/// Pushes `packets` through `stream` except those whose device time lies in `lost`, then
+/// checks what every family's loss test asks: each point handed over once, the loss counted,
+/// no discontinuity, and no sweep longer than `max_sweep_ns` (its points' `t`).
+pub fn check_a_loss(
+    stream: &mut dyn ringscan::sensor::SensorStream,
+    packets: &[SimPacket],
+    lost: std::ops::Range<i64>,
+    max_sweep_ns: i64,
+    label: &str,
+) {
+    let (mut sent, mut got, mut longest) = (0usize, 0usize, 0u32);
+    let mut on_sweep = |sw: &mut ringscan::sweep::Sweep, _: &dyn ringscan::sensor::Facts| {
+        got += sw.points.len();
+        longest = longest.max(sw.points.iter().map(|p| p.t).max().unwrap_or(0));
+    };
+    for (t, host, bytes, points) in packets {
+        if !lost.contains(t) {
+            sent += points;
+            stream.push(*host, bytes, &mut on_sweep).unwrap();
+        }
+    }
+    stream.finish(&mut on_sweep).unwrap();
+    let (summary, counts) = stream.summary();
+    assert_eq!(got, sent, "{label}: every point once");
+    assert!(counts.missing > 0, "{label}");
+    assert_eq!(summary["discontinuities"].as_u64(), Some(0), "{label}");
+    assert!(
+        i64::from(longest) < max_sweep_ns,
+        "{label}: a sweep of {longest} ns"
+    );
+}
