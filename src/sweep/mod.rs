@@ -144,6 +144,19 @@ pub fn rotation_in(ns: i64, rpm: f64, turn: i64) -> i64 {
     (ns as f64 * rpm / 60e9 * turn as f64) as i64
 }
 
+/// The motor speed a sensor reports, if plausible (60 – 3000 rpm), else the usual 600 rpm: a
+/// corrupt or missing field must not make [`rotation_in`] read every step as a turn lost.
+pub fn motor_rpm_or_nominal(rpm: Option<u16>) -> f64 {
+    match rpm {
+        Some(r @ 60..=3_000) => f64::from(r),
+        _ => 600.0,
+    }
+}
+
+/// A packet at most this many packets behind the latest is a late one (reordered on the way),
+/// not a loss or a new stretch: the window every family's loss counting shares.
+pub const REORDER_PACKETS: u16 = 10;
+
 /// A sweep laid out as channel (ring) × column, with a validity mask.
 ///
 /// Row `r` is ring `r` (0 = lowest elevation, the ROS convention); column `c` is the firing

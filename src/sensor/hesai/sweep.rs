@@ -32,12 +32,8 @@ use super::calib::HesaiCalibration;
 use super::decode::{HesaiDecoder, HesaiOptions, TURN_UDEG};
 use super::model::{mode_name, returns_of_mode, HesaiModel};
 use super::wire::{CrcPart, FunctionalSafety, HesaiPacket};
-use crate::sweep::Sweep;
+use crate::sweep::{Sweep, REORDER_PACKETS};
 use crate::time::ClockSource;
-
-/// A packet at most this many packets behind the latest is a late one (reordered on the way),
-/// not the start of a new stretch.
-pub const REORDER_PACKETS: u32 = 10;
 
 /// Configuration of one stream.
 #[derive(Clone, Debug)]
@@ -403,7 +399,9 @@ impl HesaiStream {
         // by its time) was reordered on the way: it fills a gap already counted as missing,
         // and the stream goes on from the latest packet, not from it.
         let late = match (p.udp_seq(), self.prev_seq) {
-            (Some(s), Some(prev)) => (1..=REORDER_PACKETS).contains(&prev.wrapping_sub(s)),
+            (Some(s), Some(prev)) => {
+                (1..=u32::from(REORDER_PACKETS)).contains(&prev.wrapping_sub(s))
+            }
             _ => step.is_some_and(|d| d < 0 && d >= -i64::from(REORDER_PACKETS) * period_ns),
         };
         let discontinuity = !late && step.is_some_and(|d| d < 0 || d > self.cfg.max_gap_ns);
@@ -464,10 +462,7 @@ impl HesaiStream {
         let nc = dec.channels();
         // How far the head turned since the last packet (its motor speed from the tail, else
         // the usual 600 rpm), for a step the azimuths alone cannot tell.
-        let rpm = match p.motor_rpm() {
-            r @ 60..=3_000 => f64::from(r),
-            _ => 600.0,
-        };
+        let rpm = crate::sweep::motor_rpm_or_nominal(Some(p.motor_rpm()));
         let turned_udeg = step
             .filter(|_| !discontinuity)
             .map(|d| crate::sweep::rotation_in(d, rpm, TURN_UDEG));

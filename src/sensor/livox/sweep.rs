@@ -27,7 +27,7 @@ use super::model::{LivoxModel, Protocol, STANDARD_GRAVITY};
 use super::wire::{read_imu, LivoxWireError, Record, Sdk1Packet, Sdk2Packet};
 use crate::point::Point;
 use crate::sensor::{DecodeOptions, ImuSample};
-use crate::sweep::Sweep;
+use crate::sweep::{Sweep, REORDER_PACKETS};
 use crate::time::ClockSource;
 
 /// Default integration period, ns.
@@ -36,9 +36,6 @@ pub const DEFAULT_PERIOD_NS: u64 = 100_000_000;
 pub const MAX_IMU_QUEUE: usize = 4096;
 /// A `udp_cnt` jump larger than this is a restart, not loss.
 const MAX_COUNTER_GAP: u64 = 4096;
-/// A point packet at most this many packets behind the latest is a late one (reordered on the
-/// way), not a loss or a restart.
-pub const REORDER_PACKETS: u16 = 10;
 
 /// How a stream is set up.
 #[derive(Clone, Debug)]

@@ -32,15 +32,11 @@ use super::m1::{is_m1_difop, M1Decoder, M1Difop, M1Msop, M1_BLOCKS, M1_FRAME_NS}
 use super::model::{RobosenseModel, Shape};
 use super::wire::{is_difop, msop_shape, Difop, Msop};
 use crate::sensor::{DecodeError, DecodeOptions};
-use crate::sweep::Sweep;
+use crate::sweep::{Sweep, REORDER_PACKETS};
 use crate::time::ClockSource;
 
 /// MSOP packets held while waiting for the angles.
 pub const MAX_HELD: usize = 4096;
-
-/// A spinning sensor's packet at most this many packet periods older than the latest is a late
-/// one (reordered on the way), not the start of a new stretch.
-pub const REORDER_PACKETS: u16 = 10;
 
 /// M1: a packet counter at most this far below the last one is a late packet, not a new frame
 /// (rs_driver's window).
@@ -494,10 +490,7 @@ impl RobosenseStream {
         let mut starts = [false; 12];
         let mut last = self.last_block_az;
         // The motor speed a DIFOP gave (else the usual 600 rpm).
-        let rpm = match self.facts.rpm {
-            Some(r @ 60..=3_000) => f64::from(r),
-            _ => 600.0,
-        };
+        let rpm = crate::sweep::motor_rpm_or_nominal(self.facts.rpm);
         for (b, s) in starts.iter_mut().enumerate().take(blocks).filter(|_| !late) {
             let az = p.azimuth(b);
             if let Some(l) = last {
