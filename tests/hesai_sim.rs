@@ -286,6 +286,8 @@ fn a_loss_of_most_of_a_turn_or_more_still_cuts_every_turn() {
 /// counted when its successor came, so nothing is missing, the stream goes on (no
 /// discontinuity, which closed the open sweeps mid-turn), and the sweeps are those of the
 /// stream in order. By UDP sequence number (XT32, QT128) and by tail time (Pandar40P, Pandar64).
+/// So are those of a run where two packets came twice, one right behind itself and one three
+/// packets late: the copies are counted and dropped (they were decoded again before).
 #[test]
 fn reordered_packets_are_late_not_lost() {
     let scene = scenes::named("urban").unwrap();
@@ -306,13 +308,17 @@ fn reordered_packets_are_late_not_lost() {
             common::run_stream(&mut HesaiStream::new(cfg), &packets, order)
         };
         // Away from the cuts (a turn is n / 3 packets).
-        let (in_order, _, _) = run(&(0..n).collect::<Vec<_>>());
-        let (reordered, missing, discontinuities) =
-            run(&common::reordered(n, &(0..n).collect::<Vec<_>>()));
+        let all: Vec<usize> = (0..n).collect();
+        let (in_order, _, _, _) = run(&all);
+        let (reordered, missing, discontinuities, _) = run(&common::reordered(n, &all));
         assert_eq!((missing, discontinuities), (0, 0), "{model:?}");
         assert_eq!(
             reordered, in_order,
             "{model:?}: (points, packets) per sweep"
         );
+        // Two packets sent twice: the copies are dropped and counted, not added again.
+        let (copied, missing, discontinuities, copies) = run(&common::with_copies(n, &all));
+        assert_eq!((missing, discontinuities, copies), (0, 0, 2), "{model:?}");
+        assert_eq!(copied, in_order, "{model:?}: (points, packets) per sweep");
     }
 }

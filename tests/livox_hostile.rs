@@ -155,13 +155,15 @@ fn garbage_never_panics_and_is_never_claimed_as_points() {
 #[test]
 fn undrained_imu_is_bounded() {
     let mut s = mid360();
-    let h = Sdk2Header {
-        time_type: 1,
-        timestamp_ns: 5,
-        ..Sdk2Header::default()
-    };
-    let p = encode_sdk2_imu(&h, [0.0; 3], [0.0, 0.0, 1.0]);
-    for _ in 0..(MAX_IMU_QUEUE + 100) {
+    for i in 0..(MAX_IMU_QUEUE + 100) {
+        // Each its own packet (the same `udp_cnt` again would be a copy).
+        let h = Sdk2Header {
+            time_type: 1,
+            timestamp_ns: 5 + i as u64,
+            udp_cnt: i as u16,
+            ..Sdk2Header::default()
+        };
+        let p = encode_sdk2_imu(&h, [0.0; 3], [0.0, 0.0, 1.0]);
         s.push(0, &p, &mut |_, _| {});
     }
     assert_eq!(s.stats().imu_dropped, 100);

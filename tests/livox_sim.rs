@@ -365,7 +365,8 @@ fn mid360_sweeps_wait_for_the_imu_samples_that_cover_them() {
 /// Point packets reordered on the way (one a place late, one three places late): each fills
 /// the gap counted when its successor came (SDK2 by `udp_cnt`, SDK1 by time), so nothing is
 /// missing, no discontinuity cuts a sweep early, and the sweeps are those of the stream in
-/// order.
+/// order. So are those of a run where two point packets came twice (one right behind itself,
+/// one three packets late): the copies, by `udp_cnt` or by time, are counted and dropped.
 #[test]
 fn reordered_packets_are_late_not_lost() {
     let world = scenes::urban();
@@ -387,12 +388,149 @@ fn reordered_packets_are_late_not_lost() {
             let mut s = LivoxStream::new(LivoxConfig::new(Some(model), model.protocol()));
             common::run_stream(&mut s, &packets, order)
         };
-        let (in_order, _, _) = run(&(0..packets.len()).collect::<Vec<_>>());
-        let (reordered, missing, discontinuities) = run(&common::reordered(packets.len(), &at));
+        let (in_order, _, _, _) = run(&(0..packets.len()).collect::<Vec<_>>());
+        let (reordered, missing, discontinuities, _) = run(&common::reordered(packets.len(), &at));
         assert_eq!((missing, discontinuities), (0, 0), "{model:?}");
         assert_eq!(
             reordered, in_order,
             "{model:?}: (points, packets) per sweep"
         );
+        // Two point packets sent twice: the copies are dropped and counted.
+        let (copied, missing, discontinuities, copies) =
+            run(&common::with_copies(packets.len(), &at));
+        assert_eq!((missing, discontinuities, copies), (0, 0, 2), "{model:?}");
+        assert_eq!(copied, in_order, "{model:?}: (points, packets) per sweep");
     }
+}
+
+/// Rewrites an SDK2 packet's `udp_cnt` and `frame_cnt` (header bytes 7–9, outside the CRC).
+fn set_counters(b: &mut [u8], udp: u16, frame: u8) {
+    b[7..9].copy_from_slice(&udp.to_le_bytes());
+    b[9] = frame;
+}
+
+/// A simulated MID-360 run of `ns` with its point packets' and IMU packets' `udp_cnt` given by
+/// `point_cnt(k)` and `imu_cnt(k)` for the k-th of each; `(host, is_imu, payload)`.
+fn mid360_with_counters(
+    ns: i64,
+    point_cnt: impl Fn(usize) -> (u16, u8),
+    imu_cnt: impl Fn(usize) -> u16,
+    model: LivoxModel,
+) -> Vec<(i64, bool, Vec<u8>)> {
+    let world = scenes::urban();
+    let mut sim = LivoxSim::new(model, T0);
+    sim.trajectory = Trajectory::route(T0, Route::urban());
+    let imu_port = model.imu_port().unwrap();
+    let (mut kp, mut ki) = (0, 0);
+    sim.run_until(&world, T0 + ns, &mut Vec::new(), &mut Vec::new())
+        .into_iter()
+        .map(|(host, port, mut b)| {
+            let imu = port == imu_port;
+            if imu {
+                set_counters(&mut b, imu_cnt(ki), 0);
+                ki += 1;
+            } else {
+                let (u, f) = point_cnt(kp);
+                set_counters(&mut b, u, f);
+                kp += 1;
+            }
+            (host, imu, b)
+        })
+        .collect()
+}
+
+/// `udp_cnt` wraps from 65535 to 0 (the MID-360 counts on across its frames): a packet lost
+/// just before the wrap is as lost as any other, for the point and the IMU counters. (The wrap
+/// read as a frame start, which counts no loss: 0 and 0 before.)
+#[test]
+fn a_loss_at_the_counter_wrap_is_counted() {
+    // 0.12 s: 250 point packets wrapping at the 100th, 24 IMU packets wrapping at the 10th.
+    let packets = mid360_with_counters(
+        120_000_000,
+        |k| ((k as u16).wrapping_add(65_436), 0),
+        |k| (k as u16).wrapping_add(65_526),
+        LivoxModel::Mid360,
+    );
+    let udp = |b: &[u8]| u16::from_le_bytes([b[7], b[8]]);
+    let mut s = LivoxStream::new(LivoxConfig::new(
+        Some(LivoxModel::Mid360),
+        LivoxModel::Mid360.protocol(),
+    ));
+    let (mut points, mut sent) = (0usize, 0usize);
+    for (host, _, b) in &packets {
+        // Lost: the last point packet and the last IMU packet before the wrap.
+        if udp(b) == 65_535 {
+            continue;
+        }
+        sent += 1;
+        s.push(*host, b, &mut |sw, _| points += sw.points.len());
+    }
+    s.finish(&mut |sw, _| points += sw.points.len());
+    assert_eq!(sent + 2, packets.len());
+    let st = s.stats();
+    assert_eq!((st.missing, st.imu_missing), (1, 1));
+    assert_eq!((st.discontinuities, st.duplicates), (0, 0));
+    assert!(points > 0);
+}
+
+/// A sensor that counts frames (the HAP: `udp_cnt` restarts at 0 and `frame_cnt` steps by one
+/// with each): the last packet of a frame, reordered behind the next frame's first, is late.
+/// While its frame's sweep waits for its IMU samples it joins it, and the sweeps are those of
+/// the run in order; without IMU packets that sweep was handed over already, and the packet is
+/// dropped and counted. Either way nothing is missing and nothing is a discontinuity. (Before:
+/// 468 missing, 2 discontinuities, and the frame's tail cut into a sweep of its own.)
+#[test]
+fn a_frame_s_last_packet_behind_the_next_frame_is_late() {
+    const PER_FRAME: usize = 470;
+    let packets = mid360_with_counters(
+        560_000_000,
+        |k| ((k % PER_FRAME) as u16, (k / PER_FRAME) as u8),
+        |k| k as u16,
+        LivoxModel::Hap,
+    );
+    let point_at: Vec<usize> = (0..packets.len()).filter(|&i| !packets[i].1).collect();
+    // Frame 3's first point packet and frame 2's last: sweeps follow frames by then.
+    let (last2, first3) = (point_at[3 * PER_FRAME - 1], point_at[3 * PER_FRAME]);
+    let stripped: Vec<(i64, Vec<u8>)> = packets.iter().map(|(h, _, b)| (*h, b.clone())).collect();
+    let run = |order: &[usize]| {
+        let mut s = LivoxStream::new(LivoxConfig::new(
+            Some(LivoxModel::Hap),
+            LivoxModel::Hap.protocol(),
+        ));
+        let r = common::run_stream(&mut s, &stripped, order);
+        assert!(s.facts().frame_cut);
+        (r, s.stats().late_dropped)
+    };
+    let swap = |order: &mut Vec<usize>| {
+        let (i, j) = (
+            order.iter().position(|&k| k == last2).unwrap(),
+            order.iter().position(|&k| k == first3).unwrap(),
+        );
+        order.swap(i, j);
+    };
+    // With the IMU: the frame's sweep is still held.
+    let all: Vec<usize> = (0..packets.len()).collect();
+    let ((in_order, ..), _) = run(&all);
+    assert_eq!(in_order.len(), 6, "{in_order:?}");
+    let mut order = all.clone();
+    swap(&mut order);
+    let ((late, missing, discontinuities, _), dropped) = run(&order);
+    assert_eq!((missing, discontinuities, dropped), (0, 0, 0));
+    assert_eq!(late, in_order);
+
+    // Without: dropped, counted.
+    let points_only: Vec<usize> = point_at.clone();
+    let ((in_order, ..), _) = run(&points_only);
+    let mut order = points_only;
+    swap(&mut order);
+    let ((late, missing, discontinuities, _), dropped) = run(&order);
+    assert_eq!((missing, discontinuities, dropped), (0, 0, 1));
+    assert_eq!(late.len(), in_order.len());
+    let lost_points = in_order[2].0 - late[2].0;
+    assert!(lost_points > 0 && lost_points <= 96, "{lost_points}");
+    assert_eq!(
+        (late[2].1, in_order[2].1),
+        (PER_FRAME as u32 - 1, PER_FRAME as u32)
+    );
+    assert_eq!(late[3..], in_order[3..]);
 }

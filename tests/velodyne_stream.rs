@@ -2,6 +2,8 @@
 //! hour roll-over and the GPS clock — each against numbers derived from the simulation's
 //! set-up, not from the decoder.
 
+mod common;
+
 use ringscan::sensor::velodyne::calib::builtin::builtin;
 use ringscan::sensor::velodyne::sim::encode_position_packet;
 use ringscan::sensor::velodyne::sim::VelodyneSim;
@@ -277,4 +279,33 @@ fn a_gps_fix_arriving_mid_sweep_does_not_shift_point_times() {
             s.span_ns()
         );
     }
+}
+
+/// A packet sent twice (a switch or a capture tool repeating itself), once right behind itself
+/// and once three packets later: the copies share a timestamp with a packet just seen, so they
+/// are dropped and counted, and the sweeps are those of the run without them. (Before, each
+/// copy stepped the time back: a discontinuity that cut the sweep mid-turn, and its points
+/// twice.)
+#[test]
+fn copies_are_dropped_and_counted() {
+    let mut sim = vlp16_sim();
+    let scene = Shapes::room(15.0, 10.0, 1.7, 5.0);
+    let packets: Vec<(i64, Vec<u8>)> = (0..400)
+        .map(|_| {
+            let (host, bytes) = sim.next_packet(&scene, &mut Vec::new());
+            (host, bytes.to_vec())
+        })
+        .collect();
+    let run = |order: &[usize]| {
+        common::run_stream(
+            &mut VelodyneStream::new(StreamConfig::default()),
+            &packets,
+            order,
+        )
+    };
+    let all: Vec<usize> = (0..packets.len()).collect();
+    let (in_order, ..) = run(&all);
+    let (copied, missing, discontinuities, copies) = run(&common::with_copies(all.len(), &all));
+    assert_eq!((missing, discontinuities, copies), (0, 0, 2));
+    assert_eq!(copied, in_order, "(points, packets) per sweep");
 }

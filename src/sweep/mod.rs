@@ -5,11 +5,13 @@
 //! two consecutive packets = round(Δ device time / packet period) − 1.
 
 pub mod demux;
+pub mod seq;
 
 use crate::point::Point;
 use crate::time::ClockSource;
 
 pub use demux::{Demux, DemuxStats, EarlyDatagram, SensorKey};
+pub use seq::{RecentTimes, SeqStep, SeqWindow};
 
 /// One sweep: the points of one revolution (or of the sensor's frame), with its times and
 /// its packet accounting. Buffers are reused from sweep to sweep.

@@ -124,8 +124,8 @@ impl AsRef<std::ffi::OsStr> for Scratch {
 }
 
 /// What a stream made of a run of datagrams ([`run_stream`]): each sweep's (points, packets),
-/// and the run's missing packets and discontinuities.
-pub type StreamRun = (Vec<(usize, u32)>, u64, u64);
+/// and the run's missing packets, discontinuities and copies dropped.
+pub type StreamRun = (Vec<(usize, u32)>, u64, u64, u64);
 
 /// Pushes `packets[k]` (host time, payload) for each `k` of `order` through `stream`, then
 /// finishes it.
@@ -146,7 +146,21 @@ pub fn run_stream(
     stream.finish(&mut on_sweep).unwrap();
     let (summary, counts) = stream.summary();
     let discontinuities = summary["discontinuities"].as_u64().unwrap_or(0);
-    (sweeps, counts.missing, discontinuities)
+    let copies = summary["duplicates"].as_u64().unwrap_or(0);
+    (sweeps, counts.missing, discontinuities, copies)
+}
+
+/// `0..len` with two of the `movable` positions sent twice: one a third of the way in at once
+/// (a copy right behind its packet), one two thirds in again three of them later (a copy that
+/// comes as late as a reordered packet).
+pub fn with_copies(len: usize, movable: &[usize]) -> Vec<usize> {
+    let n = movable.len();
+    let mut order: Vec<usize> = (0..len).collect();
+    let (a, b) = (movable[2 * n / 3], movable[2 * n / 3 + 3]);
+    order.insert(b + 1, a);
+    let c = movable[n / 3];
+    order.insert(c + 1, c);
+    order
 }
 
 /// `0..len` with two of the `movable` positions swapped (a sixth of the way in) and one moved

@@ -207,7 +207,7 @@ impl Family for Hesai {
             st("detection")
         ));
         out.push(format!(
-            "    {} packets, {} sweeps, {} points; missing {}, malformed {} (CRC failures {}), discontinuities {}, signed {}",
+            "    {} packets, {} sweeps, {} points; missing {}, malformed {} (CRC failures {}), discontinuities {}, duplicates {}, signed {}",
             g(&s["data_packets"]),
             g(&s["sweeps"]),
             g(&s["points"]),
@@ -215,6 +215,7 @@ impl Family for Hesai {
             g(&s["malformed"]),
             g(&s["crc_failures"]),
             g(&s["discontinuities"]),
+            g(&s["duplicates"]),
             g(&s["signed_packets"])
         ));
         out.push(format!("    packets per port: {}", s["packets_per_port"]));
@@ -346,7 +347,7 @@ impl SensorStream for HesaiStream {
             malformed: st.malformed,
             missing: st.missing,
             position: 0,
-            dropped: 0,
+            dropped: st.duplicates,
         };
         let v = json!({
             "kind": "hesai",
@@ -376,6 +377,7 @@ impl SensorStream for HesaiStream {
             "malformed": st.malformed,
             "missing": st.missing,
             "discontinuities": st.discontinuities,
+            "duplicates": st.duplicates,
             "sweeps": st.sweeps,
             "points": st.points,
         });

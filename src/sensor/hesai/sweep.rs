@@ -32,7 +32,7 @@ use super::calib::HesaiCalibration;
 use super::decode::{HesaiDecoder, HesaiOptions, TURN_UDEG};
 use super::model::{mode_name, returns_of_mode, HesaiModel};
 use super::wire::{CrcPart, FunctionalSafety, HesaiPacket};
-use crate::sweep::{Sweep, REORDER_PACKETS};
+use crate::sweep::{RecentTimes, SeqStep, SeqWindow, Sweep, REORDER_PACKETS};
 use crate::time::ClockSource;
 
 /// Configuration of one stream.
@@ -101,6 +101,8 @@ pub struct HesaiStats {
     pub missing: u64,
     /// Discontinuities (time backwards or a gap over `max_gap_ns`).
     pub discontinuities: u64,
+    /// Packets seen already (their sequence number, else their time): copies, dropped.
+    pub duplicates: u64,
     /// Packets carrying a cyber-security signature (skipped, not verified).
     pub signed: u64,
     /// Packets whose functional-safety block reports a state other than normal.
@@ -210,7 +212,10 @@ pub struct HesaiStream {
     open: VecDeque<Open>,
     spare: Vec<Sweep>,
     next_index: u64,
-    prev_seq: Option<u32>,
+    /// The tail's UDP sequence numbers seen lately.
+    seq: SeqWindow,
+    /// Without sequence numbers: the sensor times of the last packets.
+    recent: RecentTimes,
     prev_stamp: Option<i64>,
     /// Angle-correction CSV: each channel's cut threshold on the block azimuth (cut − its
     /// offset, µ°), the window they span (start, width), and the last block azimuth.
@@ -243,7 +248,8 @@ impl HesaiStream {
             open: VecDeque::new(),
             spare: Vec::new(),
             next_index: 0,
-            prev_seq: None,
+            seq: SeqWindow::new(32, (1 << 20) - 1),
+            recent: RecentTimes::default(),
             prev_stamp: None,
             thresholds: None,
             last_block_udeg: None,
@@ -391,29 +397,44 @@ impl HesaiStream {
         self.facts.clock_synchronised = Some(synced);
         self.facts.last_stamp_ns = Some(stamp);
 
+        // ATX: a packet whose laser count is not its correction's cannot be decoded with it:
+        // malformed, as a packet that does not parse, and so not a number seen.
+        if self
+            .decoder
+            .as_ref()
+            .is_some_and(|d| p.layout().channels != d.channels())
+        {
+            self.stats.malformed += 1;
+            return Ok(());
+        }
+
         // Loss and discontinuities.
         let blocks = p.layout().blocks;
         let period_ns = (blocks / n) as i64 * i64::from(model.spec().block_period_ns);
         let step = self.prev_stamp.map(|prev| stamp.saturating_sub(prev));
         // A packet a little behind the latest (by its sequence number where it has one, else
         // by its time) was reordered on the way: it fills a gap already counted as missing,
-        // and the stream goes on from the latest packet, not from it.
-        let late = match (p.udp_seq(), self.prev_seq) {
-            (Some(s), Some(prev)) => {
-                (1..=u32::from(REORDER_PACKETS)).contains(&prev.wrapping_sub(s))
-            }
-            _ => step.is_some_and(|d| d < 0 && d >= -i64::from(REORDER_PACKETS) * period_ns),
+        // and the stream goes on from the latest packet, not from it. A number seen already,
+        // or without numbers the sensor's time of the latest packet again, is a copy.
+        let seq = p.udp_seq().map(|s| self.seq.step(u64::from(s)));
+        let copy = match seq {
+            Some(s) => s == SeqStep::Duplicate,
+            None => p.stamp_ns().is_some() && self.recent.contains(stamp),
+        };
+        if copy {
+            self.stats.duplicates += 1;
+            return Ok(());
+        }
+        let late = match seq {
+            Some(s) => s == SeqStep::Late,
+            None => step.is_some_and(|d| d < 0 && d >= -i64::from(REORDER_PACKETS) * period_ns),
         };
         let discontinuity = !late && step.is_some_and(|d| d < 0 || d > self.cfg.max_gap_ns);
-        match (p.udp_seq(), self.prev_seq) {
+        match seq {
             _ if late => self.remove_missing(1),
-            (Some(s), Some(prev)) => {
-                let gap = s.wrapping_sub(prev);
-                if gap > 1 && gap < 1 << 20 {
-                    self.add_missing(u64::from(gap - 1));
-                }
-            }
-            (None, _) => {
+            Some(SeqStep::Next { lost }) if lost > 0 => self.add_missing(lost),
+            Some(_) => {}
+            None => {
                 if let (Some(d), false) = (step, discontinuity) {
                     if period_ns > 0 {
                         let m = (d as f64 / period_ns as f64).round() as i64 - 1;
@@ -423,28 +444,22 @@ impl HesaiStream {
                     }
                 }
             }
-            _ => {}
         }
         if !late {
-            self.prev_seq = p.udp_seq();
             self.prev_stamp = Some(stamp);
         }
         if discontinuity {
             self.stats.discontinuities += 1;
+            // A clock that restarted (or a capture replayed again) may repeat times.
+            self.recent.clear();
             self.emit_all(on_sweep);
             self.last_az.iter_mut().for_each(|a| *a = i64::MIN);
             self.last_block_udeg = None;
         }
-
-        // ATX: a packet whose laser count is not its correction's cannot be decoded with it.
-        if self
-            .decoder
-            .as_ref()
-            .is_some_and(|d| p.layout().channels != d.channels())
-        {
-            self.stats.malformed += 1;
-            return Ok(());
+        if seq.is_none() && p.stamp_ns().is_some() {
+            self.recent.push(stamp);
         }
+
         let frame = p.frame_id().map(|f| f & 1);
         if let (Some(f), Some(last)) = (frame, self.last_frame) {
             if f != last {

@@ -124,7 +124,7 @@ impl Family for Livox {
                 st("detection")
             ),
             format!(
-                "    {} point + {} IMU packets, {} sweeps ({} ms, cut by {}), {} points ({:.0} per sweep, {}–{}); missing {}, malformed {}, discontinuities {}; IMU missing {}, dropped {}",
+                "    {} point + {} IMU packets, {} sweeps ({} ms, cut by {}), {} points ({:.0} per sweep, {}–{}); missing {}, malformed {}, discontinuities {}, duplicates {}, late dropped {}; IMU missing {}, dropped {}",
                 g(&s["data_packets"]),
                 g(&s["imu_packets"]),
                 g(&s["sweeps"]),
@@ -137,6 +137,8 @@ impl Family for Livox {
                 g(&s["missing"]),
                 g(&s["malformed"]),
                 g(&s["discontinuities"]),
+                g(&s["duplicates"]),
+                g(&s["late_dropped"]),
                 g(&s["imu_missing"]),
                 g(&s["imu_dropped"])
             ),
@@ -283,7 +285,7 @@ impl SensorStream for LivoxStream {
             malformed: st.malformed,
             missing: st.missing,
             position: 0,
-            dropped: 0,
+            dropped: st.duplicates + st.late_dropped,
         };
         let mean = if st.sweeps > 0 {
             st.points as f64 / st.sweeps as f64
@@ -322,6 +324,8 @@ impl SensorStream for LivoxStream {
             "malformed": st.malformed,
             "missing": st.missing,
             "discontinuities": st.discontinuities,
+            "duplicates": st.duplicates,
+            "late_dropped": st.late_dropped,
             "sweeps": st.sweeps,
             "points": st.points,
             "tagged_points": st.tagged_points,

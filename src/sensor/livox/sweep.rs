@@ -27,7 +27,7 @@ use super::model::{LivoxModel, Protocol, STANDARD_GRAVITY};
 use super::wire::{read_imu, LivoxWireError, Record, Sdk1Packet, Sdk2Packet};
 use crate::point::Point;
 use crate::sensor::{DecodeOptions, ImuSample};
-use crate::sweep::{Sweep, REORDER_PACKETS};
+use crate::sweep::{RecentTimes, SeqStep, SeqWindow, Sweep, REORDER_PACKETS};
 use crate::time::ClockSource;
 
 /// Default integration period, ns.
@@ -93,6 +93,11 @@ pub struct LivoxStats {
     pub imu_missing: u64,
     /// Restarts of the counter or device time (too large or backwards).
     pub discontinuities: u64,
+    /// Point or IMU packets whose counter was seen already (copies): dropped.
+    pub duplicates: u64,
+    /// Point packets of a frame already handed over (its last packets came after the next
+    /// frame's first ones, and no IMU wait held it): dropped.
+    pub late_dropped: u64,
     /// IMU samples dropped because nobody drained them.
     pub imu_dropped: u64,
     /// Sweeps emitted.
@@ -181,11 +186,17 @@ pub struct LivoxStream {
     /// restart of the device clock (a packet's records may overlap the next one's by a
     /// spacing, depending on how the sensor fills `time_interval`).
     last_packet_ns: Option<i64>,
-    last_udp: Option<u16>,
-    last_imu_udp: Option<u16>,
+    /// SDK2 `udp_cnt` of the point and of the IMU packets.
+    udp: SeqWindow,
+    imu_udp: SeqWindow,
     last_frame: Option<u8>,
+    /// Frame-cut sensors: the frame before the open one and its `udp_cnt` window, for its
+    /// packets that come after the next frame's first.
+    prev_frame: Option<(u8, SeqWindow)>,
     frame_starts: u32,
     sdk1_next_ns: Option<i64>,
+    /// SDK1: the times of the last point packets (they carry no counter).
+    sdk1_recent: RecentTimes,
     imu: VecDeque<ImuSample>,
 }
 
@@ -225,11 +236,13 @@ impl LivoxStream {
             held_end_ns: 0,
             newest_imu_ns: None,
             last_packet_ns: None,
-            last_udp: None,
-            last_imu_udp: None,
+            udp: SeqWindow::new(16, MAX_COUNTER_GAP),
+            imu_udp: SeqWindow::new(16, MAX_COUNTER_GAP),
             last_frame: None,
+            prev_frame: None,
             frame_starts: 0,
             sdk1_next_ns: None,
+            sdk1_recent: RecentTimes::default(),
             imu: VecDeque::new(),
         }
     }
@@ -385,51 +398,66 @@ impl LivoxStream {
         self.facts.time_type = Some(p.time_type());
         self.facts.clock = Self::clock_of(Protocol::Sdk2, p.time_type());
         if p.record() == Record::Imu {
-            self.stats.imu_packets += 1;
-            let udp = p.udp_cnt();
-            if let Some(prev) = self.last_imu_udp {
-                let gap = u64::from(udp.wrapping_sub(prev.wrapping_add(1)));
-                if gap > 0 && gap < MAX_COUNTER_GAP && udp != 0 {
-                    self.stats.imu_missing += gap;
+            match self.imu_udp.step(u64::from(p.udp_cnt())) {
+                SeqStep::Duplicate => {
+                    self.stats.duplicates += 1;
+                    return Ok(());
                 }
+                SeqStep::Next { lost } => self.stats.imu_missing += lost,
+                SeqStep::Late => self.stats.imu_missing = self.stats.imu_missing.saturating_sub(1),
+                // A restart (the counter may restart at 0 with each frame): no loss known.
+                SeqStep::Jump => {}
             }
-            self.last_imu_udp = Some(udp);
+            self.stats.imu_packets += 1;
             for i in 0..p.records() {
                 self.push_imu_record(p.record_bytes(i), ts, host_ns);
             }
             return Ok(());
         }
         self.facts.data_type = Some(p.data_type());
-        // Loss and frame starts from the counters.
+        // Loss, late and duplicate packets, and frame starts, from the counters.
         let (udp, frame) = (p.udp_cnt(), p.frame_cnt());
-        let mut frame_start = false;
+        if self.prev_frame.is_some_and(|(f, _)| f == frame)
+            && self.last_frame == Some(frame.wrapping_add(1))
+            && self.udp.latest() < Some(u64::from(REORDER_PACKETS))
+        {
+            self.push_previous_frame(&p, host_ns, ts);
+            return Ok(());
+        }
+        let before = self.udp;
+        let step = self.udp.step(u64::from(udp));
+        // `udp_cnt` restarts at 0 where a frame starts; `frame_cnt` steps with it on the
+        // sensors that count frames.
+        let restart_at_0 = udp == 0 && step == SeqStep::Jump;
+        let frame_start =
+            restart_at_0 && self.last_frame.is_some_and(|f| frame == f.wrapping_add(1));
         let mut lost = 0;
         // A packet a little behind the latest was reordered on the way: it fills the gap its
-        // successor counted, cuts nothing, and the counters go on from the latest.
-        let late = self
-            .last_udp
-            .is_some_and(|prev| (1..=REORDER_PACKETS).contains(&prev.wrapping_sub(udp)));
-        if late {
-            self.unmiss();
-        } else if let Some(prev) = self.last_udp {
-            let expected = prev.wrapping_add(1);
-            if udp == 0 && udp != expected {
-                if self.last_frame.is_some_and(|f| frame == f.wrapping_add(1)) {
-                    self.frame_starts = self.frame_starts.saturating_add(1);
-                    frame_start = true;
-                }
-            } else if udp != expected {
-                let gap = u64::from(udp.wrapping_sub(expected));
-                if gap < MAX_COUNTER_GAP {
-                    self.stats.missing += gap;
-                    lost = gap;
-                } else {
-                    self.stats.discontinuities += 1;
-                }
+        // successor counted, cuts nothing, and the stream goes on from the latest.
+        let mut late = false;
+        match step {
+            SeqStep::Duplicate => {
+                self.stats.duplicates += 1;
+                return Ok(());
             }
+            SeqStep::Late => {
+                late = true;
+                self.unmiss();
+            }
+            SeqStep::Next { lost: l } => {
+                self.stats.missing += l;
+                lost = l;
+            }
+            // A restart at 0 without a frame step: a sensor whose `frame_cnt` means nothing
+            // may restart `udp_cnt` with its frames; nothing is known lost.
+            SeqStep::Jump if restart_at_0 => {}
+            SeqStep::Jump => self.stats.discontinuities += 1,
+        }
+        if frame_start {
+            self.frame_starts = self.frame_starts.saturating_add(1);
+            self.prev_frame = self.last_frame.map(|f| (f, before));
         }
         if !late {
-            self.last_udp = Some(udp);
             self.last_frame = Some(frame);
         }
         if self.frame_starts >= 2 {
@@ -475,6 +503,64 @@ impl LivoxStream {
         Ok(())
     }
 
+    /// A point packet of the frame before the open one: its frame's last packets came after
+    /// the next frame's first. It is late, never a cut. Where sweeps follow the frames, its
+    /// points join its frame's sweep while that waits for its IMU samples, and are dropped
+    /// (counted) once it was handed over; on the period, they join the open sweep as any late
+    /// packet's do.
+    fn push_previous_frame(&mut self, p: &Sdk2Packet<'_>, host_ns: i64, ts: i64) {
+        let Some((frame, window)) = self.prev_frame.as_mut() else {
+            return;
+        };
+        let frame = u32::from(*frame);
+        let filled = match window.step(u64::from(p.udp_cnt())) {
+            SeqStep::Duplicate => {
+                self.stats.duplicates += 1;
+                return;
+            }
+            SeqStep::Late => true,
+            // The frame's tail: its loss is never counted (a frame start cannot tell it).
+            SeqStep::Next { .. } | SeqStep::Jump => false,
+        };
+        let into_held = self.facts.frame_cut;
+        let sweep = if !into_held && self.open {
+            &mut self.sweep
+        } else if into_held && self.held_waiting && self.held.frame_id == frame {
+            &mut self.held
+        } else {
+            self.stats.late_dropped += 1;
+            if filled {
+                self.stats.missing = self.stats.missing.saturating_sub(1);
+            }
+            return;
+        };
+        if filled {
+            self.stats.missing = self.stats.missing.saturating_sub(1);
+            sweep.missing_packets = sweep.missing_packets.saturating_sub(1);
+        }
+        let (n, interval) = (p.records(), p.time_interval_ns());
+        let start = sweep.device_time_ns;
+        self.decoder.decode(
+            p.record(),
+            n,
+            |i| p.record_bytes(i),
+            ts,
+            Spacing::sdk2(n, interval),
+            start,
+            &mut sweep.points,
+        );
+        sweep.packets += 1;
+        sweep.columns_count = sweep.columns_count.saturating_add(1);
+        sweep.last_host_ns = sweep.last_host_ns.max(host_ns);
+        self.stats.packets += 1;
+        let end = ts.saturating_add(i64::try_from(interval).unwrap_or(i64::MAX));
+        if into_held {
+            self.held_end_ns = self.held_end_ns.max(end);
+        } else {
+            self.open_end_ns = self.open_end_ns.max(end);
+        }
+    }
+
     fn push_sdk1(
         &mut self,
         host_ns: i64,
@@ -498,6 +584,12 @@ impl LivoxStream {
             return Ok(());
         }
         self.facts.data_type = Some(p.data_type());
+        // Without a counter, a copy shows by its time: two packets of one sensor never share
+        // a first point's time.
+        if self.sdk1_recent.contains(ts) {
+            self.stats.duplicates += 1;
+            return Ok(());
+        }
         let step = self
             .cfg
             .model
@@ -532,6 +624,11 @@ impl LivoxStream {
             self.sdk1_next_ns = Some(ts.saturating_add(step * n as i64));
         }
         let backwards = !late && self.last_packet_ns.is_some_and(|l| ts < l);
+        if backwards {
+            // A clock that restarted (or a capture replayed again) may repeat times.
+            self.sdk1_recent.clear();
+        }
+        self.sdk1_recent.push(ts);
         if !late && (self.time_cut(ts) || backwards) {
             self.emit(on_sweep);
         }

@@ -95,7 +95,7 @@ impl Family for Robosense {
                 st("detection")
             ),
             format!(
-                "    {} MSOP + {} DIFOP packets, {} sweeps, {} points; missing {}, malformed {}, dropped {}, discontinuities {}, held {}",
+                "    {} MSOP + {} DIFOP packets, {} sweeps, {} points; missing {}, malformed {}, dropped {}, discontinuities {}, duplicates {}, held {}",
                 g("data_packets"),
                 g("difop_packets"),
                 g("sweeps"),
@@ -104,6 +104,7 @@ impl Family for Robosense {
                 g("malformed"),
                 g("dropped"),
                 g("discontinuities"),
+                g("duplicates"),
                 g("held")
             ),
             format!("    packets per port: {}", s["packets_per_port"]),
@@ -264,7 +265,7 @@ impl SensorStream for RobosenseStream {
             malformed: st.malformed,
             missing: st.missing,
             position: st.difop,
-            dropped: st.dropped,
+            dropped: st.dropped + st.duplicates,
         };
         let v = json!({
             "kind": "robosense",
@@ -293,6 +294,7 @@ impl SensorStream for RobosenseStream {
             "malformed": st.malformed,
             "missing": st.missing,
             "dropped": st.dropped,
+            "duplicates": st.duplicates,
             "discontinuities": st.discontinuities,
             "sweeps": st.sweeps,
             "points": st.points,

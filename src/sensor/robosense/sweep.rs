@@ -32,7 +32,7 @@ use super::m1::{is_m1_difop, M1Decoder, M1Difop, M1Msop, M1_BLOCKS, M1_FRAME_NS}
 use super::model::{RobosenseModel, Shape};
 use super::wire::{is_difop, msop_shape, Difop, Msop};
 use crate::sensor::{DecodeError, DecodeOptions};
-use crate::sweep::{Sweep, REORDER_PACKETS};
+use crate::sweep::{RecentTimes, Sweep, REORDER_PACKETS};
 use crate::time::ClockSource;
 
 /// MSOP packets held while waiting for the angles.
@@ -94,6 +94,9 @@ pub struct RobosenseStats {
     pub dropped: u64,
     /// Discontinuities.
     pub discontinuities: u64,
+    /// MSOP packets seen already (the latest header time again; M1: and its counter): copies,
+    /// dropped.
+    pub duplicates: u64,
     /// Sweeps emitted.
     pub sweeps: u64,
     /// Points emitted.
@@ -169,6 +172,8 @@ pub struct RobosenseStream {
     next_index: u64,
     last_block_az: Option<u16>,
     prev_stamp: Option<i64>,
+    /// Header times of the last MSOP packets (copies share one).
+    recent: RecentTimes,
     dual: bool,
     /// The last DIFOP, while the model is unknown (a DIFOP that came before any MSOP).
     last_difop: Option<Vec<u8>>,
@@ -196,6 +201,7 @@ impl RobosenseStream {
             next_index: 0,
             last_block_az: None,
             prev_stamp: None,
+            recent: RecentTimes::default(),
             dual: false,
             last_difop: None,
             m1: None,
@@ -448,6 +454,12 @@ impl RobosenseStream {
         let mut late = false;
         if let Some(prev) = self.prev_stamp {
             let d = stamp.saturating_sub(prev);
+            // Two packets of one sensor never share a header time: a copy.
+            if self.recent.contains(stamp) {
+                self.stats.duplicates += 1;
+                self.decoder = Some(dec);
+                return;
+            }
             if d < 0 && period > 0.0 && d as f64 >= -f64::from(REORDER_PACKETS) * period {
                 late = true;
                 self.stats.missing = self.stats.missing.saturating_sub(1);
@@ -472,9 +484,12 @@ impl RobosenseStream {
         }
         if discontinuity {
             self.stats.discontinuities += 1;
+            // A clock that restarted (or a capture replayed again) may repeat times.
+            self.recent.clear();
             self.emit(on_sweep);
             self.last_block_az = None;
         }
+        self.recent.push(stamp);
         self.stats.packets += 1;
         let clock = if synced {
             ClockSource::SensorPtp
@@ -640,6 +655,10 @@ impl RobosenseStream {
             ClockSource::Host
         };
         let seq = p.seq();
+        if self.m1_seq == Some(seq) && self.prev_stamp == Some(stamp) {
+            self.stats.duplicates += 1;
+            return;
+        }
         let mut cut = false;
         let mut missing = 0u64;
         if let Some(prev) = self.m1_seq {

@@ -124,14 +124,15 @@ impl Family for Velodyne {
                 .unwrap_or_default()
         ));
         out.push(format!(
-            "    {} data + {} position packets, {} sweeps, {} points; missing {}, malformed {}, discontinuities {}",
+            "    {} data + {} position packets, {} sweeps, {} points; missing {}, malformed {}, discontinuities {}, duplicates {}",
             g(&s["data_packets"]),
             g(&s["position_packets"]),
             g(&s["sweeps"]),
             g(&s["points"]),
             g(&s["missing"]),
             g(&s["malformed"]),
-            g(&s["discontinuities"])
+            g(&s["discontinuities"]),
+            g(&s["duplicates"])
         ));
         out.push(format!("    packets per port: {}", s["packets_per_port"]));
         out.push(format!(
@@ -229,7 +230,7 @@ impl SensorStream for VelodyneStream {
             malformed: st.malformed,
             missing: st.missing,
             position: st.position_packets,
-            dropped: 0,
+            dropped: st.duplicates,
         };
         let v = json!({
             "kind": "velodyne",
@@ -263,6 +264,7 @@ impl SensorStream for VelodyneStream {
             "malformed": st.malformed,
             "missing": st.missing,
             "discontinuities": st.discontinuities,
+            "duplicates": st.duplicates,
             "sweeps": st.sweeps,
             "points": st.points,
         });

@@ -34,7 +34,7 @@ use crate::sensor::velodyne::VelodyneDecoder;
 use crate::sensor::DecodeError;
 use crate::sensor::DecodeOptions;
 use crate::sensor::StreamError;
-use crate::sweep::Sweep;
+use crate::sweep::{RecentTimes, Sweep};
 use crate::time::{complete_toh, toh_delta_us, ClockSource};
 
 /// Packets looked at before the model is decided.
@@ -91,6 +91,10 @@ pub struct StreamStats {
     pub missing: u64,
     /// Discontinuities: time going backwards or jumping more than `max_gap_ns`.
     pub discontinuities: u64,
+    /// Data packets whose timestamp is one of the last packets' (copies): dropped. A copy
+    /// read as a packet would step the time back: a discontinuity cutting the sweep
+    /// mid-turn, and its points twice.
+    pub duplicates: u64,
     /// Sweeps emitted.
     pub sweeps: u64,
     /// Points emitted.
@@ -155,6 +159,8 @@ pub struct VelodyneStream {
     pending: Vec<(i64, Box<[u8; DATA_PACKET_LEN]>)>,
     cur: Sweep,
     prev: Option<Prev>,
+    /// Timestamps (µs past the hour) of the last data packets.
+    recent: RecentTimes,
     gps: Option<GpsRef>,
     stats: StreamStats,
     facts: SensorFacts,
@@ -183,6 +189,7 @@ impl VelodyneStream {
             pending: Vec::new(),
             cur: Sweep::default(),
             prev: None,
+            recent: RecentTimes::default(),
             gps: None,
             stats: StreamStats::default(),
             facts: SensorFacts::default(),
@@ -488,7 +495,11 @@ impl VelodyneStream {
         let fresh_first_firing_ns = stamp_ns.saturating_add(model.stamp_to_first_firing_ns());
         let period_ns = model.packet_period_ns(mode);
 
-        // Loss and discontinuities.
+        // Copies, loss and discontinuities. Two packets of one sensor never share a timestamp.
+        if self.recent.contains(i64::from(toh)) {
+            self.stats.duplicates += 1;
+            return;
+        }
         if let Some(prev) = self.prev {
             let d_us = toh_delta_us(prev.toh_us, toh);
             let d_ns = d_us * 1_000;
@@ -496,6 +507,8 @@ impl VelodyneStream {
                 self.stats.discontinuities += 1;
                 self.emit(on_sweep);
                 self.prev = None;
+                // A clock that restarted (or a capture replayed again) may repeat times.
+                self.recent.clear();
                 self.column_rate.reset();
             } else if period_ns > 0.0 {
                 let missing = ((d_ns as f64 / period_ns).round() as i64 - 1).max(0) as u64;
@@ -507,6 +520,7 @@ impl VelodyneStream {
                 }
             }
         }
+        self.recent.push(i64::from(toh));
         self.packet_rate = match self.decoder.as_ref() {
             Some(d) => self.column_rate.next(d, p),
             None => None,
