@@ -386,3 +386,26 @@ fn hostile_raw_packet_messages_are_counted_not_decoded() {
     );
     assert!(src.sensors().is_empty(), "raw packets are no bag sensor");
 }
+
+/// A zstd-compressed `.db3` that decompresses to far more than its size allows (a zstd bomb:
+/// 100 MiB of zeros behind a sqlite3 header, a few kB compressed) is refused with a clear
+/// error once the temporary copy (SQLite reads only files) reaches its cap of 64 × the
+/// compressed size + 64 MiB, and the copy is removed. Before, it was decompressed whole, twice.
+#[test]
+fn a_zstd_bomb_db3_is_refused_before_it_fills_the_disk() {
+    let mut raw = b"SQLite format 3\0".to_vec();
+    raw.resize(100 << 20, 0);
+    let z = zstd::bulk::compress(&raw, 3).unwrap();
+    drop(raw);
+    assert!(z.len() < 64 << 10, "{} bytes compressed", z.len());
+    let p = tmp("bomb.db3.zstd", &z);
+    let e = read_all(&p).unwrap_err().to_string();
+    assert!(e.contains("zstd bomb") && e.contains("zstd -d"), "{e}");
+    let left: Vec<_> = std::fs::read_dir(std::env::temp_dir())
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with(&format!("ringscan-bag-{}-", std::process::id())))
+        .collect();
+    assert!(left.is_empty(), "temporary copies left: {left:?}");
+}

@@ -109,6 +109,13 @@ pub const MAX_CHUNK_BYTES: usize = 256 << 20;
 pub const MAX_MESSAGE_BYTES: usize = 64 << 20;
 /// Message bytes the Ouster metadata pre-scan reads at most.
 pub const PRESCAN_BYTES: u64 = 64 << 20;
+/// A zstd-compressed sqlite3 file is decompressed to a temporary file (SQLite reads only
+/// files) of at most this many times its compressed size, plus [`ZSTD_DB3_SLACK_BYTES`]:
+/// storage of packets compresses a few times, a zstd bomb by thousands, and it must not fill
+/// the disk.
+pub const MAX_ZSTD_DB3_RATIO: u64 = 64;
+/// See [`MAX_ZSTD_DB3_RATIO`].
+pub const ZSTD_DB3_SLACK_BYTES: u64 = 64 << 20;
 /// Sensors (synthetic addresses 127.0.0.1 … 127.0.0.254) at most.
 pub const MAX_SENSORS: usize = 254;
 
@@ -409,6 +416,9 @@ pub fn detect(path: &Path) -> Result<Option<BagKind>, BagError> {
 /// A temporary file removed when dropped (a decompressed `.db3.zstd`).
 struct TempPath(PathBuf);
 
+/// A storage file of a bag (its path) and its decompressed temporary copy.
+type Decompressed = (PathBuf, TempPath);
+
 impl Drop for TempPath {
     fn drop(&mut self) {
         let _ = std::fs::remove_file(&self.0);
@@ -434,11 +444,27 @@ fn decompress_to_temp(path: &Path) -> Result<TempPath, BagError> {
         .open(&tmp.0)
         .map_err(|e| open(&tmp.0, e))?;
     let f = File::open(path).map_err(|e| open(path, e))?;
-    let mut d = zstd::stream::read::Decoder::new(f).map_err(|e| open(path, e))?;
-    io::copy(&mut d, &mut out).map_err(|source| BagError::Corrupt {
-        offset: 0,
-        reason: format!("zstd-compressed file does not decompress: {source}"),
+    let cap = (f.metadata().map_err(|e| open(path, e))?.len())
+        .saturating_mul(MAX_ZSTD_DB3_RATIO)
+        .saturating_add(ZSTD_DB3_SLACK_BYTES);
+    let d = zstd::stream::read::Decoder::new(f).map_err(|e| open(path, e))?;
+    let written = io::copy(&mut d.take(cap.saturating_add(1)), &mut out).map_err(|source| {
+        BagError::Corrupt {
+            offset: 0,
+            reason: format!("zstd-compressed file does not decompress: {source}"),
+        }
     })?;
+    if written > cap {
+        return Err(BagError::Corrupt {
+            offset: 0,
+            reason: format!(
+                "zstd-compressed sqlite3 file decompresses to more than {cap} bytes \
+                 ({MAX_ZSTD_DB3_RATIO} × its size + {} MiB): refused as a zstd bomb; if it is \
+                 genuine, decompress it with `zstd -d` and read the .db3",
+                ZSTD_DB3_SLACK_BYTES >> 20
+            ),
+        });
+    }
     Ok(tmp)
 }
 
@@ -452,7 +478,13 @@ enum Inner {
 }
 
 impl Inner {
-    fn open(path: &Path, kind: FileKind) -> Result<Self, BagError> {
+    /// Opens a storage file; a zstd-compressed sqlite3 file uses `decompressed` when it is
+    /// that file's copy (decompressed by the pre-scan), else is decompressed again.
+    fn open(
+        path: &Path,
+        kind: FileKind,
+        decompressed: &mut Option<Decompressed>,
+    ) -> Result<Self, BagError> {
         let open = |source| BagError::Open {
             path: path.to_path_buf(),
             source,
@@ -474,7 +506,13 @@ impl Inner {
             }
             FileKind::Sqlite3 => Self::Sqlite(Box::new(SqliteReader::open(path)?), None),
             FileKind::ZstdSqlite3 => {
-                let tmp = decompress_to_temp(path)?;
+                let tmp = match decompressed.take() {
+                    Some((p, tmp)) if p == path => tmp,
+                    other => {
+                        *decompressed = other;
+                        decompress_to_temp(path)?
+                    }
+                };
                 Self::Sqlite(Box::new(SqliteReader::open(&tmp.0)?), Some(tmp))
             }
             FileKind::Mcap => {
@@ -576,10 +614,16 @@ struct Messages {
     raw: Vec<u8>,
     /// The message last returned is `raw`.
     inflated: bool,
+    /// A zstd-compressed sqlite3 file of the bag decompressed already (by the pre-scan).
+    decompressed: Option<Decompressed>,
 }
 
 impl Messages {
-    fn open(path: &Path, kind: &BagKind) -> Result<Self, BagError> {
+    fn open(
+        path: &Path,
+        kind: &BagKind,
+        decompressed: Option<Decompressed>,
+    ) -> Result<Self, BagError> {
         let mut m = Self {
             files: VecDeque::new(),
             current: None,
@@ -592,6 +636,7 @@ impl Messages {
             damage: Damage::default(),
             raw: Vec::new(),
             inflated: false,
+            decompressed,
         };
         match kind {
             BagKind::File(k) => m.files.push_back((path.to_path_buf(), *k)),
@@ -701,6 +746,17 @@ impl Messages {
         g
     }
 
+    /// The decompressed copy of the current file, if it is a zstd-compressed sqlite3 file.
+    fn into_decompressed(mut self) -> Option<Decompressed> {
+        match self.current.take()? {
+            (path, Inner::Sqlite(reader, Some(tmp))) => {
+                drop(reader);
+                Some((path, tmp))
+            }
+            _ => None,
+        }
+    }
+
     fn next_file(&mut self) -> Result<bool, BagError> {
         if let Some((path, inner)) = self.current.take() {
             self.done_bytes += inner.position();
@@ -709,7 +765,10 @@ impl Messages {
         let Some((path, kind)) = self.files.pop_front() else {
             return Ok(false);
         };
-        let inner = Inner::open(&path, kind).map_err(|e| in_file(&path, e))?;
+        let inner =
+            Inner::open(&path, kind, &mut self.decompressed).map_err(|e| in_file(&path, e))?;
+        // A copy the pre-scan made of another file than the first is not kept waiting.
+        self.decompressed = None;
         self.local.clear();
         for (id, c) in inner.connections() {
             let g = self.localize(c);
@@ -1120,9 +1179,9 @@ impl BagSource {
             let found = head(path, 16).unwrap_or_default();
             BagError::NotABag { found }
         })?;
-        let metadata = prescan_metadata(path, &kind)?;
+        let (metadata, decompressed) = prescan_metadata(path, &kind)?;
         let attachments = mcap_attachments(path, &kind);
-        let messages = Messages::open(path, &kind)?;
+        let messages = Messages::open(path, &kind, decompressed)?;
         let mut s = Self {
             kind,
             messages,
@@ -1598,8 +1657,14 @@ fn mcap_attachments(path: &Path, kind: &BagKind) -> Vec<(String, Vec<u8>)> {
 
 /// Ouster metadata (`std_msgs/String` on `<ns>/metadata`) by namespace, read from the start of
 /// the bag until every Ouster namespace known has one, or [`PRESCAN_BYTES`] of messages.
-fn prescan_metadata(path: &Path, kind: &BagKind) -> Result<HashMap<String, String>, BagError> {
-    let mut m = Messages::open(path, kind)?;
+/// The Ouster metadata strings of a bag (by namespace) found near its start, and the file the
+/// pre-scan stopped in if it had to be decompressed (for the main pass to read, not to
+/// decompress twice).
+fn prescan_metadata(
+    path: &Path,
+    kind: &BagKind,
+) -> Result<(HashMap<String, String>, Option<Decompressed>), BagError> {
+    let mut m = Messages::open(path, kind, None)?;
     let mut found: HashMap<String, String> = HashMap::new();
     let is_ouster =
         |c: &Connection| MsgKind::from_type_name(&c.type_name) == Some(MsgKind::OusterPacket);
@@ -1618,7 +1683,7 @@ fn prescan_metadata(path: &Path, kind: &BagKind) -> Result<HashMap<String, Strin
     let upfront_complete =
         !matches!(kind, BagKind::File(FileKind::Mcap | FileKind::ZstdMcap)) && !m.conns.is_empty();
     if upfront_complete && wanted(&m).is_empty() {
-        return Ok(found);
+        return Ok((found, m.into_decompressed()));
     }
     let mut read = 0u64;
     // A damaged bag is reported by the main pass; the pre-scan keeps what it found.
@@ -1640,7 +1705,7 @@ fn prescan_metadata(path: &Path, kind: &BagKind) -> Result<HashMap<String, Strin
             break;
         }
     }
-    Ok(found)
+    Ok((found, m.into_decompressed()))
 }
 
 #[cfg(test)]
