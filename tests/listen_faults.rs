@@ -229,6 +229,76 @@ fn split_every_rotates_files_without_losing_a_sweep() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `--format ros2` with `--split-every`: each closed file is synced and named in
+/// `metadata.yaml` on a thread of its own (off the decode thread), and the run's last yaml
+/// names every file, in order, with each file's own message count; every file is finalised.
+#[test]
+fn a_split_rosbag2_names_every_file_in_its_metadata() {
+    let (pcap, _, secs) = velodyne_capture();
+    let _g = serial();
+    let dir = tmpdir("split-ros2");
+    let bag = dir.join("drive");
+    let offset = free_offset(&[2368, 8308]);
+    let mut args = sensor_args(offset, Some(&bag));
+    args.extend([
+        "--format".to_string(),
+        "ros2".to_string(),
+        "--split-every".to_string(),
+        format!("{:.2}s", 1.4 * secs),
+    ]);
+    let l = start_listen(&args);
+    replay(&pcap, offset, "1", &["--loop", "4"]);
+    std::thread::sleep(Duration::from_millis(300));
+    let (code, stdout, err) = l.stop("INT");
+    assert_eq!(code, Some(0), "{err}");
+    let j: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let files = j["files"].as_array().unwrap();
+    assert!(files.len() >= 2, "{} files", files.len());
+    let yaml = std::fs::read_to_string(bag.join("metadata.yaml")).unwrap();
+    let mut listed = Vec::new();
+    let mut total = 0u64;
+    for f in files {
+        let p = PathBuf::from(f["path"].as_str().unwrap());
+        assert_eq!(p.parent(), Some(bag.as_path()));
+        // Finalised (a summary), and its statistics count the messages it holds (CDR here,
+        // which `read_finalised` does not parse).
+        let bytes = std::fs::read(&p).unwrap();
+        let stats = mcap::Summary::read(&bytes)
+            .unwrap()
+            .and_then(|s| s.stats)
+            .unwrap_or_else(|| panic!("{}: not finalised", p.display()));
+        let n = mcap::MessageStream::new(&bytes).unwrap().count() as u64;
+        assert_eq!(stats.message_count, n, "{}", p.display());
+        total += n;
+        let name = p.file_name().unwrap().to_string_lossy().into_owned();
+        listed.push(format!("    - path: \"{name}\"\n"));
+        assert!(
+            yaml.contains(&format!("    - path: \"{name}\"")),
+            "{name} not in {yaml}"
+        );
+        // Its own count follows its path.
+        let at = yaml.find(&format!("    - path: \"{name}\"")).unwrap();
+        let count = yaml[at..]
+            .lines()
+            .find_map(|l| l.trim().strip_prefix("message_count: "))
+            .unwrap();
+        assert_eq!(count.parse::<u64>().unwrap(), n, "{name}");
+    }
+    let order: Vec<usize> = listed
+        .iter()
+        .map(|l| yaml.find(l.as_str()).unwrap())
+        .collect();
+    assert!(
+        order.windows(2).all(|w| w[0] < w[1]),
+        "files out of order: {yaml}"
+    );
+    assert!(
+        yaml.contains(&format!("  message_count: {total}\n")),
+        "{yaml}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// Sends datagrams to 127.0.0.1 at about the capture's pace.
 fn send_all(sock: &UdpSocket, dgrams: &[(i64, u16, Vec<u8>)], port_of: impl Fn(u16) -> u16) {
     let t0 = dgrams.first().map_or(0, |d| d.0);

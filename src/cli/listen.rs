@@ -22,6 +22,7 @@ use crate::sensor::ouster::family::OusterCalibration;
 use crate::sensor::ouster::OusterStream;
 use crate::sensor::{Calibration, FAMILIES};
 use crate::sink::mcap::{Behind, SinkOptions, SinkSummary};
+use crate::sink::rosbag2::BagFile;
 use crate::sink::{McapSink, SinkError};
 use crate::source::udp::{self, BoundSocket, Queue, ReceiveStats, Received, SocketOptions};
 use serde_json::{json, Value};
@@ -177,6 +178,8 @@ struct Files {
     bag_dir: bool,
     /// The rosbag2 directory was made by this run (removed again if it records nothing).
     made_dir: bool,
+    /// Syncs closed rosbag2 files and rewrites `metadata.yaml` off the decode thread.
+    checkpoints: Option<Checkpoints>,
     /// The first file is written as this temporary file until a sensor is recognised, then
     /// renamed to its path: a run that receives nothing of a sensor (a wrong port, a sensor
     /// switched off) leaves no empty file, and a file already at the path as it was.
@@ -253,13 +256,9 @@ impl Files {
         }
     }
 
-    /// Rewrites the rosbag2 `metadata.yaml` for the files closed so far (and `last`).
-    fn write_bag_metadata(&self, last: Option<(&Path, &SinkSummary)>) -> Result<(), SinkError> {
-        if !self.bag_dir {
-            return Ok(());
-        }
-        let files: Vec<crate::sink::rosbag2::BagFile> = self
-            .closed
+    /// The rosbag2 files closed so far (and `last`), as `metadata.yaml` lists them.
+    fn bag_files(&self, last: Option<(&Path, &SinkSummary)>) -> Vec<BagFile> {
+        self.closed
             .iter()
             .map(|(p, s)| (p.as_path(), s))
             .chain(last)
@@ -270,11 +269,35 @@ impl Files {
                     .unwrap_or_default(),
                 summary: s.clone(),
             })
-            .collect();
-        crate::sink::rosbag2::write_metadata(&self.base, &files).map_err(|source| SinkError::Io {
-            context: format!("writing {}/metadata.yaml", self.base.display()),
-            source,
-        })
+            .collect()
+    }
+
+    /// A rosbag2 file was closed: it is synced, then `metadata.yaml` rewritten to name it, on
+    /// the checkpoint thread. An error of an earlier checkpoint is returned here.
+    fn checkpoint(&mut self, closed: &Path) -> Result<(), SinkError> {
+        if !self.bag_dir {
+            return Ok(());
+        }
+        let files = self.bag_files(None);
+        let base = self.base.clone();
+        let c = self
+            .checkpoints
+            .get_or_insert_with(|| Checkpoints::start(base));
+        c.send(closed.to_path_buf(), files)
+    }
+
+    /// The last rosbag2 file was finished (`last`): waits for the checkpoints under way, syncs
+    /// it, and writes the final `metadata.yaml`.
+    fn write_final_metadata(&mut self, last: (&Path, &SinkSummary)) -> Result<(), SinkError> {
+        if let Some(c) = self.checkpoints.take() {
+            c.finish()?;
+        }
+        if !self.bag_dir {
+            return Ok(());
+        }
+        sync_file(last.0)?;
+        let files = self.bag_files(Some(last));
+        write_bag_metadata(&self.base, &files)
     }
 
     fn due(&self) -> bool {
@@ -291,6 +314,116 @@ impl Files {
             Some(Split::Bytes(b)) => std::fs::metadata(&self.current).is_ok_and(|m| m.len() >= b),
         }
     }
+}
+
+/// The thread that makes closed rosbag2 files durable and names them in `metadata.yaml`, in
+/// the order they were closed. A file is synced before the yaml that names it is written: a
+/// power loss must not leave a yaml naming a file cut short (a recording killed outright loses
+/// nothing written). Syncing seconds of points can take longer than the receive queue lasts,
+/// so the decode thread only hands the work over.
+struct Checkpoints {
+    base: PathBuf,
+    jobs: Option<std::sync::mpsc::Sender<(PathBuf, Vec<BagFile>)>>,
+    thread: Option<std::thread::JoinHandle<Result<(), SinkError>>>,
+}
+
+impl Checkpoints {
+    fn start(base: PathBuf) -> Self {
+        let (tx, rx) = std::sync::mpsc::channel::<(PathBuf, Vec<BagFile>)>();
+        let thread = std::thread::Builder::new()
+            .name("ringscan-checkpoint".into())
+            .spawn({
+                let base = base.clone();
+                move || {
+                    for (closed, files) in rx {
+                        sync_file(&closed)?;
+                        write_bag_metadata(&base, &files)?;
+                    }
+                    Ok(())
+                }
+            });
+        match thread {
+            Ok(t) => Self {
+                base,
+                jobs: Some(tx),
+                thread: Some(t),
+            },
+            // No thread: each checkpoint is done on the caller's (as it was before).
+            Err(e) => {
+                tracing::warn!("no checkpoint thread ({e}): files are synced on the decode thread");
+                Self {
+                    base,
+                    jobs: None,
+                    thread: None,
+                }
+            }
+        }
+    }
+
+    fn send(&mut self, closed: PathBuf, files: Vec<BagFile>) -> Result<(), SinkError> {
+        let Some(jobs) = &self.jobs else {
+            sync_file(&closed)?;
+            return write_bag_metadata(&self.base, &files);
+        };
+        if jobs.send((closed, files)).is_ok() {
+            return Ok(());
+        }
+        // The thread stopped on an error: that error.
+        self.jobs = None;
+        match self.thread.take().map(std::thread::JoinHandle::join) {
+            Some(Ok(r)) => r,
+            _ => Err(checkpoint_thread_lost()),
+        }
+    }
+
+    /// Waits for every checkpoint handed over.
+    fn finish(mut self) -> Result<(), SinkError> {
+        self.jobs = None;
+        match self.thread.take().map(std::thread::JoinHandle::join) {
+            None | Some(Ok(Ok(()))) => Ok(()),
+            Some(Ok(Err(e))) => Err(e),
+            Some(Err(_)) => Err(checkpoint_thread_lost()),
+        }
+    }
+}
+
+impl Drop for Checkpoints {
+    /// A run that ends on an error still leaves the checkpoints handed over done.
+    fn drop(&mut self) {
+        self.jobs = None;
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+fn checkpoint_thread_lost() -> SinkError {
+    SinkError::Io {
+        context: "the rosbag2 checkpoint thread".into(),
+        source: std::io::Error::other("it stopped without a result"),
+    }
+}
+
+/// Writes a file's data to the disk (`fsync`).
+fn sync_file(path: &Path) -> Result<(), SinkError> {
+    std::fs::OpenOptions::new()
+        .append(true)
+        .open(path)
+        .and_then(|f| f.sync_all())
+        .map_err(|source| SinkError::Io {
+            context: format!("syncing {}", path.display()),
+            source,
+        })
+}
+
+/// Rewrites `base/metadata.yaml` for `files`, and syncs the directory (its new names).
+fn write_bag_metadata(base: &Path, files: &[BagFile]) -> Result<(), SinkError> {
+    crate::sink::rosbag2::write_metadata(base, files).map_err(|source| SinkError::Io {
+        context: format!("writing {}/metadata.yaml", base.display()),
+        source,
+    })?;
+    crate::sink::mcap::sync_parent_dir(&base.join("metadata.yaml"));
+    Ok(())
 }
 
 /// The MCAP settings of `listen`: the default compression on `--threads` threads, which the
@@ -792,8 +925,8 @@ impl DecodeThread {
         files.opened = Instant::now();
         if let Some(s) = closed {
             tracing::info!("closed {}", prev.display());
-            files.closed.push((prev, s));
-            files.write_bag_metadata(None)?;
+            files.closed.push((prev.clone(), s));
+            files.checkpoint(&prev)?;
         }
         Ok(())
     }
@@ -821,9 +954,10 @@ impl DecodeThread {
             .close_sink()
             .map_err(|e| (RunError::Sink(e), path.clone()))?;
         let mut files = Vec::new();
-        if let Some(f) = self.files.take() {
+        if let Some(mut f) = self.files.take() {
             if let Some(s) = &last {
-                f.write_bag_metadata(Some((&f.current, s)))
+                let current = f.current.clone();
+                f.write_final_metadata((&current, s))
                     .map_err(|e| (RunError::Sink(e), path))?;
             }
             files = f.closed;
@@ -1176,6 +1310,7 @@ pub fn listen_run_with(
                                 closed: Vec::new(),
                                 bag_dir,
                                 made_dir: bag_dir && !base_existed,
+                                checkpoints: None,
                                 pending: None,
                             };
                             let current = files.path(0);

@@ -1507,7 +1507,7 @@ fn sync_buf_file(w: BufWriter<File>) -> io::Result<()> {
 }
 
 /// Best effort: make the rename durable (POSIX needs the directory synced; elsewhere a no-op).
-fn sync_parent_dir(path: &Path) {
+pub(crate) fn sync_parent_dir(path: &Path) {
     #[cfg(unix)]
     if let Some(dir) = path.parent() {
         let dir = if dir.as_os_str().is_empty() {
