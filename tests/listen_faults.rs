@@ -194,23 +194,28 @@ fn a_velodyne_that_stops_and_starts_again_resumes() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `listen --out OUT --split-every` 1.4 × the capture's length, with `extra`, while the capture
+/// is replayed four times (two or three files); the run's JSON summary.
+fn listen_split(pcap: &Path, secs: f64, out: &Path, extra: &[&str]) -> serde_json::Value {
+    let offset = free_offset(&[2368, 8308]);
+    let mut args = sensor_args(offset, Some(out));
+    args.extend(extra.iter().map(|a| a.to_string()));
+    args.extend(["--split-every".to_string(), format!("{:.2}s", 1.4 * secs)]);
+    let l = start_listen(&args);
+    replay(pcap, offset, "1", &["--loop", "4"]);
+    std::thread::sleep(Duration::from_millis(300));
+    let (code, stdout, err) = l.stop("INT");
+    assert_eq!(code, Some(0), "{err}");
+    serde_json::from_str(&stdout).unwrap()
+}
+
 #[test]
 fn split_every_rotates_files_without_losing_a_sweep() {
     let (pcap, _, secs) = velodyne_capture();
     let _g = serial();
     let dir = tmpdir("split");
     let decoded = decode(&pcap, &dir.join("d.mcap"), &[]);
-    let offset = free_offset(&[2368, 8308]);
-    let base = dir.join("drive.mcap");
-    let mut args = sensor_args(offset, Some(&base));
-    args.extend(["--split-every".to_string(), format!("{:.2}s", 1.4 * secs)]);
-    let l = start_listen(&args);
-    // 4 × the capture: two or three files.
-    replay(&pcap, offset, "1", &["--loop", "4"]);
-    std::thread::sleep(Duration::from_millis(300));
-    let (code, stdout, err) = l.stop("INT");
-    assert_eq!(code, Some(0), "{err}");
-    let j: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let j = listen_split(&pcap, secs, &dir.join("drive.mcap"), &[]);
     assert_eq!(j["receive"]["queue_dropped"], 0);
     assert_eq!(j["receive"]["kernel_dropped"], 0);
     let files = j["files"].as_array().unwrap();
@@ -238,20 +243,7 @@ fn a_split_rosbag2_names_every_file_in_its_metadata() {
     let _g = serial();
     let dir = tmpdir("split-ros2");
     let bag = dir.join("drive");
-    let offset = free_offset(&[2368, 8308]);
-    let mut args = sensor_args(offset, Some(&bag));
-    args.extend([
-        "--format".to_string(),
-        "ros2".to_string(),
-        "--split-every".to_string(),
-        format!("{:.2}s", 1.4 * secs),
-    ]);
-    let l = start_listen(&args);
-    replay(&pcap, offset, "1", &["--loop", "4"]);
-    std::thread::sleep(Duration::from_millis(300));
-    let (code, stdout, err) = l.stop("INT");
-    assert_eq!(code, Some(0), "{err}");
-    let j: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let j = listen_split(&pcap, secs, &bag, &["--format", "ros2"]);
     let files = j["files"].as_array().unwrap();
     assert!(files.len() >= 2, "{} files", files.len());
     let yaml = std::fs::read_to_string(bag.join("metadata.yaml")).unwrap();

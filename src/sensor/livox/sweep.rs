@@ -463,7 +463,6 @@ impl LivoxStream {
         if self.frame_starts >= 2 {
             self.facts.frame_cut = true;
         }
-        let n = p.records();
         let interval = p.time_interval_ns();
         let cut = if late {
             false
@@ -481,16 +480,7 @@ impl LivoxStream {
         }
         self.begin(host_ns, ts, u32::from(frame));
         self.sweep.missing_packets += lost;
-        let start = self.sweep.device_time_ns;
-        self.decoder.decode(
-            p.record(),
-            n,
-            |i| p.record_bytes(i),
-            ts,
-            Spacing::sdk2(n, interval),
-            start,
-            &mut self.sweep.points,
-        );
+        decode_sdk2(&self.decoder, &p, ts, &mut self.sweep);
         let newest = self.last_packet_ns;
         self.after_packet(
             host_ns,
@@ -538,22 +528,12 @@ impl LivoxStream {
             self.stats.missing = self.stats.missing.saturating_sub(1);
             sweep.missing_packets = sweep.missing_packets.saturating_sub(1);
         }
-        let (n, interval) = (p.records(), p.time_interval_ns());
-        let start = sweep.device_time_ns;
-        self.decoder.decode(
-            p.record(),
-            n,
-            |i| p.record_bytes(i),
-            ts,
-            Spacing::sdk2(n, interval),
-            start,
-            &mut sweep.points,
-        );
+        decode_sdk2(&self.decoder, p, ts, sweep);
         sweep.packets += 1;
         sweep.columns_count = sweep.columns_count.saturating_add(1);
         sweep.last_host_ns = sweep.last_host_ns.max(host_ns);
         self.stats.packets += 1;
-        let end = ts.saturating_add(i64::try_from(interval).unwrap_or(i64::MAX));
+        let end = ts.saturating_add(i64::try_from(p.time_interval_ns()).unwrap_or(i64::MAX));
         if into_held {
             self.held_end_ns = self.held_end_ns.max(end);
         } else {
@@ -768,4 +748,18 @@ impl LivoxStream {
         self.facts.last_sweep_points = n;
         on_sweep(&mut self.held, &self.facts);
     }
+}
+
+/// Decodes an SDK2 point packet first timed `ts` into `sweep` (point times from its start).
+fn decode_sdk2(decoder: &LivoxDecoder, p: &Sdk2Packet<'_>, ts: i64, sweep: &mut Sweep) {
+    let (n, interval) = (p.records(), p.time_interval_ns());
+    decoder.decode(
+        p.record(),
+        n,
+        |i| p.record_bytes(i),
+        ts,
+        Spacing::sdk2(n, interval),
+        sweep.device_time_ns,
+        &mut sweep.points,
+    );
 }
