@@ -210,24 +210,7 @@ fn short_long_and_marked_wrong_packets_are_counted_not_decoded() {
 #[test]
 fn crc_failures_are_dropped_and_counted() {
     let model = HesaiModel::PandarQt128;
-    let l = &model.spec().layout;
-    let mut b = vec![0u8; l.base_len()];
-    b[..12].copy_from_slice(&[0xEE, 0xFF, 3, 2, 0, 0, 128, 2, 0, 4, 1, 0x05]);
-    for blk in 0..2 {
-        let o = 12 + blk * l.block_len();
-        for c in 0..128 {
-            let u = o + 2 + 4 * c;
-            b[u..u + 2].copy_from_slice(&500u16.to_le_bytes());
-        }
-    }
-    let t = l.tail_start();
-    b[t + 12] = 0x37;
-    b[t + 15..t + 21].copy_from_slice(&[124, 1, 2, 3, 4, 5]);
-    let body = crc32_mpeg2(&b[l.body_start()..l.body_end()]);
-    b[l.body_end()..l.body_end() + 4].copy_from_slice(&body.to_le_bytes());
-    let tail = crc32_mpeg2(&b[t..t + 30]);
-    b[t + 30..t + 34].copy_from_slice(&tail.to_le_bytes());
-
+    let (b, t) = qt128_with_crcs(0);
     let mut s = stream_for(model);
     let mut on = |_: &mut ringscan::sweep::Sweep, _: &_| {};
     s.push(0, &b, &mut on).unwrap();
@@ -249,6 +232,63 @@ fn crc_failures_are_dropped_and_counted() {
     s.push(3, &signed, &mut on).unwrap();
     assert_eq!(s.stats().signed, 1);
     assert_eq!(s.stats().packets, 1);
+}
+
+/// Packets 1, 2, 3 with packet 2 corrupt. Its body alone failing: the tail CRC vouches for its
+/// sequence number, so it is malformed and not also missing (it was both). Its tail failing:
+/// which packet it was is unknown, and the gap it leaves is counted missing too.
+#[test]
+fn a_corrupt_body_under_a_good_tail_is_not_also_missing() {
+    let model = HesaiModel::PandarQt128;
+    for (corrupt, missing) in [("body", 0), ("tail", 1)] {
+        let mut s = stream_for(model);
+        let mut on = |_: &mut ringscan::sweep::Sweep, _: &_| {};
+        for seq in 1..=3u32 {
+            let (mut b, t) = qt128_with_crcs(seq);
+            // 0.1 ms apart (µs field of the tail's date + time).
+            b[t + 21..t + 25].copy_from_slice(&(seq * 100).to_le_bytes());
+            let tail = crc32_mpeg2(&b[t..t + 30]);
+            b[t + 30..t + 34].copy_from_slice(&tail.to_le_bytes());
+            if seq == 2 {
+                let at = if corrupt == "body" { 20 } else { t + 12 };
+                b[at] ^= 1;
+            }
+            s.push(i64::from(seq) * 100_000, &b, &mut on).unwrap();
+        }
+        let st = s.stats();
+        assert_eq!(
+            (st.packets, st.crc_failures, st.malformed),
+            (2, 1, 1),
+            "{corrupt}"
+        );
+        assert_eq!(st.missing, missing, "{corrupt}");
+    }
+}
+
+/// A QT128 packet (protocol 3.2) with UDP sequence number `seq` and both CRCs right; the
+/// tail's start.
+fn qt128_with_crcs(seq: u32) -> (Vec<u8>, usize) {
+    let model = HesaiModel::PandarQt128;
+    let l = &model.spec().layout;
+    let mut b = vec![0u8; l.base_len()];
+    b[..12].copy_from_slice(&[0xEE, 0xFF, 3, 2, 0, 0, 128, 2, 0, 4, 1, 0x05]);
+    for blk in 0..2 {
+        let o = 12 + blk * l.block_len();
+        for c in 0..128 {
+            let u = o + 2 + 4 * c;
+            b[u..u + 2].copy_from_slice(&500u16.to_le_bytes());
+        }
+    }
+    let t = l.tail_start();
+    b[t + 12] = 0x37;
+    b[t + 15..t + 21].copy_from_slice(&[124, 1, 2, 3, 4, 5]);
+    let body = crc32_mpeg2(&b[l.body_start()..l.body_end()]);
+    b[l.body_end()..l.body_end() + 4].copy_from_slice(&body.to_le_bytes());
+    // The sequence number (tail offset 26, under the tail CRC).
+    b[t + 26..t + 30].copy_from_slice(&seq.to_le_bytes());
+    let tail = crc32_mpeg2(&b[t..t + 30]);
+    b[t + 30..t + 34].copy_from_slice(&tail.to_le_bytes());
+    (b, t)
 }
 
 #[test]

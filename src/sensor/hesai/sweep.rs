@@ -364,6 +364,15 @@ impl HesaiStream {
                     }
                     self.stats.crc_failures += 1;
                     self.stats.malformed += 1;
+                    // Only the body failed: the tail tells which packet came corrupt, so its
+                    // number is not also counted missing (its points are lost, counted above).
+                    if let Some(s) = p.checked_udp_seq().filter(|_| part == CrcPart::Body) {
+                        match self.seq.step(u64::from(s)) {
+                            SeqStep::Next { lost } if lost > 0 => self.add_missing(lost),
+                            SeqStep::Late => self.remove_missing(1),
+                            _ => {}
+                        }
+                    }
                     return Ok(());
                 }
             }

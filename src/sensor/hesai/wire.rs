@@ -322,6 +322,20 @@ impl<'a> HesaiPacket<'a> {
             .then(|| le_u32(self.bytes, self.layout.base_len()))
     }
 
+    /// The UDP sequence number where the tail CRC covers it and passes: a packet whose body
+    /// failed its CRC still tells which packet it was.
+    pub fn checked_udp_seq(&self) -> Option<u32> {
+        let l = &self.layout;
+        let (o, c) = (l.tail.udp_seq?, l.tail.crc?);
+        if !l.crc_known || o + 4 > c {
+            return None;
+        }
+        let start = l.tail_start();
+        let stored = le_u32(self.bytes, start + c);
+        (stored == crc32_mpeg2(&self.bytes[start..start + c]))
+            .then(|| le_u32(self.bytes, start + o))
+    }
+
     /// Frame id, where the tail has one (ATX: bit 0 toggles at each frame).
     pub fn frame_id(&self) -> Option<u8> {
         self.layout
