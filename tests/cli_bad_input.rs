@@ -26,6 +26,11 @@ fn tmp(name: &str) -> Scratch {
 
 /// A valid VLP-16 capture of `n` packets, with `edit(i, payload)` applied to each payload.
 fn capture(n: usize, edit: &dyn Fn(usize, &mut Vec<u8>)) -> Vec<u8> {
+    capture_with_copy(n, edit, None)
+}
+
+/// [`capture`], packet `copy` (if any) captured twice in a row.
+fn capture_with_copy(n: usize, edit: &dyn Fn(usize, &mut Vec<u8>), copy: Option<usize>) -> Vec<u8> {
     let calib = builtin(VelodyneModel::Vlp16).unwrap();
     let mut sim = VelodyneSim::new(
         VelodyneModel::Vlp16,
@@ -42,8 +47,10 @@ fn capture(n: usize, edit: &dyn Fn(usize, &mut Vec<u8>)) -> Vec<u8> {
         let (t, p) = sim.next_packet(&scene, &mut truth);
         let mut payload = p.to_vec();
         edit(i, &mut payload);
-        w.write(t, &udp_frame(src, dst, i as u16, &payload))
-            .unwrap();
+        for _ in 0..1 + usize::from(copy == Some(i)) {
+            w.write(t, &udp_frame(src, dst, i as u16, &payload))
+                .unwrap();
+        }
     }
     w.into_inner().unwrap()
 }
@@ -282,6 +289,33 @@ fn wrong_sizes_and_bad_flags_are_counted_and_skipped() {
     assert_eq!(r.code, 1);
     assert!(r.stderr.contains("strict"), "{}", r.stderr);
     assert_not_corrupt(&out);
+}
+
+/// A packet captured twice (a mirror port, a capture tool repeating itself) is decoded once:
+/// the copy is counted in the sensor's `duplicates`, the points and sweeps are those of the
+/// capture without it, and `--strict` passes, as a copy is no loss. (The copy stepped the time
+/// back: a discontinuity cutting the sweep, and its points twice.)
+#[test]
+fn a_packet_captured_twice_is_decoded_once_and_is_no_loss() {
+    let once = write("once.pcap", &capture(120, &|_, _| {}));
+    let twice = write("twice.pcap", &capture_with_copy(120, &|_, _| {}, Some(50)));
+    let (a, b) = (
+        decode(&once, &["--json"]),
+        decode(&twice, &["--json", "--strict"]),
+    );
+    assert_eq!((a.code, b.code), (0, 0), "{}", b.stderr);
+    let (a, b) = (json(&a), json(&b));
+    let s = &b["sensors"][0];
+    assert_eq!(
+        (&s["duplicates"], &s["discontinuities"]),
+        (&1.into(), &0.into()),
+        "{s}"
+    );
+    for k in ["points", "sweeps"] {
+        assert_eq!(a[k], b[k], "{k}");
+    }
+    assert_eq!(a["packets"]["decoded"], b["packets"]["decoded"]);
+    assert_eq!(b["packets"]["dropped"], 0);
 }
 
 #[test]

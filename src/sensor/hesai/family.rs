@@ -347,7 +347,8 @@ impl SensorStream for HesaiStream {
             malformed: st.malformed,
             missing: st.missing,
             position: 0,
-            dropped: st.duplicates,
+            // A copy is no loss: counted in the sensor's `duplicates` only.
+            dropped: 0,
         };
         let v = json!({
             "kind": "hesai",

@@ -285,7 +285,8 @@ impl SensorStream for LivoxStream {
             malformed: st.malformed,
             missing: st.missing,
             position: 0,
-            dropped: st.duplicates + st.late_dropped,
+            // A copy is no loss (the sensor's `duplicates` only); a late packet dropped is.
+            dropped: st.late_dropped,
         };
         let mean = if st.sweeps > 0 {
             st.points as f64 / st.sweeps as f64

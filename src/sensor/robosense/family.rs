@@ -265,7 +265,8 @@ impl SensorStream for RobosenseStream {
             malformed: st.malformed,
             missing: st.missing,
             position: st.difop,
-            dropped: st.dropped + st.duplicates,
+            // A copy is no loss: counted in the sensor's `duplicates` only.
+            dropped: st.dropped,
         };
         let v = json!({
             "kind": "robosense",

@@ -230,7 +230,8 @@ impl SensorStream for VelodyneStream {
             malformed: st.malformed,
             missing: st.missing,
             position: st.position_packets,
-            dropped: st.duplicates,
+            // A copy is no loss: counted in the sensor's `duplicates` only.
+            dropped: 0,
         };
         let v = json!({
             "kind": "velodyne",
