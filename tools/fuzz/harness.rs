@@ -2679,7 +2679,7 @@ pub fn robosense_angles(model: RobosenseModel) -> RobosenseAngles {
 
 /// One datagram (the first byte picks the model and options) through the packet views and a
 /// stream, pushed twice. The views refuse what does not fit and never panic; every push is
-/// counted once (decoded, DIFOP, malformed or held); held packets stay within the bound; every
+/// counted once (decoded, DIFOP, malformed, held, dropped or a copy); held packets stay within the bound; every
 /// point is finite, within the model's range (plus the lens offset), on a ring of the model,
 /// return 0 or 1, at most blocks × slots per packet.
 pub fn robosense_packet(data: &[u8]) {
@@ -2765,7 +2765,7 @@ pub fn robosense_packet(data: &[u8]) {
         let st = stream.stats();
         let held = stream.held() as u64;
         assert_eq!(
-            st.packets + st.malformed + st.difop + held + st.dropped,
+            st.packets + st.malformed + st.difop + held + st.dropped + st.duplicates,
             i as u64 + 1,
             "{st:?}"
         );
@@ -2845,7 +2845,7 @@ use ringscan::sensor::livox::{
 /// One or more datagrams (byte 0 picks the model, the CRC check and a 100 ms or 1 µs
 /// integration period; the rest is split at each 0xFE byte into datagrams) through both packet views and a `LivoxStream`, each pushed twice.
 /// No panic; the views and `detect_protocol` agree; every datagram is counted once (point
-/// packet, IMU packet or malformed); points are finite, ring < lines, return ≤ 2, intensity
+/// packet, IMU packet, malformed, a copy or a late packet dropped); points are finite, ring < lines, return ≤ 2, intensity
 /// 0–255, at most 3 returns × records per packet; the IMU queue stays bounded.
 pub fn livox_packet(data: &[u8]) {
     let Some((&sel, rest)) = data.split_first() else {
@@ -2912,7 +2912,7 @@ pub fn livox_packet(data: &[u8]) {
     s.finish(&mut |sw, _| check(sw));
     let st = s.stats();
     assert_eq!(
-        st.packets + st.imu_packets + st.frames + st.malformed,
+        st.packets + st.imu_packets + st.frames + st.malformed + st.duplicates + st.late_dropped,
         pushed
     );
     assert!(s.drain_imu().count() <= LIVOX_MAX_IMU_QUEUE);
@@ -3002,7 +3002,10 @@ pub fn lvx(data: &[u8]) {
     assert_eq!(st.datagrams, pushed);
     assert!(st.datagrams <= st.packages);
     let ls = s.stats();
-    assert_eq!(ls.packets + ls.imu_packets + ls.malformed, pushed);
+    assert_eq!(
+        ls.packets + ls.imu_packets + ls.malformed + ls.duplicates + ls.late_dropped,
+        pushed
+    );
 }
 
 /// `render_messages`: byte 0 picks the reader, the rest is one CDR message as `render` reads
