@@ -322,3 +322,41 @@ fn reordered_packets_are_late_not_lost() {
         assert_eq!(copied, in_order, "{model:?}: (points, packets) per sweep");
     }
 }
+
+/// A sequence number that stands still (a sensor that leaves the field at one value) repeats
+/// numbers, not packets: a copy is a packet whose tail time is seen again too, so nothing is
+/// dropped and the sweeps are those of the run with counting numbers. (Counting numbers alone,
+/// every packet after the first was a copy.)
+#[test]
+fn a_sequence_number_that_stands_still_is_no_copy() {
+    let scene = scenes::named("urban").unwrap();
+    let model = HesaiModel::PandarXt32;
+    let mut sim = HesaiSim::new(model, synthetic(model), T0);
+    let n = (300_000_000 / sim.period_ns()) as usize;
+    let packets: Vec<(i64, Vec<u8>)> = (0..n)
+        .map(|_| sim.next_packet(&scene, &mut Vec::new()))
+        .collect();
+    // XT32 tail: the sequence number at offset 24 (no CRC over it).
+    let at = model.spec().layout.tail_start() + 24;
+    let stuck: Vec<(i64, Vec<u8>)> = packets
+        .iter()
+        .map(|(h, b)| {
+            let mut b = b.clone();
+            b[at..at + 4].copy_from_slice(&7u32.to_le_bytes());
+            (*h, b)
+        })
+        .collect();
+    let run = |packets: &[(i64, Vec<u8>)]| {
+        let mut cfg = HesaiConfig::new(Some(synthetic(model)), "sim");
+        cfg.model = Some(model);
+        common::run_stream(
+            &mut HesaiStream::new(cfg),
+            packets,
+            &(0..n).collect::<Vec<_>>(),
+        )
+    };
+    let (counting, ..) = run(&packets);
+    let (standing, missing, discontinuities, copies) = run(&stuck);
+    assert_eq!((missing, discontinuities, copies), (0, 0, 0));
+    assert_eq!(standing, counting);
+}

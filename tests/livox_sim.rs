@@ -477,8 +477,9 @@ fn a_loss_at_the_counter_wrap_is_counted() {
 /// with each): the last packet of a frame, reordered behind the next frame's first, is late.
 /// While its frame's sweep waits for its IMU samples it joins it, and the sweeps are those of
 /// the run in order; without IMU packets that sweep was handed over already, and the packet is
-/// dropped and counted. Either way nothing is missing and nothing is a discontinuity. (Before:
-/// 468 missing, 2 discontinuities, and the frame's tail cut into a sweep of its own.)
+/// dropped and counted, however late it comes. Either way nothing is missing and nothing is a
+/// discontinuity. (Before: 468 missing, 2 discontinuities, and the frame's tail cut into a
+/// sweep of its own.)
 #[test]
 fn a_frame_s_last_packet_behind_the_next_frame_is_late() {
     const PER_FRAME: usize = 470;
@@ -533,4 +534,57 @@ fn a_frame_s_last_packet_behind_the_next_frame_is_late() {
         (PER_FRAME as u32 - 1, PER_FRAME as u32)
     );
     assert_eq!(late[3..], in_order[3..]);
+
+    // A packet of frame 2 twenty packets into frame 3 is still its frame's: dropped and
+    // counted. (Counted against frame 3's `udp_cnt`, it read as 444 packets lost.)
+    let k = point_at[3 * PER_FRAME - 5];
+    let mut order: Vec<usize> = point_at.iter().copied().filter(|&i| i != k).collect();
+    let at = order
+        .iter()
+        .position(|&i| i == point_at[3 * PER_FRAME + 20])
+        .unwrap();
+    order.insert(at + 1, k);
+    let ((very_late, missing, discontinuities, _), dropped) = run(&order);
+    assert_eq!((missing, discontinuities, dropped), (0, 0, 1));
+    assert_eq!(very_late.len(), in_order.len());
+    assert_eq!(very_late[3..], in_order[3..]);
+}
+
+/// A `udp_cnt` that stands still (0, or any one value) repeats numbers, not packets: a copy is
+/// a packet whose time is seen again too, so every point and IMU packet is decoded, and the
+/// points are those of the run with counting numbers. (Counting numbers alone, every packet
+/// after the first was a copy.)
+#[test]
+fn a_counter_that_stands_still_is_no_copy() {
+    let counting = mid360_with_counters(
+        120_000_000,
+        |k| (k as u16, 0),
+        |k| k as u16,
+        LivoxModel::Mid360,
+    );
+    let points = |packets: &[(i64, bool, Vec<u8>)]| {
+        let mut s = LivoxStream::new(LivoxConfig::new(
+            Some(LivoxModel::Mid360),
+            LivoxModel::Mid360.protocol(),
+        ));
+        let mut n = 0usize;
+        for (host, _, b) in packets {
+            s.push(*host, b, &mut |sw, _| n += sw.points.len());
+        }
+        s.finish(&mut |sw, _| n += sw.points.len());
+        (n, s.stats().clone())
+    };
+    let (want, _) = points(&counting);
+    for value in [0u16, 7] {
+        let standing =
+            mid360_with_counters(120_000_000, |_| (value, 0), |_| value, LivoxModel::Mid360);
+        let (got, st) = points(&standing);
+        assert_eq!(st.duplicates, 0, "udp_cnt {value}");
+        assert_eq!(got, want, "udp_cnt {value}");
+        assert_eq!(
+            st.packets + st.imu_packets,
+            standing.len() as u64,
+            "udp_cnt {value}"
+        );
+    }
 }

@@ -288,16 +288,16 @@ impl Files {
 
     /// The last rosbag2 file was finished (`last`): waits for the checkpoints under way, syncs
     /// it, and writes the final `metadata.yaml`.
+    /// A checkpoint that failed is reported, after the final yaml was still attempted: it
+    /// names the files that were finished.
     fn write_final_metadata(&mut self, last: (&Path, &SinkSummary)) -> Result<(), SinkError> {
-        if let Some(c) = self.checkpoints.take() {
-            c.finish()?;
-        }
+        let earlier = self.checkpoints.take().map_or(Ok(()), Checkpoints::finish);
         if !self.bag_dir {
-            return Ok(());
+            return earlier;
         }
-        sync_file(last.0)?;
         let files = self.bag_files(Some(last));
-        write_bag_metadata(&self.base, &files)
+        let fin = sync_file(last.0).and_then(|()| write_bag_metadata(&self.base, &files));
+        earlier.and(fin)
     }
 
     fn due(&self) -> bool {

@@ -20,7 +20,12 @@ pub enum SeqStep {
     /// At most [`REORDER_PACKETS`] behind the latest and not seen before: reordered on the
     /// way. It fills one of the numbers counted lost; the latest stays the latest.
     Late,
-    /// A number seen already (the latest or one in the window): a copy, to drop.
+    /// At most [`REORDER_PACKETS`] behind the latest, neither seen nor counted lost (it is
+    /// from before the first number or a restart): reordered, with nothing to un-count.
+    Stray,
+    /// A number seen already (the latest or one in the window). A copy where its time is the
+    /// same too (a real copy is the same bytes); the caller checks, as a counter stuck at one
+    /// value or restarted repeats numbers without repeating packets.
     Duplicate,
     /// Too far ahead or behind to be loss or reordering: the counter restarted. The window
     /// starts again from this number.
@@ -35,6 +40,8 @@ pub struct SeqWindow {
     latest: Option<u64>,
     /// Bit `i`: number `latest − i` came.
     seen: u64,
+    /// Bit `i`: number `latest − i` was skipped, counted lost, and has not come since.
+    lost: u64,
 }
 
 impl SeqWindow {
@@ -51,6 +58,7 @@ impl SeqWindow {
             max_gap,
             latest: None,
             seen: 0,
+            lost: 0,
         }
     }
 
@@ -63,16 +71,28 @@ impl SeqWindow {
     pub fn reset(&mut self) {
         self.latest = None;
         self.seen = 0;
+        self.lost = 0;
     }
 
-    /// Starts again from `n`, as a first number.
-    fn restart(&mut self, n: u64) {
-        self.latest = Some(n);
+    /// Starts again from `n`, as a first number (a counter that restarted or repeats itself).
+    pub fn restart(&mut self, n: u64) {
+        self.latest = Some(n & self.mask);
         self.seen = 1;
+        self.lost = 0;
     }
 
-    /// Classifies number `n` and records it.
+    /// Classifies number `n` and records it; a [`SeqStep::Jump`] restarts the window at `n`.
     pub fn step(&mut self, n: u64) -> SeqStep {
+        self.classify(n, true)
+    }
+
+    /// [`Self::step`], but a jump leaves the window as it was: for the numbers of a stretch
+    /// that is over (a frame before the open one), where a stray number must not undo it.
+    pub fn step_within(&mut self, n: u64) -> SeqStep {
+        self.classify(n, false)
+    }
+
+    fn classify(&mut self, n: u64, restart_on_jump: bool) -> SeqStep {
         let n = n & self.mask;
         let Some(latest) = self.latest else {
             self.restart(n);
@@ -85,14 +105,27 @@ impl SeqWindow {
                 return SeqStep::Duplicate;
             }
             self.seen |= bit;
-            return SeqStep::Late;
+            if self.lost & bit != 0 {
+                self.lost &= !bit;
+                return SeqStep::Late;
+            }
+            return SeqStep::Stray;
         }
         let ahead = n.wrapping_sub(latest) & self.mask;
         if ahead > self.max_gap {
-            self.restart(n);
+            if restart_on_jump {
+                self.restart(n);
+            }
             return SeqStep::Jump;
         }
-        self.seen = if ahead >= 64 { 0 } else { self.seen << ahead } | 1;
+        // The numbers skipped are `1 … ahead − 1` behind the new latest.
+        let (seen, lost, skipped) = if ahead >= 64 {
+            (0, 0, u64::MAX - 1)
+        } else {
+            (self.seen << ahead, self.lost << ahead, (1u64 << ahead) - 2)
+        };
+        self.seen = seen | 1;
+        self.lost = lost | skipped;
         self.latest = Some(n);
         SeqStep::Next { lost: ahead - 1 }
     }
@@ -204,12 +237,43 @@ mod tests {
             steps(&mut w, &[5, 6, 30_000, 6]),
             [Next { lost: 0 }, Next { lost: 0 }, Jump, Jump]
         );
-        // A step of 64 or more numbers clears every bit of the window.
+        // A step of 64 or more numbers clears every bit of the window but the skipped ones.
         let mut w = SeqWindow::new(16, 4096);
         assert_eq!(
             steps(&mut w, &[0, 100, 99, 1]),
             [Next { lost: 0 }, Next { lost: 99 }, Late, Jump]
         );
+    }
+
+    #[test]
+    fn only_numbers_counted_lost_are_late() {
+        use SeqStep::*;
+        // After the first number and after a restart, a number just behind was never counted
+        // lost: a stray, nothing to un-count.
+        let mut w = SeqWindow::new(32, 1 << 20);
+        assert_eq!(
+            steps(&mut w, &[1_000, 995, 1_002, 1_001, 1_001, 998]),
+            [
+                Next { lost: 0 },
+                Stray,
+                Next { lost: 1 },
+                Late,
+                Duplicate,
+                Stray
+            ]
+        );
+        // A jump restarts the window; `step_within` leaves it.
+        let mut w = SeqWindow::new(16, 4096);
+        assert_eq!(
+            steps(&mut w, &[10, 12]),
+            [Next { lost: 0 }, Next { lost: 1 }]
+        );
+        assert_eq!(w.step_within(9_000), Jump);
+        assert_eq!(w.latest(), Some(12));
+        assert_eq!(w.step(11), Late);
+        // A restart forgets the numbers counted lost.
+        w.restart(500);
+        assert_eq!(steps(&mut w, &[499, 500]), [Stray, Duplicate]);
     }
 
     #[test]

@@ -214,7 +214,7 @@ pub struct HesaiStream {
     next_index: u64,
     /// The tail's UDP sequence numbers seen lately.
     seq: SeqWindow,
-    /// Without sequence numbers: the sensor times of the last packets.
+    /// The sensor times of the last packets (a copy repeats one).
     recent: RecentTimes,
     prev_stamp: Option<i64>,
     /// Angle-correction CSV: each channel's cut threshold on the block azimuth (cut − its
@@ -423,23 +423,35 @@ impl HesaiStream {
         let step = self.prev_stamp.map(|prev| stamp.saturating_sub(prev));
         // A packet a little behind the latest (by its sequence number where it has one, else
         // by its time) was reordered on the way: it fills a gap already counted as missing,
-        // and the stream goes on from the latest packet, not from it. A number seen already,
-        // or without numbers the sensor's time of the latest packet again, is a copy.
-        let seq = p.udp_seq().map(|s| self.seq.step(u64::from(s)));
+        // and the stream goes on from the latest packet, not from it. A copy is a packet whose
+        // sensor time is one of the last packets' (and its number too, where it has one): a
+        // number seen again at a new time is a counter that restarted or stands still.
+        let sensor_time = p.stamp_ns().is_some();
+        let time_seen = sensor_time && self.recent.contains(stamp);
+        let mut seq = p.udp_seq().map(|s| (s, self.seq.step(u64::from(s))));
+        if let Some((s, SeqStep::Duplicate)) = seq.filter(|_| !time_seen) {
+            self.seq.restart(u64::from(s));
+            seq = Some((s, SeqStep::Jump));
+        }
+        let seq = seq.map(|(_, step)| step);
         let copy = match seq {
             Some(s) => s == SeqStep::Duplicate,
-            None => p.stamp_ns().is_some() && self.recent.contains(stamp),
+            None => time_seen,
         };
         if copy {
             self.stats.duplicates += 1;
             return Ok(());
         }
+        if sensor_time {
+            self.recent.push(stamp);
+        }
         let late = match seq {
-            Some(s) => s == SeqStep::Late,
+            Some(s) => matches!(s, SeqStep::Late | SeqStep::Stray),
             None => step.is_some_and(|d| d < 0 && d >= -i64::from(REORDER_PACKETS) * period_ns),
         };
         let discontinuity = !late && step.is_some_and(|d| d < 0 || d > self.cfg.max_gap_ns);
         match seq {
+            Some(SeqStep::Stray) => {}
             _ if late => self.remove_missing(1),
             Some(SeqStep::Next { lost }) if lost > 0 => self.add_missing(lost),
             Some(_) => {}
@@ -465,7 +477,7 @@ impl HesaiStream {
             self.last_az.iter_mut().for_each(|a| *a = i64::MIN);
             self.last_block_udeg = None;
         }
-        if seq.is_none() && p.stamp_ns().is_some() {
+        if discontinuity && sensor_time {
             self.recent.push(stamp);
         }
 

@@ -195,8 +195,10 @@ pub struct LivoxStream {
     prev_frame: Option<(u8, SeqWindow)>,
     frame_starts: u32,
     sdk1_next_ns: Option<i64>,
-    /// SDK1: the times of the last point packets (they carry no counter).
-    sdk1_recent: RecentTimes,
+    /// The times of the last point packets and of the last IMU packets: a copy repeats one
+    /// (SDK1 packets carry no counter; an SDK2 counter seen again at a new time restarted).
+    recent: RecentTimes,
+    imu_recent: RecentTimes,
     imu: VecDeque<ImuSample>,
 }
 
@@ -242,7 +244,8 @@ impl LivoxStream {
             prev_frame: None,
             frame_starts: 0,
             sdk1_next_ns: None,
-            sdk1_recent: RecentTimes::default(),
+            recent: RecentTimes::default(),
+            imu_recent: RecentTimes::default(),
             imu: VecDeque::new(),
         }
     }
@@ -398,16 +401,20 @@ impl LivoxStream {
         self.facts.time_type = Some(p.time_type());
         self.facts.clock = Self::clock_of(Protocol::Sdk2, p.time_type());
         if p.record() == Record::Imu {
-            match self.imu_udp.step(u64::from(p.udp_cnt())) {
-                SeqStep::Duplicate => {
+            let udp = u64::from(p.udp_cnt());
+            match self.imu_udp.step(udp) {
+                SeqStep::Duplicate if self.imu_recent.contains(ts) => {
                     self.stats.duplicates += 1;
                     return Ok(());
                 }
+                // The number again at a new time: the counter restarted or stands still.
+                SeqStep::Duplicate => self.imu_udp.restart(udp),
                 SeqStep::Next { lost } => self.stats.imu_missing += lost,
                 SeqStep::Late => self.stats.imu_missing = self.stats.imu_missing.saturating_sub(1),
                 // A restart (the counter may restart at 0 with each frame): no loss known.
-                SeqStep::Jump => {}
+                SeqStep::Jump | SeqStep::Stray => {}
             }
+            self.imu_recent.push(ts);
             self.stats.imu_packets += 1;
             for i in 0..p.records() {
                 self.push_imu_record(p.record_bytes(i), ts, host_ns);
@@ -417,15 +424,21 @@ impl LivoxStream {
         self.facts.data_type = Some(p.data_type());
         // Loss, late and duplicate packets, and frame starts, from the counters.
         let (udp, frame) = (p.udp_cnt(), p.frame_cnt());
+        // However late: counted against the next frame's `udp_cnt`, it would read as a loss.
         if self.prev_frame.is_some_and(|(f, _)| f == frame)
             && self.last_frame == Some(frame.wrapping_add(1))
-            && self.udp.latest() < Some(u64::from(REORDER_PACKETS))
         {
             self.push_previous_frame(&p, host_ns, ts);
             return Ok(());
         }
         let before = self.udp;
-        let step = self.udp.step(u64::from(udp));
+        let mut step = self.udp.step(u64::from(udp));
+        if step == SeqStep::Duplicate && !self.recent.contains(ts) {
+            // The number again at a new time: the counter restarted (a frame of fewer than
+            // 11 packets, a sensor restarted) or stands still; no copy.
+            self.udp.restart(u64::from(udp));
+            step = SeqStep::Jump;
+        }
         // `udp_cnt` restarts at 0 where a frame starts; `frame_cnt` steps with it on the
         // sensors that count frames.
         let restart_at_0 = udp == 0 && step == SeqStep::Jump;
@@ -444,6 +457,7 @@ impl LivoxStream {
                 late = true;
                 self.unmiss();
             }
+            SeqStep::Stray => late = true,
             SeqStep::Next { lost: l } => {
                 self.stats.missing += l;
                 lost = l;
@@ -453,6 +467,7 @@ impl LivoxStream {
             SeqStep::Jump if restart_at_0 => {}
             SeqStep::Jump => self.stats.discontinuities += 1,
         }
+        self.recent.push(ts);
         if frame_start {
             self.frame_starts = self.frame_starts.saturating_add(1);
             self.prev_frame = self.last_frame.map(|f| (f, before));
@@ -503,15 +518,19 @@ impl LivoxStream {
             return;
         };
         let frame = u32::from(*frame);
-        let filled = match window.step(u64::from(p.udp_cnt())) {
-            SeqStep::Duplicate => {
+        // The frame's tail that came (`Next`) tells its loss, counted now; a number far
+        // behind its latest (`Jump`) leaves the frame's window as it was.
+        let (filled, lost) = match window.step_within(u64::from(p.udp_cnt())) {
+            SeqStep::Duplicate if self.recent.contains(ts) => {
                 self.stats.duplicates += 1;
                 return;
             }
-            SeqStep::Late => true,
-            // The frame's tail: its loss is never counted (a frame start cannot tell it).
-            SeqStep::Next { .. } | SeqStep::Jump => false,
+            SeqStep::Late => (true, 0),
+            SeqStep::Next { lost } => (false, lost),
+            SeqStep::Duplicate | SeqStep::Stray | SeqStep::Jump => (false, 0),
         };
+        self.recent.push(ts);
+        self.stats.missing += lost;
         let into_held = self.facts.frame_cut;
         let sweep = if !into_held && self.open {
             &mut self.sweep
@@ -528,6 +547,7 @@ impl LivoxStream {
             self.stats.missing = self.stats.missing.saturating_sub(1);
             sweep.missing_packets = sweep.missing_packets.saturating_sub(1);
         }
+        sweep.missing_packets += lost;
         decode_sdk2(&self.decoder, p, ts, sweep);
         sweep.packets += 1;
         sweep.columns_count = sweep.columns_count.saturating_add(1);
@@ -566,7 +586,7 @@ impl LivoxStream {
         self.facts.data_type = Some(p.data_type());
         // Without a counter, a copy shows by its time: two packets of one sensor never share
         // a first point's time.
-        if self.sdk1_recent.contains(ts) {
+        if self.recent.contains(ts) {
             self.stats.duplicates += 1;
             return Ok(());
         }
@@ -606,9 +626,9 @@ impl LivoxStream {
         let backwards = !late && self.last_packet_ns.is_some_and(|l| ts < l);
         if backwards {
             // A clock that restarted (or a capture replayed again) may repeat times.
-            self.sdk1_recent.clear();
+            self.recent.clear();
         }
-        self.sdk1_recent.push(ts);
+        self.recent.push(ts);
         if !late && (self.time_cut(ts) || backwards) {
             self.emit(on_sweep);
         }
