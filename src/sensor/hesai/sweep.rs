@@ -428,12 +428,11 @@ impl HesaiStream {
         // number seen again at a new time is a counter that restarted or stands still.
         let sensor_time = p.stamp_ns().is_some();
         let time_seen = sensor_time && self.recent.contains(stamp);
-        let mut seq = p.udp_seq().map(|s| (s, self.seq.step(u64::from(s))));
-        if let Some((s, SeqStep::Duplicate)) = seq.filter(|_| !time_seen) {
+        let mut seq = p.udp_seq().map(|s| self.seq.step(u64::from(s)));
+        if let (Some(SeqStep::Duplicate), false, Some(s)) = (seq, time_seen, p.udp_seq()) {
             self.seq.restart(u64::from(s));
-            seq = Some((s, SeqStep::Jump));
+            seq = Some(SeqStep::Jump);
         }
-        let seq = seq.map(|(_, step)| step);
         let copy = match seq {
             Some(s) => s == SeqStep::Duplicate,
             None => time_seen,
@@ -441,9 +440,6 @@ impl HesaiStream {
         if copy {
             self.stats.duplicates += 1;
             return Ok(());
-        }
-        if sensor_time {
-            self.recent.push(stamp);
         }
         let late = match seq {
             Some(s) => matches!(s, SeqStep::Late | SeqStep::Stray),
@@ -477,7 +473,7 @@ impl HesaiStream {
             self.last_az.iter_mut().for_each(|a| *a = i64::MIN);
             self.last_block_udeg = None;
         }
-        if discontinuity && sensor_time {
+        if sensor_time {
             self.recent.push(stamp);
         }
 
