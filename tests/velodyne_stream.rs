@@ -309,3 +309,97 @@ fn copies_are_dropped_and_counted() {
     assert_eq!((missing, discontinuities, copies), (0, 0, 2));
     assert_eq!(copied, in_order, "(points, packets) per sweep");
 }
+
+/// Each sweep's points in a canonical order (a late packet's points join after the others),
+/// with the sweep's packet and missing counts.
+type SweepSet = (Vec<[i64; 5]>, u32, u64);
+
+/// Pushes `packets[k]` for each `k` of `order`; returns each sweep as a [`SweepSet`] and the
+/// stream's counters.
+fn sweep_sets(
+    packets: &[(i64, Vec<u8>)],
+    order: &[usize],
+) -> (Vec<SweepSet>, ringscan::sensor::velodyne::StreamStats) {
+    let mut stream = VelodyneStream::new(StreamConfig::default());
+    let mut out = Vec::new();
+    let mut on = |s: &mut Sweep, _: &SensorFacts| {
+        let mut pts: Vec<[i64; 5]> = s
+            .points
+            .iter()
+            .map(|p| {
+                let mm = |v: f32| (f64::from(v) * 1e6).round() as i64;
+                [i64::from(p.t), i64::from(p.ring), mm(p.x), mm(p.y), mm(p.z)]
+            })
+            .collect();
+        pts.sort_unstable();
+        out.push((pts, s.packets, s.missing_packets));
+    };
+    for &k in order {
+        stream.push(packets[k].0, &packets[k].1, &mut on).unwrap();
+    }
+    stream.finish(&mut on).unwrap();
+    (out, stream.stats().clone())
+}
+
+/// A packet reordered on the way (one a place late, one three places late, inside a sweep)
+/// joins its sweep: the same points at the same times as in order, no loss, no cut. Before,
+/// each was a discontinuity that cut its sweep in two. A packet late past its sweep's cut is
+/// as good as lost: its sweep holds what the run without it holds, and it is counted in
+/// `late_dropped` (a loss), not in `missing`.
+#[test]
+fn reordered_packets_join_their_sweep_or_are_counted_late() {
+    let mut sim = vlp16_sim();
+    let scene = Shapes::room(15.0, 10.0, 1.7, 5.0);
+    let packets: Vec<(i64, Vec<u8>)> = (0..400)
+        .map(|_| {
+            let (host, bytes) = sim.next_packet(&scene, &mut Vec::new());
+            (host, bytes.to_vec())
+        })
+        .collect();
+    let all: Vec<usize> = (0..packets.len()).collect();
+    let (in_order, st) = sweep_sets(&packets, &all);
+    assert_eq!((st.missing, st.discontinuities), (0, 0));
+    assert!(in_order.len() >= 4, "{} sweeps", in_order.len());
+    // The packets that cut a sweep: those whose push emitted one.
+    let mut cuts = Vec::new();
+    let mut stream = VelodyneStream::new(StreamConfig::default());
+    for (k, (host, bytes)) in packets.iter().enumerate() {
+        let mut emitted = false;
+        stream
+            .push(*host, bytes, &mut |_, _| emitted = true)
+            .unwrap();
+        if emitted {
+            cuts.push(k);
+        }
+    }
+
+    // Late inside a sweep (a VLP-16 turn is 75 packets): a packet a place late and one three
+    // places late, well inside their sweeps.
+    let mut order = all.clone();
+    order.swap(cuts[0] + 20, cuts[0] + 21);
+    let late = order.remove(cuts[1] + 30);
+    order.insert(cuts[1] + 33, late);
+    let (reordered, st) = sweep_sets(&packets, &order);
+    assert_eq!((st.missing, st.discontinuities, st.late_dropped), (0, 0, 0));
+    assert_eq!(reordered.len(), in_order.len());
+    for (i, (a, b)) in reordered.iter().zip(&in_order).enumerate() {
+        assert!(a == b, "sweep {i}: points, packets or missing differ");
+    }
+
+    // Late past the cut: the last packet wholly in a sweep comes after the packet that cut it.
+    let k = cuts[1];
+    let mut order = all.clone();
+    order.swap(k - 1, k);
+    let (late, st) = sweep_sets(&packets, &order);
+    let without: Vec<usize> = all.iter().copied().filter(|&i| i != k - 1).collect();
+    let (lost, lost_st) = sweep_sets(&packets, &without);
+    assert_eq!(lost_st.missing, 1);
+    assert_eq!((st.missing, st.discontinuities, st.late_dropped), (0, 0, 1));
+    assert_eq!(late.len(), lost.len());
+    for (i, (a, b)) in late.iter().zip(&lost).enumerate() {
+        assert!(
+            a.0 == b.0 && a.1 == b.1,
+            "sweep {i}: points or packets differ"
+        );
+    }
+}

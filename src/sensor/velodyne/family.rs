@@ -124,7 +124,7 @@ impl Family for Velodyne {
                 .unwrap_or_default()
         ));
         out.push(format!(
-            "    {} data + {} position packets, {} sweeps, {} points; missing {}, malformed {}, discontinuities {}, duplicates {}",
+            "    {} data + {} position packets, {} sweeps, {} points; missing {}, malformed {}, discontinuities {}, duplicates {}, late dropped {}",
             g(&s["data_packets"]),
             g(&s["position_packets"]),
             g(&s["sweeps"]),
@@ -132,7 +132,8 @@ impl Family for Velodyne {
             g(&s["missing"]),
             g(&s["malformed"]),
             g(&s["discontinuities"]),
-            g(&s["duplicates"])
+            g(&s["duplicates"]),
+            g(&s["late_dropped"])
         ));
         out.push(format!("    packets per port: {}", s["packets_per_port"]));
         out.push(format!(
@@ -230,8 +231,8 @@ impl SensorStream for VelodyneStream {
             malformed: st.malformed,
             missing: st.missing,
             position: st.position_packets,
-            // A copy is no loss: counted in the sensor's `duplicates` only.
-            dropped: 0,
+            // A copy is no loss (the sensor's `duplicates` only); a late packet dropped is.
+            dropped: st.late_dropped,
         };
         let v = json!({
             "kind": "velodyne",
@@ -266,6 +267,7 @@ impl SensorStream for VelodyneStream {
             "missing": st.missing,
             "discontinuities": st.discontinuities,
             "duplicates": st.duplicates,
+            "late_dropped": st.late_dropped,
             "sweeps": st.sweeps,
             "points": st.points,
         });

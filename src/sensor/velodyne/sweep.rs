@@ -13,8 +13,9 @@
 //!
 //! **Sweeps** are cut on the firing (block) azimuth: a new sweep starts at the first firing
 //! whose azimuth, measured from the cut angle, is smaller than the previous firing's by more
-//! than half a turn. A device-time gap of more than `max_gap_ns`, a step backwards, or a sweep
-//! longer than `max_sweep_ns` also ends the sweep (counted as a discontinuity).
+//! than half a turn. A device-time gap of more than `max_gap_ns`, a step backwards (beyond
+//! the few packets a reordering network delivers late), or a sweep longer than `max_sweep_ns`
+//! also ends the sweep (counted as a discontinuity).
 
 use crate::sensor::nmea::parse_rmc;
 use crate::sensor::nmea::Rmc;
@@ -34,7 +35,7 @@ use crate::sensor::velodyne::VelodyneDecoder;
 use crate::sensor::DecodeError;
 use crate::sensor::DecodeOptions;
 use crate::sensor::StreamError;
-use crate::sweep::{RecentTimes, Sweep};
+use crate::sweep::{RecentTimes, Sweep, REORDER_PACKETS};
 use crate::time::{complete_toh, toh_delta_us, ClockSource};
 
 /// Packets looked at before the model is decided.
@@ -95,6 +96,10 @@ pub struct StreamStats {
     /// read as a packet would step the time back: a discontinuity cutting the sweep
     /// mid-turn, and its points twice.
     pub duplicates: u64,
+    /// Late data packets (a little behind the latest: reordered on the way) whose firings all
+    /// belong to a sweep already emitted: dropped, and counted as a loss. A late packet whose
+    /// firings fall in the open sweep joins it instead.
+    pub late_dropped: u64,
     /// Sweeps emitted.
     pub sweeps: u64,
     /// Points emitted.
@@ -503,6 +508,11 @@ impl VelodyneStream {
         if let Some(prev) = self.prev {
             let d_us = toh_delta_us(prev.toh_us, toh);
             let d_ns = d_us * 1_000;
+            if d_ns < 0 && period_ns > 0.0 && d_ns as f64 >= -f64::from(REORDER_PACKETS) * period_ns
+            {
+                self.push_late(toh, host_ns, p, clock);
+                return;
+            }
             if d_ns <= 0 || d_ns > self.cfg.max_gap_ns {
                 self.stats.discontinuities += 1;
                 self.emit(on_sweep);
@@ -571,6 +581,38 @@ impl VelodyneStream {
             toh_us: toh,
             rel_az: last_rel.unwrap_or(0),
         });
+    }
+
+    /// A packet a little behind the latest was reordered on the way: it fills a gap already
+    /// counted as missing, and the stream goes on from the latest packet. Its firings timed
+    /// inside the open sweep join it, after the points that came before it (a sweep keeps
+    /// the order of arrival, as the ROS driver's does; with columns kept, its columns follow
+    /// the sweep's last). Firings of a sweep already emitted are lost: a packet with none in
+    /// the open sweep is counted in `late_dropped`.
+    fn push_late(&mut self, toh: u32, host_ns: i64, p: &DataPacket<'_>, clock: ClockSource) {
+        self.recent.push(i64::from(toh));
+        self.stats.missing = self.stats.missing.saturating_sub(1);
+        let Some(dec) = self.decoder.as_ref().filter(|_| self.sweep_open) else {
+            self.stats.late_dropped += 1;
+            return;
+        };
+        let (bpf, used) = (
+            dec.blocks_per_firing().max(1),
+            dec.blocks_used().clamp(1, BLOCKS),
+        );
+        let (toh0, ff0) = self.anchor;
+        let first_firing_ns = ff0.saturating_add(toh_delta_us(toh0, toh).saturating_mul(1_000));
+        let first = (0..used).step_by(bpf).find(|&g| {
+            first_firing_ns.saturating_add(i64::from(dec.block_time_ns(g)))
+                >= self.cur.device_time_ns
+        });
+        let Some(first) = first else {
+            self.stats.late_dropped += 1;
+            return;
+        };
+        self.cur.missing_packets = self.cur.missing_packets.saturating_sub(1);
+        self.add_segment(host_ns, p, first..used, first_firing_ns, clock);
+        self.stats.data_packets += 1;
     }
 
     /// [`Self::add_segment`], remembering the packet that opens a sweep as its time anchor.
