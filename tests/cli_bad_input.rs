@@ -1014,6 +1014,35 @@ fn a_bag_that_could_not_be_written_leaves_no_metadata() {
     assert_not_corrupt(&bag.join("drive_0.mcap"));
 }
 
+/// A `--format ros2` run refused after its checks (a `--serve` that cannot start) leaves no
+/// bag behind: the empty `metadata.yaml` and the directory it made stayed, and made the next
+/// run into the same --out refuse ("already holds a rosbag2").
+#[test]
+fn a_bag_run_that_fails_at_its_start_leaves_nothing() {
+    let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo-vlp16.pcap");
+    let dir = Scratch::dir("bag-start");
+    let bag = dir.join("drive");
+    let o = Command::new(bin())
+        .arg("decode")
+        .arg(&demo)
+        .args([
+            "--format",
+            "ros2",
+            "--serve",
+            "127.0.0.1:0",
+            "--serve-queue",
+            "0",
+            "--out",
+        ])
+        .arg(&bag)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("--serve-queue"), "{err}");
+    assert!(!bag.exists(), "{err}");
+}
+
 /// A run that finds no sensor has decoded nothing: exit 1 with the reason, and nothing written
 /// (a file already at `--out` is left as it was; no bag directory is made), as a sensor that
 /// cannot be decoded (Hesai or VLS-128 without their file) already was. It used to exit 0 and
@@ -1503,6 +1532,28 @@ fn an_output_over_an_input_is_refused() {
         assert_eq!(std::fs::read_to_string(&yaml).unwrap(), text);
         assert!(!dir.join("o.mcap").exists());
     }
+    // A bag directory's MCAP over INPUT (a capture named as the bag's first file): the
+    // rename at the end replaced the capture with the bag's file.
+    let bagdir = dir.join("bag");
+    std::fs::create_dir(&bagdir).unwrap();
+    let inside = bagdir.join("bag_0.mcap");
+    std::fs::write(&inside, &bytes).unwrap();
+    let r = decode(
+        &inside,
+        &["--format", "ros2", "--out", bagdir.to_str().unwrap()],
+    );
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(
+        r.stderr.starts_with("error: --out ") && r.stderr.contains("the same file as INPUT"),
+        "{}",
+        r.stderr
+    );
+    assert_eq!(
+        std::fs::read(&inside).unwrap(),
+        bytes,
+        "the capture changed"
+    );
+    assert!(!bagdir.join("metadata.yaml").exists());
     // render: its PNG over the MCAP it reads.
     let mcap = dir.join("run");
     let r = decode(

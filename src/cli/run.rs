@@ -391,7 +391,9 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
             ("--calib", Path::new(file))
         }))
         .collect();
-    let outputs: Vec<(&str, &Path)> = (args.out.as_deref().filter(|_| bag_dir.is_none()))
+    // A bag's output is the MCAP file in its directory (INPUT may be a file there).
+    let bag_file = bag_dir.map(|d| crate::sink::rosbag2::file_path(d, 0));
+    let outputs: Vec<(&str, &Path)> = (bag_file.as_deref().or(args.out.as_deref()))
         .map(|p| ("--out", p))
         .into_iter()
         .chain(
@@ -423,17 +425,33 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
         }
     }
     let (mut session, mut src) = start_session(args)?;
+    // The live view starts before any output exists: a port it cannot bind leaves nothing.
+    session.set_live(super::serve::LivePublisher::start(
+        &args.serve,
+        Some(args.serve_rate),
+    )?);
     let bag_dir_existed = bag_dir.is_some_and(Path::exists);
-    let sink = match (&out_path, bag_dir) {
-        (_, Some(dir)) => {
+    // On an error, the output is finalised (a valid MCAP) if it holds a sweep: what was
+    // decoded before the damage. An output without one is not written, so a run that could
+    // not decode leaves no empty file, and leaves a file already at the path as it was.
+    // A bag whose MCAP could not be finished loses the empty `metadata.yaml` written at its
+    // start (and the directory, if this run made it), so the failed run leaves nothing that
+    // looks like a bag and stops the next run into the same --out.
+    let discard_bag = || {
+        if let Some(dir) = bag_dir {
+            let _ = std::fs::remove_file(dir.join("metadata.yaml"));
+            if !bag_dir_existed {
+                let _ = std::fs::remove_dir(dir);
+            }
+        }
+    };
+    let sink = match (&out_path, bag_dir.zip(bag_file.as_deref())) {
+        (_, Some((dir, file))) => {
             crate::sink::rosbag2::create_dir(dir).map_err(|source| SinkError::Io {
                 context: format!("creating the rosbag2 directory {}", dir.display()),
                 source,
             })?;
-            Some(create_file(
-                &crate::sink::rosbag2::file_path(dir, 0),
-                sink_opts.clone(),
-            )?)
+            Some(create_file(file, sink_opts.clone()).inspect_err(|_| discard_bag())?)
         }
         (Some(p), None) => Some(create_file(p, sink_opts.clone())?),
         (None, None) => None,
@@ -455,30 +473,12 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
             source,
         })
     };
-    session.set_live(super::serve::LivePublisher::start(
-        &args.serve,
-        Some(args.serve_rate),
-    )?);
     let total = match args.input_bytes {
         Some(_) => None,
         None => std::fs::metadata(&args.input)
             .ok()
             .filter(|m| m.is_file())
             .map(|m| m.len()),
-    };
-    // On an error, the output is finalised (a valid MCAP) if it holds a sweep: what was
-    // decoded before the damage. An output without one is not written, so a run that could
-    // not decode leaves no empty file, and leaves a file already at the path as it was.
-    // A bag whose MCAP could not be finished loses the empty `metadata.yaml` written at its
-    // start (and the directory, if this run made it), so the failed run leaves nothing that
-    // looks like a bag and stops the next run into the same --out.
-    let discard_bag = || {
-        if let Some(dir) = bag_dir {
-            let _ = std::fs::remove_file(dir.join("metadata.yaml"));
-            if !bag_dir_existed {
-                let _ = std::fs::remove_dir(dir);
-            }
-        }
     };
     let pumped = pump(&mut src, &mut session, total);
     // A run that found no sensor decoded nothing: an error, as a sensor that cannot be
