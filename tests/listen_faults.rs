@@ -291,6 +291,53 @@ fn a_split_rosbag2_names_every_file_in_its_metadata() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A `--format ros2` recording that ends in an error (here the `--trajectory`'s disk is full,
+/// found when it is flushed at the end) still names its finalised last file in
+/// `metadata.yaml`: the yaml listed only the files of earlier checkpoints (none within the
+/// first 10 s), a bag that opened empty beside a complete file.
+#[test]
+fn a_rosbag2_recording_that_ends_in_an_error_names_its_last_file() {
+    if !Path::new("/dev/full").exists() {
+        eprintln!("SKIP: /dev/full is absent");
+        return;
+    }
+    let (pcap, _, _) = velodyne_capture();
+    let _g = serial();
+    let dir = tmpdir("ros2-error");
+    let bag = dir.join("drive");
+    let offset = free_offset(&[2368, 8308]);
+    let mut args = sensor_args(offset, Some(&bag));
+    args.extend(
+        [
+            "--format",
+            "ros2",
+            "--odometry",
+            "--trajectory",
+            "/dev/full",
+        ]
+        .map(String::from),
+    );
+    let l = start_listen(&args);
+    replay(&pcap, offset, "1", &[]);
+    std::thread::sleep(Duration::from_millis(300));
+    let (code, _, err) = l.stop("INT");
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("--trajectory /dev/full"), "{err}");
+    let file = bag.join("drive_0.mcap");
+    let bytes = std::fs::read(&file).unwrap();
+    let stats = mcap::Summary::read(&bytes)
+        .unwrap()
+        .and_then(|s| s.stats)
+        .expect("the last file finalised");
+    let yaml = std::fs::read_to_string(bag.join("metadata.yaml")).unwrap();
+    assert!(yaml.contains("    - path: \"drive_0.mcap\""), "{yaml}");
+    assert!(
+        yaml.contains(&format!("  message_count: {}\n", stats.message_count)),
+        "{yaml}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// Sends datagrams to 127.0.0.1 at about the capture's pace.
 fn send_all(sock: &UdpSocket, dgrams: &[(i64, u16, Vec<u8>)], port_of: impl Fn(u16) -> u16) {
     let t0 = dgrams.first().map_or(0, |d| d.0);

@@ -723,7 +723,9 @@ impl DecodeThread {
     }
 
     /// After an error: the output is finalised if it records a sensor (what came before the
-    /// error), else removed.
+    /// error), else removed. A rosbag2's `metadata.yaml` then names the file finalised, as
+    /// at a normal end (else the bag opened without it). The run's error is the one
+    /// reported: one in closing is only logged.
     fn close_on_error(&mut self) {
         match self.files.as_mut() {
             Some(f) if f.pending.is_some() => {
@@ -731,7 +733,19 @@ impl DecodeThread {
                 f.discard();
             }
             _ => {
-                let _ = self.session.close_sink();
+                let last = self.session.close_sink();
+                let Some(f) = self.files.as_mut() else {
+                    return;
+                };
+                let current = f.current.clone();
+                let named = match &last {
+                    Ok(Some(s)) => f.write_final_metadata((&current, s)),
+                    // Not finished: the yaml keeps the files before it.
+                    _ => f.checkpoints.take().map_or(Ok(()), Checkpoints::finish),
+                };
+                if let Err(e) = last.map(|_| ()).and(named) {
+                    tracing::warn!("closing {} after the error: {e}", current.display());
+                }
             }
         }
     }
