@@ -275,3 +275,81 @@ fn an_existing_bag_is_not_overwritten() {
     assert_eq!(std::fs::read(bag.join("metadata.yaml")).unwrap(), b"x");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Whether ROS 2 takes `name` as a full topic name, checked from the rules of rmw's
+/// `rmw_validate_full_topic_name` (written here from its documentation, not from ringscan):
+/// starts with `/`, does not end with one, no empty token, only ASCII letters, digits, `_`
+/// and `/`, and no token starting with a digit.
+fn ros2_accepts(name: &str) -> bool {
+    let Some(rest) = name.strip_prefix('/') else {
+        return false;
+    };
+    !rest.is_empty()
+        && rest.split('/').all(|token| {
+            token.chars().next().is_some_and(|c| !c.is_ascii_digit())
+                && token.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+        })
+}
+
+/// Two sensors in one `--format ros2` bag: each sensor's topics carry its name, and ROS 2 must
+/// take them (the default names hold `-`: `/vlp16-201/points` was written, which ROS 2
+/// refuses, so `ros2 bag play` published none of it). The MCAP's channels and the yaml
+/// agree, and the frame id keeps the sensor's name.
+#[test]
+fn two_sensors_get_topic_names_ros2_takes() {
+    use ringscan::sim::net::{udp_frame, PcapWriter};
+    use std::net::{Ipv4Addr, SocketAddrV4};
+    let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo-vlp16.pcap");
+    let dir = temp_dir("two-sensors");
+    let mut w = PcapWriter::new(Vec::new()).unwrap();
+    for (t, port, payload) in common::datagrams(&demo) {
+        for last in [201, 202] {
+            let src = SocketAddrV4::new(Ipv4Addr::new(192, 168, 1, last), port);
+            let dst = SocketAddrV4::new(Ipv4Addr::new(192, 168, 1, 100), port);
+            w.write(t + i64::from(last - 201), &udp_frame(src, dst, 0, &payload))
+                .unwrap();
+        }
+    }
+    let pcap = dir.join("two.pcap");
+    std::fs::write(&pcap, w.into_inner().unwrap()).unwrap();
+    let bag = dir.join("bag");
+    let j = ringscan(&[
+        "decode",
+        pcap.to_str().unwrap(),
+        "--format",
+        "ros2",
+        "--json",
+        "--out",
+        bag.to_str().unwrap(),
+    ]);
+    assert_eq!(j["sensors"].as_array().map(Vec::len), Some(2), "{j}");
+    let yaml = std::fs::read_to_string(bag.join("metadata.yaml")).unwrap();
+    let topics: Vec<&str> = yaml
+        .lines()
+        .filter_map(|l| l.trim().strip_prefix("name: "))
+        .map(|n| n.trim_matches('"'))
+        .collect();
+    assert!(topics.len() >= 4, "{yaml}");
+    for t in &topics {
+        assert!(ros2_accepts(t), "ROS 2 refuses the topic {t}");
+    }
+    for name in ["vlp16-201", "vlp16-202"] {
+        let topic = format!("/{}/points", name.replace('-', "_"));
+        assert!(
+            topics.contains(&topic.as_str()),
+            "{topic} not in {topics:?}"
+        );
+    }
+    let bytes = std::fs::read(bag.join("bag_0.mcap")).unwrap();
+    let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+    let mut channels: Vec<&str> = summary
+        .channels
+        .values()
+        .map(|c| c.topic.as_str())
+        .collect();
+    channels.sort_unstable();
+    let mut listed = topics.clone();
+    listed.sort_unstable();
+    assert_eq!(channels, listed);
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -75,12 +75,29 @@ fn title_case(name: &str) -> String {
 }
 
 /// The topic prefix of sensor `idx` named `name` among `n_sensors` counted: none for the
-/// first of a single sensor.
-fn topic_prefix(n_sensors: usize, idx: usize, name: &str) -> String {
+/// first of a single sensor. `ros`: a name ROS 2 takes ([`ros_name`]).
+fn topic_prefix(n_sensors: usize, idx: usize, name: &str, ros: bool) -> String {
     if n_sensors <= 1 && idx == 0 {
         String::new()
+    } else if ros {
+        format!("/{}", ros_name(name))
     } else {
         format!("/{name}")
+    }
+}
+
+/// A sensor name as a ROS 2 topic token: ROS 2 takes only letters, digits and `_`, and no
+/// token that starts with a digit (rmw's full topic name rules), where sensor names hold `-`
+/// and `.` (`vlp16-201`): `ros2 bag play` cannot publish such a topic. Other characters become
+/// `_`; a leading digit gets `sensor_` before it (a leading `_` would hide the topic).
+fn ros_name(name: &str) -> String {
+    let token: String = name
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+        .collect();
+    match token.chars().next() {
+        Some(c) if !c.is_ascii_digit() => token,
+        _ => format!("sensor_{token}"),
     }
 }
 
@@ -230,7 +247,11 @@ impl Output {
             .find(|(a, n, _)| (a.is_none() || *a == Some(addr)) && first == *n)
             .map(|(_, n, b)| (n.clone(), b.clone()));
         let md = sensors::channel_metadata(facts, addr, ports);
-        let topic_prefix = topic_prefix(self.n_sensors_hint, idx, &name);
+        let ros = self
+            .sink
+            .as_ref()
+            .is_some_and(|k| k.format() == crate::sink::mcap::Format::Ros2);
+        let topic_prefix = topic_prefix(self.n_sensors_hint, idx, &name, ros);
         let s = self.sensor(idx, addr);
         s.name = name.clone();
         s.topic = format!("{topic_prefix}/points");
@@ -815,7 +836,7 @@ impl Session {
         if self.out.sink.is_none() {
             for (idx, s) in self.out.sensors.iter_mut().enumerate() {
                 if let Some(info) = s.info.as_mut() {
-                    info.topic_prefix = topic_prefix(n, idx, &s.name);
+                    info.topic_prefix = topic_prefix(n, idx, &s.name, false);
                     s.topic = format!("{}/points", info.topic_prefix);
                 }
             }
