@@ -147,7 +147,7 @@ fn atx_packets_whose_header_lies_are_counted_not_decoded() {
         ("protocol 4.8", with(3, 8)),
         (
             "a well-formed packet of 99 lasers for a 100-channel correction",
-            atx_packet(99),
+            with_seq(atx_packet(99), 8),
         ),
         ("return mode 0x42", {
             let mut b = good.clone();
@@ -161,14 +161,21 @@ fn atx_packets_whose_header_lies_are_counted_not_decoded() {
         assert_eq!(s.stats().malformed, i as u64 + 1, "{what}");
     }
     assert_eq!(s.stats().packets, 1);
-    // The next good packet (sequence number 8; 7 again would be a copy).
-    let mut next = good.clone();
-    let n = next.len();
-    next[n - 16..n - 12].copy_from_slice(&8u32.to_le_bytes());
-    s.push(100_000, &next, &mut on).unwrap();
+    // The next good packet (sequence number 9; 7 again would be a copy). The 99-laser packet
+    // parsed whole under its own header: its number 8 came, so nothing is missing.
+    s.push(100_000, &with_seq(good.clone(), 9), &mut on)
+        .unwrap();
     s.finish(&mut on);
     assert_eq!(s.stats().packets, 2);
+    assert_eq!(s.stats().missing, 0);
     assert_eq!(points, 400, "two good packets of 200 returns");
+}
+
+/// An ATX packet of [`atx_packet`] with UDP sequence number `seq` (after the 32-byte tail).
+fn with_seq(mut b: Vec<u8>, seq: u32) -> Vec<u8> {
+    let n = b.len();
+    b[n - 16..n - 12].copy_from_slice(&seq.to_le_bytes());
+    b
 }
 
 #[test]

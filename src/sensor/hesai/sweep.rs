@@ -367,11 +367,7 @@ impl HesaiStream {
                     // Only the body failed: the tail tells which packet came corrupt, so its
                     // number is not also counted missing (its points are lost, counted above).
                     if let Some(s) = p.checked_udp_seq().filter(|_| part == CrcPart::Body) {
-                        match self.seq.step(u64::from(s)) {
-                            SeqStep::Next { lost } if lost > 0 => self.add_missing(lost),
-                            SeqStep::Late => self.remove_missing(1),
-                            _ => {}
-                        }
+                        self.number_seen(s);
                     }
                     return Ok(());
                 }
@@ -407,13 +403,17 @@ impl HesaiStream {
         self.facts.last_stamp_ns = Some(stamp);
 
         // ATX: a packet whose laser count is not its correction's cannot be decoded with it:
-        // malformed, as a packet that does not parse, and so not a number seen.
+        // malformed. It parsed whole by its own header (a corrupt count would not fit the
+        // datagram's length), so its number tells which packet it was: not also missing.
         if self
             .decoder
             .as_ref()
             .is_some_and(|d| p.layout().channels != d.channels())
         {
             self.stats.malformed += 1;
+            if let Some(s) = p.udp_seq() {
+                self.number_seen(s);
+            }
             return Ok(());
         }
 
@@ -666,6 +666,16 @@ impl HesaiStream {
         }
         self.decoder = Some(dec);
         Ok(())
+    }
+
+    /// A packet counted malformed whose sequence number can be trusted: the window takes it,
+    /// so its gap is not also counted missing.
+    fn number_seen(&mut self, seq: u32) {
+        match self.seq.step(u64::from(seq)) {
+            SeqStep::Next { lost } if lost > 0 => self.add_missing(lost),
+            SeqStep::Late => self.remove_missing(1),
+            _ => {}
+        }
     }
 
     fn add_missing(&mut self, m: u64) {
