@@ -409,3 +409,225 @@ fn a_zstd_bomb_db3_is_refused_before_it_fills_the_disk() {
         .collect();
     assert!(left.is_empty(), "temporary copies left: {left:?}");
 }
+
+/// A ROS 1 bag of `chunks` (each the records it holds), every chunk bz2-compressed.
+fn bz2_bag(chunks: &[Vec<u8>]) -> Vec<u8> {
+    use std::io::Write;
+    let mut b = b"#ROSBAG V2.0\n".to_vec();
+    b.extend(record(
+        &[field("op", &[3]), field("index_pos", &0u64.to_le_bytes())],
+        &[b' '; 32],
+    ));
+    for records in chunks {
+        let mut z = bzip2::write::BzEncoder::new(Vec::new(), bzip2::Compression::best());
+        z.write_all(records).unwrap();
+        let z = z.finish().unwrap();
+        b.extend(record(
+            &[
+                field("op", &[5]),
+                field("compression", b"bz2"),
+                field("size", &(records.len() as u32).to_le_bytes()),
+            ],
+            &z,
+        ));
+    }
+    b
+}
+
+/// A connection record inside a chunk: id, topic (in the header), type (in the data).
+fn connection(id: u32, topic: &[u8], type_name: &[u8]) -> Vec<u8> {
+    record(
+        &[
+            field("op", &[7]),
+            field("conn", &id.to_le_bytes()),
+            field("topic", topic),
+        ],
+        &field("type", type_name),
+    )
+}
+
+/// Connections are kept for the whole bag, so what they hold must be bounded: a bz2 chunk of
+/// a few hundred bytes decompresses to a connection with a topic or type of megabytes, and
+/// one chunk can hold thousands of connections (old: every one kept, whatever its size or
+/// number — a bag of such chunks grew without end). Beyond the bounds: a clear error.
+#[test]
+fn ros1_connections_beyond_the_bounds_are_errors() {
+    use ringscan::source::bag::{MAX_CONNECTIONS, MAX_NAME_BYTES};
+    let long = vec![b'a'; 512 << 10];
+    for (what, records) in [
+        ("topic", connection(0, &long, b"std_msgs/String")),
+        ("type", connection(0, b"/t", &vec![b'b'; 8 << 20])),
+    ] {
+        let b = bz2_bag(&[records]);
+        assert!(b.len() < 4096, "{what}: {} bytes", b.len());
+        let e = read_all(&tmp("long-name.bag", &b)).unwrap_err().to_string();
+        assert!(
+            e.contains("connection topic or type") && e.contains(&MAX_NAME_BYTES.to_string()),
+            "{what}: {e}"
+        );
+    }
+    let many: Vec<u8> = (0..=MAX_CONNECTIONS as u32)
+        .flat_map(|id| connection(id, format!("/t{id}").as_bytes(), b"std_msgs/String"))
+        .collect();
+    let e = read_all(&tmp("many-connections.bag", &bz2_bag(&[many])))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains(&format!("more than {MAX_CONNECTIONS} connections")),
+        "{e}"
+    );
+    // A record header inside a chunk is held to the bound of one outside: the chunk is
+    // counted and skipped.
+    let mut records = record(&[field("op", &[2]), field("x", &vec![0; 2 << 20])], &[]);
+    records.extend(connection(0, b"/t", b"std_msgs/String"));
+    let (_, st) = read_all(&tmp("long-header.bag", &bz2_bag(&[records]))).unwrap();
+    assert_eq!(st.bad_chunks, 1, "{st:?}");
+}
+
+/// MCAP likewise: zstd chunks of channel and schema records with names of megabytes, or more
+/// channels than any bag has, are errors (old: all kept).
+#[test]
+fn mcap_channels_and_schemas_beyond_the_bounds_are_errors() {
+    use ringscan::source::bag::MAX_CONNECTIONS;
+    let schema = |id: u16, name: &[u8]| {
+        let mut b = id.to_le_bytes().to_vec();
+        b.extend(mcap_bytes(name));
+        b.extend(mcap_bytes(b"ros1msg"));
+        b.extend(mcap_bytes(b""));
+        mcap_record(0x03, &b)
+    };
+    let channel = |id: u16, topic: &[u8]| {
+        let mut b = id.to_le_bytes().to_vec();
+        b.extend_from_slice(&1u16.to_le_bytes());
+        b.extend(mcap_bytes(topic));
+        b.extend(mcap_bytes(b"ros1"));
+        b.extend_from_slice(&0u32.to_le_bytes());
+        mcap_record(0x04, &b)
+    };
+    let file = |records: &[u8]| {
+        let z = zstd::bulk::compress(records, 3).unwrap();
+        let mut chunk = Vec::new();
+        chunk.extend_from_slice(&0u64.to_le_bytes());
+        chunk.extend_from_slice(&0u64.to_le_bytes());
+        chunk.extend_from_slice(&(records.len() as u64).to_le_bytes());
+        chunk.extend_from_slice(&0u32.to_le_bytes());
+        chunk.extend(mcap_bytes(b"zstd"));
+        chunk.extend_from_slice(&(z.len() as u64).to_le_bytes());
+        chunk.extend_from_slice(&z);
+        let mut f = b"\x89MCAP0\r\n".to_vec();
+        f.extend(mcap_record(0x01, &[0, 0, 0, 0, 1, 0, 0, 0, b't']));
+        f.extend(mcap_record(0x06, &chunk));
+        f.extend(mcap_record(0x0f, &[0; 4]));
+        f.extend(mcap_record(0x02, &[0; 20]));
+        f.extend_from_slice(b"\x89MCAP0\r\n");
+        f
+    };
+    let long = vec![b'a'; 8 << 20];
+    let std_string = schema(1, b"std_msgs/String");
+    let many: Vec<u8> = (0..=MAX_CONNECTIONS as u16)
+        .flat_map(|id| channel(id, format!("/t{id}").as_bytes()))
+        .collect();
+    for (what, records, says) in [
+        (
+            "topic",
+            [std_string.clone(), channel(1, &long)].concat(),
+            "topic",
+        ),
+        ("schema", schema(1, &long), "schema name"),
+        ("channels", [std_string, many].concat(), "channels"),
+    ] {
+        let f = file(&records);
+        assert!(f.len() < 64 << 10, "{what}: {} bytes", f.len());
+        let e = read_all(&tmp("bounds.mcap", &f)).unwrap_err().to_string();
+        assert!(e.contains(says) && e.contains("MCAP"), "{what}: {e}");
+    }
+}
+
+/// A ROS 1 bag whose header gives where its index starts: a file that ends before that point
+/// was cut, even where it ends between two records (old: a clean end, the chunks lost
+/// unsaid); an index position that is no record of the index (inside the data) is not taken
+/// for the end of the messages (old: the stream stopped there, silently, with none).
+#[test]
+fn a_ros1_bag_that_ends_before_its_index_is_truncated_and_a_wrong_index_pos_is_read_past() {
+    let name = "demo-vlp16.ros1-lz4.bag";
+    let full = std::fs::read(fixture(name)).unwrap();
+    let (all, _) = read_all(&fixture(name)).unwrap();
+    let recs = records(&full);
+    let field_at = full.windows(10).position(|w| w == b"index_pos=").unwrap() + 10;
+    let index_pos = u64::from_le_bytes(full[field_at..field_at + 8].try_into().unwrap()) as usize;
+    assert!(recs.iter().any(|r| r.0 == index_pos && r.1 == 7));
+    // Cut between records: before the second chunk, and before the index.
+    let second = recs.iter().filter(|r| r.1 == 5).nth(1).unwrap().0;
+    let (n, st) = read_all(&tmp("cut-between.bag", &full[..second])).unwrap();
+    assert!(n > 0 && n < all, "{n} of {all}");
+    assert_eq!(st.truncated_at.map(|t| t.1), Some(second as u64));
+    // Every message is there, but the file ends before its index: cut all the same.
+    let last = recs.iter().rfind(|r| r.0 < index_pos).unwrap().0;
+    let (n, st) = read_all(&tmp("cut-before-index.bag", &full[..last])).unwrap();
+    assert_eq!(n, all);
+    assert_eq!(st.truncated_at.map(|t| t.1), Some(last as u64));
+    // Cut at the index, or inside it: every message is there.
+    for cut in [index_pos, index_pos + 20, full.len() - 1] {
+        let (n, st) = read_all(&tmp("cut-in-index.bag", &full[..cut])).unwrap();
+        assert_eq!((n, st.truncated_at), (all, None), "cut {cut}");
+    }
+    // index_pos at the first chunk, or inside it.
+    for wrong in [recs[1].0, recs[1].0 + 10] {
+        let mut b = full.clone();
+        b[field_at..field_at + 8].copy_from_slice(&(wrong as u64).to_le_bytes());
+        let (n, st) = read_all(&tmp("wrong-index-pos.bag", &b)).unwrap();
+        assert_eq!((n, st.truncated_at), (all, None), "index_pos {wrong}");
+    }
+}
+
+/// A message record inside a chunk, recorded at 1.7e9 s.
+fn message(conn: u32, body: &[u8]) -> Vec<u8> {
+    let mut t = 1_700_000_000u32.to_le_bytes().to_vec();
+    t.extend_from_slice(&0u32.to_le_bytes());
+    record(
+        &[
+            field("op", &[2]),
+            field("conn", &conn.to_le_bytes()),
+            field("time", &t),
+        ],
+        body,
+    )
+}
+
+/// A ROS 1 `string` or `uint8[]`: u32 length, then the bytes.
+fn ros1_bytes(b: &[u8]) -> Vec<u8> {
+    let mut r = (b.len() as u32).to_le_bytes().to_vec();
+    r.extend_from_slice(b);
+    r
+}
+
+/// Ouster metadata is kept by namespace to the end of the bag, and a bz2 chunk of a few
+/// hundred bytes holds a metadata message of megabytes: past `MAX_METADATA_BYTES` of them, a
+/// namespace's is counted and not kept (old: every namespace's kept, whatever their total).
+#[test]
+fn ouster_metadata_past_its_bound_is_counted_not_kept() {
+    use ringscan::source::bag::MAX_METADATA_BYTES;
+    let text = ros1_bytes(&vec![b'x'; MAX_METADATA_BYTES * 2 / 5]);
+    let mut chunks = Vec::new();
+    let mut packets = Vec::new();
+    for k in 0..3u32 {
+        let (meta, lidar) = (format!("/os{k}/metadata"), format!("/os{k}/lidar_packets"));
+        let mut records = connection(2 * k, meta.as_bytes(), b"std_msgs/String");
+        records.extend(connection(
+            2 * k + 1,
+            lidar.as_bytes(),
+            b"ouster_ros/PacketMsg",
+        ));
+        records.extend(message(2 * k, &text));
+        chunks.push(records);
+        packets.extend(message(2 * k + 1, &ros1_bytes(&[0; 16])));
+    }
+    chunks.push(packets);
+    let b = bz2_bag(&chunks);
+    assert!(b.len() < 64 << 10, "{} bytes", b.len());
+    let mut src = BagSource::open(&tmp("metadata.bag", &b), BagOptions::default()).unwrap();
+    while src.next_datagram().unwrap().is_some() {}
+    let kept: Vec<bool> = src.sensors().iter().map(|s| s.metadata.is_some()).collect();
+    assert_eq!(kept, [true, true, false]);
+    assert_eq!(src.stats().metadata_dropped, 1);
+}

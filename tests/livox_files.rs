@@ -541,6 +541,32 @@ fn not_a_recording_is_read_as_something_else() {
     assert!(e.contains("1.0.0.0"), "{e}");
 }
 
+/// A recording's header may list 255 devices, one more than the synthetic addresses
+/// 127.0.0.1 … 127.0.0.254: the 255th device's packages are counted and dropped (old: given
+/// 127.0.0.1, the first device's address, merging the two devices' streams).
+#[test]
+fn a_device_beyond_the_254_addresses_is_counted_not_merged() {
+    let recs: Vec<([i32; 3], u8, u8)> = (0..4).map(|i| ([i, i, i], 1, 0)).collect();
+    let devices: Vec<Vec<u8>> = (0..255).map(|id| device_lvx2(id, 9)).collect();
+    let f = lvx2_file(
+        &devices,
+        &[vec![
+            package_lvx2(0, 1, 10, 0, 1, 0, &type1(&recs)),
+            package_lvx2(254, 1, 20, 0, 1, 0, &type1(&recs)),
+            package_lvx2(253, 1, 30, 0, 1, 0, &type1(&recs)),
+        ]],
+    );
+    let mut src = LvxSource::new(&f[..]).unwrap();
+    assert_eq!(src.devices().len(), 255);
+    let mut from = Vec::new();
+    while let Some(d) = src.next_datagram().unwrap() {
+        from.push(d.src.to_string());
+    }
+    assert_eq!(from, ["127.0.0.1:56301", "127.0.0.254:56301"]);
+    assert_eq!(src.stats().device_limit, 1);
+    assert_eq!(LvxSource::<&[u8]>::address(254), None);
+}
+
 // ----- the command line ----------------------------------------------------------------------
 
 #[cfg(feature = "cli")]

@@ -216,7 +216,7 @@ impl<R: Read> Input<R> {
                     .enumerate()
                     .map(|(i, d)| {
                         json!({
-                            "address": LvxSource::<R>::address(i).to_string(),
+                            "address": LvxSource::<R>::address(i).map(|a| a.to_string()),
                             "lidar_sn": d.lidar_sn,
                             "hub_sn": d.hub_sn,
                             "id": d.id,
@@ -249,6 +249,7 @@ impl<R: Read> Input<R> {
                         "malformed_packages": st.malformed_packages,
                         "first_malformed": st.first_malformed.as_ref().map(|(o, w)| json!({"offset": o, "reason": w})),
                         "unknown_device": st.unknown_device,
+                        "device_limit": st.device_limit,
                         "truncated_at": st.truncated_at,
                         "devices": devices,
                     },
@@ -292,6 +293,7 @@ impl<R: Read> Input<R> {
                         "messages": st.messages,
                         "packet_messages": st.packet_messages,
                         "metadata_messages": st.metadata_messages,
+                        "metadata_dropped": st.metadata_dropped,
                         "unselected": st.unselected,
                         "outside_time": st.outside_time,
                         "unknown_type": st.unknown_type,

@@ -3,7 +3,9 @@
 //! The layouts and why each package becomes the datagram its sensor sent are in
 //! [`crate::sensor::livox::lvx`]; this is the reading loop. The file is read front to back,
 //! one package at a time (memory: one datagram). Each device gets a synthetic source address,
-//! 127.0.0.N for the N-th device info block, and its model's ports: MID-360 points to 56301 and
+//! 127.0.0.N for the N-th device info block (N ≤ [`MAX_DEVICES`]; the packages of a 255th
+//! device, which the header's u8 count allows, are counted in [`LvxStats::device_limit`] and
+//! dropped), and its model's ports: MID-360 points to 56301 and
 //! IMU to 56401, HAP 57000 / 58000, SDK1 models 56001 (points and IMU alike); 0.0.0.0:0 is
 //! never used. A datagram's time is its package's timestamp (the file keeps no host time).
 //!
@@ -27,6 +29,8 @@ use crate::sensor::livox::model::LivoxModel;
 
 /// Largest frame accepted (a 50 ms frame of a HAP is about 1.5 MB).
 pub const MAX_FRAME_BYTES: u64 = 256 << 20;
+/// Devices with an address (127.0.0.1 … 127.0.0.254) at most.
+pub const MAX_DEVICES: usize = 254;
 
 /// Why a recording cannot be read (further).
 #[derive(Debug, thiserror::Error)]
@@ -79,6 +83,8 @@ pub struct LvxStats {
     pub first_malformed: Option<(u64, String)>,
     /// Packages of a device the headers do not list: skipped.
     pub unknown_device: u64,
+    /// Packages of devices beyond [`MAX_DEVICES`]: skipped.
+    pub device_limit: u64,
     /// Where a file cut short ended the stream.
     pub truncated_at: Option<u64>,
     /// Time of the first datagram, ns.
@@ -202,9 +208,9 @@ impl<R: Read> LvxSource<R> {
         &self.stats
     }
 
-    /// Synthetic source address of device block `i`.
-    pub fn address(i: usize) -> Ipv4Addr {
-        Ipv4Addr::new(127, 0, 0, (i % 254) as u8 + 1)
+    /// Synthetic source address of device block `i`; `None` beyond [`MAX_DEVICES`].
+    pub fn address(i: usize) -> Option<Ipv4Addr> {
+        (i < MAX_DEVICES).then(|| Ipv4Addr::new(127, 0, 0, i as u8 + 1))
     }
 
     fn io(&self, source: io::Error) -> LvxError {
@@ -339,12 +345,15 @@ impl<R: Read> LvxSource<R> {
                 self.stats.unknown_device += 1;
                 continue;
             };
+            let Some(addr) = Self::address(device) else {
+                self.stats.device_limit += 1;
+                continue;
+            };
             let model = self.devices[device].model;
             lvx::package_datagram(self.version, &self.pkg, model, &mut self.datagram);
             let time_ns = lvx::package_time_ns(self.version, &self.pkg);
             let imu = header.data_type == self.imu_data_type();
             let port = port_of(model, imu);
-            let addr = Self::address(device);
             self.stats.datagrams += 1;
             self.stats.first_time_ns.get_or_insert(time_ns);
             self.stats.last_time_ns = Some(time_ns);

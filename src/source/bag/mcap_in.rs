@@ -20,7 +20,8 @@
 //! A file that ends early (no footer, a record cut short) ends the stream with `truncated_at` =
 //! the bytes read; any other inconsistency (bad magic, bad CRC, a chunk that does not
 //! decompress, an unknown compression, a record past its chunk's end) is [`BagError::Mcap`]
-//! with the offset reached.
+//! with the offset reached; so are more than [`MAX_CONNECTIONS`] channels or schemas, and a
+//! topic or schema name longer than [`MAX_NAME_BYTES`] (they are kept to the end of the file).
 
 use std::collections::HashMap;
 use std::io::Read;
@@ -32,7 +33,7 @@ use mcap::records::Record;
 use super::messages::Encoding;
 use super::{
     fill, inflate_exact, read_up_to, BagError, Connection, RawMessage, MAX_CHUNK_BYTES,
-    MAX_MESSAGE_BYTES,
+    MAX_CONNECTIONS, MAX_MESSAGE_BYTES, MAX_NAME_BYTES,
 };
 
 /// The MCAP magic.
@@ -43,8 +44,8 @@ pub struct McapReader<R: Read> {
     reader: R,
     offset: u64,
     magic_checked: bool,
-    /// Schema id → (name, encoding).
-    schemas: HashMap<u16, (String, String)>,
+    /// Schema id → name.
+    schemas: HashMap<u16, String>,
     channels: HashMap<u16, Connection>,
     order: Vec<u16>,
     /// Messages larger than [`MAX_MESSAGE_BYTES`], skipped.
@@ -115,9 +116,11 @@ impl<R: Read> McapReader<R> {
         self.order.len()
     }
 
-    /// Every channel known so far, in order of appearance.
-    pub fn connections(&self) -> Vec<(u64, Connection)> {
+    /// The channels known so far from the `first`-th on, in order of appearance.
+    pub fn connections_from(&self, first: usize) -> Vec<(u64, Connection)> {
         self.order
+            .get(first..)
+            .unwrap_or_default()
             .iter()
             .filter_map(|id| Some((u64::from(*id), self.channels.get(id)?.clone())))
             .collect()
@@ -334,17 +337,42 @@ impl<R: Read> McapReader<R> {
                         return Err(self.mcap_error(reason));
                     }
                 };
+                let refused = match &record {
+                    Record::Schema { header, .. } if header.name.len() > MAX_NAME_BYTES => {
+                        Some(format!(
+                            "schema name of {} bytes, more than the {MAX_NAME_BYTES} accepted",
+                            header.name.len()
+                        ))
+                    }
+                    Record::Schema { header, .. }
+                        if !self.schemas.contains_key(&header.id)
+                            && self.schemas.len() >= MAX_CONNECTIONS =>
+                    {
+                        Some(format!("more than {MAX_CONNECTIONS} schemas"))
+                    }
+                    Record::Channel(c) if c.topic.len() > MAX_NAME_BYTES => Some(format!(
+                        "channel topic of {} bytes, more than the {MAX_NAME_BYTES} accepted",
+                        c.topic.len()
+                    )),
+                    Record::Channel(c)
+                        if !self.channels.contains_key(&c.id)
+                            && self.order.len() >= MAX_CONNECTIONS =>
+                    {
+                        Some(format!("more than {MAX_CONNECTIONS} channels"))
+                    }
+                    _ => None,
+                };
+                if let Some(reason) = refused {
+                    self.done = true;
+                    self.chunk_at = self.chunk_end;
+                    return Err(self.mcap_error(reason));
+                }
                 match record {
                     Record::Schema { header, .. } => {
-                        self.schemas
-                            .insert(header.id, (header.name, header.encoding));
+                        self.schemas.insert(header.id, header.name);
                     }
                     Record::Channel(c) => {
-                        let type_name = self
-                            .schemas
-                            .get(&c.schema_id)
-                            .map(|(n, _)| n.clone())
-                            .unwrap_or_default();
+                        let type_name = self.schemas.get(&c.schema_id).cloned().unwrap_or_default();
                         if !self.channels.contains_key(&c.id) {
                             self.order.push(c.id);
                         }

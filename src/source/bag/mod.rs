@@ -79,7 +79,11 @@
 //! message at a time; a record or chunk larger than
 //! [`MAX_CHUNK_BYTES`], a message larger than [`MAX_MESSAGE_BYTES`], is refused before it is
 //! allocated (an error for ROS 1 / MCAP records, whose framing is then lost; a counted skip for
-//! sqlite3 rows). A message that does not parse as its type is counted in
+//! sqlite3 rows). What is kept to the end is bounded: [`MAX_CONNECTIONS`] connections and topics
+//! with names of at most [`MAX_NAME_BYTES`] (beyond them the bag is refused), and
+//! [`MAX_METADATA_BYTES`] of Ouster metadata (beyond it counted in `metadata_dropped`); a message
+//! without a connection record is of one placeholder topic, whatever its id. A message that
+//! does not parse as its type is counted in
 //! [`BagStats::malformed`] and skipped; topics of other types in `unknown_type`; a ROS 1 chunk
 //! that does not decompress in `bad_chunks`. A file cut short ends the stream with
 //! [`BagStats::truncated_at`] saying where; what came before is decoded.
@@ -118,6 +122,19 @@ pub const MAX_ZSTD_DB3_RATIO: u64 = 64;
 pub const ZSTD_DB3_SLACK_BYTES: u64 = 64 << 20;
 /// Sensors (synthetic addresses 127.0.0.1 … 127.0.0.254) at most.
 pub const MAX_SENSORS: usize = 254;
+/// Connections (ROS 1), channels and schemas (MCAP), topics (sqlite3) of one storage file, and
+/// topics (by name and type) of a whole bag, at most; beyond it the bag is refused. They are
+/// kept to the end of the bag, and a compressed chunk of a kB holds thousands of them: without
+/// a bound a hostile bag fills memory. Real bags have tens to a few hundred (ROS 1: one per
+/// topic and publishing node).
+pub const MAX_CONNECTIONS: usize = 4096;
+/// Ouster metadata texts kept at most, all namespaces together (past it, one is counted in
+/// [`BagStats::metadata_dropped`]): a sensor's is tens of kB, and a bag may have a metadata
+/// topic of up to [`MAX_MESSAGE_BYTES`] for each of its namespaces.
+pub const MAX_METADATA_BYTES: usize = 16 << 20;
+/// Longest topic, type or schema name accepted (real ones have tens of bytes); a longer one
+/// is refused, for the reason of [`MAX_CONNECTIONS`].
+pub const MAX_NAME_BYTES: usize = 4096;
 
 const ZSTD_MAGIC: [u8; 4] = [0x28, 0xb5, 0x2f, 0xfd];
 const SQLITE_MAGIC: &[u8; 16] = b"SQLite format 3\0";
@@ -559,11 +576,12 @@ impl Inner {
         }
     }
 
-    fn connections(&self) -> Vec<(u64, Connection)> {
+    /// The connections from the `first`-th on (in the order [`Self::connection_count`] counts).
+    fn connections_from(&self, first: usize) -> Vec<(u64, Connection)> {
         match self {
-            Self::Ros1(r) => r.connections(),
-            Self::Sqlite(r, _) => r.connections(),
-            Self::Mcap(r) => r.connections(),
+            Self::Ros1(r) => r.connections_from(first),
+            Self::Sqlite(r, _) => r.connections_from(first),
+            Self::Mcap(r) => r.connections_from(first),
         }
     }
 
@@ -606,6 +624,10 @@ struct Messages {
     conns: Vec<Connection>,
     by_name: HashMap<(String, String), u64>,
     local: HashMap<u64, u64>,
+    /// The global ids of the Livox `CustomMsg` connections, by topic.
+    custom_msgs: HashMap<String, u64>,
+    /// How many of the current file's connections have been looked at for `custom_msgs`.
+    scanned: usize,
     /// Serialization formats from `metadata.yaml`, by topic (for storage that lacks them).
     formats: HashMap<String, Option<Encoding>>,
     done_bytes: u64,
@@ -631,6 +653,8 @@ impl Messages {
             conns: Vec::new(),
             by_name: HashMap::new(),
             local: HashMap::new(),
+            custom_msgs: HashMap::new(),
+            scanned: 0,
             formats: HashMap::new(),
             done_bytes: 0,
             damage: Damage::default(),
@@ -658,7 +682,11 @@ impl Messages {
                         topic: name.clone(),
                         type_name: ty.clone(),
                         encoding: enc,
-                    });
+                    })
+                    .map_err(|_| BagError::Metadata {
+                        path: yaml.clone(),
+                        reason: format!("more than {MAX_CONNECTIONS} topics"),
+                    })?;
                 }
                 let files: Vec<String> = if meta.files.is_empty() {
                     // No list: every storage file of the directory, by name.
@@ -716,34 +744,47 @@ impl Messages {
         (self.conns.len(), inner)
     }
 
-    /// The global id of a connection of `topic` and of `kind` that the storage has told of,
-    /// whether or not a message of it has been read yet (the current file's connection
+    /// The global id of a Livox `CustomMsg` connection of `topic` that the storage has told
+    /// of, whether or not a message of it has been read yet (the current file's connection
     /// records so far: all of an indexed ROS 1 bag's, sqlite3's topics table, the MCAP
-    /// channels read).
-    fn known_connection(&mut self, topic: &str, kind: MsgKind) -> Option<u64> {
-        let is = |c: &Connection| {
-            c.topic == topic && MsgKind::from_type_name(&c.type_name) == Some(kind)
-        };
-        if let Some(g) = self.conns.iter().position(is) {
-            return Some(g as u64);
+    /// channels read). It is asked again at every new connection while an IMU topic waits for
+    /// its `CustomMsg` topic, so each connection is looked at once, not at every asking.
+    fn custom_msg_connection(&mut self, topic: &str) -> Option<u64> {
+        if let Some(&g) = self.custom_msgs.get(topic) {
+            return Some(g);
         }
         let (_, inner) = self.current.as_ref()?;
-        let (id, c) = inner.connections().into_iter().find(|(_, c)| is(c))?;
-        let g = self.localize(c);
-        self.local.insert(id, g);
-        Some(g)
+        let new = inner.connections_from(self.scanned);
+        self.scanned += new.len();
+        for (id, c) in new {
+            if MsgKind::from_type_name(&c.type_name) == Some(MsgKind::LivoxCustomMsg) {
+                let g = self.localize(c).ok()?;
+                self.local.insert(id, g);
+            }
+        }
+        self.custom_msgs.get(topic).copied()
     }
 
-    /// The global id of a connection (by topic name and type).
-    fn global(&mut self, c: Connection) -> u64 {
+    /// The global id of a connection (by topic name and type); an error past
+    /// [`MAX_CONNECTIONS`] of them.
+    fn global(&mut self, c: Connection) -> Result<u64, BagError> {
         let key = (c.topic.clone(), c.type_name.clone());
         if let Some(&g) = self.by_name.get(&key) {
-            return g;
+            return Ok(g);
+        }
+        if self.conns.len() >= MAX_CONNECTIONS {
+            return Err(BagError::Corrupt {
+                offset: self.position(),
+                reason: format!("more than {MAX_CONNECTIONS} topics (by name and type)"),
+            });
         }
         let g = self.conns.len() as u64;
+        if MsgKind::from_type_name(&c.type_name) == Some(MsgKind::LivoxCustomMsg) {
+            self.custom_msgs.insert(c.topic.clone(), g);
+        }
         self.conns.push(c);
         self.by_name.insert(key, g);
-        g
+        Ok(g)
     }
 
     /// The decompressed copy of the current file, if it is a zstd-compressed sqlite3 file.
@@ -770,16 +811,17 @@ impl Messages {
         // A copy the pre-scan made of another file than the first is not kept waiting.
         self.decompressed = None;
         self.local.clear();
-        for (id, c) in inner.connections() {
-            let g = self.localize(c);
+        for (id, c) in inner.connections_from(0) {
+            let g = self.localize(c).map_err(|e| in_file(&path, e))?;
             self.local.insert(id, g);
         }
+        self.scanned = inner.connection_count();
         self.current = Some((path, inner));
         Ok(true)
     }
 
     /// A file's connection with the yaml's serialization format where the file has none.
-    fn localize(&mut self, mut c: Connection) -> u64 {
+    fn localize(&mut self, mut c: Connection) -> Result<u64, BagError> {
         if let Some(enc) = self.formats.get(&c.topic) {
             if c.encoding.is_none() {
                 c.encoding = *enc;
@@ -826,6 +868,13 @@ impl Messages {
         self.conns.get(usize::try_from(g).ok()?)
     }
 
+    fn in_current(&self, e: BagError) -> BagError {
+        match &self.current {
+            Some((path, _)) => in_file(path, e),
+            None => e,
+        }
+    }
+
     /// The bytes of the message last returned by [`Self::next_message`].
     fn message(&self) -> &[u8] {
         match &self.current {
@@ -860,18 +909,20 @@ impl Messages {
                 None => {
                     let Some(c) = inner.connection(m.conn).cloned() else {
                         // A message before (or without) its connection record: unknown topic.
-                        let g = self.global(Connection {
-                            topic: format!("<connection {}>", m.conn),
+                        // One placeholder for them all, not remembered by id: ids are as many
+                        // as a file names (ROS 1's are u32).
+                        let placeholder = Connection {
+                            topic: "<no connection record>".into(),
                             type_name: String::new(),
                             encoding: None,
-                        });
-                        self.local.insert(m.conn, g);
+                        };
+                        let g = self.global(placeholder).map_err(|e| self.in_current(e))?;
                         return Ok(Some(RawMessage {
                             conn: g,
                             time_ns: m.time_ns,
                         }));
                     };
-                    let g = self.localize(c);
+                    let g = self.localize(c).map_err(|e| self.in_current(e))?;
                     self.local.insert(m.conn, g);
                     g
                 }
@@ -1014,6 +1065,9 @@ pub struct BagStats {
     pub datagrams: u64,
     /// Ouster metadata messages read.
     pub metadata_messages: u64,
+    /// Ouster metadata messages of a namespace without one, not kept: past
+    /// [`MAX_METADATA_BYTES`].
+    pub metadata_dropped: u64,
     /// Messages of topics not selected (`--topic`).
     pub unselected: u64,
     /// Messages recorded outside `--start` / `--end`.
@@ -1075,6 +1129,29 @@ struct Route {
     role: Role,
 }
 
+/// Ouster metadata texts by namespace, the first of each, at most [`MAX_METADATA_BYTES`].
+#[derive(Default)]
+struct MetadataTexts {
+    by_ns: HashMap<String, String>,
+    bytes: usize,
+}
+
+impl MetadataTexts {
+    /// Keeps `text` for `ns` if none is kept for it; false when it is not kept for want of room.
+    fn keep(&mut self, ns: &str, text: &[u8]) -> bool {
+        if self.by_ns.contains_key(ns) {
+            return true;
+        }
+        let text = String::from_utf8_lossy(text);
+        if self.bytes + text.len() > MAX_METADATA_BYTES {
+            return false;
+        }
+        self.bytes += text.len();
+        self.by_ns.insert(ns.to_string(), text.into_owned());
+        true
+    }
+}
+
 /// UDP datagrams from a ROS bag. See the [module documentation](self).
 ///
 /// ```no_run
@@ -1096,7 +1173,7 @@ pub struct BagSource {
     routes: HashMap<u64, Route>,
     sensors: Vec<BagSensor>,
     /// Ouster metadata by namespace (from the pre-scan and the stream).
-    metadata: HashMap<String, String>,
+    metadata: MetadataTexts,
     /// The MCAP attachments ([`Self::attachments`]).
     attachments: Vec<(String, Vec<u8>)>,
     packets: Vec<PacketRef>,
@@ -1373,10 +1450,7 @@ impl BagSource {
                 // The CustomMsg topic may be known before its first message (a ROS 1 index,
                 // the sqlite3 topics table): its sensor is made now, so the IMU samples that
                 // come first (the drivers publish a frame only once it is complete) are kept.
-                if let Some(g) = self
-                    .messages
-                    .known_connection(&lidar, MsgKind::LivoxCustomMsg)
-                {
+                if let Some(g) = self.messages.custom_msg_connection(&lidar) {
                     self.route(g);
                 }
             }
@@ -1433,7 +1507,7 @@ impl BagSource {
                     Family::Ouster => {
                         s.data_port = 7502;
                         s.aux_port = 7503;
-                        if let Some(m) = self.metadata.get(&key) {
+                        if let Some(m) = self.metadata.by_ns.get(&key) {
                             let (l, i) = ouster_ports(m);
                             s.data_port = l.unwrap_or(7502);
                             s.aux_port = i.unwrap_or(7503);
@@ -1535,13 +1609,11 @@ impl BagSource {
                     self.stats.metadata_messages += 1;
                     let msg = self.messages.message();
                     if let Ok((a, n)) = messages::string(route.encoding, msg) {
-                        let text = String::from_utf8_lossy(&msg[a..a + n]).into_owned();
-                        let topic = self
-                            .messages
-                            .connection(m.conn)
-                            .map(|c| namespace(&c.topic).to_string())
-                            .unwrap_or_default();
-                        self.metadata.entry(topic).or_insert(text);
+                        let ns =
+                            (self.messages.connection(m.conn)).map_or("", |c| namespace(&c.topic));
+                        if !self.metadata.keep(ns, &msg[a..a + n]) {
+                            self.stats.metadata_dropped += 1;
+                        }
                     }
                 }
                 Role::Dropped => self.stats.sensor_limit += 1,
@@ -1663,9 +1735,9 @@ fn mcap_attachments(path: &Path, kind: &BagKind) -> Vec<(String, Vec<u8>)> {
 fn prescan_metadata(
     path: &Path,
     kind: &BagKind,
-) -> Result<(HashMap<String, String>, Option<Decompressed>), BagError> {
+) -> Result<(MetadataTexts, Option<Decompressed>), BagError> {
     let mut m = Messages::open(path, kind, None)?;
-    let mut found: HashMap<String, String> = HashMap::new();
+    let mut found = MetadataTexts::default();
     let is_ouster =
         |c: &Connection| MsgKind::from_type_name(&c.type_name) == Some(MsgKind::OusterPacket);
     let is_meta = |c: &Connection| {
@@ -1686,6 +1758,7 @@ fn prescan_metadata(
         return Ok((found, m.into_decompressed()));
     }
     let mut read = 0u64;
+    let mut asked = None;
     // A damaged bag is reported by the main pass; the pre-scan keeps what it found.
     while let Ok(Some(msg)) = m.next_message() {
         let buf = m.message();
@@ -1693,15 +1766,20 @@ fn prescan_metadata(
         if let Some(c) = m.connection(msg.conn).filter(|c| is_meta(c)) {
             let text = c.encoding.and_then(|enc| messages::string(enc, buf).ok());
             if let Some((a, n)) = text {
-                found
-                    .entry(namespace(&c.topic).to_string())
-                    .or_insert_with(|| String::from_utf8_lossy(&buf[a..a + n]).into_owned());
+                found.keep(namespace(&c.topic), &buf[a..a + n]);
             }
         }
-        let want = wanted(&m);
-        if (!want.is_empty() && want.iter().all(|ns| found.contains_key(ns)))
-            || read > PRESCAN_BYTES
-        {
+        // The answer changes only with the topics or the texts found: not asked at every
+        // message (a bag may have thousands of topics).
+        let state = Some((m.conns.len(), found.by_ns.len()));
+        if state != asked {
+            asked = state;
+            let want = wanted(&m);
+            if !want.is_empty() && want.iter().all(|ns| found.by_ns.contains_key(ns)) {
+                break;
+            }
+        }
+        if read > PRESCAN_BYTES {
             break;
         }
     }
@@ -1731,6 +1809,103 @@ mod tests {
             (Some(7502), None)
         );
         assert_eq!(ouster_ports("not json"), (None, None));
+    }
+
+    fn field(name: &str, value: &[u8]) -> Vec<u8> {
+        let mut f = ((name.len() + 1 + value.len()) as u32)
+            .to_le_bytes()
+            .to_vec();
+        f.extend_from_slice(name.as_bytes());
+        f.push(b'=');
+        f.extend_from_slice(value);
+        f
+    }
+
+    fn record(header: &[Vec<u8>], data: &[u8]) -> Vec<u8> {
+        let h: Vec<u8> = header.concat();
+        let mut r = (h.len() as u32).to_le_bytes().to_vec();
+        r.extend_from_slice(&h);
+        r.extend_from_slice(&(data.len() as u32).to_le_bytes());
+        r.extend_from_slice(data);
+        r
+    }
+
+    fn connection(id: u32, topic: &str, type_name: &str) -> Vec<u8> {
+        record(
+            &[
+                field("op", &[7]),
+                field("conn", &id.to_le_bytes()),
+                field("topic", topic.as_bytes()),
+            ],
+            &field("type", type_name.as_bytes()),
+        )
+    }
+
+    fn message(id: u32) -> Vec<u8> {
+        let time = [0, 0x65, 0xcd, 0x1d, 0, 0, 0, 0];
+        record(
+            &[
+                field("op", &[2]),
+                field("conn", &id.to_le_bytes()),
+                field("time", &time),
+            ],
+            &[],
+        )
+    }
+
+    /// An unindexed ROS 1 bag of one uncompressed chunk holding `records`, read to its end.
+    fn read_ros1(name: &str, records: &[u8]) -> BagSource {
+        let mut b = ros1::MAGIC.to_vec();
+        b.extend(record(
+            &[field("op", &[3]), field("index_pos", &0u64.to_le_bytes())],
+            &[b' '; 32],
+        ));
+        b.extend(record(
+            &[
+                field("op", &[5]),
+                field("compression", b"none"),
+                field("size", &(records.len() as u32).to_le_bytes()),
+            ],
+            records,
+        ));
+        let path = std::env::temp_dir().join(format!("ringscan-{}-{name}", std::process::id()));
+        std::fs::write(&path, b).unwrap();
+        let mut s = BagSource::open(&path, BagOptions::default()).unwrap();
+        while s.next_datagram().unwrap().is_some() {}
+        let _ = std::fs::remove_file(&path);
+        s
+    }
+
+    /// Messages of ids no connection record names share one placeholder (old: one per id in
+    /// four tables; ROS 1 ids are u32, so such a bag grew them without end).
+    #[test]
+    fn messages_without_a_connection_record_share_one_placeholder() {
+        let records: Vec<u8> = (0..5000).flat_map(message).collect();
+        let s = read_ros1("orphans.bag", &records);
+        assert_eq!((s.stats().messages, s.stats().unknown_type), (5000, 5000));
+        let m = &s.messages;
+        assert_eq!((m.conns.len(), m.local.len(), s.routes.len()), (1, 0, 1));
+    }
+
+    /// An IMU topic waits for its `CustomMsg` connection through thousands of other
+    /// connections (each one re-asks the question: that must not cost a look at all of them),
+    /// and is paired by the first message after it.
+    #[test]
+    fn an_imu_topic_is_paired_after_many_other_connections() {
+        let mut records = connection(0, "/livox/imu", "sensor_msgs/Imu");
+        for id in 2..3000 {
+            records.extend(connection(id, &format!("/x{id}"), "std_msgs/Int32"));
+            records.extend(message(0));
+        }
+        records.extend(connection(1, "/livox/lidar", "livox_ros_driver2/CustomMsg"));
+        records.extend(message(0));
+        let s = read_ros1("pairing.bag", &records);
+        let st = s.stats();
+        // The last IMU message is read as one (and is no IMU sample: it is empty).
+        assert_eq!((st.unknown_type, st.malformed), (2998, 1), "{st:?}");
+        assert_eq!(s.sensors().len(), 1);
+        assert_eq!(s.sensors()[0].topics, ["/livox/lidar", "/livox/imu"]);
+        assert_eq!(s.messages.scanned, 3000);
     }
 
     #[test]

@@ -16,21 +16,25 @@
 //! [`read_index_connections`] reads it so that every topic is known before the first message.
 //!
 //! # Bounds
-//! Record headers are at most [`MAX_HEADER_BYTES`]; a chunk's compressed and uncompressed sizes
-//! at most [`MAX_CHUNK_BYTES`]; any other record at most
+//! Record headers (in a chunk too) are at most [`MAX_HEADER_BYTES`]; a chunk's compressed and
+//! uncompressed sizes at most [`MAX_CHUNK_BYTES`]; any other record at most
 //! [`MAX_MESSAGE_BYTES`]. A length beyond them is
 //! [`BagError::RecordTooLarge`] before anything is allocated, and buffers grow only as bytes
-//! actually arrive. One chunk is held at a time (compressed and uncompressed), the buffers are
+//! actually arrive. Connections are kept to the end: at most [`MAX_CONNECTIONS`], their topic
+//! and type at most [`MAX_NAME_BYTES`] each, else an error. One chunk is held at a time (compressed and uncompressed), the buffers are
 //! reused. A chunk that does not decompress to its announced size, or whose records contradict
 //! their lengths, is counted in `bad_chunks` and skipped: its length is known, the next record
-//! is not lost. A record cut short by the end of the file ends the stream (`truncated_at`).
+//! is not lost. A record cut short by the end of the file ends the stream (`truncated_at`), as
+//! does the end of the file before the index section the bag header announces (`index_pos`).
+//! An `index_pos` where no index record starts (inside the data) is read past.
 
 use std::collections::HashMap;
 use std::io::{self, Read, Seek, SeekFrom};
 
 use super::messages::Encoding;
 use super::{
-    inflate_exact, read_up_to, BagError, Connection, RawMessage, MAX_CHUNK_BYTES, MAX_MESSAGE_BYTES,
+    inflate_exact, read_up_to, BagError, Connection, RawMessage, MAX_CHUNK_BYTES, MAX_CONNECTIONS,
+    MAX_MESSAGE_BYTES, MAX_NAME_BYTES,
 };
 
 /// The first bytes of every ROS 1 bag of format 2.0.
@@ -41,6 +45,7 @@ pub const MAX_HEADER_BYTES: usize = 1 << 20;
 const OP_MESSAGE: u8 = 0x02;
 const OP_BAG_HEADER: u8 = 0x03;
 const OP_CHUNK: u8 = 0x05;
+const OP_CHUNK_INFO: u8 = 0x06;
 const OP_CONNECTION: u8 = 0x07;
 
 /// The fields of a record header ringscan uses.
@@ -54,6 +59,9 @@ struct Header {
     compression: Option<String>,
     topic: Option<String>,
     type_name: Option<String>,
+    /// Length of a `topic` or `type` longer than [`MAX_NAME_BYTES`] (then not kept: the
+    /// fields of a connection's data may be as long as its chunk).
+    long_name: Option<usize>,
 }
 
 /// Walks `name=value` fields; `f` gets each (name, value).
@@ -92,6 +100,9 @@ fn parse_header(buf: &[u8]) -> Result<Header, &'static str> {
         }
         b"index_pos" => h.index_pos = value.try_into().ok().map(u64::from_le_bytes),
         b"size" => h.size = le32(value),
+        b"topic" | b"type" if value.len() > MAX_NAME_BYTES => h.long_name = Some(value.len()),
+        // Not kept either: no compression has such a name, the chunk is counted as bad.
+        b"compression" if value.len() > MAX_NAME_BYTES => {}
         b"compression" => h.compression = Some(String::from_utf8_lossy(value).into_owned()),
         b"topic" => h.topic = Some(String::from_utf8_lossy(value).into_owned()),
         b"type" => h.type_name = Some(String::from_utf8_lossy(value).into_owned()),
@@ -217,18 +228,43 @@ impl<R: Read> Ros1Reader<R> {
         self.offset
     }
 
-    /// Registers connections known beforehand (from the index).
+    /// Registers connections known beforehand (from the index), up to [`MAX_CONNECTIONS`].
     pub fn add_connections(&mut self, list: Vec<(u32, Connection)>) {
         for (id, c) in list {
-            self.add_connection(id, c);
+            if !self.add_connection(id, c) {
+                break;
+            }
         }
     }
 
-    fn add_connection(&mut self, id: u32, c: Connection) {
+    /// False when `id` would be one connection more than [`MAX_CONNECTIONS`].
+    fn add_connection(&mut self, id: u32, c: Connection) -> bool {
         if !self.connections.contains_key(&id) {
+            if self.order.len() >= MAX_CONNECTIONS {
+                return false;
+            }
             self.order.push(id);
         }
         self.connections.insert(id, c);
+        true
+    }
+
+    /// Registers the connection (if any) of the record at `offset`.
+    fn register(
+        &mut self,
+        found: Result<Option<(u32, Connection)>, BagError>,
+        offset: u64,
+    ) -> Result<(), BagError> {
+        let Some((id, c)) = found? else {
+            return Ok(());
+        };
+        if self.add_connection(id, c) {
+            return Ok(());
+        }
+        Err(BagError::Corrupt {
+            offset,
+            reason: format!("more than {MAX_CONNECTIONS} connections"),
+        })
     }
 
     /// The connection `id`.
@@ -243,9 +279,11 @@ impl<R: Read> Ros1Reader<R> {
         self.order.len()
     }
 
-    /// Every connection known so far, in order of appearance.
-    pub fn connections(&self) -> Vec<(u64, Connection)> {
+    /// The connections known so far from the `first`-th on, in order of appearance.
+    pub fn connections_from(&self, first: usize) -> Vec<(u64, Connection)> {
         self.order
+            .get(first..)
+            .unwrap_or_default()
             .iter()
             .filter_map(|id| Some((u64::from(*id), self.connections.get(id)?.clone())))
             .collect()
@@ -361,23 +399,34 @@ impl<R: Read> Ros1Reader<R> {
                 return Ok(None);
             }
             if self.chunk_at < self.chunk_end {
-                if let Some(m) = self.next_in_chunk() {
-                    return Ok(Some(m));
+                match self.next_in_chunk() {
+                    Ok(Some(m)) => return Ok(Some(m)),
+                    Ok(None) => continue,
+                    Err(e) => {
+                        self.done = true;
+                        return Err(e);
+                    }
                 }
-                continue;
-            }
-            if self.index_pos > 0 && self.offset >= self.index_pos {
-                self.done = true;
-                return Ok(None);
             }
             let start = self.offset;
+            let at_index = self.index_pos > 0 && start == self.index_pos;
+            if self.index_pos > 0 && start > self.index_pos {
+                // It pointed inside a record: no index is there, the data goes on.
+                self.index_pos = 0;
+            }
             let rec = match self.read_framing() {
                 Ok(Framing::Record(r)) => r,
-                Ok(Framing::End) => {
+                // Every message came before: only the index is cut short.
+                Ok(Framing::End | Framing::Truncated) if at_index => {
                     self.done = true;
                     return Ok(None);
                 }
-                Ok(Framing::Truncated) => {
+                // Ending before the index announced is ending cut, at a record's start or not.
+                Ok(Framing::End) if start >= self.index_pos => {
+                    self.done = true;
+                    return Ok(None);
+                }
+                Ok(Framing::End | Framing::Truncated) => {
                     self.truncated_at = Some(start);
                     self.done = true;
                     return Ok(None);
@@ -388,6 +437,14 @@ impl<R: Read> Ros1Reader<R> {
                 }
             };
             let h = rec.header;
+            if at_index {
+                if matches!(h.op, Some(OP_CONNECTION | OP_CHUNK_INFO)) {
+                    self.done = true;
+                    return Ok(None);
+                }
+                // Data where the index should start: the position is wrong, not the data.
+                self.index_pos = 0;
+            }
             match h.op {
                 Some(OP_CHUNK) => {
                     self.chunk_offset = start;
@@ -438,8 +495,10 @@ impl<R: Read> Ros1Reader<R> {
                         self.done = true;
                         return Ok(None);
                     }
-                    if let Some((id, c)) = connection(&h, &self.compressed[..self.compressed_end]) {
-                        self.add_connection(id, c);
+                    let found = connection(&h, &self.compressed[..self.compressed_end], start);
+                    if let Err(e) = self.register(found, start) {
+                        self.done = true;
+                        return Err(e);
                     }
                 }
                 Some(OP_MESSAGE) => {
@@ -470,39 +529,41 @@ impl<R: Read> Ros1Reader<R> {
 
     /// The next message record inside the current chunk (connections are registered on the
     /// way); `None` when the chunk is used up or found inconsistent (then counted).
-    fn next_in_chunk(&mut self) -> Option<RawMessage> {
+    fn next_in_chunk(&mut self) -> Result<Option<RawMessage>, BagError> {
         while self.chunk_at < self.chunk_end {
             let Some((header, data)) = inner_record(&self.chunk[..self.chunk_end], self.chunk_at)
             else {
                 self.bad_chunk();
-                return None;
+                return Ok(None);
             };
             let (hs, he) = header;
             let (ds, de) = data;
             self.chunk_at = de;
-            let Ok(h) = parse_header(&self.chunk[hs..he]) else {
+            let parsed = (he - hs <= MAX_HEADER_BYTES)
+                .then(|| parse_header(&self.chunk[hs..he]).ok())
+                .flatten();
+            let Some(h) = parsed else {
                 self.bad_chunk();
-                return None;
+                return Ok(None);
             };
             match h.op {
                 Some(OP_CONNECTION) => {
-                    if let Some((id, c)) = connection(&h, &self.chunk[ds..de]) {
-                        self.add_connection(id, c);
-                    }
+                    let found = connection(&h, &self.chunk[ds..de], self.chunk_offset);
+                    self.register(found, self.chunk_offset)?;
                 }
                 Some(OP_MESSAGE) => {
                     if let (Some(conn), Some(time_ns)) = (h.conn, h.time_ns) {
                         (self.msg_in_chunk, self.msg) = (true, ds..de);
-                        return Some(RawMessage {
+                        return Ok(Some(RawMessage {
                             conn: u64::from(conn),
                             time_ns,
-                        });
+                        }));
                     }
                 }
                 _ => {}
             }
         }
-        None
+        Ok(None)
     }
 }
 
@@ -527,23 +588,35 @@ fn inner_record(buf: &[u8], at: usize) -> Option<((usize, usize), (usize, usize)
     (de <= buf.len()).then_some(((hs, he), (ds, de)))
 }
 
-/// A connection record: its id and what it carries (the type is in the data's fields).
-fn connection(h: &Header, data: &[u8]) -> Option<(u32, Connection)> {
-    let id = h.conn?;
+/// The connection record at `offset`: its id and what it carries (the type is in the data's
+/// fields); `None` without an id or a topic.
+fn connection(h: &Header, data: &[u8], offset: u64) -> Result<Option<(u32, Connection)>, BagError> {
+    let Some(id) = h.conn else { return Ok(None) };
     let inner = parse_header(data).ok();
-    let topic = h
+    if let Some(len) = h.long_name.or(inner.as_ref().and_then(|i| i.long_name)) {
+        return Err(BagError::RecordTooLarge {
+            offset,
+            what: "connection topic or type",
+            len: len as u64,
+            limit: MAX_NAME_BYTES as u64,
+        });
+    }
+    let Some(topic) = h
         .topic
         .clone()
-        .or_else(|| inner.as_ref().and_then(|i| i.topic.clone()))?;
+        .or_else(|| inner.as_ref().and_then(|i| i.topic.clone()))
+    else {
+        return Ok(None);
+    };
     let type_name = inner.and_then(|i| i.type_name).unwrap_or_default();
-    Some((
+    Ok(Some((
         id,
         Connection {
             topic,
             type_name,
             encoding: Some(Encoding::Ros1),
         },
-    ))
+    )))
 }
 
 /// The connections listed in the index section at `index_pos` (all of the bag's), restoring
@@ -585,8 +658,11 @@ pub fn read_index_connections<R: Read + Seek>(
             if reader.by_ref().take(dl as u64).read_to_end(&mut buf)? < dl {
                 break;
             }
-            if let Some(c) = connection(&h, &buf) {
-                out.push(c);
+            // The main pass refuses what is out of bounds, where it meets it in the data.
+            match connection(&h, &buf, 0) {
+                Ok(Some(c)) if out.len() < MAX_CONNECTIONS => out.push(c),
+                Ok(None) | Err(_) => {}
+                Ok(Some(_)) => break,
             }
         }
     }

@@ -31,7 +31,7 @@ use rusqlite::{Connection as Db, OpenFlags};
 use yaml_rust2::{Yaml, YamlLoader};
 
 use super::messages::Encoding;
-use super::{BagError, Connection, RawMessage, MAX_MESSAGE_BYTES};
+use super::{BagError, Connection, RawMessage, MAX_CONNECTIONS, MAX_MESSAGE_BYTES, MAX_NAME_BYTES};
 
 /// Rows fetched per query at most (their topics, times and rowids; the bytes are read one
 /// message at a time).
@@ -248,6 +248,17 @@ impl SqliteReader {
                 .map_err(|e| sql_err(path, e))?;
             for row in rows {
                 let (id, name, ty, fmt) = row.map_err(|e| sql_err(path, e))?;
+                let too_many = order.len() >= MAX_CONNECTIONS;
+                if too_many || name.len().max(ty.len()) > MAX_NAME_BYTES {
+                    return Err(BagError::Sqlite {
+                        path: path.to_path_buf(),
+                        reason: if too_many {
+                            format!("more than {MAX_CONNECTIONS} topics")
+                        } else {
+                            format!("topic {id}: name or type longer than {MAX_NAME_BYTES} bytes")
+                        },
+                    });
+                }
                 order.push(id);
                 topics.insert(
                     id,
@@ -299,9 +310,11 @@ impl SqliteReader {
         self.order.len()
     }
 
-    /// Every topic, in id order.
-    pub fn connections(&self) -> Vec<(u64, Connection)> {
+    /// The topics from the `first`-th on, in id order.
+    pub fn connections_from(&self, first: usize) -> Vec<(u64, Connection)> {
         self.order
+            .get(first..)
+            .unwrap_or_default()
             .iter()
             .filter_map(|id| Some((u64::try_from(*id).ok()?, self.topics.get(id)?.clone())))
             .collect()
