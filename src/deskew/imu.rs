@@ -86,19 +86,31 @@ impl ImuTrack {
     }
 
     /// Angular velocity in the sensor frame at `t_ns`, rad/s: linear between the samples
-    /// around it, held up to [`HOLD_NS`] beyond the first and last; `None` farther out.
+    /// around it, held up to [`HOLD_NS`] beyond the first and last; `None` farther out. Two
+    /// samples more than 2 × [`HOLD_NS`] apart are a gap (samples lost, the gyro stopped):
+    /// each is held up to [`HOLD_NS`] into it, and a line across the rest would be invented.
+    /// Times may lie anywhere in `i64` (a corrupt stamp): differences are unsigned.
     pub fn angular_velocity_at(&self, t_ns: i64) -> Option<Vector3<f64>> {
+        let hold = HOLD_NS.unsigned_abs();
         let (&(t0, w0), &(t1, w1)) = (self.samples.front()?, self.samples.back()?);
         if t_ns <= t0 {
-            return (t0 - t_ns <= HOLD_NS).then_some(w0);
+            return (t0.abs_diff(t_ns) <= hold).then_some(w0);
         }
         if t_ns >= t1 {
-            return (t_ns - t1 <= HOLD_NS).then_some(w1);
+            return (t_ns.abs_diff(t1) <= hold).then_some(w1);
         }
         let hi = self.samples.partition_point(|&(t, _)| t <= t_ns);
         let (ta, wa) = self.samples[hi - 1];
         let (tb, wb) = self.samples[hi];
-        let s = (t_ns - ta) as f64 / (tb - ta) as f64;
+        let (after_a, span) = (t_ns.abs_diff(ta), tb.abs_diff(ta));
+        if span > 2 * hold {
+            return match (after_a <= hold, tb.abs_diff(t_ns) <= hold) {
+                (true, _) => Some(wa),
+                (_, true) => Some(wb),
+                _ => None,
+            };
+        }
+        let s = after_a as f64 / span as f64;
         Some(wa + (wb - wa) * s)
     }
 }
@@ -106,6 +118,43 @@ impl ImuTrack {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Stamps at either end of `i64` (a corrupt column time: Ouster's u64 stamps beyond 2^63)
+    /// are far from every sample, not a panic (debug) or a wrapped difference that passed for
+    /// near (release).
+    #[test]
+    fn times_at_the_ends_of_i64_are_far_from_every_sample() {
+        let mut track = ImuTrack::new(UnitQuaternion::identity(), 10);
+        assert!(track.push(1_000_000_000, [0.0, 0.0, 1.0]));
+        assert_eq!(track.angular_velocity_at(i64::MIN), None);
+        assert_eq!(track.angular_velocity_at(i64::MAX), None);
+        let mut wide = ImuTrack::new(UnitQuaternion::identity(), 10);
+        assert!(wide.push(i64::MIN, [0.0, 0.0, 1.0]));
+        assert!(wide.push(i64::MAX, [0.0, 0.0, 2.0]));
+        assert_eq!(wide.angular_velocity_at(0), None);
+    }
+
+    /// A gap in the samples (more than twice the hold) is no reading: each side is held for
+    /// [`HOLD_NS`] into it, and between them there is none. Before, a 10 s gap gave a rate
+    /// interpolated across it, and the IMU rotation prior integrated it.
+    #[test]
+    fn a_gap_between_samples_is_not_bridged() {
+        let mut track = ImuTrack::new(UnitQuaternion::identity(), 10);
+        assert!(track.push(0, [0.0, 0.0, 0.0]));
+        assert!(track.push(10_000_000_000, [0.0, 0.0, 1.0]));
+        assert_eq!(track.angular_velocity_at(5_000_000_000), None);
+        assert_eq!(track.angular_velocity_at(HOLD_NS), Some(Vector3::zeros()));
+        assert_eq!(
+            track.angular_velocity_at(10_000_000_000 - HOLD_NS),
+            Some(Vector3::new(0.0, 0.0, 1.0))
+        );
+        // Samples 2 × the hold apart are still interpolated.
+        let mut close = ImuTrack::new(UnitQuaternion::identity(), 10);
+        assert!(close.push(0, [0.0, 0.0, 0.0]));
+        assert!(close.push(2 * HOLD_NS, [0.0, 0.0, 1.0]));
+        let w = close.angular_velocity_at(HOLD_NS / 2).unwrap();
+        assert!((w.z - 0.25).abs() < 1e-12, "{w}");
+    }
 
     #[test]
     fn readings_are_rotated_into_the_sensor_frame_and_interpolated() {

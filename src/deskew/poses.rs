@@ -237,7 +237,8 @@ impl PoseTable {
             .clamp(1, self.times_ns.len() - 1);
         let lo = hi - 1;
         let (ta, tb) = (self.times_ns[lo], self.times_ns[hi]);
-        let s = (t_ns - ta) as f64 / (tb - ta) as f64;
+        // Pose times span up to ±9.2e9 s: their differences do not fit an i64.
+        let s = t_ns.abs_diff(ta) as f64 / tb.abs_diff(ta) as f64;
         Ok(se3::interpolate(&self.poses[lo], &self.poses[hi], s))
     }
 }
@@ -262,6 +263,22 @@ mod tests {
         assert_eq!(parse_seconds_ns("x"), None);
         assert_eq!(parse_seconds_ns("."), None);
         assert_eq!(parse_seconds_ns("1.2.3"), None);
+    }
+
+    /// Poses at either end of the times TUM text gives (±9e9 s): the interpolation weight
+    /// between them is computed without an i64 difference, which overflowed (a panic in
+    /// debug, a weight of about −20 in release: a pose extrapolated far off).
+    #[test]
+    fn poses_far_apart_interpolate_without_overflow() {
+        let t =
+            PoseTable::from_tum("-9000000000 0 0 0 0 0 0 1\n9000000000 2 0 0 0 0 0 1\n").unwrap();
+        let p = t.world_from_sensor(0).unwrap();
+        assert!(
+            (p.translation.vector - Vector3::new(1.0, 0.0, 0.0)).norm() < 1e-9,
+            "{p}"
+        );
+        let q = t.world_from_sensor(4_500_000_000_000_000_000).unwrap();
+        assert!((q.translation.x - 1.5).abs() < 1e-9, "{q}");
     }
 
     #[test]

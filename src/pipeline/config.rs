@@ -412,6 +412,16 @@ impl PipelineConfig {
         if g.iterations == 0 || g.iterations > 1_000_000 {
             return Err(invalid("ground.iterations", g.iterations, "1 ..= 1000000"));
         }
+        // What only the segmenter can tell (its grid's rings × sectors), refused here too:
+        // before decoding starts, as a bad value, not at the first sensor.
+        if let Err(super::PipelineError::InvalidParameter {
+            name,
+            value,
+            expected,
+        }) = super::ground::GroundSegmenter::new(g.method())
+        {
+            return Err(invalid(&format!("ground.{name}"), value, expected));
+        }
         let c = &self.cluster;
         positive("cluster.tolerance_m", c.tolerance_m)?;
         if c.min_points == 0 {
@@ -826,6 +836,10 @@ max_points = 5000
             ("[ground]\nsectors = 1.5", "ground.sectors"),
             ("[ground]\nradial_bin_m = 0", "ground.radial_bin_m"),
             ("[ground]\nradial_bin_m = 0.00001", "ground.radial_bin_m"),
+            (
+                "[ground]\nsectors = 4096\nradial_bin_m = 0.001",
+                "ground.radial_bin_m",
+            ),
             ("[ground]\nmax_range_m = inf", "ground.max_range_m"),
             ("[ground]\nmax_slope_deg = 90", "ground.max_slope_deg"),
             ("[ground]\nmax_step_m = -0.1", "ground.max_step_m"),

@@ -178,6 +178,10 @@ pub struct GroundSegmenter {
     column_start: Vec<u32>,
 }
 
+/// Bins of the polar grid at most (rings × sectors): its per-bin state (about 50 bytes) is
+/// rewritten at every sweep. The default grid has a few thousand.
+pub const MAX_POLAR_BINS: usize = 1 << 20;
+
 impl GroundSegmenter {
     /// A segmenter with validated parameters (see each field's doc for its range).
     pub fn new(method: GroundMethod) -> Result<Self, PipelineError> {
@@ -251,6 +255,16 @@ impl GroundSegmenter {
         };
         if let GroundMethod::PolarGrid(p) = method {
             s.build_rings(&p);
+            // Each bounded alone, sectors and rings still multiply: 4096 sectors of 1 mm
+            // rings made 16 M bins, 0.8 GB of planes rewritten at every sweep.
+            let bins = (s.ring_edges.len() - 1) * p.sectors as usize;
+            if bins > MAX_POLAR_BINS {
+                return Err(PipelineError::InvalidParameter {
+                    name: "radial_bin_m",
+                    value: p.radial_bin_m,
+                    expected: "rings × sectors ≤ 2^20: a coarser radial_bin_m or fewer sectors",
+                });
+            }
         }
         Ok(s)
     }
@@ -943,6 +957,21 @@ mod tests {
         bad(
             GroundMethod::PolarGrid(PolarGridParams { sectors: 2, ..d }),
             "sectors",
+        );
+        // Within each bound alone, 16 M bins together (0.8 GB rewritten per sweep).
+        let fine = PolarGridParams {
+            sectors: 4096,
+            radial_bin_m: 0.001,
+            max_range_m: 100.0,
+            ..d
+        };
+        bad(GroundMethod::PolarGrid(fine), "radial_bin_m");
+        assert!(
+            GroundSegmenter::new(GroundMethod::PolarGrid(PolarGridParams {
+                radial_bin_m: 1.0,
+                ..fine
+            }))
+            .is_ok()
         );
         bad(
             GroundMethod::PolarGrid(PolarGridParams {
