@@ -23,7 +23,9 @@
 //!   apart, more than the tolerance (≈ √3·s) once an offset reaches 3: cells within ±2 can
 //!   be joined, 12 forward neighbour columns of the 5×5 block, a ±2 window in z. Every cell
 //!   is one component, so every join goes by roots as above, and pairs within a cell cost
-//!   nothing.
+//!   nothing. Two cells of many points first drop the points of one farther than the
+//!   tolerance from the other's bounding box, so dense cells that are not joined (two
+//!   surfaces a little farther apart than the tolerance) cost a test a point, not a pair.
 //!
 //! The coarse grid does the work of the pipeline's input (voxel centroids, a few per coarse
 //! cell) in about half the time of the fine grid, whose 5×5×5 neighbourhood holds many
@@ -804,10 +806,40 @@ fn find(parent: &mut [u32], mut x: u32) -> u32 {
     x
 }
 
+/// Point pairs of two cells above which [`any_within`] first drops the points of one cell
+/// too far from the other's bounding box (below, the box costs more than it saves).
+const BOX_FILTER_PAIRS: usize = 4096;
+
 /// True when some point of `a` is within `sqrt(tol2)` of some point of `b`.
 #[inline]
 fn any_within(a: &[[f32; 3]], b: &[[f32; 3]], tol2: f64) -> bool {
-    a.iter().any(|p| b.iter().any(|q| dist2(p, q) <= tol2))
+    if a.len().saturating_mul(b.len()) <= BOX_FILTER_PAIRS {
+        return a.iter().any(|p| b.iter().any(|q| dist2(p, q) <= tol2));
+    }
+    // Two dense fine cells that are not joined cost every pair: two surfaces a little farther
+    // apart than the tolerance, each cell of them thousands of points, made billions of tests
+    // a sweep. A point farther than the tolerance from `b`'s bounding box is farther from all
+    // of `b`, so such cells cost one test a point.
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for q in b {
+        for k in 0..3 {
+            lo[k] = lo[k].min(f64::from(q[k]));
+            hi[k] = hi[k].max(f64::from(q[k]));
+        }
+    }
+    let near_box = |p: &&[f32; 3]| {
+        let d2: f64 = (0..3)
+            .map(|k| {
+                let v = f64::from(p[k]);
+                let d = (lo[k] - v).max(v - hi[k]).max(0.0);
+                d * d
+            })
+            .sum();
+        d2 <= tol2
+    };
+    a.iter()
+        .filter(near_box)
+        .any(|p| b.iter().any(|q| dist2(p, q) <= tol2))
 }
 
 /// Squared distance, computed in `f64` from the `f32` coordinates.
@@ -1231,6 +1263,31 @@ mod tests {
         assert_eq!(partition(&out), expected);
         assert_eq!(expected.len(), 2);
         assert_eq!(expected[1], vec![1, 2]);
+    }
+
+    /// Two dense slabs (hundreds of points a fine cell) farther apart than the tolerance, and
+    /// nearer than it: the cell pairs between them go through the bounding-box filter of
+    /// `any_within` (every pair of points, before), with the reference's components.
+    #[test]
+    fn dense_slabs_apart_and_together_partition_as_the_reference() {
+        for gap in [0.7f32, 0.45] {
+            let mut points = Vec::new();
+            for z in [0.0, gap] {
+                for i in 0..50 {
+                    for j in 0..50 {
+                        points.push(pt(i as f32 * 0.02, j as f32 * 0.02, z));
+                    }
+                }
+            }
+            let mut c = Clusterer::new(ClusterParams::new(0.5, 1, usize::MAX)).unwrap();
+            let mut out = Clusters::new();
+            let stats = c.cluster(&points, &mut out);
+            assert!(stats.fine_grid);
+            let keep = vec![true; points.len()];
+            let expected = reference(&points, &keep, 0.5, 1, usize::MAX);
+            assert_eq!(expected.len(), if gap > 0.5 { 2 } else { 1 });
+            assert_eq!(partition(&out), expected, "gap {gap}");
+        }
     }
 
     #[test]
