@@ -348,6 +348,106 @@ fn simulated_drive_ends_within_one_percent_of_the_truth() {
     );
 }
 
+/// The simulated drive of `seconds` whose first turn (the first sweep: the sensor starts at
+/// azimuth 0) sees only a ball 5 m to the sensor's left, 1 m up, with nothing of the street
+/// within 2 m; without `ball`, that turn is left out.
+fn simulated_capture_after_a_ball(seconds: f64, ball: bool) -> Vec<u8> {
+    use ringscan::sim::scene::{Object, Prim, World};
+    let calib = builtin(VelodyneModel::Vlp16).unwrap();
+    let mut sim = VelodyneSim::new(VelodyneModel::Vlp16, ReturnMode::Strongest, calib, T0_NS);
+    sim.trajectory = drive();
+    let only_ball = World::new(
+        vec![Object::new(
+            1,
+            Prim::Sphere {
+                center: [40.0, 5.0, scenes::SENSOR_HEIGHT_M + 1.0],
+                radius: 0.3,
+            },
+        )],
+        100.0,
+    );
+    let street = scenes::urban();
+    let mut w = PcapWriter::new(Vec::new()).unwrap();
+    let src = SocketAddrV4::new(Ipv4Addr::new(192, 168, 1, 201), 2368);
+    let dst = SocketAddrV4::new(Ipv4Addr::new(192, 168, 1, 100), 2368);
+    let mut truth = Vec::new();
+    let first_turn = (1e8 / sim.period_ns()).ceil() as usize;
+    let packets = (seconds * 1e9 / sim.period_ns()).ceil() as usize;
+    for i in 0..packets {
+        truth.clear();
+        let scene: &World = if i < first_turn { &only_ball } else { &street };
+        let (t, p) = sim.next_packet(scene, &mut truth);
+        if ball || i >= first_turn {
+            w.write(t, &udp_frame(src, dst, i as u16, &p)).unwrap();
+        }
+    }
+    w.into_inner().unwrap()
+}
+
+/// A first sweep of a few points: the second sweep starts the map again, counted in
+/// `reinitialized`, and from there every pose is the one of a run that never saw the first
+/// sweep. A map of a few points used to leave every later sweep lost.
+#[test]
+fn a_sparse_first_sweep_restarts_the_map() {
+    let mut runs = Vec::new();
+    for ball in [true, false] {
+        let pcap = out_path(&format!("sparse-first-{ball}.pcap"));
+        std::fs::write(&pcap, simulated_capture_after_a_ball(1.5, ball)).unwrap();
+        let out = out_path(&format!("sparse-first-{ball}.mcap"));
+        let tum = out_path(&format!("sparse-first-{ball}.tum"));
+        let o = ringscan(&[
+            "decode",
+            pcap.to_str().unwrap(),
+            "--model",
+            "vlp16",
+            "--odometry",
+            "--trajectory",
+            tum.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--json",
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let diags: Vec<serde_json::Value> = read(&out)["/diagnostics"]
+            .iter()
+            .map(|b| serde_json::from_slice(b).unwrap())
+            .collect();
+        runs.push((summary["odometry"].clone(), diags, read_tum(&tum)));
+        for p in [&pcap, &out, &tum] {
+            let _ = std::fs::remove_file(p);
+        }
+    }
+    let (odo, diags, traj) = &runs[0];
+    let map_points = |i: usize| diags[i]["odometry"]["map_points"].as_u64().unwrap();
+    // The setup: a first map of fewer points than a registration's 10 correspondences.
+    assert!((1..10).contains(&map_points(0)), "{}", diags[0]);
+    assert_eq!(
+        diags[1]["odometry"]["status"], "initialized",
+        "{}",
+        diags[1]
+    );
+    assert!(map_points(1) > 1000, "{}", diags[1]);
+    let sweeps = odo["sweeps"].as_u64().unwrap();
+    assert!(sweeps >= 14, "{odo}");
+    assert_eq!(odo["reinitialized"], 1, "{odo}");
+    assert_eq!(odo["failed"], 0, "{odo}");
+    assert_eq!(odo["map_refused"], 0, "{odo}");
+    assert_eq!(traj.len() as u64, sweeps, "{odo}");
+    // Poses depend on the points alone (not the stamps): from the second sweep on, those of
+    // the run without the first.
+    let (plain, _, plain_traj) = &runs[1];
+    assert_eq!(plain["reinitialized"], 0, "{plain}");
+    assert_eq!(plain_traj.len() + 1, traj.len(), "{plain}");
+    for ((_, a), (_, b)) in traj[1..].iter().zip(plain_traj) {
+        let d = a.inverse() * b;
+        assert!(
+            d.translation.vector.norm() < 1e-6 && d.rotation.angle() < 1e-6,
+            "{a:?} vs {b:?}"
+        );
+    }
+}
+
 /// `--odometry-method continuous-time`: the raw sweeps with their point times, poses at each
 /// sweep's last point; the same drive, the same bound. With a pipeline deskew it is refused.
 #[test]

@@ -7,8 +7,9 @@
 //!   `t x y z qx qy qz qw`, `t` in seconds;
 //! - per sweep, an `odometry` object in the sensor's `/diagnostics` (status, degeneracy flag
 //!   and named directions);
-//! - in `--json`, an `odometry` object (sweeps registered, failed, degenerate, ms per sweep,
-//!   final pose).
+//! - in `--json`, an `odometry` object (sweeps registered, failed, degenerate, sweeps that
+//!   restarted a map too sparse to register against, points refused by a full map, ms per
+//!   sweep, final pose).
 //!
 //! With `--extrinsics` for the sensor, `/tf` and the trajectory are `base_link`'s instead
 //! (`odom` = `base_link` at the first sweep, `odom ← base_link` = B·T·B⁻¹ with B the
@@ -131,7 +132,9 @@ pub struct OdometryArgs {
     /// With --odometry: the ICP residual.
     #[arg(long, value_enum, default_value_t = MethodArg::PointToPlane)]
     pub odometry_method: MethodArg,
-    /// With --odometry: map voxel size, metres (default: max range / 100 = 1 m).
+    /// With --odometry: map voxel size, metres (default: max range / 100 = 1 m). The map
+    /// holds 256 MiB at most (about 220 k voxels): far smaller voxels fill it, and the points
+    /// it then refuses are counted (`map_refused` in --json).
     #[arg(long, value_name = "M")]
     pub odometry_voxel: Option<f64>,
     /// With --odometry: points farther than this are not registered, metres.
@@ -278,6 +281,8 @@ struct SensorOdometry {
     failed: u64,
     degenerate: u64,
     not_converged: u64,
+    /// Sweeps after the first that started the map again (the one before held too few points).
+    reinitialized: u64,
     /// Registration time per sweep, ns (the first `TIMES_KEPT`), and the largest of all.
     times: Vec<u64>,
     max_ns: u64,
@@ -467,6 +472,7 @@ impl OdometryRunner {
                 failed: 0,
                 degenerate: 0,
                 not_converged: 0,
+                reinitialized: 0,
                 times: Vec::new(),
                 max_ns: 0,
                 work: Vec::new(),
@@ -581,6 +587,9 @@ impl OdometryRunner {
         }
         if step.status == TrackStatus::NotConverged {
             so.not_converged += 1;
+        }
+        if step.status == TrackStatus::Initialized && step.index > 0 {
+            so.reinitialized += 1;
         }
         if step.degenerate {
             so.degenerate += 1;
@@ -749,6 +758,8 @@ impl OdometryRunner {
                     "registered": s.registered,
                     "failed": s.failed,
                     "not_converged": s.not_converged,
+                    "reinitialized": s.reinitialized,
+                    "map_refused": s.odometry.map().refused(),
                     "degenerate": s.degenerate,
                     "imu_priors": s.imu_priors,
                     "median_ms": median_ms(&s.times),
@@ -773,6 +784,8 @@ impl OdometryRunner {
             "registered": all.iter().map(|s| s.registered).sum::<u64>(),
             "failed": all.iter().map(|s| s.failed).sum::<u64>(),
             "not_converged": all.iter().map(|s| s.not_converged).sum::<u64>(),
+            "reinitialized": all.iter().map(|s| s.reinitialized).sum::<u64>(),
+            "map_refused": all.iter().map(|s| s.odometry.map().refused()).sum::<u64>(),
             "degenerate": all.iter().map(|s| s.degenerate).sum::<u64>(),
             "imu_priors": all.iter().map(|s| s.imu_priors).sum::<u64>(),
             "median_ms": median_ms(&times),

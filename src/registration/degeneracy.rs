@@ -7,11 +7,15 @@
 //! point-to-point information matrix would not do: every pair constrains all three
 //! translations, whatever the geometry.
 //!
-//! Translations (m) and rotations (rad) are put on one scale with a length `L` (the RMS
-//! range of the samples: a rotation δ moves a point at range L by about L·δ), and `H` is
-//! divided by the sample count: `Ĥ = S·H·S / N`, `S = diag(1, 1, 1, L⁻¹, L⁻¹, L⁻¹)`. With unit
-//! normals the translation block of `Ĥ` has trace 1: an eigenvalue is the share of the
-//! constraint the scene puts on that direction. Eigenvalues below
+//! Translations (m) and rotations (rad) are put on one scale with a length `L`
+//! ([`DegeneracyConfig::rotation_scale_m`], 1 m by default: a rotation δ is weighed as a
+//! translation of L·δ), and `H` is divided by the sample count: `Ĥ = S·H·S / N`,
+//! `S = diag(1, 1, 1, L⁻¹, L⁻¹, L⁻¹)`. With unit normals the translation block of `Ĥ` has
+//! trace 1: an eigenvalue is the share of the constraint the scene puts on that direction.
+//! A rotation's eigenvalue grows with the square of the ranges that constrain it, so with
+//! L = 1 m a rotation is named degenerate only when the scene holds it far less than it
+//! holds a translation (a few far points constrain a yaw); an L near the samples' RMS range
+//! weighs a rotation by the displacement it causes there. Eigenvalues below
 //! `min_eigenvalue` are **degenerate**; the degenerate subspace is then named along the
 //! sensor axes: axis k (x, y, z, roll, pitch, yaw) is degenerate when at least half of its
 //! unit twist lies in that subspace (‖P·e_k‖² ≥ ½, P the projector). A long corridor along x
@@ -231,6 +235,7 @@ mod tests {
             voxel_size_m: 1.0,
             max_points_per_voxel: 20,
             max_distance_m: 200.0,
+            ..VoxelMapConfig::default()
         })
         .unwrap();
         m.add_points(points.iter().copied());

@@ -12,6 +12,10 @@
 //!   lies closer than `voxel_size_m / √max_points_per_voxel`.
 //! - **Bound in space**: [`VoxelMap::remove_far`] drops every voxel whose first point is
 //!   `max_distance_m` or more from the sensor.
+//! - **Bound in memory**: at most `max_voxels` voxels; a point that would open another is
+//!   refused and counted ([`VoxelMap::refused`]). The bound in space alone does not hold
+//!   memory: voxels much smaller than the range noise open new voxels with every sweep of a
+//!   sensor standing still.
 //! - **Nearest neighbour**: the closest stored point among the 27 voxels around the query's
 //!   voxel (so a neighbour farther than one voxel size may be missed: correspondence gates
 //!   wider than `voxel_size_m` do not widen the search).
@@ -250,16 +254,46 @@ pub struct VoxelMapConfig {
     pub max_points_per_voxel: usize,
     /// Voxels whose first point is this far from the sensor or farther are dropped, m.
     pub max_distance_m: f64,
+    /// Voxels held at most (1..=2³²−1); see [`VoxelMapConfig::voxels_within`].
+    pub max_voxels: usize,
 }
 
 impl Default for VoxelMapConfig {
-    /// KISS-ICP's defaults: 1 m voxels, 20 points per voxel, 100 m.
+    /// KISS-ICP's defaults: 1 m voxels, 20 points per voxel, 100 m; as many voxels as
+    /// [`DEFAULT_MAP_BYTES`] holds.
     fn default() -> Self {
         Self {
             voxel_size_m: 1.0,
             max_points_per_voxel: 20,
             max_distance_m: 100.0,
+            max_voxels: Self::voxels_within(DEFAULT_MAP_BYTES, 20),
         }
+    }
+}
+
+/// The memory a map may take by default, bytes. At KISS-ICP's ratio of voxel to range (1/100)
+/// a map holds tens of thousands of points (22.8 k after the 7 sweeps of the HDL-32E drive
+/// `hdl32_example.pcap`; a flat ground alone fills π·100² voxels): 256 MiB keeps about 220 k
+/// voxels of 20 points, 4.4 M points, room for far denser scenes at that ratio.
+pub const DEFAULT_MAP_BYTES: usize = 256 << 20;
+
+impl VoxelMapConfig {
+    /// The most voxels of `max_points_per_voxel` points whose storage fits in `bytes`.
+    pub fn voxels_within(bytes: usize, max_points_per_voxel: usize) -> usize {
+        // A voxel's slot of points, moments, normal, length and dirty flag, hash entry with
+        // its control byte, and free-list and dirty-list entries; twice that, for vectors and
+        // the table grown by doubling.
+        let per_voxel = max_points_per_voxel
+            .saturating_mul(std::mem::size_of::<Vector3<f64>>())
+            .saturating_add(
+                std::mem::size_of::<Moments>()
+                    + std::mem::size_of::<Option<Vector3<f64>>>()
+                    + 2
+                    + std::mem::size_of::<(u64, u32)>()
+                    + 1
+                    + 2 * std::mem::size_of::<u32>(),
+            );
+        bytes / per_voxel.saturating_mul(2)
     }
 }
 
@@ -294,6 +328,7 @@ pub struct VoxelMap {
     moments: Vec<Moments>,
     free: Vec<u32>,
     live_points: usize,
+    refused: u64,
     /// Per slot: the unit normal of its plane when usable (see [`VoxelMap::refresh_normals`]).
     normals: Vec<Option<Vector3<f64>>>,
     /// Slots changed since the last [`VoxelMap::refresh_normals`], and a flag per slot.
@@ -302,8 +337,8 @@ pub struct VoxelMap {
 }
 
 impl VoxelMap {
-    /// A new empty map; rejects a voxel size or distance that is not finite and > 0, and a
-    /// point count outside 1..=255.
+    /// A new empty map; rejects a voxel size or distance that is not finite and > 0, a
+    /// point count outside 1..=255 and a voxel count outside 1..=2³²−1 (slots are `u32`).
     pub fn new(cfg: VoxelMapConfig) -> Result<Self, RegistrationConfigError> {
         RegistrationConfigError::positive("voxel_size_m", cfg.voxel_size_m)?;
         RegistrationConfigError::positive("max_distance_m", cfg.max_distance_m)?;
@@ -312,6 +347,13 @@ impl VoxelMap {
                 name: "max_points_per_voxel",
                 value: cfg.max_points_per_voxel as f64,
                 expected: "1..=255",
+            });
+        }
+        if cfg.max_voxels == 0 || u32::try_from(cfg.max_voxels).is_err() {
+            return Err(RegistrationConfigError::Invalid {
+                name: "max_voxels",
+                value: cfg.max_voxels as f64,
+                expected: "1..=4294967295",
             });
         }
         // As KISS-ICP computes it: sqrt(v² / n).
@@ -326,6 +368,7 @@ impl VoxelMap {
             moments: Vec::new(),
             free: Vec::new(),
             live_points: 0,
+            refused: 0,
             normals: Vec::new(),
             dirty: Vec::new(),
             is_dirty: Vec::new(),
@@ -365,6 +408,11 @@ impl VoxelMap {
         self.index.len()
     }
 
+    /// Points refused since the map was made because it held `max_voxels` voxels.
+    pub fn refused(&self) -> u64 {
+        self.refused
+    }
+
     /// Every point held, in no particular order.
     pub fn points(&self) -> impl Iterator<Item = &Vector3<f64>> + '_ {
         let m = self.cfg.max_points_per_voxel;
@@ -396,6 +444,10 @@ impl VoxelMap {
                         continue;
                     }
                     s
+                }
+                None if self.index.len() >= self.cfg.max_voxels => {
+                    self.refused += 1;
+                    continue;
                 }
                 None => {
                     let s = match self.free.pop() {
@@ -463,6 +515,12 @@ impl VoxelMap {
     pub fn update(&mut self, sensor_points: &[Vector3<f64>], world_from_sensor: &Isometry3<f64>) {
         let r = world_from_sensor.rotation.to_rotation_matrix();
         let t = world_from_sensor.translation.vector;
+        if self.index.len().saturating_add(sensor_points.len()) > self.cfg.max_voxels {
+            // The sweep may fill the map: the voxels left behind make room for it first. Below
+            // the bound, KISS-ICP's order (add, then drop), which ringscan's trajectories
+            // follow sweep by sweep, stands.
+            self.remove_far(&t);
+        }
         self.add_points(sensor_points.iter().map(|p| r * p + t));
         self.remove_far(&t);
     }
@@ -720,6 +778,7 @@ mod tests {
             voxel_size_m: 1.0,
             max_points_per_voxel: 4,
             max_distance_m: 10.0,
+            ..VoxelMapConfig::default()
         })
         .unwrap();
         // Spacing = 1 / √4 = 0.5 m: the second point (0.3 m away) is refused.
@@ -738,11 +797,37 @@ mod tests {
     }
 
     #[test]
+    fn the_map_holds_at_most_max_voxels() {
+        let mut map = VoxelMap::new(VoxelMapConfig {
+            voxel_size_m: 1.0,
+            max_points_per_voxel: 4,
+            max_distance_m: 10.0,
+            max_voxels: 10,
+        })
+        .unwrap();
+        // 1000 points, each in a voxel of its own: 10 kept, the rest refused and counted.
+        map.add_points((0..1000).map(|i| v(f64::from(i % 10) + 0.5, f64::from(i / 10), 0.5)));
+        assert_eq!((map.voxels(), map.len(), map.refused()), (10, 10, 990));
+        // Its memory: the slots of 10 voxels.
+        assert_eq!(map.lens.len(), 10);
+        assert!(map.points.len() <= 10 * 4);
+        // A full map still takes points into the voxels it holds.
+        map.add_points([v(0.9, 0.9, 0.9)]);
+        assert_eq!((map.voxels(), map.len(), map.refused()), (10, 11, 990));
+        // A sweep that would not fit: the voxels it left behind make room for it first.
+        let far = Isometry3::translation(100.0, 0.0, 0.0);
+        map.update(&[v(0.5, 0.5, 0.5), v(1.5, 0.5, 0.5)], &far);
+        assert_eq!((map.voxels(), map.len(), map.refused()), (2, 2, 990));
+        assert_eq!(map.lens.len(), 10);
+    }
+
+    #[test]
     fn nearest_matches_brute_force_within_one_voxel() {
         let mut map = VoxelMap::new(VoxelMapConfig {
             voxel_size_m: 0.5,
             max_points_per_voxel: 20,
             max_distance_m: 100.0,
+            ..VoxelMapConfig::default()
         })
         .unwrap();
         // A deterministic scatter.
@@ -778,6 +863,7 @@ mod tests {
             voxel_size_m: 10.0,
             max_points_per_voxel: 255,
             max_distance_m: 100.0,
+            ..VoxelMapConfig::default()
         })
         .unwrap();
         let n = v(1.0, 2.0, 3.0).normalize();
@@ -821,5 +907,8 @@ mod tests {
             max_distance_m: -1.0,
             ..d
         }));
+        for max_voxels in [0, usize::MAX] {
+            assert!(bad(VoxelMapConfig { max_voxels, ..d }));
+        }
     }
 }

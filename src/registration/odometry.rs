@@ -21,8 +21,9 @@
 //! 5. poses are composed `Tₜ = Tₜ₋₁ · ΔTₜ` (`world_from_sensor`; the world is the first
 //!    sweep's sensor frame);
 //! 6. **keyframes**: the sweep's map points are added to the [`VoxelMap`] (bounded: points per
-//!    voxel, and voxels dropped beyond `max_range_m` of the sensor) when the sensor has moved at
-//!    least `keyframe_translation_m` or turned `keyframe_rotation_rad` since the last keyframe
+//!    voxel, voxels dropped beyond `max_range_m` of the sensor, and voxels in all by
+//!    [`DEFAULT_MAP_BYTES`] of memory) when the sensor has moved at least
+//!    `keyframe_translation_m` or turned `keyframe_rotation_rad` since the last keyframe
 //!    (both 0: every sweep, as KISS-ICP);
 //! 7. optionally, the **degeneracy** of the registration ([`crate::registration::degeneracy`]), analysed at
 //!    the point-to-point pose; with [`OdometryMethod::PointToPlane`] a degenerate sweep is
@@ -30,7 +31,9 @@
 //!
 //! A registration that fails (too few correspondences, singular system) keeps the predicted
 //! pose, says so in [`OdometryStep::status`], and leaves the map and the threshold untouched:
-//! a pose is never silently wrong.
+//! a pose is never silently wrong. A map of fewer points than `min_correspondences` (a first
+//! sweep of a few points) is no map: the next sweep starts it again
+//! ([`TrackStatus::Initialized`]) at the predicted pose.
 //!
 //! **Time convention**: a sweep's pose is stamped with the sweep's timestamp (its first
 //! firing, [`crate::sweep::Sweep::timestamp_ns`]). [`Odometry::last_motion`] gives the motion
@@ -65,6 +68,7 @@ use crate::registration::icp::SweepPriors;
 use crate::registration::map::VoxelMap;
 use crate::registration::map::VoxelMapConfig;
 use crate::registration::map::VoxelSampler;
+use crate::registration::map::DEFAULT_MAP_BYTES;
 
 /// The arm at which a rotation weighs like a translation in the continuous-time priors, m.
 const CT_ROTATION_ARM_M: f64 = 10.0;
@@ -175,7 +179,9 @@ impl OdometryConfig {
 /// How a sweep's registration went.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum TrackStatus {
-    /// The first sweep (or the first after [`Odometry::reset`]): it starts the map.
+    /// The first sweep (or the first after [`Odometry::reset`]), or the first after a map of
+    /// fewer points than `min_correspondences`: it starts the map (again, at the predicted
+    /// pose, dropping the few points there were).
     Initialized,
     /// ICP converged.
     Converged,
@@ -376,6 +382,7 @@ impl Odometry {
             voxel_size_m: cfg.voxel_size_m,
             max_points_per_voxel: cfg.max_points_per_voxel,
             max_distance_m: cfg.max_range_m,
+            max_voxels: VoxelMapConfig::voxels_within(DEFAULT_MAP_BYTES, cfg.max_points_per_voxel),
         })?;
         let sigma = cfg.initial_threshold_m;
         let refine = Icp::new(IcpConfig {
@@ -662,7 +669,7 @@ impl Odometry {
     ) -> (Estimate, Vector6<f64>) {
         let prediction = *initial;
         let predicted_motion = se3_log(&(start.inverse() * prediction));
-        if self.map.is_empty() {
+        if !self.map_registrable() {
             return (
                 (prediction, TrackStatus::Initialized, None, None),
                 predicted_motion,
@@ -757,6 +764,13 @@ impl Odometry {
             .sample(&self.frame_ds, 1.5 * vs, &mut self.source);
     }
 
+    /// Whether the map is one to register against: at least `min_correspondences` points.
+    /// Below, a registration finds its pairs in a handful of points or none, and since a
+    /// lost sweep does not update the map, a sparse first sweep left every later one lost.
+    fn map_registrable(&self) -> bool {
+        self.map.len() >= self.cfg.min_correspondences
+    }
+
     /// The constant-velocity prediction and the IMU rotation prior.
     /// With `scaled`, the motion is constant in time, not per sweep: the last motion is
     /// scaled by the ratio of this sweep's stamp difference to the last one's (a first,
@@ -806,7 +820,7 @@ impl Odometry {
     ) -> Estimate {
         let prediction = *initial;
         let mut coarse_degeneracy: Option<(Option<Degeneracy>, bool)> = None;
-        let (pose, status, icp) = if self.map.is_empty() {
+        let (pose, status, icp) = if !self.map_registrable() {
             (prediction, TrackStatus::Initialized, None)
         } else {
             // σ ≥ initial·√(1/n) > 0, so the gate is valid; keep the old one otherwise.
@@ -874,15 +888,22 @@ impl Odometry {
             (Some(d), false) => d,
             _ => (None, false),
         };
-        let keyframe = !lost
-            && match &self.last_keyframe {
-                None => true,
-                Some(k) => {
-                    let d = k.inverse() * pose;
-                    d.translation.vector.norm() >= self.cfg.keyframe_translation_m
-                        || d.rotation.angle() >= self.cfg.keyframe_rotation_rad
-                }
-            };
+        let initialized = status == TrackStatus::Initialized;
+        if initialized {
+            // A sweep registered against nothing: the few points before it were placed by no
+            // registration either.
+            self.map.clear();
+        }
+        let keyframe = initialized
+            || (!lost
+                && match &self.last_keyframe {
+                    None => true,
+                    Some(k) => {
+                        let d = k.inverse() * pose;
+                        d.translation.vector.norm() >= self.cfg.keyframe_translation_m
+                            || d.rotation.angle() >= self.cfg.keyframe_rotation_rad
+                    }
+                });
         if keyframe {
             self.map.update(&self.frame_ds, &pose);
             if self.cfg.method == OdometryMethod::PointToPlane {
@@ -1226,6 +1247,63 @@ mod tests {
         ));
         assert!(!step.keyframe);
         assert_eq!(step.world_from_sensor, Isometry3::identity()); // the prediction
+    }
+
+    #[test]
+    fn a_sparse_first_sweep_is_no_map_to_be_lost_against() {
+        let world = street();
+        let at = Isometry3::from_parts(
+            Translation3::new(-45.0, 0.0, 1.8),
+            UnitQuaternion::identity(),
+        );
+        let timed = |pts: Vec<Vector3<f64>>| -> Vec<Point> {
+            pts.iter()
+                .map(|p| Point {
+                    x: p.x as f32,
+                    y: p.y as f32,
+                    z: p.z as f32,
+                    ..Point::default()
+                })
+                .collect()
+        };
+        for (way, continuous_time) in [(0, false), (1, false), (1, true)] {
+            let mut odo = Odometry::new(OdometryConfig {
+                continuous_time,
+                // At rest: the sweep that restarts the map must fill it, keyframe or not.
+                keyframe_translation_m: 1.0,
+                ..OdometryConfig::for_max_range(100.0)
+            })
+            .unwrap();
+            let mut register = |pts: Vec<Vector3<f64>>, i: i64| {
+                if way == 0 {
+                    odo.register(pts, i * 100_000_000, None)
+                } else {
+                    odo.register_timed(&timed(pts), i * 100_000_000, None)
+                }
+            };
+            // One point, far from everything the next sweeps see.
+            let first = register(vec![Vector3::new(50.0, 50.0, 50.0)], 0);
+            assert_eq!(
+                (first.status, first.map_points),
+                (TrackStatus::Initialized, 1)
+            );
+            let again = register(observe(&world, &at, 1), 1);
+            assert_eq!(
+                again.status,
+                TrackStatus::Initialized,
+                "{way} {continuous_time}"
+            );
+            assert!(again.keyframe && again.map_points > 1000, "{again:?}");
+            for i in 2..5 {
+                let step = register(observe(&world, &at, i as u64), i);
+                assert_eq!(step.status, TrackStatus::Converged, "sweep {i}: {step:?}");
+                // Point-to-point on these resampled surfaces: a few cm (see above).
+                let off = step.world_from_sensor.translation.vector.norm();
+                assert!(off < 0.1, "{way} {continuous_time} sweep {i}: {off} m");
+            }
+            // The lone point went with the map it made.
+            assert!(odo.map().points().all(|p| p.norm() < 40.0));
+        }
     }
 
     #[test]
