@@ -111,7 +111,7 @@ impl<R: Read> McapReader<R> {
         u16::try_from(id).ok().and_then(|i| self.channels.get(&i))
     }
 
-    /// How many channels [`Self::connections`] lists (it only grows).
+    /// How many channels [`Self::connections_from`] lists from 0 (it only grows).
     pub fn connection_count(&self) -> usize {
         self.order.len()
     }

@@ -274,7 +274,7 @@ impl<R: Read> Ros1Reader<R> {
             .and_then(|i| self.connections.get(&i))
     }
 
-    /// How many connections [`Self::connections`] lists (it only grows).
+    /// How many connections [`Self::connections_from`] lists from 0 (it only grows).
     pub fn connection_count(&self) -> usize {
         self.order.len()
     }

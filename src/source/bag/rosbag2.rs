@@ -305,7 +305,7 @@ impl SqliteReader {
         i64::try_from(id).ok().and_then(|i| self.topics.get(&i))
     }
 
-    /// How many topics [`Self::connections`] lists.
+    /// How many topics [`Self::connections_from`] lists (from 0).
     pub fn connection_count(&self) -> usize {
         self.order.len()
     }
