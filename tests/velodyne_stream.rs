@@ -402,4 +402,23 @@ fn reordered_packets_join_their_sweep_or_are_counted_late() {
             "sweep {i}: points or packets differ"
         );
     }
+
+    // A packet behind the latest that fills no gap counted missing is no late one: after a
+    // silence of 1.5 s (a discontinuity, which counts no loss) the first two packets swapped.
+    // Read as late, it un-counted the loss counted before the silence (missing 0). It is a
+    // discontinuity, as before late packets were read: the real loss stays counted, and the
+    // packet after it counts the one it stepped back over (missing 2).
+    let mut after: Vec<(i64, Vec<u8>)> = packets[..200].to_vec();
+    for _ in 0..1_130 {
+        sim.next_packet(&scene, &mut Vec::new());
+    }
+    after.extend((0..50).map(|_| {
+        let (host, bytes) = sim.next_packet(&scene, &mut Vec::new());
+        (host, bytes.to_vec())
+    }));
+    let mut order: Vec<usize> = (0..after.len()).collect();
+    order.remove(150); // one loss before the silence, counted
+    order.swap(199, 200); // the first two after it (positions moved by the removal)
+    let (_, st) = sweep_sets(&after, &order);
+    assert_eq!((st.missing, st.discontinuities, st.late_dropped), (2, 2, 0));
 }

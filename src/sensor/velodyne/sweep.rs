@@ -79,6 +79,10 @@ impl Default for StreamConfig {
     }
 }
 
+/// Gaps counted missing that a late packet may still fill: a packet at most
+/// [`REORDER_PACKETS`] late falls in one of the last few.
+const GAPS_KEPT: usize = 4;
+
 /// Counters of one stream.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct StreamStats {
@@ -177,6 +181,9 @@ pub struct VelodyneStream {
     /// later packets of the sweep are timed from it by their stamp difference, so a clock that
     /// changes source mid-sweep (the first GPS fix) cannot shift the points' `t`.
     anchor: (u32, i64),
+    /// The last gaps counted missing: (stamp before, stamp after, packets not yet come late),
+    /// newest first. A late packet must fall in one.
+    gaps: [Option<(u32, u32, u64)>; GAPS_KEPT],
     /// Rotation rate of one-column packets (VLS-128 dual), from the packets before.
     column_rate: ColumnRate,
     /// The rate [`Self::column_rate`] gave the packet being decoded.
@@ -201,6 +208,7 @@ impl VelodyneStream {
             next_index: 0,
             sweep_open: false,
             anchor: (0, 0),
+            gaps: [None; GAPS_KEPT],
             column_rate: ColumnRate::default(),
             packet_rate: None,
             uncalibrated: false,
@@ -508,8 +516,12 @@ impl VelodyneStream {
         if let Some(prev) = self.prev {
             let d_us = toh_delta_us(prev.toh_us, toh);
             let d_ns = d_us * 1_000;
-            if d_ns < 0 && period_ns > 0.0 && d_ns as f64 >= -f64::from(REORDER_PACKETS) * period_ns
-            {
+            // Late: a little behind the latest, and inside a gap counted missing (a clock
+            // that stepped back fills none, and stays a discontinuity).
+            let within = d_ns < 0
+                && period_ns > 0.0
+                && d_ns as f64 >= -f64::from(REORDER_PACKETS) * period_ns;
+            if within && self.fill_gap(toh) {
                 self.push_late(toh, host_ns, p, clock);
                 return;
             }
@@ -519,6 +531,7 @@ impl VelodyneStream {
                 self.prev = None;
                 // A clock that restarted (or a capture replayed again) may repeat times.
                 self.recent.clear();
+                self.gaps = [None; GAPS_KEPT];
                 self.column_rate.reset();
             } else if period_ns > 0.0 {
                 let missing = ((d_ns as f64 / period_ns).round() as i64 - 1).max(0) as u64;
@@ -527,6 +540,8 @@ impl VelodyneStream {
                     if self.sweep_open {
                         self.cur.missing_packets += missing;
                     }
+                    self.gaps.rotate_right(1);
+                    self.gaps[0] = Some((prev.toh_us, toh, missing));
                 }
             }
         }
@@ -583,8 +598,8 @@ impl VelodyneStream {
         });
     }
 
-    /// A packet a little behind the latest was reordered on the way: it fills a gap already
-    /// counted as missing, and the stream goes on from the latest packet. Its firings timed
+    /// A packet a little behind the latest, inside a gap counted missing, was reordered on the
+    /// way: it fills that gap, and the stream goes on from the latest packet. Its firings timed
     /// inside the open sweep join it, after the points that came before it (a sweep keeps
     /// the order of arrival, as the ROS driver's does; with columns kept, its columns follow
     /// the sweep's last). Firings of a sweep already emitted are lost: a packet with none in
@@ -613,6 +628,25 @@ impl VelodyneStream {
         self.cur.missing_packets = self.cur.missing_packets.saturating_sub(1);
         self.add_segment(host_ns, p, first..used, first_firing_ns, clock);
         self.stats.data_packets += 1;
+    }
+
+    /// Whether a packet stamped `toh` falls inside one of the last gaps counted missing,
+    /// which then counts one packet fewer.
+    fn fill_gap(&mut self, toh: u32) -> bool {
+        let inside = self
+            .gaps
+            .iter_mut()
+            .flatten()
+            .find(|(before, after, left)| {
+                *left > 0 && toh_delta_us(*before, toh) > 0 && toh_delta_us(toh, *after) > 0
+            });
+        match inside {
+            Some((_, _, left)) => {
+                *left -= 1;
+                true
+            }
+            None => false,
+        }
     }
 
     /// [`Self::add_segment`], remembering the packet that opens a sweep as its time anchor.
