@@ -452,7 +452,7 @@ fn connection(id: u32, topic: &[u8], type_name: &[u8]) -> Vec<u8> {
 /// number — a bag of such chunks grew without end). Beyond the bounds: a clear error.
 #[test]
 fn ros1_connections_beyond_the_bounds_are_errors() {
-    use ringscan::source::bag::{MAX_CONNECTIONS, MAX_NAME_BYTES};
+    use ringscan::source::bag::{MAX_CONNECTION_NAME_BYTES, MAX_FILE_CONNECTIONS, MAX_NAME_BYTES};
     let long = vec![b'a'; 512 << 10];
     for (what, records) in [
         ("topic", connection(0, &long, b"std_msgs/String")),
@@ -466,16 +466,26 @@ fn ros1_connections_beyond_the_bounds_are_errors() {
             "{what}: {e}"
         );
     }
-    let many: Vec<u8> = (0..=MAX_CONNECTIONS as u32)
-        .flat_map(|id| connection(id, format!("/t{id}").as_bytes(), b"std_msgs/String"))
-        .collect();
+    // A long log whose nodes come and go has a connection per node on one topic: thousands
+    // of ids are read; more than MAX_FILE_CONNECTIONS, or names past their byte bound, not.
+    let ids = |n: u32, topic: &[u8]| -> Vec<u8> {
+        (0..n)
+            .flat_map(|id| connection(id, topic, b"rosgraph_msgs/Log"))
+            .collect()
+    };
+    assert!(read_all(&tmp("rosout.bag", &bz2_bag(&[ids(5_000, b"/rosout")]))).is_ok());
+    let bound = format!("more than {MAX_FILE_CONNECTIONS} connections, or {MAX_CONNECTION_NAME_BYTES} bytes of their names");
+    let many = ids(MAX_FILE_CONNECTIONS as u32 + 1, b"/rosout");
     let e = read_all(&tmp("many-connections.bag", &bz2_bag(&[many])))
         .unwrap_err()
         .to_string();
-    assert!(
-        e.contains(&format!("more than {MAX_CONNECTIONS} connections")),
-        "{e}"
-    );
+    assert!(e.contains(&bound), "{e}");
+    let long_topic = vec![b'c'; 3_000];
+    let heavy = ids((MAX_CONNECTION_NAME_BYTES / 3_000) as u32 + 1, &long_topic);
+    let e = read_all(&tmp("heavy-connections.bag", &bz2_bag(&[heavy])))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains(&bound), "{e}");
     // A record header inside a chunk is held to the bound of one outside: the chunk is
     // counted and skipped.
     let mut records = record(&[field("op", &[2]), field("x", &vec![0; 2 << 20])], &[]);

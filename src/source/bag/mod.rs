@@ -79,8 +79,9 @@
 //! message at a time; a record or chunk larger than
 //! [`MAX_CHUNK_BYTES`], a message larger than [`MAX_MESSAGE_BYTES`], is refused before it is
 //! allocated (an error for ROS 1 / MCAP records, whose framing is then lost; a counted skip for
-//! sqlite3 rows). What is kept to the end is bounded: [`MAX_CONNECTIONS`] connections and topics
-//! with names of at most [`MAX_NAME_BYTES`] (beyond them the bag is refused), and
+//! sqlite3 rows). What is kept to the end is bounded: [`MAX_CONNECTIONS`] topics, MCAP channels
+//! and schemas, [`MAX_FILE_CONNECTIONS`] ROS 1 connections with [`MAX_CONNECTION_NAME_BYTES`] of
+//! names, names of at most [`MAX_NAME_BYTES`] (beyond them the bag is refused), and
 //! [`MAX_METADATA_BYTES`] of Ouster metadata (beyond it counted in `metadata_dropped`); a message
 //! without a connection record is of one placeholder topic, whatever its id. A message that
 //! does not parse as its type is counted in
@@ -122,12 +123,20 @@ pub const MAX_ZSTD_DB3_RATIO: u64 = 64;
 pub const ZSTD_DB3_SLACK_BYTES: u64 = 64 << 20;
 /// Sensors (synthetic addresses 127.0.0.1 … 127.0.0.254) at most.
 pub const MAX_SENSORS: usize = 254;
-/// Connections (ROS 1), channels and schemas (MCAP), topics (sqlite3) of one storage file, and
-/// topics (by name and type) of a whole bag, at most; beyond it the bag is refused. They are
-/// kept to the end of the bag, and a compressed chunk of a kB holds thousands of them: without
-/// a bound a hostile bag fills memory. Real bags have tens to a few hundred (ROS 1: one per
-/// topic and publishing node).
+/// Channels and schemas (MCAP) and topics (sqlite3) of one storage file, and topics (by name
+/// and type) of a whole bag, at most; beyond it the bag is refused. They are kept to the end
+/// of the bag, and a compressed chunk of a kB holds thousands of them: without a bound a
+/// hostile bag fills memory. Real bags have tens to a few hundred (ROS 1 connections, one per
+/// topic and publishing node, have [`MAX_FILE_CONNECTIONS`]).
 pub const MAX_CONNECTIONS: usize = 4096;
+/// Connection ids of one ROS 1 file at most: one per topic and publishing node, so a long log
+/// whose anonymous nodes come and go (each with its own `/rosout` connection) holds thousands
+/// on a few hundred topics. Their names are bounded together by
+/// [`MAX_CONNECTION_NAME_BYTES`].
+pub const MAX_FILE_CONNECTIONS: usize = 1 << 16;
+/// Bytes of topic and type names over one ROS 1 file's connections at most (real ones have
+/// tens of bytes each): with [`MAX_FILE_CONNECTIONS`], what a file's connections hold.
+pub const MAX_CONNECTION_NAME_BYTES: usize = 16 << 20;
 /// Ouster metadata texts kept at most, all namespaces together (past it, one is counted in
 /// [`BagStats::metadata_dropped`]): a sensor's is tens of kB, and a bag may have a metadata
 /// topic of up to [`MAX_MESSAGE_BYTES`] for each of its namespaces.

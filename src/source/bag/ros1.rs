@@ -20,8 +20,9 @@
 //! uncompressed sizes at most [`MAX_CHUNK_BYTES`]; any other record at most
 //! [`MAX_MESSAGE_BYTES`]. A length beyond them is
 //! [`BagError::RecordTooLarge`] before anything is allocated, and buffers grow only as bytes
-//! actually arrive. Connections are kept to the end: at most [`MAX_CONNECTIONS`], their topic
-//! and type at most [`MAX_NAME_BYTES`] each, else an error. One chunk is held at a time (compressed and uncompressed), the buffers are
+//! actually arrive. Connections are kept to the end: at most [`MAX_FILE_CONNECTIONS`], their
+//! topic and type at most [`MAX_NAME_BYTES`] each and [`MAX_CONNECTION_NAME_BYTES`] over all,
+//! else an error. One chunk is held at a time (compressed and uncompressed), the buffers are
 //! reused. A chunk that does not decompress to its announced size, or whose records contradict
 //! their lengths, is counted in `bad_chunks` and skipped: its length is known, the next record
 //! is not lost. A record cut short by the end of the file ends the stream (`truncated_at`), as
@@ -33,8 +34,8 @@ use std::io::{self, Read, Seek, SeekFrom};
 
 use super::messages::Encoding;
 use super::{
-    inflate_exact, read_up_to, BagError, Connection, RawMessage, MAX_CHUNK_BYTES, MAX_CONNECTIONS,
-    MAX_MESSAGE_BYTES, MAX_NAME_BYTES,
+    inflate_exact, read_up_to, BagError, Connection, RawMessage, MAX_CHUNK_BYTES,
+    MAX_CONNECTION_NAME_BYTES, MAX_FILE_CONNECTIONS, MAX_MESSAGE_BYTES, MAX_NAME_BYTES,
 };
 
 /// The first bytes of every ROS 1 bag of format 2.0.
@@ -148,6 +149,8 @@ pub struct Ros1Reader<R: Read> {
     connections: HashMap<u32, Connection>,
     /// Connection ids in order of first appearance.
     order: Vec<u32>,
+    /// Bytes of the names of `connections`.
+    name_bytes: usize,
     /// Chunks skipped because they did not decompress or their records were inconsistent.
     pub(crate) bad_chunks: u64,
     /// Offset of the first skipped chunk.
@@ -183,6 +186,7 @@ impl<R: Read> Ros1Reader<R> {
             chunk_offset: 0,
             connections: HashMap::new(),
             order: Vec::new(),
+            name_bytes: 0,
             bad_chunks: 0,
             first_bad_chunk: None,
             truncated_at: None,
@@ -228,7 +232,8 @@ impl<R: Read> Ros1Reader<R> {
         self.offset
     }
 
-    /// Registers connections known beforehand (from the index), up to [`MAX_CONNECTIONS`].
+    /// Registers connections known beforehand (from the index), up to
+    /// [`MAX_FILE_CONNECTIONS`] with [`MAX_CONNECTION_NAME_BYTES`] of names.
     pub fn add_connections(&mut self, list: Vec<(u32, Connection)>) {
         for (id, c) in list {
             if !self.add_connection(id, c) {
@@ -237,14 +242,23 @@ impl<R: Read> Ros1Reader<R> {
         }
     }
 
-    /// False when `id` would be one connection more than [`MAX_CONNECTIONS`].
+    /// False when `id` would be one connection more than [`MAX_FILE_CONNECTIONS`], or its
+    /// names would pass [`MAX_CONNECTION_NAME_BYTES`] over all. A connection record repeats
+    /// in every chunk that uses it: a repeat replaces the one kept.
     fn add_connection(&mut self, id: u32, c: Connection) -> bool {
-        if !self.connections.contains_key(&id) {
-            if self.order.len() >= MAX_CONNECTIONS {
-                return false;
-            }
+        let size = |c: &Connection| c.topic.len() + c.type_name.len();
+        let old = self.connections.get(&id).map(size);
+        if old.is_none() && self.order.len() >= MAX_FILE_CONNECTIONS {
+            return false;
+        }
+        let bytes = self.name_bytes - old.unwrap_or(0) + size(&c);
+        if bytes > MAX_CONNECTION_NAME_BYTES {
+            return false;
+        }
+        if old.is_none() {
             self.order.push(id);
         }
+        self.name_bytes = bytes;
         self.connections.insert(id, c);
         true
     }
@@ -263,7 +277,9 @@ impl<R: Read> Ros1Reader<R> {
         }
         Err(BagError::Corrupt {
             offset,
-            reason: format!("more than {MAX_CONNECTIONS} connections"),
+            reason: format!(
+                "more than {MAX_FILE_CONNECTIONS} connections, or {MAX_CONNECTION_NAME_BYTES} bytes of their names"
+            ),
         })
     }
 
@@ -627,6 +643,7 @@ pub fn read_index_connections<R: Read + Seek>(
 ) -> io::Result<Vec<(u32, Connection)>> {
     let here = reader.stream_position()?;
     let mut out = Vec::new();
+    let mut bytes = 0usize;
     if index_pos > 0 && reader.seek(SeekFrom::Start(index_pos)).is_ok() {
         let mut buf = Vec::new();
         loop {
@@ -659,10 +676,12 @@ pub fn read_index_connections<R: Read + Seek>(
                 break;
             }
             // The main pass refuses what is out of bounds, where it meets it in the data.
-            match connection(&h, &buf, 0) {
-                Ok(Some(c)) if out.len() < MAX_CONNECTIONS => out.push(c),
-                Ok(None) | Err(_) => {}
-                Ok(Some(_)) => break,
+            if let Ok(Some(c)) = connection(&h, &buf, 0) {
+                bytes += c.1.topic.len() + c.1.type_name.len();
+                if out.len() >= MAX_FILE_CONNECTIONS || bytes > MAX_CONNECTION_NAME_BYTES {
+                    break;
+                }
+                out.push(c);
             }
         }
     }
