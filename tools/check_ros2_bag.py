@@ -18,7 +18,10 @@ message whole. Checks:
 - `sensor_msgs/msg/PointCloud2`: point_step × width = row_step = len(data), height 1; with
   --points (the Foxglove output of the same run, dumped by --dump-foxglove), for every points
   topic the same number of messages, the same field names / offsets / types and the same data
-  bytes (SHA-256 of each message's data, in order): bit for bit;
+  bytes (SHA-256 of each message's data, in order): bit for bit (a Foxglove topic's sensor
+  name compared as ROS 2 takes it: `/vlp16-201/points` is the bag's `/vlp16_201/points`);
+- every topic of the bag is a name ROS 2 accepts (rmw's rules: tokens of letters, digits
+  and `_`, none starting with a digit);
 - `--require`: at least one message on a topic ending in each suffix (e.g. `/imu`, `/clusters`).
 
 Prints one JSON object ({"bag", "topics": {topic: {"type", "messages"}}, "ok", "errors"}) and
@@ -42,6 +45,27 @@ CHECK_VENV = os.path.join(TOOLS, ".venv")
 # sensor_msgs/msg/PointField datatype <- foxglove.PackedElementField.NumericType
 FOXGLOVE_TO_ROS = {1: 2, 2: 1, 3: 4, 4: 3, 5: 6, 6: 5, 7: 7, 8: 8}
 
+
+
+def ros2_accepts(name):
+    """rmw's full topic name rules: '/'-separated tokens of ASCII letters, digits and '_',
+    none empty or starting with a digit."""
+    tokens = name.split("/")
+    return (
+        name.startswith("/")
+        and all(tokens[1:])
+        and all(t[0] not in "0123456789" and all(c.isascii() and (c.isalnum() or c == "_") for c in t) for t in tokens[1:])
+    )
+
+
+def as_ros2(topic):
+    """A Foxglove topic of ringscan's as the ROS 2 bag names it: a sensor's name with every
+    character but letters, digits and '_' as '_', and 'sensor_' before a leading digit."""
+    out = []
+    for t in topic.split("/"):
+        t = "".join(c if c.isascii() and (c.isalnum() or c == "_") else "_" for c in t)
+        out.append("sensor_" + t if t[:1].isdigit() else t)
+    return "/".join(out)
 
 def ensure_venv(venv_dir, maker):
     if sys.prefix == venv_dir or os.environ.get("RINGSCAN_BAGS_NO_VENV") == "1":
@@ -128,8 +152,12 @@ def check(args):
         for topic in topics:
             if topic not in want:
                 errors.append(f"{topic}: in the bag but not in ringscan's report")
+    for topic in topics:
+        if not ros2_accepts(topic):
+            errors.append(f"{topic}: not a topic name ROS 2 accepts")
     if args.points:
-        fox = json.load(open(args.points))
+        # The Foxglove output names topics by the sensor's name; the bag, as ROS 2 takes it.
+        fox = {as_ros2(t): f for t, f in json.load(open(args.points)).items()}
         for topic, f in fox.items():
             r = points.get(topic)
             if r is None:
