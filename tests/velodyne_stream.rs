@@ -286,16 +286,21 @@ fn a_gps_fix_arriving_mid_sweep_does_not_shift_point_times() {
 /// are dropped and counted, and the sweeps are those of the run without them. (Before, each
 /// copy stepped the time back: a discontinuity that cut the sweep mid-turn, and its points
 /// twice.)
+/// The next `n` packets of `sim` as (host time, payload).
+fn sim_packets(sim: &mut VelodyneSim, scene: &Shapes, n: usize) -> Vec<(i64, Vec<u8>)> {
+    (0..n)
+        .map(|_| {
+            let (host, bytes) = sim.next_packet(scene, &mut Vec::new());
+            (host, bytes.to_vec())
+        })
+        .collect()
+}
+
 #[test]
 fn copies_are_dropped_and_counted() {
     let mut sim = vlp16_sim();
     let scene = Shapes::room(15.0, 10.0, 1.7, 5.0);
-    let packets: Vec<(i64, Vec<u8>)> = (0..400)
-        .map(|_| {
-            let (host, bytes) = sim.next_packet(&scene, &mut Vec::new());
-            (host, bytes.to_vec())
-        })
-        .collect();
+    let packets = sim_packets(&mut sim, &scene, 400);
     let run = |order: &[usize]| {
         common::run_stream(
             &mut VelodyneStream::new(StreamConfig::default()),
@@ -350,12 +355,7 @@ fn sweep_sets(
 fn reordered_packets_join_their_sweep_or_are_counted_late() {
     let mut sim = vlp16_sim();
     let scene = Shapes::room(15.0, 10.0, 1.7, 5.0);
-    let packets: Vec<(i64, Vec<u8>)> = (0..400)
-        .map(|_| {
-            let (host, bytes) = sim.next_packet(&scene, &mut Vec::new());
-            (host, bytes.to_vec())
-        })
-        .collect();
+    let packets = sim_packets(&mut sim, &scene, 400);
     let all: Vec<usize> = (0..packets.len()).collect();
     let (in_order, st) = sweep_sets(&packets, &all);
     assert_eq!((st.missing, st.discontinuities), (0, 0));
@@ -412,10 +412,7 @@ fn reordered_packets_join_their_sweep_or_are_counted_late() {
     for _ in 0..1_130 {
         sim.next_packet(&scene, &mut Vec::new());
     }
-    after.extend((0..50).map(|_| {
-        let (host, bytes) = sim.next_packet(&scene, &mut Vec::new());
-        (host, bytes.to_vec())
-    }));
+    after.extend(sim_packets(&mut sim, &scene, 50));
     let mut order: Vec<usize> = (0..after.len()).collect();
     order.remove(150); // one loss before the silence, counted
     order.swap(199, 200); // the first two after it (positions moved by the removal)

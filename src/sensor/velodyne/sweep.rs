@@ -550,12 +550,8 @@ impl VelodyneStream {
             Some(d) => self.column_rate.next(d, p),
             None => None,
         };
-        let continued = |this: &Self| {
-            let (toh0, ff0) = this.anchor;
-            ff0.saturating_add(toh_delta_us(toh0, toh).saturating_mul(1_000))
-        };
         let mut first_firing_ns = if self.sweep_open {
-            continued(self)
+            self.anchored_first_firing(toh)
         } else {
             fresh_first_firing_ns
         };
@@ -615,8 +611,7 @@ impl VelodyneStream {
             dec.blocks_per_firing().max(1),
             dec.blocks_used().clamp(1, BLOCKS),
         );
-        let (toh0, ff0) = self.anchor;
-        let first_firing_ns = ff0.saturating_add(toh_delta_us(toh0, toh).saturating_mul(1_000));
+        let first_firing_ns = self.anchored_first_firing(toh);
         let first = (0..used).step_by(bpf).find(|&g| {
             first_firing_ns.saturating_add(i64::from(dec.block_time_ns(g)))
                 >= self.cur.device_time_ns
@@ -628,6 +623,13 @@ impl VelodyneStream {
         self.cur.missing_packets = self.cur.missing_packets.saturating_sub(1);
         self.add_segment(host_ns, p, first..used, first_firing_ns, clock);
         self.stats.data_packets += 1;
+    }
+
+    /// The first firing of a packet stamped `toh` in the open sweep, timed from the packet
+    /// that opened it (`anchor`).
+    fn anchored_first_firing(&self, toh: u32) -> i64 {
+        let (toh0, ff0) = self.anchor;
+        ff0.saturating_add(toh_delta_us(toh0, toh).saturating_mul(1_000))
     }
 
     /// Whether a packet stamped `toh` falls inside one of the last gaps counted missing,

@@ -1820,24 +1820,7 @@ mod tests {
         assert_eq!(ouster_ports("not json"), (None, None));
     }
 
-    fn field(name: &str, value: &[u8]) -> Vec<u8> {
-        let mut f = ((name.len() + 1 + value.len()) as u32)
-            .to_le_bytes()
-            .to_vec();
-        f.extend_from_slice(name.as_bytes());
-        f.push(b'=');
-        f.extend_from_slice(value);
-        f
-    }
-
-    fn record(header: &[Vec<u8>], data: &[u8]) -> Vec<u8> {
-        let h: Vec<u8> = header.concat();
-        let mut r = (h.len() as u32).to_le_bytes().to_vec();
-        r.extend_from_slice(&h);
-        r.extend_from_slice(&(data.len() as u32).to_le_bytes());
-        r.extend_from_slice(data);
-        r
-    }
+    use super::ros1::tests::{field, record};
 
     fn connection(id: u32, topic: &str, type_name: &str) -> Vec<u8> {
         record(

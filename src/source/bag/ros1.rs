@@ -690,10 +690,11 @@ pub fn read_index_connections<R: Read + Seek>(
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
 
-    fn field(name: &str, value: &[u8]) -> Vec<u8> {
+    /// A `name=value` header field.
+    pub(in crate::source::bag) fn field(name: &str, value: &[u8]) -> Vec<u8> {
         let mut f = ((name.len() + 1 + value.len()) as u32)
             .to_le_bytes()
             .to_vec();
@@ -703,7 +704,8 @@ mod tests {
         f
     }
 
-    fn record(header: &[Vec<u8>], data: &[u8]) -> Vec<u8> {
+    /// A record of `header` fields and `data`.
+    pub(in crate::source::bag) fn record(header: &[Vec<u8>], data: &[u8]) -> Vec<u8> {
         let h: Vec<u8> = header.concat();
         let mut r = (h.len() as u32).to_le_bytes().to_vec();
         r.extend_from_slice(&h);
