@@ -32,8 +32,9 @@
 //! A registration that fails (too few correspondences, singular system) keeps the predicted
 //! pose, says so in [`OdometryStep::status`], and leaves the map and the threshold untouched:
 //! a pose is never silently wrong. A map of fewer points than `min_correspondences` (a first
-//! sweep of a few points) is no map: the next sweep starts it again
-//! ([`TrackStatus::Initialized`]) at the predicted pose.
+//! sweep of a few points), or one against which `max_lost_sweeps` sweeps in a row were lost,
+//! is no map: the next sweep starts it again ([`TrackStatus::Initialized`]) at the predicted
+//! pose.
 //!
 //! **Time convention**: a sweep's pose is stamped with the sweep's timestamp (its first
 //! firing, [`crate::sweep::Sweep::timestamp_ns`]). [`Odometry::last_motion`] gives the motion
@@ -141,6 +142,10 @@ pub struct OdometryConfig {
     /// a motion was seen. Default 0.003. Both defaults were chosen on the simulated urban
     /// drives (BENCHMARKS.md "Odometry" has the grid); 0 leaves that part free.
     pub continuous_motion_weight: f64,
+    /// After this many sweeps lost in a row the map is stale (a gap in the data while moving,
+    /// a first sweep no later one sees): the next sweep starts it again at the predicted pose
+    /// ([`TrackStatus::Initialized`]). 0: never, every later sweep stays lost. Default 10.
+    pub max_lost_sweeps: usize,
 }
 
 impl Default for OdometryConfig {
@@ -172,6 +177,7 @@ impl OdometryConfig {
             continuous_time: false,
             continuous_start_weight: 0.3,
             continuous_motion_weight: 0.003,
+            max_lost_sweeps: 10,
         }
     }
 }
@@ -180,8 +186,8 @@ impl OdometryConfig {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum TrackStatus {
     /// The first sweep (or the first after [`Odometry::reset`]), or the first after a map of
-    /// fewer points than `min_correspondences`: it starts the map (again, at the predicted
-    /// pose, dropping the few points there were).
+    /// fewer points than `min_correspondences` or after `max_lost_sweeps` lost in a row: it
+    /// starts the map (again, at the predicted pose, dropping the points there were).
     Initialized,
     /// ICP converged.
     Converged,
@@ -339,6 +345,8 @@ pub struct Odometry {
     last_stamp_ns: Option<i64>,
     last_motion: Option<SweepMotion>,
     count: u64,
+    /// Sweeps lost since the last one registered or initialised.
+    lost_in_a_row: usize,
 }
 
 impl Odometry {
@@ -427,6 +435,7 @@ impl Odometry {
             last_stamp_ns: None,
             last_motion: None,
             count: 0,
+            lost_in_a_row: 0,
         })
     }
 
@@ -449,6 +458,7 @@ impl Odometry {
         self.last_stamp_ns = None;
         self.last_motion = None;
         self.count = 0;
+        self.lost_in_a_row = 0;
     }
 
     /// The pose of the last sweep registered (`world_from_sensor`).
@@ -764,11 +774,13 @@ impl Odometry {
             .sample(&self.frame_ds, 1.5 * vs, &mut self.source);
     }
 
-    /// Whether the map is one to register against: at least `min_correspondences` points.
-    /// Below, a registration finds its pairs in a handful of points or none, and since a
-    /// lost sweep does not update the map, a sparse first sweep left every later one lost.
+    /// Whether the map is one to register against: at least `min_correspondences` points, and
+    /// fewer than `max_lost_sweeps` sweeps lost against it in a row. Since a lost sweep does
+    /// not update the map, a map of a handful of points, or one the sensor has left, would
+    /// keep every later sweep lost.
     fn map_registrable(&self) -> bool {
-        self.map.len() >= self.cfg.min_correspondences
+        let stale = self.cfg.max_lost_sweeps > 0 && self.lost_in_a_row >= self.cfg.max_lost_sweeps;
+        self.map.len() >= self.cfg.min_correspondences && !stale
     }
 
     /// The constant-velocity prediction and the IMU rotation prior.
@@ -881,6 +893,7 @@ impl Odometry {
         // prediction (Tₜ₋₁·ΔT): renormalise every stored rotation.
         pose.rotation.renormalize();
         let lost = matches!(status, TrackStatus::Lost(_));
+        self.lost_in_a_row = if lost { self.lost_in_a_row + 1 } else { 0 };
         if !lost && status != TrackStatus::Initialized {
             self.threshold.update(&(prediction.inverse() * pose));
         }
@@ -1247,6 +1260,42 @@ mod tests {
         ));
         assert!(!step.keyframe);
         assert_eq!(step.world_from_sensor, Isometry3::identity()); // the prediction
+    }
+
+    #[test]
+    fn a_map_lost_against_max_lost_sweeps_times_in_a_row_is_started_again() {
+        let world = street();
+        let p0 =
+            Isometry3::from_parts(Translation3::new(0.0, 0.0, 1.8), UnitQuaternion::identity());
+        // A wall no sweep of the street sees, dense enough to register against itself.
+        let far: Vec<_> = (0..400)
+            .map(|i| {
+                let (u, v) = (f64::from(i % 20), f64::from(i / 20));
+                Vector3::new(30.0 + 0.05 * u * v.sin(), u * 0.5 - 5.0, 15.0 + v * 0.5)
+            })
+            .collect();
+        for max_lost_sweeps in [0, 3] {
+            let mut odo = Odometry::new(OdometryConfig {
+                max_lost_sweeps,
+                ..OdometryConfig::for_max_range(100.0)
+            })
+            .unwrap();
+            odo.register(observe(&world, &p0, 1), 0, None);
+            let statuses: Vec<_> = (1..8)
+                .map(|i| odo.register(far.clone(), i * 100_000_000, None).status)
+                .collect();
+            let lost = |s: &TrackStatus| matches!(s, TrackStatus::Lost(_));
+            if max_lost_sweeps == 0 {
+                assert!(statuses.iter().all(lost), "{statuses:?}");
+            } else {
+                assert!(statuses[..3].iter().all(lost), "{statuses:?}");
+                assert_eq!(statuses[3], TrackStatus::Initialized, "{statuses:?}");
+                assert!(
+                    statuses[4..].iter().all(|s| *s == TrackStatus::Converged),
+                    "{statuses:?}"
+                );
+            }
+        }
     }
 
     #[test]
