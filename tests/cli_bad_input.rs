@@ -634,9 +634,24 @@ fn values_that_would_be_ignored_are_refused() {
             "--size-px",
             "8192",
         ],
+        // Seconds past what a clock deadline holds panicked (`Duration::from_secs_f64`,
+        // `Instant + Duration`) instead of being refused.
+        &["replay", p, "--to", "127.0.0.1", "--duration", "1e20"][..],
+        &["listen", "--sensor", "127.0.0.1:1", "--duration", "1e20"][..],
+        &["listen", "--sensor", "127.0.0.1:1", "--duration", "1.5e19"][..],
+        &[
+            "hesai-calib",
+            "--sensor",
+            "127.0.0.1:1",
+            "--out",
+            "x.csv",
+            "--timeout",
+            "1e20",
+        ][..],
     ] {
         let (c, err) = code(args);
         assert_eq!(c, Some(2), "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
     }
 }
 

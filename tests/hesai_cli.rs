@@ -565,9 +565,21 @@ fn listen_with_ptc_serving(
     ]);
     server.join().unwrap();
     // The fetched file is held in a folder of the run while it listens, and removed after.
-    let fetched = std::env::temp_dir()
-        .join(format!("ringscan-hesai-ptc-{}", l.child.id()))
-        .join(file);
+    // The folder is private and its name not predictable from the process id alone.
+    let prefix = format!("ringscan-hesai-ptc-{}-", l.child.id());
+    let folders: Vec<_> = std::fs::read_dir(std::env::temp_dir())
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().starts_with(&prefix))
+        .map(|e| e.path())
+        .collect();
+    assert_eq!(folders.len(), 1, "{folders:?}");
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = std::fs::metadata(&folders[0]).unwrap().permissions().mode();
+        assert_eq!(mode & 0o777, 0o700, "{}", folders[0].display());
+    }
+    let fetched = folders[0].join(file);
     assert!(fetched.is_file(), "{} while listening", fetched.display());
     replay(pcap, offset, "1", &["--per-source-loopback"]);
     std::thread::sleep(std::time::Duration::from_millis(500));

@@ -1,4 +1,4 @@
-//! Faults of the live path: SIGINT / SIGTERM mid-run, a full disk, a sensor that stops and
+//! Faults of the live path: SIGINT / SIGTERM / SIGHUP mid-run, a full disk, a sensor that stops and
 //! starts again (Velodyne gap, Ouster re-initialised with a new init_id), `--split-every`.
 
 mod common;
@@ -73,11 +73,12 @@ fn sensor_args(offset: i32, out: Option<&Path>) -> Vec<String> {
 }
 
 #[test]
-fn sigint_and_sigterm_mid_run_leave_a_finalised_mcap() {
+fn sigint_sigterm_and_sighup_mid_run_leave_a_finalised_mcap() {
     let (pcap, n, secs) = velodyne_capture();
     let _g = serial();
     let dir = tmpdir("signals");
-    for sig in ["INT", "TERM"] {
+    // SIGHUP: a closed SSH session; by default it killed the run with the file unfinished.
+    for sig in ["INT", "TERM", "HUP"] {
         let offset = free_offset(&[2368, 8308]);
         let out = dir.join(format!("{sig}.mcap"));
         let l = start_listen(&sensor_args(offset, Some(&out)));
@@ -687,4 +688,41 @@ fn datagrams_from_other_addresses_only_are_explained() {
         )),
         "{why}"
     );
+}
+
+/// `replay --duration` ends on time across a gap in the capture: it slept the whole gap (here
+/// 30 s) before looking at the clock.
+#[test]
+fn replay_ends_at_its_duration_inside_a_gap() {
+    let (pcap, _, _) = velodyne_capture();
+    let d = common::datagrams(&pcap);
+    let dir = tmpdir("replay-gap");
+    let gapped = dir.join("gap.pcap");
+    let mut w = ringscan::sim::net::PcapWriter::new(Vec::new()).unwrap();
+    let src = SocketAddrV4::new(Ipv4Addr::new(192, 168, 1, 201), 2368);
+    let dst = SocketAddrV4::new(Ipv4Addr::new(192, 168, 1, 100), 2368);
+    for (i, t) in [0i64, 30_000_000_000].into_iter().enumerate() {
+        let frame = ringscan::sim::net::udp_frame(src, dst, i as u16, &d[i].2);
+        w.write(1_700_000_000_000_000_000 + t, &frame).unwrap();
+    }
+    std::fs::write(&gapped, w.into_inner().unwrap()).unwrap();
+    let receiver = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let offset = i32::from(receiver.local_addr().unwrap().port()) - 2368;
+    let started = std::time::Instant::now();
+    let o = std::process::Command::new(BIN)
+        .arg("replay")
+        .arg(&gapped)
+        .args(["--to", "127.0.0.1", "--port-offset", &offset.to_string()])
+        .args(["--rate", "1", "--duration", "1", "--json"])
+        .output()
+        .unwrap();
+    let took = started.elapsed();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["sent"], 1, "{j}");
+    assert!(
+        took < Duration::from_secs(10),
+        "{took:?}: slept through the gap"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -125,7 +125,7 @@ pub type TappedSweep = (ReadSweep, Option<SensorDesc>);
 /// drops datagrams, so a slow consumer never holds up the sockets.
 #[derive(Debug, Clone, Default)]
 pub struct ListenHooks {
-    /// Set it to stop listening (checked every 100 ms); SIGINT and SIGTERM are then left to
+    /// Set it to stop listening (checked every 100 ms); SIGINT, SIGTERM and SIGHUP are then left to
     /// the caller.
     pub stop: Option<Arc<AtomicBool>>,
     /// Where decoded sweeps go.
@@ -443,13 +443,48 @@ fn listen_sink_options(args: &ListenArgs) -> SinkOptions {
 
 /// The folder of the angle corrections fetched over PTC, removed with its files when the run
 /// ends (they are copies of what the sensor holds; the output attaches them).
-struct FetchedCorrections(PathBuf);
+struct FetchedCorrections(Option<PathBuf>);
+
+impl FetchedCorrections {
+    /// The run's folder, made on first use. Made new, private (0700) and under a name no one
+    /// can claim first: a folder of a predictable name that another user had made, holding a
+    /// symbolic link where a file is written, would have had the run write through the link,
+    /// and the guard would have removed that user's folder.
+    fn dir(&mut self) -> std::io::Result<PathBuf> {
+        use std::os::unix::fs::DirBuilderExt;
+        if let Some(d) = &self.0 {
+            return Ok(d.clone());
+        }
+        let nanos = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.subsec_nanos());
+        let mut last = None;
+        for attempt in 0u32..16 {
+            let d = std::env::temp_dir().join(format!(
+                "ringscan-hesai-ptc-{}-{:08x}",
+                std::process::id(),
+                nanos.wrapping_add(attempt.wrapping_mul(0x9e37_79b9))
+            ));
+            match std::fs::DirBuilder::new().mode(0o700).create(&d) {
+                Ok(()) => {
+                    self.0 = Some(d.clone());
+                    return Ok(d);
+                }
+                Err(e) => last = Some(e),
+            }
+        }
+        Err(last.unwrap_or_else(|| std::io::Error::other("no folder name left")))
+    }
+}
 
 impl Drop for FetchedCorrections {
     fn drop(&mut self) {
-        if let Err(e) = std::fs::remove_dir_all(&self.0) {
+        let Some(d) = &self.0 else {
+            return;
+        };
+        if let Err(e) = std::fs::remove_dir_all(d) {
             if e.kind() != std::io::ErrorKind::NotFound {
-                tracing::warn!("{}: {e}", self.0.display());
+                tracing::warn!("{}: {e}", d.display());
             }
         }
     }
@@ -462,8 +497,7 @@ impl Drop for FetchedCorrections {
 /// left as it was (it may not be a Hesai).
 fn with_hesai_corrections(args: &ListenArgs, port: u16) -> (ListenArgs, FetchedCorrections) {
     let mut out = args.clone();
-    let dir = std::env::temp_dir().join(format!("ringscan-hesai-ptc-{}", std::process::id()));
-    let guard = FetchedCorrections(dir.clone());
+    let mut guard = FetchedCorrections(None);
     let mut seen = BTreeSet::new();
     for (ip, _) in &args.sensors {
         let bound = args
@@ -482,10 +516,15 @@ fn with_hesai_corrections(args: &ListenArgs, port: u16) -> (ListenArgs, FetchedC
                 } else {
                     "csv"
                 };
+                let dir = match guard.dir() {
+                    Ok(d) => d,
+                    Err(e) => {
+                        tracing::warn!("--hesai-ptc: a private temporary folder: {e}");
+                        continue;
+                    }
+                };
                 let path = dir.join(format!("hesai-ptc-{ip}.{ext}"));
-                let written =
-                    std::fs::create_dir_all(&dir).and_then(|()| std::fs::write(&path, &bytes));
-                match written {
+                match std::fs::write(&path, &bytes) {
                     Ok(()) => {
                         tracing::info!(
                             "{ip}: angle correction fetched over PTC ({} bytes)",
@@ -1025,6 +1064,39 @@ fn ports_for(args: &ListenArgs, calibs: &[Calibration]) -> BTreeSet<u16> {
     ports
 }
 
+/// A thread that writes the status lines it is given to stderr; `None` if it cannot start
+/// (the run goes on without a status line). Write errors are ignored: a terminal that went
+/// away (SIGHUP) fails with EIO, and `eprint!` would panic on it.
+fn status_writer() -> Option<SyncSender<String>> {
+    let (tx, rx) = std::sync::mpsc::sync_channel::<String>(1);
+    std::thread::Builder::new()
+        .name("ringscan-status".into())
+        .spawn(move || {
+            for line in rx {
+                let mut err = std::io::stderr().lock();
+                let _ = err.write_all(line.as_bytes());
+                let _ = err.flush();
+            }
+        })
+        .ok()?;
+    Some(tx)
+}
+
+/// After SIGHUP the terminal is gone and every write to it fails (EIO), so the standard
+/// output and error that were the terminal are pointed at /dev/null: the run finishes its
+/// file and its summary goes nowhere, instead of a print panicking half-way.
+fn detach_from_terminal() {
+    let Ok(null) = std::fs::OpenOptions::new().write(true).open("/dev/null") else {
+        return;
+    };
+    if std::io::stdout().is_terminal() {
+        let _ = nix::unistd::dup2_stdout(&null);
+    }
+    if std::io::stderr().is_terminal() {
+        let _ = nix::unistd::dup2_stderr(&null);
+    }
+}
+
 fn status_line(
     live: &Live,
     stats: &ReceiveStats,
@@ -1433,6 +1505,11 @@ pub fn listen_run_with(
         .map_err(|e| RunError::Live(format!("starting the runtime: {e}")))?;
     let sources = Arc::new(addrs.clone());
     let terminal = std::io::stderr().is_terminal();
+    // The status line is written by a thread of its own: the runtime's one thread also reads
+    // every socket, and a terminal that stops taking output (Ctrl-S, a slow SSH link) would
+    // stop it in the write while the kernel drops datagrams. A line the writer has not taken
+    // by the next second is skipped.
+    let status = terminal.then(status_writer).flatten();
     let reason = rt.block_on(async {
         let mut tasks = Vec::new();
         for s in &sockets {
@@ -1457,6 +1534,15 @@ pub fn listen_run_with(
                 Err(e) => return Err(RunError::Live(format!("installing the SIGTERM handler: {e}"))),
             },
         };
+        // A closed SSH session ends a recording like SIGTERM: by default it killed the process
+        // with the MCAP unfinished.
+        let mut sighup = match &stop {
+            Some(_) => None,
+            None => match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup()) {
+                Ok(s) => Some(s),
+                Err(e) => return Err(RunError::Live(format!("installing the SIGHUP handler: {e}"))),
+            },
+        };
         let mut stop_tick = tokio::time::interval(Duration::from_millis(100));
         let deadline = args.duration.map(|d| tokio::time::Instant::now() + d);
         let mut tick = tokio::time::interval(Duration::from_secs(1));
@@ -1466,6 +1552,10 @@ pub fn listen_run_with(
             tokio::select! {
                 _ = tokio::signal::ctrl_c(), if stop.is_none() => break "SIGINT",
                 _ = async { match sigterm.as_mut() { Some(s) => { s.recv().await; } None => std::future::pending().await } } => break "SIGTERM",
+                _ = async { match sighup.as_mut() { Some(s) => { s.recv().await; } None => std::future::pending().await } } => {
+                    detach_from_terminal();
+                    break "SIGHUP";
+                }
                 _ = stop_tick.tick(), if stop.is_some() => {
                     if stop.as_ref().is_some_and(|s| s.load(Ordering::Relaxed)) {
                         break "stopped by the caller";
@@ -1488,10 +1578,10 @@ pub fn listen_run_with(
                     Some(Event::Failed) | None => break "decode thread stopped",
                 },
                 _ = tick.tick() => {
-                    if terminal {
+                    if let Some(status) = &status {
                         let serve = live_stats.as_deref().map(super::serve::status).unwrap_or_default();
-                        eprint!("{}{serve}", status_line(&live, &stats, kernel_drops(&sockets), &mut prev));
-                        let _ = std::io::stderr().flush();
+                        let line = format!("{}{serve}", status_line(&live, &stats, kernel_drops(&sockets), &mut prev));
+                        let _ = status.try_send(line);
                     }
                 }
             }
@@ -1505,9 +1595,10 @@ pub fn listen_run_with(
         Ok(reason)
     });
     drop(rt);
-    if terminal {
-        eprintln!();
+    if status.is_some() && std::io::stderr().is_terminal() {
+        let _ = writeln!(std::io::stderr());
     }
+    drop(status);
     let control = configured.map(super::livox_ctl::Configured::finish);
     // With the runtime gone, no sender of datagrams is left: the decode thread finishes its
     // file and ends. Wait for it even when the loop failed, so the process never exits with

@@ -49,7 +49,7 @@ enum Command {
     Info(InfoCmd),
     /// Decode the built-in example capture (a simulated VLP-16) and write demo.mcap.
     Demo(DemoCmd),
-    /// Receive sensors' UDP packets live, decode them and write MCAP until SIGINT / SIGTERM.
+    /// Receive sensors' UDP packets live, decode them and write MCAP until SIGINT / SIGTERM / SIGHUP.
     Listen(ListenCmd),
     /// Send a capture's UDP payloads again, paced by its timestamps.
     Replay(ReplayCmd),
@@ -90,14 +90,8 @@ fn hesai_calib_command(c: &HesaiCalibCmd) -> Result<ExitCode, RunError> {
             }
         },
     };
-    if !(c.timeout.is_finite() && c.timeout > 0.0) {
-        return Err(RunError::Usage(format!(
-            "--timeout {}: expected a positive number of seconds",
-            c.timeout
-        )));
-    }
-    let bytes = ptc::fetch_angle_correction(addr, std::time::Duration::from_secs_f64(c.timeout))
-        .map_err(RunError::Live)?;
+    let timeout = seconds("--timeout", c.timeout).map_err(RunError::Usage)?;
+    let bytes = ptc::fetch_angle_correction(addr, timeout).map_err(RunError::Live)?;
     std::fs::write(&c.out, &bytes)
         .map_err(|e| RunError::Live(format!("{}: {e}", c.out.display())))?;
     outln!(
@@ -106,8 +100,7 @@ fn hesai_calib_command(c: &HesaiCalibCmd) -> Result<ExitCode, RunError> {
         bytes.len()
     );
     if let Some(path) = &c.firetimes {
-        let f = ptc::fetch_atx_firetimes(addr, std::time::Duration::from_secs_f64(c.timeout))
-            .map_err(RunError::Live)?;
+        let f = ptc::fetch_atx_firetimes(addr, timeout).map_err(RunError::Live)?;
         std::fs::write(path, f.to_csv())
             .map_err(|e| RunError::Live(format!("{}: {e}", path.display())))?;
         outln!(
@@ -322,7 +315,7 @@ struct ListenCmd {
     /// Datagrams from other addresses are counted and ignored.
     #[arg(long = "sensor", value_name = "IP[:PORT]", required = true, value_parser = listen::parse_sensor)]
     sensors: Vec<(std::net::Ipv4Addr, Option<u16>)>,
-    /// Output MCAP file, written continuously and finalised on SIGINT / SIGTERM (omit to
+    /// Output MCAP file, written continuously and finalised on SIGINT / SIGTERM / SIGHUP (omit to
     /// decode and count only).
     #[arg(long, short)]
     out: Option<PathBuf>,
@@ -444,6 +437,21 @@ fn parse_name(s: &str) -> Result<String, String> {
 }
 
 /// `--threads`: a positive number.
+/// The longest `--duration` or `--timeout` taken, s (about 31 years): a longer one would
+/// overflow the clock's deadline (`Instant + Duration` panics), and means "no limit" anyway.
+const MAX_SECONDS: f64 = 1e9;
+
+/// A positive number of seconds for `flag`, at most [`MAX_SECONDS`].
+fn seconds(flag: &str, s: f64) -> Result<std::time::Duration, String> {
+    if s > 0.0 && s <= MAX_SECONDS {
+        Ok(std::time::Duration::from_secs_f64(s))
+    } else {
+        Err(format!(
+            "{flag} {s}: expected a positive number of seconds, at most {MAX_SECONDS:e}"
+        ))
+    }
+}
+
 fn parse_threads(s: &str) -> Result<usize, String> {
     match s.parse::<usize>() {
         Ok(n) if (1..=1024).contains(&n) => Ok(n),
@@ -579,11 +587,13 @@ where
         Command::Demo(c) => run::demo_command(&c.out, c.json),
         Command::Listen(c) => {
             let duration = match c.duration {
-                Some(d) if d.is_finite() && d > 0.0 => Some(std::time::Duration::from_secs_f64(d)),
-                Some(d) => {
-                    eprintln!("error: --duration {d}: expected a positive number of seconds");
-                    return 2;
-                }
+                Some(d) => match seconds("--duration", d) {
+                    Ok(d) => Some(d),
+                    Err(e) => {
+                        eprintln!("error: {e}");
+                        return 2;
+                    }
+                },
                 None => None,
             };
             let fields_minimal = c.sweeps.fields == FieldsArg::Minimal;
@@ -614,11 +624,13 @@ where
         }
         Command::Replay(c) => replay::replay_command(&replay::ReplayArgs {
             duration: match c.duration {
-                Some(d) if d.is_finite() && d > 0.0 => Some(std::time::Duration::from_secs_f64(d)),
-                Some(d) => {
-                    eprintln!("error: --duration {d}: expected a positive number of seconds");
-                    return 2;
-                }
+                Some(d) => match seconds("--duration", d) {
+                    Ok(d) => Some(d),
+                    Err(e) => {
+                        eprintln!("error: {e}");
+                        return 2;
+                    }
+                },
                 None => None,
             },
             input: c.input,

@@ -121,8 +121,17 @@ pub fn replay_command(args: &ReplayArgs) -> Result<ExitCode, RunError> {
     let mut loop_base_ns: i64 = 0;
     let mut last_rel_ns: i64 = 0;
     let over = |started: &Instant| args.duration.is_some_and(|d| started.elapsed() >= d);
+    // The replay clock's zero: when the first datagram is due. Opening the input (a bag's
+    // index, a sqlite3 file) is not replay time; counted in, the first datagrams of each loop
+    // went out in a burst at full speed until the schedule caught up, and receivers dropped
+    // them.
+    let mut zero: Option<Instant> = None;
     'loops: for _ in 0..args.loops.max(1) {
+        let opening = Instant::now();
         let mut src = input::open(&args.input, &args.bag)?;
+        if let Some(z) = zero.as_mut() {
+            *z += opening.elapsed();
+        }
         senders.exact = matches!(src, Input::Bag(_) | Input::Lvx(_));
         let mut loop_first: Option<i64> = None;
         while let Some(d) = src.next_datagram().map_err(serr)? {
@@ -133,10 +142,16 @@ pub fn replay_command(args: &ReplayArgs) -> Result<ExitCode, RunError> {
             let rel = loop_base_ns + d.time_ns.saturating_sub(lf);
             last_rel_ns = last_rel_ns.max(rel);
             if let Some(due) = due_offset(rel, args.rate) {
-                let now = started.elapsed();
+                let now = zero.get_or_insert_with(Instant::now).elapsed();
                 // Sleep only when worth it; at high rates the small waits are made up in bursts.
                 if due > now + Duration::from_micros(200) {
-                    std::thread::sleep(due - now);
+                    // A gap in the capture longer than what is left of --duration ends the
+                    // run on time instead of sleeping past it.
+                    let left = args.duration.map(|d| d.saturating_sub(started.elapsed()));
+                    std::thread::sleep(left.map_or(due - now, |l| l.min(due - now)));
+                    if over(&started) {
+                        break 'loops;
+                    }
                 }
             }
             // Data a ROS driver decoded (a bag's points or IMU frames) was never on the wire.
