@@ -1029,6 +1029,50 @@ fn a_bag_that_could_not_be_written_leaves_no_metadata() {
     assert_not_corrupt(&bag.join("drive_0.mcap"));
 }
 
+/// A `--format ros2` bag whose MCAP was finished but whose `metadata.yaml` then cannot be
+/// written (the yaml's temporary file a link to /dev/full, made once the run has started)
+/// leaves nothing: the MCAP stayed, without the yaml that makes the directory a bag.
+#[test]
+fn a_bag_whose_metadata_cannot_be_written_at_the_end_leaves_nothing() {
+    let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo-vlp16.pcap");
+    if !Path::new("/dev/full").exists() {
+        eprintln!("SKIP: /dev/full is absent");
+        return;
+    }
+    let dir = Scratch::dir("bag-yaml-full");
+    let bag = dir.join("drive");
+    // Paced by the live view at the capture's own speed (1 s), so the link can be made after
+    // the yaml of the start and before the one of the end.
+    let child = Command::new(bin())
+        .arg("decode")
+        .arg(&demo)
+        .args(["--format", "ros2", "--serve", "127.0.0.1:0", "--out"])
+        .arg(&bag)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let started = std::time::Instant::now();
+    while !bag.join("metadata.yaml").exists() {
+        assert!(
+            started.elapsed().as_secs() < 20,
+            "no metadata.yaml at the start"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    std::os::unix::fs::symlink("/dev/full", bag.join("metadata.yaml.tmp-ringscan")).unwrap();
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        started.elapsed().as_millis() > 300,
+        "the run ended before the link was made: {err}"
+    );
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("metadata.yaml"), "{err}");
+    assert!(!bag.join("metadata.yaml").exists(), "{err}");
+    assert!(!bag.join("drive_0.mcap").exists(), "{err}");
+}
+
 /// A `--format ros2` run refused after its checks (a `--serve` that cannot start) leaves no
 /// bag behind: the empty `metadata.yaml` and the directory it made stayed, and made the next
 /// run into the same --out refuse ("already holds a rosbag2").

@@ -457,9 +457,17 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
         (None, None) => None,
     };
     session.set_sink(sink);
+    // The bag's MCAP is in place once the sink is closed: when its `metadata.yaml` cannot then
+    // be written, the file goes too (with the yaml of the start), not left without one.
     let commit_bag = |summary: &Option<SinkSummary>| -> Result<(), SinkError> {
         let (Some(dir), Some(s)) = (bag_dir, summary) else {
             return Ok(());
+        };
+        let discard_file = |e| {
+            if let Some(f) = bag_file.as_deref() {
+                let _ = std::fs::remove_file(f);
+            }
+            e
         };
         let file = crate::sink::rosbag2::BagFile {
             name: crate::sink::rosbag2::file_path(dir, 0)
@@ -468,10 +476,12 @@ pub fn decode_capture(args: &DecodeArgs) -> Result<Summary, RunError> {
                 .unwrap_or_default(),
             summary: s.clone(),
         };
-        crate::sink::rosbag2::write_metadata(dir, &[file]).map_err(|source| SinkError::Io {
-            context: format!("writing {}/metadata.yaml", dir.display()),
-            source,
-        })
+        crate::sink::rosbag2::write_metadata(dir, &[file])
+            .map_err(|source| SinkError::Io {
+                context: format!("writing {}/metadata.yaml", dir.display()),
+                source,
+            })
+            .map_err(discard_file)
     };
     let total = match args.input_bytes {
         Some(_) => None,
