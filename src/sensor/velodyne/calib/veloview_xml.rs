@@ -32,8 +32,11 @@
 //! `HDL-64.xml`) and must be whole numbers.
 //!
 //! Hostile input: the text is capped at [`MAX_CALIB_BYTES`](crate::sensor::calib::MAX_CALIB_BYTES) and
-//! [`MAX_NODES`] nodes; roxmltree resolves no external entities and stops entity-expansion
-//! loops; the tree is walked along fixed paths without recursion, so nesting depth is harmless.
+//! [`MAX_NODES`] nodes; an entity declaration is refused (real files carry only
+//! `<!DOCTYPE boost_serialization>`; roxmltree stops expansion loops but not a large entity
+//! referenced many times, and nodes_limit does not count merged text, so 4 MiB could ask for a
+//! terabyte); the tree is walked along fixed paths without recursion, so nesting depth is
+//! harmless.
 
 use std::collections::BTreeMap;
 
@@ -55,6 +58,15 @@ pub const MAX_NODES: u32 = 200_000;
 pub fn parse(text: &str, source_name: &str) -> Result<VelodyneCalibration, CalibError> {
     check_size(text.len())?;
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    if let Some(at) = text.find("<!ENTITY") {
+        let before = &text[..at];
+        return Err(CalibError::Syntax {
+            format: FORMAT,
+            line: before.matches('\n').count() + 1,
+            column: before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1,
+            message: "an entity declaration; a calibration file has none".into(),
+        });
+    }
     let options = ParsingOptions {
         allow_dtd: true,
         nodes_limit: MAX_NODES,
@@ -324,6 +336,23 @@ mod tests {
         }
         s.push_str("</points_>\n</DB>\n</boost_serialization>\n");
         s
+    }
+
+    #[test]
+    fn an_entity_declaration_is_refused_before_expansion() {
+        // 64 KiB of text referenced 60,000 times: 4 GB expanded, in a 400 kB file.
+        let big = "A".repeat(1 << 16);
+        let refs = "&a;".repeat(60_000);
+        let text = format!(
+            "<?xml version=\"1.0\"?>\n<!DOCTYPE boost_serialization [\n<!ENTITY a \"{big}\">]>\n\
+             <boost_serialization><DB><distLSB_>{refs}</distLSB_></DB></boost_serialization>\n"
+        );
+        match parse(&text, "hostile.xml") {
+            Err(CalibError::Syntax { line, column, .. }) => assert_eq!((line, column), (3, 1)),
+            other => panic!("{other:?}"),
+        }
+        // A plain DOCTYPE, as real files have, still parses.
+        assert!(parse(&db(16, 16, ""), "db.xml").is_ok());
     }
 
     #[test]
