@@ -419,3 +419,60 @@ fn reordered_packets_join_their_sweep_or_are_counted_late() {
     let (_, st) = sweep_sets(&after, &order);
     assert_eq!((st.missing, st.discontinuities, st.late_dropped), (2, 2, 0));
 }
+
+/// A motor that stalls (every block at one azimuth, the clock going on: 3 s of VLP-16
+/// packets) gives no azimuth cut: sweeps end after `max_sweep_ns` (1 s), each forced cut
+/// counted as a discontinuity as the stream's documentation says, and every point is handed
+/// over once.
+#[test]
+fn a_stalled_motor_still_cuts_its_sweeps() {
+    let mut sim = vlp16_sim();
+    let scene = Shapes::room(15.0, 10.0, 1.7, 5.0);
+    let mut packets = sim_packets(&mut sim, &scene, 2300); // 1.327 ms each: 3.05 s
+    for (_, bytes) in &mut packets {
+        // The 12 blocks' azimuths (bytes 2..4 of each 100-byte block) held at 90°.
+        for b in 0..12 {
+            bytes[b * 100 + 2..b * 100 + 4].copy_from_slice(&9000u16.to_le_bytes());
+        }
+    }
+    // The points of the packets, from a stream that never ends a sweep for its length.
+    let mut unbounded = VelodyneStream::new(StreamConfig {
+        max_sweep_ns: i64::MAX,
+        ..StreamConfig::default()
+    });
+    let mut expected = 0usize;
+    for (host, bytes) in &packets {
+        unbounded
+            .push(*host, bytes, &mut |s, _| expected += s.points.len())
+            .unwrap();
+    }
+    unbounded
+        .finish(&mut |s, _| expected += s.points.len())
+        .unwrap();
+    let mut stream = VelodyneStream::new(StreamConfig::default());
+    let mut sweeps: Vec<Sweep> = Vec::new();
+    let mut points = 0usize;
+    for (host, bytes) in packets {
+        stream
+            .push(host, &bytes, &mut |s, _| sweeps.push(s.clone()))
+            .unwrap();
+    }
+    stream.finish(&mut |s, _| sweeps.push(s.clone())).unwrap();
+    for s in &sweeps {
+        points += s.points.len();
+        let span = s.points.iter().map(|p| p.t).max().unwrap_or(0);
+        // The length is checked per block: its firings may run on by up to one block.
+        assert!(span <= 1_000_000_000 + 110_000, "a sweep of {span} ns");
+    }
+    // 3.05 s in sweeps of at most 1 s: three forced cuts, four sweeps.
+    assert_eq!(
+        sweeps.len(),
+        4,
+        "{:?}",
+        sweeps.iter().map(|s| s.points.len()).collect::<Vec<_>>()
+    );
+    assert_eq!(stream.stats().discontinuities, 3);
+    assert_eq!(points, expected);
+    assert!(points > 0);
+    assert_eq!(stream.stats().missing, 0);
+}

@@ -573,6 +573,10 @@ impl VelodyneStream {
             // Blocks of this packet before `g` may open the sweep themselves (a wrap inside the
             // stream's first packet, or the first after a discontinuity).
             if (wrapped || too_long) && (self.sweep_open || g > seg_start) {
+                if !wrapped {
+                    // No turn ended it: a stalled motor or a clock that ran on.
+                    self.stats.discontinuities += 1;
+                }
                 if g > seg_start {
                     self.add_segment_at(toh, host_ns, p, seg_start..g, first_firing_ns, clock);
                 }
