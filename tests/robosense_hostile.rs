@@ -324,3 +324,274 @@ fn m1_random_bytes_never_panic() {
     assert!(st.packets >= 1500, "{st:?}");
     assert!(n > 0 && n as u64 == st.points);
 }
+
+/// An M1 packet of counter `seq` at header time `stamp_ns` (whole µs), return-mode byte `mode`.
+fn m1_at(seq: u16, stamp_ns: i64, mode: u8) -> Vec<u8> {
+    let mut b = m1_packet(seq, 0);
+    b[8] = mode;
+    b[10..16].copy_from_slice(&(stamp_ns / 1_000_000_000).to_be_bytes()[2..]);
+    b[16..20].copy_from_slice(&((stamp_ns % 1_000_000_000 / 1_000) as u32).to_be_bytes());
+    b
+}
+
+/// M1 frames of `len` packets, 100 ms apart: (counter, header time) of frame `f`'s packet `q`
+/// (counter q + 1).
+fn m1_slot(f: i64, q: u16, len: u16) -> (u16, i64) {
+    let t = 1_700_000_000_000_000_000 + f * 100_000_000;
+    (
+        q + 1,
+        t + i64::from(q) * 100_000_000 / i64::from(len) / 1_000 * 1_000,
+    )
+}
+
+/// Pushes M1 packets; (packets, points, missing packets) of each sweep emitted.
+fn m1_run(s: &mut RobosenseStream, packets: &[Vec<u8>]) -> Vec<(u32, usize, u64)> {
+    let mut out = Vec::new();
+    for p in packets {
+        s.push(0, p, &mut |sw, _| {
+            out.push((sw.packets, sw.points.len(), sw.missing_packets))
+        })
+        .unwrap();
+    }
+    out
+}
+
+/// M1: a frame's last packet (630) arrives after the next frame's first (counter 1). It is
+/// late, of a frame already emitted: dropped and counted once (late, not also missing); the
+/// next frame is not cut again by it (the old code counted 628 packets lost, then cut the
+/// next frame after its first packet, one more phantom loss).
+#[test]
+fn m1_a_frames_last_packet_after_the_next_frames_first_is_late() {
+    let mut s = RobosenseStream::new(RobosenseConfig::new(None));
+    let mut ps = Vec::new();
+    // Three whole frames (the frame length is learned), then frame 3 whose 630 comes late.
+    for f in 0..3 {
+        for q in 0..630 {
+            let (c, t) = m1_slot(f, q, 630);
+            ps.push(m1_at(c, t, 4));
+        }
+    }
+    for q in 0..629 {
+        let (c, t) = m1_slot(3, q, 630);
+        ps.push(m1_at(c, t, 4));
+    }
+    let (c, t) = m1_slot(4, 0, 630);
+    ps.push(m1_at(c, t, 4));
+    let (c, t) = m1_slot(3, 629, 630);
+    ps.push(m1_at(c, t, 4));
+    for q in 1..630 {
+        let (c, t) = m1_slot(4, q, 630);
+        ps.push(m1_at(c, t, 4));
+    }
+    let (c, t) = m1_slot(5, 0, 630);
+    ps.push(m1_at(c, t, 4));
+    let sweeps = m1_run(&mut s, &ps);
+    let st = s.stats();
+    assert_eq!(
+        (st.missing, st.late_dropped, st.discontinuities),
+        (0, 1, 0),
+        "{st:?}"
+    );
+    // Frame 3 lacks its last packet (missing in it), frame 4 is whole and one sweep.
+    assert_eq!(
+        sweeps,
+        [
+            (630, 630 * 125, 0),
+            (630, 630 * 125, 0),
+            (630, 630 * 125, 0),
+            (629, 629 * 125, 1),
+            (630, 630 * 125, 0)
+        ]
+    );
+}
+
+/// M1: a stray packet with a corrupt counter (0xFFFF), and a switch from dual return (1260
+/// packets a frame) to single (630), add no loss: every frame is whole. The old code kept
+/// the largest counter ever seen and added it minus each frame's last at every frame end
+/// (64 905 and 630 phantom packets a frame). A frame whose last packets are really lost
+/// still counts them, once the frame length is known.
+#[test]
+fn m1_a_corrupt_counter_or_a_mode_change_adds_no_phantom_loss() {
+    let mut s = RobosenseStream::new(RobosenseConfig::new(None));
+    let mut ps = Vec::new();
+    for f in 0..3 {
+        for q in 0..1260 {
+            let (c, t) = m1_slot(f, q, 1260);
+            ps.push(m1_at(c, t, 5));
+            if f == 1 && q == 100 {
+                // Between two packets, a time of its own.
+                ps.push(m1_at(0xFFFF, t + 20_000, 5));
+            }
+        }
+    }
+    for f in 3..8 {
+        // Frame 6 loses its last 5 packets.
+        let n = if f == 6 { 625 } else { 630 };
+        for q in 0..n {
+            let (c, t) = m1_slot(f, q, 630);
+            ps.push(m1_at(c, t, 4));
+        }
+    }
+    let (c, t) = m1_slot(8, 0, 630);
+    ps.push(m1_at(c, t, 4));
+    let sweeps = m1_run(&mut s, &ps);
+    let st = s.stats();
+    assert_eq!(
+        (st.missing, st.discontinuities, st.duplicates),
+        (5, 0, 0),
+        "{st:?}"
+    );
+    let packets: Vec<u32> = sweeps.iter().map(|w| w.0).collect();
+    assert_eq!(packets, [1260, 1261, 1260, 630, 630, 630, 625, 630]);
+    let missing: Vec<u64> = sweeps.iter().map(|w| w.2).collect();
+    assert_eq!(missing, [0, 0, 0, 0, 0, 0, 5, 0]);
+}
+
+/// M1: a copy of a packet older than the latest (counters 1, 2, 3, 5, then 2 again, same
+/// bytes, then 6 … 20) is a copy: dropped, its points not added twice, and the real loss (4)
+/// still counted. The old code took it for a late packet, un-counting 4's loss.
+#[test]
+fn m1_a_copy_of_an_older_packet_is_a_copy() {
+    let p = |q: u16| {
+        let (c, t) = m1_slot(0, q, 630);
+        m1_at(c, t, 4)
+    };
+    let (c, t) = m1_slot(1, 0, 630);
+    let next_frame = m1_at(c, t, 4);
+    let run = |order: &[u16]| {
+        let mut s = RobosenseStream::new(RobosenseConfig::new(None));
+        let mut ps: Vec<Vec<u8>> = order.iter().map(|&q| p(q)).collect();
+        ps.extend((5..20).map(p));
+        ps.push(next_frame.clone());
+        let sweeps = m1_run(&mut s, &ps);
+        let st = s.stats();
+        (sweeps, st.missing, st.duplicates, st.late_dropped)
+    };
+    assert_eq!(run(&[0, 1, 2, 4, 1]), (vec![(19, 19 * 125, 1)], 1, 1, 0));
+    // A packet that really came late (4, after 5) fills its gap, in the sweep that counted
+    // it; its copy is a copy.
+    assert_eq!(run(&[0, 1, 2, 4, 3, 3]), (vec![(20, 20 * 125, 0)], 0, 1, 0));
+}
+
+/// A Helios-16P packet (the angles of `csv16`) at `t_us` µs after a base time, first block
+/// at `az0`, 0.20° a block.
+fn helios_at(az0: u16, t_us: i64) -> Vec<u8> {
+    let mut b = helios_packet(az0);
+    let t = 0x6500_0000i64 * 1_000_000 + t_us;
+    b[20..26].copy_from_slice(&(t / 1_000_000).to_be_bytes()[2..]);
+    b[26..30].copy_from_slice(&((t % 1_000_000) as u32).to_be_bytes());
+    b
+}
+
+/// The Helios-16P's packet period, µs, and the packets of a head turning at 600 rpm: packet
+/// `k` at `k` periods, 12 blocks of 0.20° (2.4° a packet; 150 packets a turn, 100 ms).
+fn helios_turning(k: i64) -> Vec<u8> {
+    let period_us = RobosenseModel::Helios16P.spec().packet_period_ns(false) / 1_000.0;
+    helios_at(
+        ((k * 240).rem_euclid(36_000)) as u16,
+        (k as f64 * period_us).round() as i64,
+    )
+}
+
+/// Pushes spinning packets; (packets, points, missing packets, first `t`, last `t`) of each
+/// sweep emitted, `finish` included.
+fn spin_run(s: &mut RobosenseStream, packets: &[Vec<u8>]) -> Vec<(u32, usize, u64, u32, u32)> {
+    let mut out = Vec::new();
+    let mut on = |sw: &mut ringscan::sweep::Sweep, _: &_| {
+        let t = sw.points.iter().map(|p| p.t);
+        out.push((
+            sw.packets,
+            sw.points.len(),
+            sw.missing_packets,
+            t.clone().min().unwrap_or(0),
+            t.max().unwrap_or(0),
+        ))
+    };
+    for p in packets {
+        s.push(0, p, &mut on).unwrap();
+    }
+    s.finish(&mut on);
+    out
+}
+
+fn helios_stream() -> RobosenseStream {
+    let mut cfg = RobosenseConfig::new(Some(csv16()));
+    cfg.model = Some(RobosenseModel::Helios16P);
+    RobosenseStream::new(cfg)
+}
+
+/// A motor that stalls (the azimuth stands still while the header time goes on, 3 s of
+/// packets) never reaches the cut: its sweep is still cut once it spans more than
+/// `max_sweep_ns` (1 s), each cut a discontinuity, and every point is handed over once. The
+/// old code held one sweep for the whole stream (unbounded memory).
+#[test]
+fn a_stalled_motor_still_cuts_its_sweeps() {
+    let period_us = RobosenseModel::Helios16P.spec().packet_period_ns(false) / 1_000.0;
+    let n = (3e6 / period_us) as i64;
+    let ps: Vec<Vec<u8>> = (0..n)
+        .map(|k| helios_at(9_000, (k as f64 * period_us).round() as i64))
+        .collect();
+    let mut s = helios_stream();
+    let sweeps = spin_run(&mut s, &ps);
+    assert!(sweeps.len() >= 3, "{}", sweeps.len());
+    for w in &sweeps {
+        assert!(w.4 <= 1_000_000_000 + 1_000_000, "{w:?}");
+    }
+    let st = s.stats();
+    assert_eq!(st.discontinuities as usize, sweeps.len() - 1, "{st:?}");
+    assert_eq!(st.missing, 0);
+    // A packet a cut splits counts in both sweeps; its points go to one or the other.
+    let one = spin_run(&mut helios_stream(), &ps[..1])[0].1;
+    assert!(one > 0);
+    assert_eq!(sweeps.iter().map(|w| w.1).sum::<usize>(), n as usize * one);
+    assert_eq!(sweeps.iter().map(|w| w.1 as u64).sum::<u64>(), st.points);
+}
+
+/// Spinning: the last packet before the cut arrives after the first one past it. Its firings
+/// belong to the sweep already emitted: dropped (`late_dropped`), not added to the new sweep
+/// at time 0; the gap it left moves from `missing` to `late_dropped`, and stays missing in
+/// the sweep that lost it. The new sweep is what it is in order.
+#[test]
+fn a_late_packet_of_the_sweep_before_is_dropped() {
+    // Packet 150 crosses 0° (its block 0 at 360.00° − 0 = 0.00°): the cut.
+    let order: Vec<i64> = (0..300).collect();
+    let mut late = order.clone();
+    late.swap(148, 149);
+    late.swap(149, 150); // …, 147, 149, 150, 148, 151, …
+    let all = |o: &[i64]| o.iter().map(|&k| helios_turning(k)).collect::<Vec<_>>();
+    let mut s = helios_stream();
+    let in_order = spin_run(&mut s, &all(&order));
+    assert_eq!(in_order.len(), 2);
+    let mut s = helios_stream();
+    let got = spin_run(&mut s, &all(&late));
+    // The new sweep is what it is in order (the old code added the late packet to it, its
+    // times clamped to 0).
+    assert_eq!(got[1], in_order[1]);
+    let st = s.stats();
+    assert_eq!(
+        (st.missing, st.late_dropped, st.discontinuities),
+        (0, 1, 0),
+        "{st:?}"
+    );
+    let per_packet = in_order[0].1 / in_order[0].0 as usize;
+    assert_eq!(got[0].0, in_order[0].0 - 1);
+    assert_eq!(got[0].1, in_order[0].1 - per_packet);
+    assert_eq!(got[0].2, 1, "the sweep that lost it");
+}
+
+/// Spinning: a packet from before the stream's first (late, but inside no gap counted) does
+/// not un-count a real loss elsewhere: 2, 3, 5 (4 lost), then 1. The old code un-counted 4.
+#[test]
+fn a_late_packet_fills_only_a_gap_counted() {
+    let ps: Vec<Vec<u8>> = [2, 3, 5, 1, 6].iter().map(|&k| helios_turning(k)).collect();
+    let mut s = helios_stream();
+    let sweeps = spin_run(&mut s, &ps);
+    let st = s.stats();
+    assert_eq!(
+        (st.missing, st.late_dropped, st.discontinuities),
+        (1, 1, 0),
+        "{st:?}"
+    );
+    assert_eq!(sweeps.len(), 1);
+    assert_eq!((sweeps[0].0, sweeps[0].2), (4, 1));
+}

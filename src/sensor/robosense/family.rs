@@ -95,7 +95,7 @@ impl Family for Robosense {
                 st("detection")
             ),
             format!(
-                "    {} MSOP + {} DIFOP packets, {} sweeps, {} points; missing {}, malformed {}, dropped {}, discontinuities {}, duplicates {}, held {}",
+                "    {} MSOP + {} DIFOP packets, {} sweeps, {} points; missing {}, malformed {}, dropped {}, late dropped {}, discontinuities {}, duplicates {}, held {}",
                 g("data_packets"),
                 g("difop_packets"),
                 g("sweeps"),
@@ -103,6 +103,7 @@ impl Family for Robosense {
                 g("missing"),
                 g("malformed"),
                 g("dropped"),
+                g("late_dropped"),
                 g("discontinuities"),
                 g("duplicates"),
                 g("held")
@@ -265,8 +266,9 @@ impl SensorStream for RobosenseStream {
             malformed: st.malformed,
             missing: st.missing,
             position: st.difop,
-            // A copy is no loss: counted in the sensor's `duplicates` only.
-            dropped: st.dropped,
+            // A copy is no loss: counted in the sensor's `duplicates` only; a late packet
+            // dropped is.
+            dropped: st.dropped.saturating_add(st.late_dropped),
         };
         let v = json!({
             "kind": "robosense",
@@ -295,6 +297,7 @@ impl SensorStream for RobosenseStream {
             "malformed": st.malformed,
             "missing": st.missing,
             "dropped": st.dropped,
+            "late_dropped": st.late_dropped,
             "duplicates": st.duplicates,
             "discontinuities": st.discontinuities,
             "sweeps": st.sweeps,

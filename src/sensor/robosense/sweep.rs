@@ -22,7 +22,12 @@
 //! host time, the sensor's own time kept as `device_time_ns`.
 //!
 //! **Loss.** Missing packets = round(Δ header time / packet period) − 1; a header time going
-//! backwards or jumping by more than `max_gap_ns` ends the open sweep (a discontinuity).
+//! backwards or jumping by more than `max_gap_ns` ends the open sweep (a discontinuity), and
+//! so does a sweep spanning more than `max_sweep_ns` (a motor that stalls never reaches the
+//! cut). A packet a little behind the latest came late: it fills the gap it was counted
+//! missing in, if one was, and joins the open sweep with its firings from the sweep's start
+//! on; one with none there belonged to a sweep already emitted and is dropped
+//! (`late_dropped`, a loss).
 
 use std::collections::VecDeque;
 
@@ -32,7 +37,7 @@ use super::m1::{is_m1_difop, M1Decoder, M1Difop, M1Msop, M1_BLOCKS, M1_FRAME_NS}
 use super::model::{RobosenseModel, Shape};
 use super::wire::{is_difop, msop_shape, Difop, Msop};
 use crate::sensor::{DecodeError, DecodeOptions};
-use crate::sweep::{RecentTimes, Sweep, REORDER_PACKETS};
+use crate::sweep::{RecentTimes, SeqStep, SeqWindow, Sweep, REORDER_PACKETS};
 use crate::time::ClockSource;
 
 /// MSOP packets held while waiting for the angles.
@@ -45,6 +50,12 @@ pub const M1_REORDER: u16 = 10;
 const M1_REORDER_NS: i64 = 10 * M1_FRAME_NS / 630;
 /// M1: a sweep whose frame never ends (the counter does not restart) is cut at 1.5 frames.
 pub const M1_MAX_SWEEP_NS: i64 = M1_FRAME_NS * 3 / 2;
+/// M1: the largest packet counter a frame can have (1260 packets in dual return). A counter
+/// of 0 or beyond is corrupt, and must not stand for a frame's length or a loss.
+pub const M1_MAX_COUNTER: u16 = 2 * super::m1::M1_PACKETS_PER_FRAME;
+/// Gaps counted missing that a late packet may still fill: a late packet is at most
+/// [`REORDER_PACKETS`] behind, so older gaps are out of its reach.
+const GAPS_KEPT: usize = REORDER_PACKETS as usize;
 
 /// Configuration of one stream.
 #[derive(Clone, Debug)]
@@ -59,6 +70,9 @@ pub struct RobosenseConfig {
     pub cut_cdeg: u16,
     /// A header-time gap longer than this ends the sweep, ns.
     pub max_gap_ns: i64,
+    /// A sweep spanning longer than this is cut (a discontinuity), ns: the azimuth of a
+    /// stalled motor never reaches the cut, and its sweep would grow without end.
+    pub max_sweep_ns: i64,
     /// Keep each point's firing column.
     pub keep_columns: bool,
 }
@@ -72,6 +86,7 @@ impl RobosenseConfig {
             options: DecodeOptions::default(),
             cut_cdeg: 0,
             max_gap_ns: 1_000_000_000,
+            max_sweep_ns: 1_000_000_000,
             keep_columns: false,
         }
     }
@@ -84,7 +99,9 @@ pub struct RobosenseStats {
     pub packets: u64,
     /// DIFOP packets read.
     pub difop: u64,
-    /// Packets not well-formed (or of no known shape).
+    /// Packets not well-formed (or of no known shape). The header-time gap such a packet
+    /// leaves is also counted in `missing` (its place is not read from a packet that failed
+    /// its checks), so a sum of both counts it twice.
     pub malformed: u64,
     /// DIFOP packets whose angle table could not be used.
     pub difop_bad_angles: u64,
@@ -97,6 +114,10 @@ pub struct RobosenseStats {
     /// MSOP packets seen already (the latest header time again; M1: and its counter): copies,
     /// dropped.
     pub duplicates: u64,
+    /// Late MSOP packets (reordered on the way) whose firings all belong to a sweep already
+    /// emitted: dropped, and counted as a loss (a packet counted missing before it came
+    /// moves from `missing` to here).
+    pub late_dropped: u64,
     /// Sweeps emitted.
     pub sweeps: u64,
     /// Points emitted.
@@ -177,10 +198,30 @@ pub struct RobosenseStream {
     dual: bool,
     /// The last DIFOP, while the model is unknown (a DIFOP that came before any MSOP).
     last_difop: Option<Vec<u8>>,
-    /// M1: the decoder (no angles needed), the last packet counter and the largest seen.
+    /// Gaps counted missing lately, newest first, for a late packet to fill.
+    gaps: [Option<Gap>; GAPS_KEPT],
+    /// M1: the decoder (no angles needed) and the packet counters of the open frame.
     m1: Option<M1Decoder>,
-    m1_seq: Option<u16>,
-    m1_max_seq: u16,
+    m1_seq: SeqWindow,
+    /// M1: the counters of the frame before, for its late packets.
+    m1_prev_seq: Option<SeqWindow>,
+    /// M1: the largest counter of the open frame, and of the frame before.
+    m1_frame_max: u16,
+    m1_last_frame_max: u16,
+    /// M1: the frame length learned (two frames in a row ending on the same counter) and the
+    /// return mode it holds for.
+    m1_frame_len: Option<u16>,
+    m1_mode: Option<u8>,
+}
+
+/// Packets counted missing between two header times, `left` of them not yet come late.
+#[derive(Clone, Copy, Debug)]
+struct Gap {
+    after: i64,
+    before: i64,
+    left: u64,
+    /// The sweep whose `missing_packets` counted them.
+    sweep: Option<u64>,
 }
 
 impl RobosenseStream {
@@ -204,9 +245,14 @@ impl RobosenseStream {
             recent: RecentTimes::default(),
             dual: false,
             last_difop: None,
+            gaps: [None; GAPS_KEPT],
             m1: None,
-            m1_seq: None,
-            m1_max_seq: 0,
+            m1_seq: SeqWindow::new(16, M1_MAX_COUNTER as u64),
+            m1_prev_seq: None,
+            m1_frame_max: 0,
+            m1_last_frame_max: 0,
+            m1_frame_len: None,
+            m1_mode: None,
         }
     }
 
@@ -449,8 +495,8 @@ impl RobosenseStream {
         let mut discontinuity = false;
         // Time since the last packet, for an azimuth step the azimuths alone cannot tell.
         let mut since_last = None;
-        // A packet a little older than the latest was reordered on the way: it fills a gap
-        // already counted as missing, opens no sweep, and the stream goes on from the latest.
+        // A packet a little older than the latest was reordered on the way: it opens no
+        // sweep, and the stream goes on from the latest.
         let mut late = false;
         if let Some(prev) = self.prev_stamp {
             let d = stamp.saturating_sub(prev);
@@ -462,10 +508,6 @@ impl RobosenseStream {
             }
             if d < 0 && period > 0.0 && d as f64 >= -f64::from(REORDER_PACKETS) * period {
                 late = true;
-                self.stats.missing = self.stats.missing.saturating_sub(1);
-                if let Some((sw, _)) = &mut self.open {
-                    sw.missing_packets = sw.missing_packets.saturating_sub(1);
-                }
             } else if d < 0 || d > self.cfg.max_gap_ns {
                 discontinuity = true;
             } else if period > 0.0 {
@@ -473,9 +515,17 @@ impl RobosenseStream {
                 let m = (d as f64 / period).round() as i64 - 1;
                 if m > 0 {
                     self.stats.missing += m as u64;
-                    if let Some((sw, _)) = &mut self.open {
+                    let sweep = self.open.as_mut().map(|(sw, _)| {
                         sw.missing_packets += m as u64;
-                    }
+                        sw.index
+                    });
+                    self.gaps.rotate_right(1);
+                    self.gaps[0] = Some(Gap {
+                        after: prev,
+                        before: stamp,
+                        left: m as u64,
+                        sweep,
+                    });
                 }
             }
         }
@@ -486,11 +536,11 @@ impl RobosenseStream {
             self.stats.discontinuities += 1;
             // A clock that restarted (or a capture replayed again) may repeat times.
             self.recent.clear();
+            self.gaps = [None; GAPS_KEPT];
             self.emit(on_sweep);
             self.last_block_az = None;
         }
         self.recent.push(stamp);
-        self.stats.packets += 1;
         let clock = if synced {
             ClockSource::SensorPtp
         } else {
@@ -500,12 +550,37 @@ impl RobosenseStream {
         dec.roles(&p, dual, &mut roles);
         let blocks = spec.shape.blocks();
         let period_ns = super::model::us_to_ns(spec.firing_period_us(dual));
+        let block_time = |b: usize| stamp.saturating_add(roles[b].0 as i64 * period_ns);
+        if late {
+            // Only a gap really counted is un-counted (not one before the stream's first
+            // packet or a discontinuity), and in the sweep that counted it.
+            let filled = self.fill_gap(stamp);
+            // Firings before the open sweep's start belong to a sweep already emitted: their
+            // time in this one would be negative (clamped to its start).
+            let open = self
+                .open
+                .as_mut()
+                .filter(|(_, t0)| (0..blocks).any(|b| block_time(b) >= *t0));
+            let Some((sw, _)) = open else {
+                self.stats.late_dropped += 1;
+                self.decoder = Some(dec);
+                return;
+            };
+            if filled.is_some_and(|g| g == Some(sw.index)) {
+                sw.missing_packets = sw.missing_packets.saturating_sub(1);
+            }
+        }
+        self.stats.packets += 1;
         // The blocks at which a new sweep starts.
         let cut = i32::from(self.cfg.cut_cdeg % 36_000);
         let mut starts = [false; 12];
         let mut last = self.last_block_az;
         // The motor speed a DIFOP gave (else the usual 600 rpm).
         let rpm = crate::sweep::motor_rpm_or_nominal(self.facts.rpm);
+        // The start of the sweep open when a block comes, to cut one grown too long; a start
+        // in this packet opens a new one, short.
+        let mut open_t0 = self.open.as_ref().map(|(_, t0)| *t0);
+        let mut too_long = false;
         for (b, s) in starts.iter_mut().enumerate().take(blocks).filter(|_| !late) {
             let az = p.azimuth(b);
             if let Some(l) = last {
@@ -524,7 +599,20 @@ impl RobosenseStream {
                     }
                 };
             }
+            if !*s
+                && open_t0
+                    .is_some_and(|t0| block_time(b).saturating_sub(t0) > self.cfg.max_sweep_ns)
+            {
+                *s = true;
+                too_long = true;
+            }
+            if *s {
+                open_t0 = None;
+            }
             last = Some(az);
+        }
+        if too_long {
+            self.stats.discontinuities += 1;
         }
         if !late {
             self.last_block_az = last;
@@ -560,6 +648,9 @@ impl RobosenseStream {
                 cur_block = d.block;
             }
             if let Some((sw, t0)) = &mut self.open {
+                if late && block_time(d.block) < *t0 {
+                    return;
+                }
                 if !counted {
                     sw.packets += 1;
                     counted = true;
@@ -596,10 +687,25 @@ impl RobosenseStream {
         }
         if let Some((sw, _)) = &mut self.open {
             sw.last_host_ns = host_ns;
-            sw.last_azimuth = p.azimuth(blocks - 1);
+            if !late {
+                sw.last_azimuth = p.azimuth(blocks - 1);
+            }
             sw.columns_count += spec.firings(dual) as u32;
         }
         self.decoder = Some(dec);
+    }
+
+    /// Whether a late packet stamped `t` falls inside one of the last gaps counted missing,
+    /// which then counts one packet fewer: `Some(the sweep that counted it)`.
+    fn fill_gap(&mut self, t: i64) -> Option<Option<u64>> {
+        let g = self
+            .gaps
+            .iter_mut()
+            .flatten()
+            .find(|g| g.left > 0 && g.after < t && t < g.before)?;
+        g.left -= 1;
+        self.stats.missing = self.stats.missing.saturating_sub(1);
+        Some(g.sweep)
     }
 
     /// An M1 DIFOP: device facts only (the M1 needs no angle table).
@@ -621,9 +727,13 @@ impl RobosenseStream {
     /// An M1 MSOP packet into the open sweep. Sweeps follow the sensor's frames: the packet
     /// counter restarts at 1 with each frame (rs_driver splits the same way), so a counter
     /// more than [`M1_REORDER`] below the last one opens a new sweep; a counter a little
-    /// below it is a packet that came late, kept in the open sweep. Should the counter stop
-    /// restarting, a sweep is also cut once it spans [`M1_MAX_SWEEP_NS`]. Loss: the counter's
-    /// gaps, within a frame and across its end (up to the largest counter seen).
+    /// below it is a packet that came late, kept in the open sweep (one whose counter was seen
+    /// already at the same time is a copy, dropped). A packet older than the latest whose
+    /// counter is not a little below the open frame's is late from the frame before, emitted
+    /// already: dropped (`late_dropped`). Should the counter stop restarting, a sweep is also
+    /// cut once it spans [`M1_MAX_SWEEP_NS`]. Loss: the counter's gaps within a frame, its
+    /// first packets, and its last ones once the frame length is learned (two frames in a row
+    /// ending on the same counter, in one return mode).
     fn decode_m1(
         &mut self,
         host_ns: i64,
@@ -655,55 +765,126 @@ impl RobosenseStream {
             ClockSource::Host
         };
         let seq = p.seq();
-        if self.m1_seq == Some(seq) && self.prev_stamp == Some(stamp) {
-            self.stats.duplicates += 1;
-            return;
+        let mode = p.return_mode();
+        if self.m1_mode.replace(mode).is_some_and(|m| m != mode) {
+            // Dual return sends twice the packets a frame: the length learned no longer holds,
+            // nor does the last frame's for learning it again.
+            self.m1_frame_len = None;
+            self.m1_last_frame_max = 0;
         }
-        let mut cut = false;
+        let d = self.prev_stamp.map(|prev| stamp.saturating_sub(prev));
+        let t0 = self.open.as_ref().map(|(_, t0)| *t0);
+        // Counter gaps before this packet (in the open frame, or the new frame's first
+        // packets lost), and whether it fills a gap of the open sweep counted before.
         let mut missing = 0u64;
-        if let Some(prev) = self.m1_seq {
-            if seq > prev {
-                missing = u64::from(seq - prev - 1);
-                self.m1_seq = Some(seq);
-            } else if prev - seq > M1_REORDER {
-                cut = true;
-                missing = u64::from(seq.saturating_sub(1))
-                    + u64::from(self.m1_max_seq.saturating_sub(prev));
-                self.m1_seq = Some(seq);
-            } else if seq < prev {
-                // A late packet: the gap it left was counted as lost.
-                self.stats.missing = self.stats.missing.saturating_sub(1);
-                if let Some((sw, _)) = &mut self.open {
-                    sw.missing_packets = sw.missing_packets.saturating_sub(1);
+        let mut fills = false;
+        let mut cut = false;
+        if d.is_some_and(|d| !(-M1_REORDER_NS..=self.cfg.max_gap_ns).contains(&d)) {
+            self.stats.discontinuities += 1;
+            cut = true;
+            self.recent.clear();
+            self.m1_seq.reset();
+            self.m1_prev_seq = None;
+            self.m1_frame_max = 0;
+            self.m1_last_frame_max = 0;
+            self.prev_stamp = None;
+        }
+        let late_in_time = !cut && d.is_some_and(|d| d < 0);
+        if !(1..=M1_MAX_COUNTER).contains(&seq) {
+            // A corrupt counter: its place in the frame is unknown, so it moves no counter
+            // state and counts no loss; the points are whole (the decoder checks them).
+            if late_in_time && t0.is_some_and(|t0| stamp < t0) {
+                self.stats.late_dropped += 1;
+                return;
+            }
+        } else if behind_by_at_most(&self.m1_seq, seq, REORDER_PACKETS) {
+            match self.m1_seq.step_within(u64::from(seq)) {
+                SeqStep::Duplicate if self.recent.contains(stamp) => {
+                    self.stats.duplicates += 1;
+                    return;
+                }
+                step => {
+                    // A counter seen already at a new time (a counter that stands still) has
+                    // no gap to fill.
+                    let filled = step == SeqStep::Late;
+                    if t0.is_some_and(|t0| stamp < t0) {
+                        // Before the open sweep's start (the frame's first packets came after
+                        // a later one): its times there would be negative.
+                        self.drop_late(filled);
+                        self.recent.push(stamp);
+                        return;
+                    }
+                    fills = filled;
                 }
             }
+        } else if late_in_time {
+            // Older than the latest packet, whatever its counter says: a packet of the frame
+            // before (its last ones may come after the next frame's first), emitted already.
+            let prev = self
+                .m1_prev_seq
+                .as_mut()
+                .filter(|w| behind_by_at_most(w, seq, REORDER_PACKETS));
+            let counted = match prev.map(|w| w.step_within(u64::from(seq))) {
+                Some(SeqStep::Duplicate) if self.recent.contains(stamp) => {
+                    self.stats.duplicates += 1;
+                    return;
+                }
+                step => step == Some(SeqStep::Late),
+            };
+            self.drop_late(counted);
+            self.recent.push(stamp);
+            return;
+        } else if self
+            .m1_seq
+            .latest()
+            .is_some_and(|l| u64::from(seq) + u64::from(M1_REORDER) < l)
+        {
+            // The counter restarted: a new frame. Its last packets lost are known only from
+            // the frame length learned; stepping the frame's counters past its last one counts
+            // them and keeps them there for a late one to fill.
+            cut = true;
+            let frame_max = self.m1_frame_max;
+            if frame_max == self.m1_last_frame_max {
+                self.m1_frame_len = Some(frame_max);
+            }
+            self.m1_last_frame_max = frame_max;
+            let mut old = self.m1_seq;
+            if let Some(len) = self.m1_frame_len.filter(|&len| len > frame_max) {
+                if let SeqStep::Next { lost } = old.step(u64::from(len) + 1) {
+                    self.stats.missing += lost;
+                    if let Some((sw, _)) = &mut self.open {
+                        sw.missing_packets += lost;
+                    }
+                }
+            }
+            self.m1_prev_seq = Some(old);
+            // Counted from 0 (no real counter), so that the frame's first packets lost are
+            // counted, and filled should they come late.
+            self.m1_seq.restart(0);
+            if let SeqStep::Next { lost } = self.m1_seq.step(u64::from(seq)) {
+                missing = lost;
+            }
+            self.m1_frame_max = seq;
         } else {
-            self.m1_seq = Some(seq);
+            if let SeqStep::Next { lost } = self.m1_seq.step(u64::from(seq)) {
+                missing = lost;
+            }
+            self.m1_frame_max = self.m1_frame_max.max(seq);
         }
-        self.m1_max_seq = self.m1_max_seq.max(seq);
+        self.recent.push(stamp);
         // The latest header time seen: a late packet does not move it back.
-        self.prev_stamp = match self.prev_stamp {
-            Some(prev)
-                if (-M1_REORDER_NS..=self.cfg.max_gap_ns).contains(&stamp.saturating_sub(prev)) =>
-            {
-                Some(prev.max(stamp))
-            }
-            Some(_) => {
-                self.stats.discontinuities += 1;
-                cut = true;
-                missing = 0;
-                Some(stamp)
-            }
-            None => Some(stamp),
-        };
-        if let Some((_, t0)) = &self.open {
-            if stamp.saturating_sub(*t0) >= M1_MAX_SWEEP_NS {
+        self.prev_stamp = Some(self.prev_stamp.map_or(stamp, |prev| prev.max(stamp)));
+        if let Some(t0) = t0 {
+            if stamp.saturating_sub(t0) >= M1_MAX_SWEEP_NS {
                 cut = true;
             }
         }
-        self.stats.missing += missing;
         if cut {
             self.emit(on_sweep);
+        }
+        self.stats.missing += missing;
+        if fills {
+            self.stats.missing = self.stats.missing.saturating_sub(1);
         }
         self.stats.packets += 1;
         if self.open.is_none() {
@@ -723,8 +904,11 @@ impl RobosenseStream {
         }
         let keep_columns = self.cfg.keep_columns;
         if let Some((sw, t0)) = &mut self.open {
-            // Counter gaps before this packet (across a frame end: counted in the new one).
+            // Counter gaps before this packet (the new frame's first packets: in the new one).
             sw.missing_packets += missing;
+            if fills {
+                sw.missing_packets = sw.missing_packets.saturating_sub(1);
+            }
             sw.packets += 1;
             sw.last_host_ns = host_ns;
             let col_base = sw.columns_count;
@@ -742,6 +926,15 @@ impl RobosenseStream {
             });
             sw.columns_count += M1_BLOCKS as u32;
         }
+    }
+
+    /// M1: a late packet of a sweep already emitted, dropped; `counted` if it was counted
+    /// missing (it moves to `late_dropped`).
+    fn drop_late(&mut self, counted: bool) {
+        if counted {
+            self.stats.missing = self.stats.missing.saturating_sub(1);
+        }
+        self.stats.late_dropped += 1;
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -799,6 +992,13 @@ impl RobosenseStream {
         self.held.clear();
         self.emit(on_sweep);
     }
+}
+
+/// Whether `n` is at most `k` numbers behind the window's latest (or is it).
+fn behind_by_at_most(w: &SeqWindow, n: u16, k: u16) -> bool {
+    w.latest()
+        .and_then(|l| l.checked_sub(u64::from(n)))
+        .is_some_and(|b| b <= u64::from(k))
 }
 
 /// Whether a Helios DIFOP's 32 angle entries describe a Helios-16P: its 16 lasers are entries
