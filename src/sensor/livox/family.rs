@@ -124,7 +124,7 @@ impl Family for Livox {
                 st("detection")
             ),
             format!(
-                "    {} point + {} IMU packets, {} sweeps ({} ms, cut by {}), {} points ({:.0} per sweep, {}–{}); missing {}, malformed {}, discontinuities {}, duplicates {}, late dropped {}; IMU missing {}, dropped {}",
+                "    {} point + {} IMU packets, {} sweeps ({} ms, cut by {}), {} points ({:.0} per sweep, {}–{}); missing {}, malformed {}, discontinuities {}, duplicates {}, late dropped {}, forced cuts {}; IMU missing {}, dropped {}",
                 g(&s["data_packets"]),
                 g(&s["imu_packets"]),
                 g(&s["sweeps"]),
@@ -139,6 +139,7 @@ impl Family for Livox {
                 g(&s["discontinuities"]),
                 g(&s["duplicates"]),
                 g(&s["late_dropped"]),
+                g(&s["forced_cuts"]),
                 g(&s["imu_missing"]),
                 g(&s["imu_dropped"])
             ),
@@ -327,6 +328,7 @@ impl SensorStream for LivoxStream {
             "discontinuities": st.discontinuities,
             "duplicates": st.duplicates,
             "late_dropped": st.late_dropped,
+            "forced_cuts": st.forced_cuts,
             "sweeps": st.sweeps,
             "points": st.points,
             "tagged_points": st.tagged_points,

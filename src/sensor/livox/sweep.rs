@@ -7,7 +7,21 @@
 //! `udp_cnt` restarts at 0, seen twice — sweeps follow its frames instead (the MID-360
 //! protocol says `frame_cnt` means nothing for non-repetitive scanning, so that sensor stays on
 //! the period). Loss: SDK2 from `udp_cnt` (+1 per packet, 0 at a frame's start), SDK1 from the
-//! device-time gap between consecutive packets.
+//! device-time gap between consecutive packets (the packet spacing is the model's, or, with
+//! no model named, learnt from the stream: the median of the last in-order steps, so a
+//! Mid-40 at 1 ms and a Horizon at 0.4 ms are both counted right; until two packets have
+//! come, no time gap is counted).
+//!
+//! A packet further behind than a reordering explains (more than [`REORDER_PACKETS`] behind
+//! the newest `udp_cnt`, or of a frame whose sweep is gone), but at most two periods behind
+//! the newest packet's time, came late: it is dropped and counted in
+//! [`LivoxStats::late_dropped`] (its gap no longer counted missing, where its frame's
+//! numbers are still known: the last two frames), and changes nothing else. Further behind,
+//! or with counters and time both jumping, the sensor restarted: one discontinuity. A sweep
+//! is also cut when it spans two periods (of 100 ms at least) or holds four times the
+//! model's dual-return rate over a period in points (2^22 to 2^26), or as many packets,
+//! without the period or the sensor's frame ending it — a timestamp or `frame_cnt` that
+//! stands still — counted in [`LivoxStats::forced_cuts`].
 //!
 //! Once the stream has seen IMU packets, a finished sweep waits for the first IMU sample at or
 //! after its last point before it is handed over (on the next datagram, so that a caller that
@@ -23,6 +37,7 @@ use std::collections::VecDeque;
 
 use super::decode::{LivoxDecoder, Spacing};
 use super::frame::{ImuFrame, PointsFrame};
+use super::ledger::{Count, UdpLedger, LEDGER_NUMBERS};
 use super::model::{LivoxModel, Protocol, STANDARD_GRAVITY};
 use super::wire::{read_imu, LivoxWireError, Record, Sdk1Packet, Sdk2Packet};
 use crate::point::Point;
@@ -36,6 +51,13 @@ pub const DEFAULT_PERIOD_NS: u64 = 100_000_000;
 pub const MAX_IMU_QUEUE: usize = 4096;
 /// A `udp_cnt` jump larger than this is a restart, not loss.
 const MAX_COUNTER_GAP: u64 = 4096;
+/// Fewest and most points a sweep may hold before it is cut (the model's rate sets the cap
+/// between them): memory stays bounded whatever the counters and times say.
+const MIN_POINT_CAP: f64 = (1u64 << 22) as f64;
+const MAX_POINT_CAP: f64 = (1u64 << 26) as f64;
+/// SDK1 record spacing a stream may teach, ns: Livox sensors send 100 000 to 480 000
+/// points per second; anything outside is a clock step, not a spacing.
+const LEARNT_STEP_NS: std::ops::RangeInclusive<i64> = 500..=100_000;
 
 /// How a stream is set up.
 #[derive(Clone, Debug)]
@@ -95,9 +117,14 @@ pub struct LivoxStats {
     pub discontinuities: u64,
     /// Point or IMU packets whose counter was seen already (copies): dropped.
     pub duplicates: u64,
-    /// Point packets of a frame already handed over (its last packets came after the next
-    /// frame's first ones, and no IMU wait held it): dropped.
+    /// Point packets that came too late to join a sweep: of a frame already handed over (its
+    /// last packets came after the next frame's first ones, and no IMU wait held it), of a
+    /// frame before that, or more than [`REORDER_PACKETS`] behind the newest `udp_cnt`
+    /// (within two periods of its time). Dropped; not counted missing.
     pub late_dropped: u64,
+    /// Sweeps cut because they spanned two periods or reached the point cap before the
+    /// period or the sensor's frame ended them (a timestamp or `frame_cnt` standing still).
+    pub forced_cuts: u64,
     /// IMU samples dropped because nobody drained them.
     pub imu_dropped: u64,
     /// Sweeps emitted.
@@ -186,15 +213,21 @@ pub struct LivoxStream {
     /// restart of the device clock (a packet's records may overlap the next one's by a
     /// spacing, depending on how the sensor fills `time_interval`).
     last_packet_ns: Option<i64>,
-    /// SDK2 `udp_cnt` of the point and of the IMU packets.
-    udp: SeqWindow,
+    /// SDK2 `udp_cnt` of the point packets of the open run (frame) and of the IMU packets.
+    udp: UdpLedger,
     imu_udp: SeqWindow,
     last_frame: Option<u8>,
-    /// Frame-cut sensors: the frame before the open one and its `udp_cnt` window, for its
-    /// packets that come after the next frame's first.
-    prev_frame: Option<(u8, SeqWindow)>,
+    /// Sensors that restart `udp_cnt` with their frames: the two frames before the open one
+    /// and their numbers, newest first, for their packets that come after the next frame's
+    /// first.
+    closed: [(Option<u8>, UdpLedger); 2],
     frame_starts: u32,
     sdk1_next_ns: Option<i64>,
+    /// SDK1 of no known model: record spacings seen, and the last in-order packet's records.
+    sdk1_steps: LearntSpacing,
+    sdk1_last_records: usize,
+    /// Most points in a sweep.
+    max_points: usize,
     /// The times of the last point packets and of the last IMU packets: a copy repeats one
     /// (SDK1 packets carry no counter; an SDK2 counter seen again at a new time restarted).
     recent: RecentTimes,
@@ -224,6 +257,11 @@ impl LivoxStream {
             status_code: None,
             last_sweep_points: 0,
         };
+        // Dual returns double the rate; four times that over a period is no sweep a sensor
+        // sends, only one its counters or times failed to cut.
+        let rate = cfg.model.map_or(480_000.0, |m| f64::from(m.point_rate()));
+        let max_points =
+            (8.0 * rate * cfg.period_ns as f64 / 1e9).clamp(MIN_POINT_CAP, MAX_POINT_CAP) as usize;
         Self {
             decoder: LivoxDecoder::new(lines, cfg.range),
             cfg,
@@ -238,12 +276,18 @@ impl LivoxStream {
             held_end_ns: 0,
             newest_imu_ns: None,
             last_packet_ns: None,
-            udp: SeqWindow::new(16, MAX_COUNTER_GAP),
+            udp: UdpLedger::new(MAX_COUNTER_GAP),
             imu_udp: SeqWindow::new(16, MAX_COUNTER_GAP),
             last_frame: None,
-            prev_frame: None,
+            closed: [
+                (None, UdpLedger::new(MAX_COUNTER_GAP)),
+                (None, UdpLedger::new(MAX_COUNTER_GAP)),
+            ],
             frame_starts: 0,
             sdk1_next_ns: None,
+            sdk1_steps: LearntSpacing::default(),
+            sdk1_last_records: 0,
+            max_points,
             recent: RecentTimes::default(),
             imu_recent: RecentTimes::default(),
             imu: VecDeque::new(),
@@ -348,7 +392,7 @@ impl LivoxStream {
         self.facts.lines = lines;
         self.stats.frames += 1;
         self.open_end_ns = last;
-        self.sweep.packets += 1;
+        self.sweep.packets = self.sweep.packets.saturating_add(1);
         self.sweep.last_host_ns = host_ns;
         self.last_packet_ns = Some(ts);
         self.emit(on_sweep);
@@ -385,98 +429,164 @@ impl LivoxStream {
         on_sweep: &mut dyn FnMut(&mut Sweep, &LivoxFacts),
     ) -> Result<(), LivoxWireError> {
         let p = Sdk2Packet::new(payload)?;
+        // The CRC covers the timestamp and the data, not the counters before them: a packet
+        // that fails it is dropped, but its counters still say it came (and what it skipped),
+        // so the next packet does not count it missing too.
+        let mut damaged = None;
         if self.cfg.check_crc {
             let stored = p.stored_crc();
             if stored == 0 {
                 self.stats.crc_absent += 1;
             } else {
                 let computed = p.computed_crc();
-                if stored != computed {
-                    return Err(LivoxWireError::Crc { stored, computed });
+                if stored == computed {
+                    self.stats.crc_ok += 1;
+                } else {
+                    damaged = Some(LivoxWireError::Crc { stored, computed });
                 }
-                self.stats.crc_ok += 1;
             }
         }
         let ts = i64::try_from(p.timestamp_ns()).unwrap_or(i64::MAX);
-        self.facts.time_type = Some(p.time_type());
-        self.facts.clock = Self::clock_of(Protocol::Sdk2, p.time_type());
+        if damaged.is_none() {
+            self.facts.time_type = Some(p.time_type());
+            self.facts.clock = Self::clock_of(Protocol::Sdk2, p.time_type());
+        }
         if p.record() == Record::Imu {
-            let udp = u64::from(p.udp_cnt());
-            match self.imu_udp.step(udp) {
-                SeqStep::Duplicate if self.imu_recent.contains(ts) => {
-                    self.stats.duplicates += 1;
-                    return Ok(());
-                }
-                // The number again at a new time: the counter restarted or stands still.
-                SeqStep::Duplicate => self.imu_udp.restart(udp),
-                SeqStep::Next { lost } => self.stats.imu_missing += lost,
-                SeqStep::Late => self.stats.imu_missing = self.stats.imu_missing.saturating_sub(1),
-                // A restart (the counter may restart at 0 with each frame): no loss known.
-                SeqStep::Jump | SeqStep::Stray => {}
-            }
-            self.imu_recent.push(ts);
-            self.stats.imu_packets += 1;
-            for i in 0..p.records() {
-                self.push_imu_record(p.record_bytes(i), ts, host_ns);
-            }
-            return Ok(());
+            return self.push_sdk2_imu(&p, ts, host_ns, damaged);
         }
-        self.facts.data_type = Some(p.data_type());
-        // Loss, late and duplicate packets, and frame starts, from the counters.
+        let trusted = damaged.is_none();
+        if trusted {
+            self.facts.data_type = Some(p.data_type());
+        }
         let (udp, frame) = (p.udp_cnt(), p.frame_cnt());
-        // However late: counted against the next frame's `udp_cnt`, it would read as a loss.
-        if self.prev_frame.is_some_and(|(f, _)| f == frame)
-            && self.last_frame == Some(frame.wrapping_add(1))
-        {
-            self.push_previous_frame(&p, host_ns, ts);
-            return Ok(());
+        let period = i64::try_from(self.cfg.period_ns).unwrap_or(i64::MAX);
+        // A sensor that restarts counts from 0, seconds back; one on PTP goes on ahead: a
+        // packet at most two periods behind the newest was held up on the way.
+        let behind_in_time = trusted
+            && self
+                .last_packet_ns
+                .is_some_and(|l| ts < l && l.saturating_sub(ts) <= period.saturating_mul(2));
+        let next_frame = self.last_frame.map(|f| f.wrapping_add(1)) == Some(frame);
+        // Where `udp_cnt` restarts with each frame, a packet of an older frame is numbered in
+        // its own frame: however late, counted against the open frame it would read as loss.
+        if self.frame_starts > 0 {
+            let frames_back = self.last_frame.map_or(0, |f| f.wrapping_sub(frame));
+            if (1..128).contains(&frames_back) && (behind_in_time || !trusted) {
+                if let Some(k) = self.closed.iter().position(|(f, _)| *f == Some(frame)) {
+                    return self.push_closed_frame(k, &p, host_ns, ts, damaged);
+                }
+                return match damaged {
+                    Some(e) => Err(e),
+                    None => {
+                        self.stats.late_dropped += 1;
+                        Ok(())
+                    }
+                };
+            }
         }
-        let before = self.udp;
-        let mut step = self.udp.step(u64::from(udp));
-        if step == SeqStep::Duplicate && !self.recent.contains(ts) {
-            // The number again at a new time: the counter restarted (a frame of fewer than
-            // 11 packets, a sensor restarted) or stands still; no copy.
-            self.udp.restart(u64::from(udp));
-            step = SeqStep::Jump;
-        }
-        // `udp_cnt` restarts at 0 where a frame starts; `frame_cnt` steps with it on the
-        // sensors that count frames.
-        let restart_at_0 = udp == 0 && step == SeqStep::Jump;
-        let frame_start =
-            restart_at_0 && self.last_frame.is_some_and(|f| frame == f.wrapping_add(1));
+        let count = self.udp.peek(udp);
+        let reorder = REORDER_PACKETS;
+        let arrival = match count {
+            // A frame's first packets lost: the next one's number is how many.
+            _ if self.frame_starts > 0
+                && next_frame
+                && udp < LEDGER_NUMBERS
+                && !matches!(count, Count::Next { .. }) =>
+            {
+                Arrival::FrameStart
+            }
+            Count::Next { lost } => Arrival::Next { lost },
+            Count::Lost { behind } if behind <= reorder => Arrival::Late { filled: true },
+            Count::Stray => Arrival::Late { filled: false },
+            Count::Seen { behind }
+                if behind <= reorder && (!trusted || self.recent.contains(ts)) =>
+            {
+                Arrival::Copy
+            }
+            Count::Seen { .. } if behind_in_time || !trusted => Arrival::Copy,
+            Count::Lost { .. } if behind_in_time || !trusted => Arrival::Stale { filled: true },
+            Count::Far if behind_in_time => Arrival::Stale { filled: false },
+            // The number again at a new time (the counter restarted: a frame of fewer than 11
+            // packets, a sensor restarted; or it stands still), or a jump.
+            _ if next_frame && udp < LEDGER_NUMBERS => Arrival::FrameStart,
+            // A damaged packet's counters never restart the count: the next good one decides.
+            _ if !trusted => Arrival::Copy,
+            _ => Arrival::Restart,
+        };
         let mut lost = 0;
         // A packet a little behind the latest was reordered on the way: it fills the gap its
         // successor counted, cuts nothing, and the stream goes on from the latest.
         let mut late = false;
-        match step {
-            SeqStep::Duplicate => {
-                self.stats.duplicates += 1;
-                return Ok(());
+        let mut frame_start = false;
+        match arrival {
+            Arrival::Copy => {
+                return match damaged {
+                    Some(e) => Err(e),
+                    None => {
+                        self.stats.duplicates += 1;
+                        Ok(())
+                    }
+                };
             }
-            SeqStep::Late => {
+            Arrival::Stale { filled } => {
+                if filled {
+                    self.udp.take(udp);
+                    self.stats.missing = self.stats.missing.saturating_sub(1);
+                }
+                return match damaged {
+                    Some(e) => Err(e),
+                    None => {
+                        self.stats.late_dropped += 1;
+                        Ok(())
+                    }
+                };
+            }
+            Arrival::Late { filled } => {
                 late = true;
-                self.unmiss();
+                self.udp.take(udp);
+                if filled {
+                    self.unmiss();
+                }
             }
-            SeqStep::Stray => late = true,
-            SeqStep::Next { lost: l } => {
+            Arrival::Next { lost: l } => {
+                self.udp.take(udp);
                 self.stats.missing += l;
                 lost = l;
             }
-            // A restart at 0 without a frame step: a sensor whose `frame_cnt` means nothing
-            // may restart `udp_cnt` with its frames; nothing is known lost.
-            SeqStep::Jump if restart_at_0 => {}
-            SeqStep::Jump => self.stats.discontinuities += 1,
+            Arrival::FrameStart => {
+                frame_start = true;
+                lost = u64::from(udp);
+                self.stats.missing += lost;
+                self.frame_starts = self.frame_starts.saturating_add(1);
+                // The open frame's numbers become the closed ones'; the oldest are forgotten.
+                self.closed.swap(0, 1);
+                std::mem::swap(&mut self.closed[0].1, &mut self.udp);
+                self.closed[0].0 = self.last_frame;
+                self.udp.start_lost_before(udp);
+            }
+            Arrival::Restart => {
+                self.udp.restart(udp);
+                self.closed[0].0 = None;
+                self.closed[1].0 = None;
+                // A restart at 0 without a frame step: a sensor whose `frame_cnt` means
+                // nothing may restart `udp_cnt` with its frames; nothing is known lost.
+                if udp != 0 {
+                    self.stats.discontinuities += 1;
+                }
+            }
         }
         self.recent.push(ts);
-        if frame_start {
-            self.frame_starts = self.frame_starts.saturating_add(1);
-            self.prev_frame = self.last_frame.map(|f| (f, before));
-        }
         if !late {
             self.last_frame = Some(frame);
         }
         if self.frame_starts >= 2 {
             self.facts.frame_cut = true;
+        }
+        if let Some(e) = damaged {
+            if self.open {
+                self.sweep.missing_packets += lost;
+            }
+            return Err(e);
         }
         let interval = p.time_interval_ns();
         let cut = if late {
@@ -486,11 +596,16 @@ impl LivoxStream {
         } else {
             self.time_cut(ts)
         };
+        // A restart already counted is one discontinuity, not two.
         let backwards = !late && self.last_packet_ns.is_some_and(|l| ts < l);
-        if backwards {
+        if backwards && !(arrival == Arrival::Restart && udp != 0) {
             self.stats.discontinuities += 1;
         }
-        if cut || backwards {
+        let forced = !(late || cut || backwards) && self.overfull(ts);
+        if forced {
+            self.stats.forced_cuts += 1;
+        }
+        if cut || backwards || forced {
             self.emit(on_sweep);
         }
         self.begin(host_ns, ts, u32::from(frame));
@@ -508,48 +623,118 @@ impl LivoxStream {
         Ok(())
     }
 
-    /// A point packet of the frame before the open one: its frame's last packets came after
-    /// the next frame's first. It is late, never a cut. Where sweeps follow the frames, its
-    /// points join its frame's sweep while that waits for its IMU samples, and are dropped
-    /// (counted) once it was handed over; on the period, they join the open sweep as any late
-    /// packet's do.
-    fn push_previous_frame(&mut self, p: &Sdk2Packet<'_>, host_ns: i64, ts: i64) {
-        let Some((frame, window)) = self.prev_frame.as_mut() else {
-            return;
+    /// An SDK2 IMU packet. A damaged one (`damaged`: its CRC failed) is numbered, so the next
+    /// does not count it missing, and then dropped; its counter never restarts the window,
+    /// as its time (under the CRC) cannot tell a copy from a restart.
+    fn push_sdk2_imu(
+        &mut self,
+        p: &Sdk2Packet<'_>,
+        ts: i64,
+        host_ns: i64,
+        damaged: Option<LivoxWireError>,
+    ) -> Result<(), LivoxWireError> {
+        let udp = u64::from(p.udp_cnt());
+        let trusted = damaged.is_none();
+        let step = if trusted {
+            self.imu_udp.step(udp)
+        } else {
+            self.imu_udp.step_within(udp)
         };
-        let frame = u32::from(*frame);
-        // The frame's tail that came (`Next`) tells its loss, counted now; a number far
-        // behind its latest (`Jump`) leaves the frame's window as it was.
-        let (filled, lost) = match window.step_within(u64::from(p.udp_cnt())) {
-            SeqStep::Duplicate if self.recent.contains(ts) => {
+        match step {
+            SeqStep::Duplicate if !trusted => {}
+            SeqStep::Duplicate if self.imu_recent.contains(ts) => {
                 self.stats.duplicates += 1;
-                return;
+                return Ok(());
             }
-            SeqStep::Late => (true, 0),
-            SeqStep::Next { lost } => (false, lost),
-            SeqStep::Duplicate | SeqStep::Stray | SeqStep::Jump => (false, 0),
+            // The number again at a new time: the counter restarted or stands still.
+            SeqStep::Duplicate => self.imu_udp.restart(udp),
+            SeqStep::Next { lost } => self.stats.imu_missing += lost,
+            SeqStep::Late => self.stats.imu_missing = self.stats.imu_missing.saturating_sub(1),
+            // A restart (the counter may restart at 0 with each frame): no loss known.
+            SeqStep::Jump | SeqStep::Stray => {}
+        }
+        if let Some(e) = damaged {
+            return Err(e);
+        }
+        self.imu_recent.push(ts);
+        self.stats.imu_packets += 1;
+        for i in 0..p.records() {
+            self.push_imu_record(p.record_bytes(i), ts, host_ns);
+        }
+        Ok(())
+    }
+
+    /// A point packet of one of the two frames before the open one (`k`: 0 the newest):
+    /// its frame's last packets came after the next frame's first. It is late, never a cut;
+    /// its number fills its frame's gap (once: a copy is a copy, however far behind) or
+    /// tells the frame's tail lost. Where sweeps follow the frames, its points join its
+    /// frame's sweep while that waits for its IMU samples; on the period, a packet of the
+    /// frame just closed joins the open sweep as any late packet's do; else it is dropped
+    /// (counted). A damaged one (`damaged`) only does the counting.
+    fn push_closed_frame(
+        &mut self,
+        k: usize,
+        p: &Sdk2Packet<'_>,
+        host_ns: i64,
+        ts: i64,
+        damaged: Option<LivoxWireError>,
+    ) -> Result<(), LivoxWireError> {
+        let (frame, ledger) = &mut self.closed[k];
+        let frame = frame.map_or(0, u32::from);
+        let udp = p.udp_cnt();
+        let (filled, lost) = match ledger.peek(udp) {
+            Count::Lost { .. } => (true, 0),
+            Count::Next { lost } => (false, lost),
+            Count::Stray => (false, 0),
+            Count::Seen { .. } => {
+                return match damaged {
+                    Some(e) => Err(e),
+                    None => {
+                        self.stats.duplicates += 1;
+                        Ok(())
+                    }
+                };
+            }
+            // Far ahead of the frame's numbers or before them: nothing to tell of its loss.
+            Count::Far => {
+                return match damaged {
+                    Some(e) => Err(e),
+                    None => {
+                        self.stats.late_dropped += 1;
+                        Ok(())
+                    }
+                };
+            }
         };
+        ledger.take(udp);
         self.recent.push(ts);
         self.stats.missing += lost;
-        let into_held = self.facts.frame_cut;
-        let sweep = if !into_held && self.open {
-            &mut self.sweep
-        } else if into_held && self.held_waiting && self.held.frame_id == frame {
-            &mut self.held
-        } else {
-            self.stats.late_dropped += 1;
-            if filled {
-                self.stats.missing = self.stats.missing.saturating_sub(1);
-            }
-            return;
-        };
         if filled {
             self.stats.missing = self.stats.missing.saturating_sub(1);
+        }
+        let into_held = self.facts.frame_cut;
+        let sweep = if k == 0 && !into_held && self.open {
+            &mut self.sweep
+        } else if k == 0 && into_held && self.held_waiting && self.held.frame_id == frame {
+            &mut self.held
+        } else {
+            return match damaged {
+                Some(e) => Err(e),
+                None => {
+                    self.stats.late_dropped += 1;
+                    Ok(())
+                }
+            };
+        };
+        if filled {
             sweep.missing_packets = sweep.missing_packets.saturating_sub(1);
         }
         sweep.missing_packets += lost;
+        if let Some(e) = damaged {
+            return Err(e);
+        }
         decode_sdk2(&self.decoder, p, ts, sweep);
-        sweep.packets += 1;
+        sweep.packets = sweep.packets.saturating_add(1);
         sweep.columns_count = sweep.columns_count.saturating_add(1);
         sweep.last_host_ns = sweep.last_host_ns.max(host_ns);
         self.stats.packets += 1;
@@ -559,6 +744,7 @@ impl LivoxStream {
         } else {
             self.open_end_ns = self.open_end_ns.max(end);
         }
+        Ok(())
     }
 
     fn push_sdk1(
@@ -590,10 +776,13 @@ impl LivoxStream {
             self.stats.duplicates += 1;
             return Ok(());
         }
-        let step = self
-            .cfg
-            .model
-            .map_or(4_167, LivoxModel::sdk1_point_interval_ns) as i64;
+        // The model's spacing, else the stream's; before it is learnt, the Horizon's (the
+        // shortest) bounds the reorder window, and no time gap counts.
+        let known = match self.cfg.model {
+            Some(m) => Some(m.sdk1_point_interval_ns() as i64),
+            None => self.sdk1_steps.median(),
+        };
+        let step = known.unwrap_or(4_167);
         let n = p.records();
         let mut lost = 0;
         // A packet a little older than the latest was reordered on the way (these packets
@@ -610,7 +799,7 @@ impl LivoxStream {
                 if ts < next - period {
                     self.stats.discontinuities += 1;
                 }
-            } else if period > 0 {
+            } else if period > 0 && known.is_some() {
                 let l = ((gap as f64) / (period as f64)).round() as u64;
                 if l < MAX_COUNTER_GAP {
                     self.stats.missing += l;
@@ -621,15 +810,32 @@ impl LivoxStream {
             }
         }
         if !late {
-            self.sdk1_next_ns = Some(ts.saturating_add(step * n as i64));
+            // Where the next packet is due is not known before the spacing is.
+            self.sdk1_next_ns = known.map(|step| ts.saturating_add(step * n as i64));
         }
         let backwards = !late && self.last_packet_ns.is_some_and(|l| ts < l);
         if backwards {
             // A clock that restarted (or a capture replayed again) may repeat times.
             self.recent.clear();
         }
+        if self.cfg.model.is_none() && !late {
+            // Consecutive packets are a packet's records apart; over a loss, a multiple of
+            // that, which the median outvotes.
+            if let Some(prev) = self.last_packet_ns.filter(|&l| ts > l) {
+                let per = (ts - prev) / self.sdk1_last_records.max(1) as i64;
+                if LEARNT_STEP_NS.contains(&per) {
+                    self.sdk1_steps.push(per);
+                }
+            }
+            self.sdk1_last_records = n;
+        }
         self.recent.push(ts);
-        if !late && (self.time_cut(ts) || backwards) {
+        let cut = !late && (self.time_cut(ts) || backwards);
+        let forced = !late && !cut && self.overfull(ts);
+        if forced {
+            self.stats.forced_cuts += 1;
+        }
+        if cut || forced {
             self.emit(on_sweep);
         }
         let newest = self.last_packet_ns;
@@ -682,6 +888,18 @@ impl LivoxStream {
         }
     }
 
+    /// Whether the open sweep is as long as a sweep may be: two periods (two of the default
+    /// at least, so a frame-cut sensor on a shorter period keeps its frames whole), or the
+    /// point cap, or as many packets (those with no points grow nothing else).
+    fn overfull(&self, ts: i64) -> bool {
+        let span = self.cfg.period_ns.max(DEFAULT_PERIOD_NS).saturating_mul(2);
+        self.open
+            && (ts.saturating_sub(self.sweep.device_time_ns)
+                >= i64::try_from(span).unwrap_or(i64::MAX)
+                || self.sweep.points.len() >= self.max_points
+                || self.sweep.packets as usize >= self.max_points)
+    }
+
     fn time_cut(&self, ts: i64) -> bool {
         self.open
             && ts.saturating_sub(self.sweep.device_time_ns)
@@ -722,7 +940,7 @@ impl LivoxStream {
     fn after_packet(&mut self, host_ns: i64, first_ns: i64, last_ns: i64) {
         self.open_end_ns = self.open_end_ns.max(last_ns);
         self.stats.packets += 1;
-        self.sweep.packets += 1;
+        self.sweep.packets = self.sweep.packets.saturating_add(1);
         self.sweep.columns_count = self.sweep.columns_count.saturating_add(1);
         self.sweep.last_host_ns = host_ns;
         self.last_packet_ns = Some(first_ns);
@@ -767,6 +985,52 @@ impl LivoxStream {
         self.stats.max_sweep_points = self.stats.max_sweep_points.max(n);
         self.facts.last_sweep_points = n;
         on_sweep(&mut self.held, &self.facts);
+    }
+}
+
+/// How a point packet's counters place it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Arrival {
+    /// Seen already: dropped.
+    Copy,
+    /// Further behind than reordering explains, within two periods: dropped, its gap (if
+    /// `filled`) no longer missing.
+    Stale { filled: bool },
+    /// Reordered on the way: joins the open sweep, its gap (if `filled`) no longer missing.
+    Late { filled: bool },
+    /// In order, `lost` skipped.
+    Next { lost: u64 },
+    /// A frame's first packet come, its number's worth before it lost.
+    FrameStart,
+    /// The counter restarted.
+    Restart,
+}
+
+/// The last record spacings of an SDK1 stream of no known model, ns.
+#[derive(Clone, Copy, Debug, Default)]
+struct LearntSpacing {
+    steps: [i64; 15],
+    len: usize,
+    next: usize,
+}
+
+impl LearntSpacing {
+    fn push(&mut self, step: i64) {
+        self.steps[self.next] = step;
+        self.next = (self.next + 1) % self.steps.len();
+        self.len = (self.len + 1).min(self.steps.len());
+    }
+
+    /// The median (the lower of two): a loss's longer step is outvoted while fewer than half
+    /// the steps kept span one.
+    fn median(&self) -> Option<i64> {
+        if self.len == 0 {
+            return None;
+        }
+        let mut s = self.steps;
+        let s = &mut s[..self.len];
+        s.sort_unstable();
+        Some(s[(self.len - 1) / 2])
     }
 }
 

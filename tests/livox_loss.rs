@@ -1,0 +1,370 @@
+//! Loss accounting on streams built with known losses, late packets, copies and damage: each
+//! packet sent is decoded, counted missing, counted late-dropped or counted a copy — once —
+//! and the sweeps are cut where the sensor's frames or the period say, never grown without
+//! bound.
+#![cfg(feature = "sim")]
+
+use ringscan::sensor::livox::model::LivoxModel;
+use ringscan::sensor::livox::sim::{
+    encode_sdk1_cartesian, encode_sdk2, encode_sdk2_imu, RawPoint, Sdk2Header,
+};
+use ringscan::sensor::livox::{LivoxConfig, LivoxStats, LivoxStream, Protocol};
+
+const T0: u64 = 1_714_564_800_000_000_000;
+/// Time between MID-360-like packets in these streams (96 records 5 µs apart).
+const P: u64 = 480_000;
+
+fn points(n: usize) -> Vec<RawPoint> {
+    (0..n)
+        .map(|i| RawPoint {
+            v: [1000 + i as i32, 0, 0],
+            reflectivity: 1,
+            tag: 0,
+        })
+        .collect()
+}
+
+/// An SDK2 point packet of 96 points.
+fn sdk2(udp: u16, frame: u8, ts: u64) -> Vec<u8> {
+    sdk2_n(udp, frame, ts, 96)
+}
+
+fn sdk2_n(udp: u16, frame: u8, ts: u64, n: usize) -> Vec<u8> {
+    let h = Sdk2Header {
+        time_interval: 4750,
+        udp_cnt: udp,
+        frame_cnt: frame,
+        data_type: 1,
+        time_type: 1,
+        timestamp_ns: ts,
+    };
+    encode_sdk2(&h, &points(n))
+}
+
+fn imu(udp: u16, ts: u64) -> Vec<u8> {
+    let h = Sdk2Header {
+        udp_cnt: udp,
+        time_type: 1,
+        timestamp_ns: ts,
+        ..Sdk2Header::default()
+    };
+    encode_sdk2_imu(&h, [0.0; 3], [0.0, 0.0, 1.0])
+}
+
+/// Flips a data byte: the CRC-32 (timestamp and data) fails, the counters are intact.
+fn damage(mut b: Vec<u8>) -> Vec<u8> {
+    let k = b.len() - 3;
+    b[k] ^= 0x10;
+    b
+}
+
+/// Per sweep (points, packets, missing packets, first device time, last point's time), and
+/// the counters.
+type Seen = Vec<(usize, u32, u64, i64, i64)>;
+
+fn run(model: Option<LivoxModel>, protocol: Protocol, packets: &[Vec<u8>]) -> (Seen, LivoxStats) {
+    let mut s = LivoxStream::new(LivoxConfig::new(model, protocol));
+    let mut out = Vec::new();
+    let mut keep = |sw: &mut ringscan::sweep::Sweep, _: &_| {
+        let end = sw.points.iter().map(|p| p.t).max().unwrap_or(0);
+        out.push((
+            sw.points.len(),
+            sw.packets,
+            sw.missing_packets,
+            sw.device_time_ns,
+            sw.device_time_ns + i64::from(end),
+        ));
+    };
+    for p in packets {
+        s.push(0, p, &mut keep);
+    }
+    s.finish(&mut keep);
+    (out, s.stats().clone())
+}
+
+fn mid360(packets: &[Vec<u8>]) -> (Seen, LivoxStats) {
+    run(Some(LivoxModel::Mid360), Protocol::Sdk2, packets)
+}
+
+fn hap(packets: &[Vec<u8>]) -> (Seen, LivoxStats) {
+    run(Some(LivoxModel::Hap), Protocol::Sdk2, packets)
+}
+
+/// HAP-like frames of `per` packets 1 ms apart (100: a frame a period), `udp_cnt` from 0 in each: (frame, udp) and
+/// the packet.
+fn frames(n: usize, per: u16) -> Vec<((u8, u16), Vec<u8>)> {
+    (0..n)
+        .flat_map(|f| (0..per).map(move |u| (f, u)))
+        .enumerate()
+        .map(|(k, (f, u))| ((f as u8, u), sdk2(u, f as u8, T0 + k as u64 * 1_000_000)))
+        .collect()
+}
+
+fn at(fs: &[((u8, u16), Vec<u8>)], frame: u8, udp: u16) -> usize {
+    fs.iter().position(|(id, _)| *id == (frame, udp)).unwrap()
+}
+
+fn total(seen: &Seen) -> usize {
+    seen.iter().map(|s| s.0).sum()
+}
+
+/// The CRC-32 covers the timestamp and the data, not the counters: a damaged packet is
+/// malformed and a CRC failure, once — not missing too. (Before: each also counted missing,
+/// for point and IMU packets alike.)
+#[test]
+fn a_damaged_packet_is_malformed_not_missing() {
+    let mut ps: Vec<Vec<u8>> = (0..40u16)
+        .map(|k| sdk2(k, 0, T0 + u64::from(k) * P))
+        .collect();
+    ps[12] = damage(ps[12].clone());
+    ps[30] = damage(ps[30].clone());
+    // Sent, lost on the way: 20; damaged right after: 21.
+    ps.remove(20);
+    ps[20] = damage(ps[20].clone());
+    let (seen, st) = mid360(&ps);
+    assert_eq!((st.malformed, st.crc_failures), (3, 3));
+    assert_eq!((st.missing, st.discontinuities, st.duplicates), (1, 0, 0));
+    assert_eq!(st.packets, 36);
+    assert_eq!(total(&seen), 36 * 96);
+    assert_eq!(seen.iter().map(|s| s.2).sum::<u64>(), 1);
+
+    // A damaged packet's counter never restarts the count, whatever it says.
+    let mut ps: Vec<Vec<u8>> = (0..20u16)
+        .map(|k| sdk2(k, 0, T0 + u64::from(k) * P))
+        .collect();
+    ps.insert(10, damage(sdk2(40_000, 9, T0 + 10 * P)));
+    let (_, st) = mid360(&ps);
+    assert_eq!((st.malformed, st.missing, st.discontinuities), (1, 0, 0));
+
+    // IMU packets likewise.
+    let mut ps: Vec<Vec<u8>> = (0..20u16)
+        .map(|k| imu(k, T0 + u64::from(k) * 5_000_000))
+        .collect();
+    ps[7] = damage(ps[7].clone());
+    let (_, st) = mid360(&ps);
+    assert_eq!((st.malformed, st.crc_failures), (1, 1));
+    assert_eq!((st.imu_missing, st.imu_packets), (0, 19));
+}
+
+/// SDK1 packets (`datatype` 0: 100 records) 1 ms apart, `drop` not sent.
+fn mid40(n: u64, drop: &[u64]) -> Vec<Vec<u8>> {
+    (0..n)
+        .filter(|k| !drop.contains(k))
+        .map(|k| {
+            let mut b = vec![0u8; 18 + 100 * 13];
+            b[0] = 5; // version
+            b[1] = 1; // slot
+            b[2] = 1; // id
+            b[8] = 1; // PTP time
+            b[9] = 0; // Cartesian, 100 records of 13 bytes
+            b[10..18].copy_from_slice(&(T0 + k * 1_000_000).to_le_bytes());
+            for i in 0..100 {
+                let o = 18 + 13 * i;
+                b[o..o + 4].copy_from_slice(&(2000 + i as i32).to_le_bytes());
+                b[o + 12] = 5;
+            }
+            b
+        })
+        .collect()
+}
+
+/// SDK1 packets of 96 records (`datatype` 2) `period` apart, `drop` not sent.
+fn sdk1_type2(n: u64, period: u64, drop: &[u64]) -> Vec<Vec<u8>> {
+    (0..n)
+        .filter(|k| !drop.contains(k))
+        .map(|k| encode_sdk1_cartesian(1, T0 + k * period, &points(96)))
+        .collect()
+}
+
+/// SDK1 without `--model`: the packet spacing is the stream's. A Mid-40 (100 records 10 µs
+/// apart: a packet a millisecond), a Mid-70 (96 records: 960 µs) and a Horizon (96 records
+/// 4.167 µs apart) each count the packets they lost, no more. (Before: with the Horizon's
+/// spacing assumed, every Mid-40 and Mid-70 packet counted one missing.)
+#[test]
+fn sdk1_without_a_model_counts_loss_at_the_stream_s_spacing() {
+    let sdk1 = |ps: &[Vec<u8>]| run(None, Protocol::Sdk1, ps);
+    let (seen, st) = sdk1(&mid40(300, &[50, 120, 121, 200, 201, 202]));
+    assert_eq!((st.missing, st.discontinuities), (6, 0));
+    assert_eq!(total(&seen), 294 * 100);
+    let (_, st) = sdk1(&sdk1_type2(300, 960_000, &[30, 31, 32, 100]));
+    assert_eq!((st.missing, st.discontinuities), (4, 0));
+    let (_, st) = sdk1(&sdk1_type2(300, 400_032, &[40, 41]));
+    assert_eq!((st.missing, st.discontinuities), (2, 0));
+    // A model named still sets the spacing.
+    let (_, st) = run(
+        Some(LivoxModel::Mid40),
+        Protocol::Sdk1,
+        &mid40(100, &[10, 60]),
+    );
+    assert_eq!(st.missing, 2);
+}
+
+/// A packet further behind than reordering explains (30 packets, 14 ms), or of a frame two
+/// frames back, is late: dropped and counted once in `late_dropped`, its gap no longer
+/// missing, the sweeps those of the stream without it. (Before: a counter restart: 29 or 20
+/// missing, two discontinuities, a cut.) A sensor that restarts (counters and time go back
+/// seconds) is still a discontinuity, one.
+#[test]
+fn a_packet_far_behind_is_late_not_a_restart() {
+    let ps: Vec<Vec<u8>> = (0..300u16)
+        .map(|k| sdk2(k, 0, T0 + u64::from(k) * P))
+        .collect();
+    let mut without = ps.clone();
+    let late = without.remove(100);
+    let (want, _) = mid360(&without);
+    let mut order = without.clone();
+    order.insert(130, late);
+    let (got, st) = mid360(&order);
+    assert_eq!(
+        (
+            st.late_dropped,
+            st.missing,
+            st.discontinuities,
+            st.duplicates
+        ),
+        (1, 0, 0, 0)
+    );
+    let strip = |s: &Seen| s.iter().map(|w| (w.0, w.1, w.3)).collect::<Vec<_>>();
+    assert_eq!(strip(&got), strip(&want));
+
+    // HAP frames of 100 packets: frame 0's 31st packet comes during frame 2.
+    let fs = frames(5, 100);
+    let mut order: Vec<Vec<u8>> = fs.iter().map(|(_, b)| b.clone()).collect();
+    let k = at(&fs, 0, 30);
+    let late = order.remove(k);
+    let (want, _) = hap(&order);
+    order.insert(at(&fs, 2, 10), late);
+    let (got, st) = hap(&order);
+    assert_eq!((st.late_dropped, st.missing, st.discontinuities), (1, 0, 0));
+    assert_eq!(strip(&got), strip(&want));
+
+    // Restarted: counters from 0 or 7, device time from power-on.
+    for first in [0u16, 7] {
+        let mut ps: Vec<Vec<u8>> = (0..150u16)
+            .map(|k| sdk2(k, 0, T0 + u64::from(k) * P))
+            .collect();
+        ps.extend((0..150u16).map(|k| sdk2(first + k, 0, 5_000_000_000 + u64::from(k) * P)));
+        let (seen, st) = mid360(&ps);
+        assert_eq!(
+            (st.discontinuities, st.late_dropped, st.missing),
+            (1, 0, 0),
+            "from {first}"
+        );
+        assert_eq!(total(&seen), 300 * 96);
+    }
+}
+
+/// Packets of the frame just closed that come more than 10 of its packets behind its
+/// newest: their gap is un-counted (once), and a copy of one is a copy — counted, never
+/// decoded twice — whether the frame's sweep was handed over or is waiting for its IMU
+/// samples. (Before: the gap stayed missing, and a copy joined the waiting sweep again.)
+#[test]
+fn a_closed_frame_s_packets_far_behind_count_once() {
+    let fs = frames(5, 100);
+    let base: Vec<Vec<u8>> = fs.iter().map(|(_, b)| b.clone()).collect();
+    // Frame 1's 21st packet after frame 2's 6th; a copy of frame 1's 51st after frame 2's 9th.
+    let mut order = base.clone();
+    let late = order.remove(at(&fs, 1, 20));
+    order.insert(at(&fs, 2, 5), late);
+    order.insert(at(&fs, 2, 8) + 1, base[at(&fs, 1, 50)].clone());
+    let (_, st) = hap(&order);
+    assert_eq!(
+        (
+            st.missing,
+            st.late_dropped,
+            st.duplicates,
+            st.discontinuities
+        ),
+        (0, 1, 1, 0)
+    );
+    // With IMU samples that stop at the start: frame 1's sweep waits while frame 2 comes,
+    // and the late packet joins it; the copy does not.
+    let with_imu = |ps: &[Vec<u8>]| {
+        let mut v = vec![imu(0, T0)];
+        v.extend_from_slice(ps);
+        hap(&v)
+    };
+    let (want, _) = with_imu(&base);
+    let (got, st) = with_imu(&order);
+    assert_eq!(
+        (
+            st.missing,
+            st.late_dropped,
+            st.duplicates,
+            st.discontinuities
+        ),
+        (0, 0, 1, 0)
+    );
+    assert_eq!(total(&got), total(&want));
+    assert_eq!(
+        got.iter().map(|s| s.0).collect::<Vec<_>>(),
+        want.iter().map(|s| s.0).collect::<Vec<_>>()
+    );
+}
+
+/// A frame's first packets lost: the next one's `udp_cnt` says how many, and the frame still
+/// starts a sweep of its own. Reordered behind the second, the first is late. (Before: a
+/// discontinuity and nothing missing.)
+#[test]
+fn a_frame_s_first_packets_lost_are_missing() {
+    let fs = frames(5, 100);
+    let base: Vec<Vec<u8>> = fs.iter().map(|(_, b)| b.clone()).collect();
+    let (want, _) = hap(&base);
+    let lost = [at(&fs, 2, 0), at(&fs, 3, 0), at(&fs, 3, 1)];
+    let order: Vec<Vec<u8>> = (0..base.len())
+        .filter(|k| !lost.contains(k))
+        .map(|k| base[k].clone())
+        .collect();
+    let (got, st) = hap(&order);
+    assert_eq!((st.missing, st.discontinuities), (3, 0));
+    assert_eq!(got.len(), want.len());
+    assert_eq!(got.iter().map(|s| s.2).collect::<Vec<_>>(), [0, 0, 1, 2, 0]);
+    // The first behind the second.
+    let mut order = base.clone();
+    order.swap(at(&fs, 3, 0), at(&fs, 3, 1));
+    let (got, st) = hap(&order);
+    assert_eq!((st.missing, st.discontinuities, st.late_dropped), (0, 0, 0));
+    assert_eq!(total(&got), total(&want));
+}
+
+/// A sweep never grows without bound: a timestamp that stands still (the period never ends)
+/// is cut at the point cap (2^22 points for a MID-360 on 100 ms), a `frame_cnt` that stands
+/// still at two periods; each cut counted. (Before: one sweep of everything.)
+#[test]
+fn a_sweep_is_cut_when_its_counters_or_time_stand_still() {
+    let mut s = LivoxStream::new(LivoxConfig::new(Some(LivoxModel::Mid360), Protocol::Sdk2));
+    let mut sizes = Vec::new();
+    for k in 0..45_000u32 {
+        s.push(0, &sdk2(k as u16, 0, T0), &mut |sw, _| {
+            sizes.push(sw.points.len())
+        });
+    }
+    s.finish(&mut |sw, _| sizes.push(sw.points.len()));
+    assert_eq!(sizes.len(), 2, "{sizes:?}");
+    assert!(
+        sizes[0] >= 1 << 22 && sizes[0] < (1 << 22) + 96,
+        "{sizes:?}"
+    );
+    assert_eq!(sizes.iter().sum::<usize>(), 45_000 * 96);
+    assert_eq!(s.stats().forced_cuts, 1);
+
+    // Packets of no points, the same time: cut at as many packets.
+    let mut s = LivoxStream::new(LivoxConfig::new(Some(LivoxModel::Mid360), Protocol::Sdk2));
+    let mut packets = Vec::new();
+    let empty = sdk2_n(0, 0, T0, 0);
+    for k in 0..((1u32 << 22) + 10) {
+        let mut b = empty.clone();
+        b[7..9].copy_from_slice(&(k as u16).to_le_bytes());
+        s.push(0, &b, &mut |sw, _| packets.push(sw.packets));
+    }
+    s.finish(&mut |sw, _| packets.push(sw.packets));
+    assert_eq!(packets, [1 << 22, 10]);
+
+    // HAP: frames 0–2 of 100 packets 1 ms apart, then frame 3 never ends (1 s).
+    let mut ps: Vec<Vec<u8>> = frames(3, 100).into_iter().map(|(_, b)| b).collect();
+    ps.extend((0..1000u64).map(|k| sdk2(k as u16, 3, T0 + (300 + k) * 1_000_000)));
+    let (seen, st) = hap(&ps);
+    assert_eq!(st.forced_cuts, 4, "{seen:?}");
+    assert!(seen.iter().all(|s| s.4 - s.3 < 200_000_000), "{seen:?}");
+    assert_eq!(total(&seen), 1300 * 96);
+}
