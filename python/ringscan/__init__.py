@@ -357,7 +357,9 @@ class Source:
                     break
                 yield Sweep(raw)
             s = reader.summary()
-            self._summary = json.loads(s) if s is not None else None
+            # None when close() ended the iteration early: the last complete one's stays.
+            if s is not None:
+                self._summary = json.loads(s)
         finally:
             reader.close()
             self._readers.remove(reader)
@@ -376,7 +378,8 @@ class Source:
         return self._summary
 
     def close(self) -> None:
-        """Stops any iteration in progress."""
+        """Stops any iteration in progress, from any thread, without waiting: an iteration
+        waiting for a sweep ends (as at the end of the capture) within 100 ms."""
         for r in list(self._readers):
             r.close()
 
@@ -462,8 +465,10 @@ class Decoder:
 class Listener:
     """Live sensors (``ringscan listen``): sockets on their own thread, a bounded queue of
     datagrams and one of sweeps, each dropping and counting when full. Iterate it for
-    sweeps; ``stop()`` (or Ctrl-C in the loop, or ``duration``) ends it, then ``summary``
-    is ``listen --json``'s (``receive.queue_dropped``, ``receive.sweeps_dropped``...)."""
+    sweeps; ``stop()`` (or leaving a ``with`` block, Ctrl-C in the loop, or ``duration``)
+    ends it, then ``summary`` is ``listen --json``'s (``receive.queue_dropped``,
+    ``receive.sweeps_dropped``...). Iterate from one thread at a time; ``stop()`` may come
+    from any thread."""
 
     def __init__(self, native):
         self._native = native
@@ -473,13 +478,22 @@ class Listener:
         while True:
             raw = self._native.next()
             if raw is None:
-                s = self._native.summary()
-                self.summary = json.loads(s) if s else None
+                self._take_summary()
                 return
             yield Sweep(raw)
 
+    def _take_summary(self) -> None:
+        s = self._native.summary()
+        self.summary = json.loads(s) if s else None
+
     def stop(self) -> None:
-        self._native.stop()
+        """Stops listening and returns once the listening thread has ended: the ``out`` MCAP
+        file is complete and ``summary`` set. Raises the thread's error (e.g. the file could
+        not be written) unless the iteration already did. Sweeps still queued can be iterated."""
+        try:
+            self._native.stop()
+        finally:
+            self._take_summary()
 
     def __enter__(self) -> "Listener":
         return self
@@ -493,7 +507,9 @@ def listen(sensors: Union[str, Sequence[str]], calib=None, model: Optional[str] 
            interface: str = "0.0.0.0", recv_buffer: Optional[int] = None, api_port: int = 80,
            queue: int = 16, out: Optional[PathLike] = None) -> Listener:
     """Receives and decodes live sensors: ``sensors`` as the CLI's ``--sensor IP[:PORT]``.
-    ``out``: also record to this MCAP file. ``queue``: sweeps held for a slow consumer."""
+    ``out``: also record to this MCAP file (complete once :meth:`Listener.stop` returned, or
+    the ``with`` block or the iteration ended). ``queue``: sweeps held for a slow consumer
+    (at most 65536: the queue's slots are allocated up front); ``duration``: seconds."""
     return Listener(_ringscan.Listener(
         _strings(sensors, "sensors"), model, _paths(calib, "calib"), _number(duration, "duration"),
         multicast, interface, recv_buffer, api_port, queue,

@@ -137,6 +137,18 @@ def decode(
     calib: Sequence[str] = ...,
     topics: Sequence[str] = ...,
     threads: int = 1,
+    start: Optional[float] = None,
+    end: Optional[float] = None,
+    port: Optional[int] = None,
+    cut_angle: float = 0.0,
+    min_range: Optional[float] = None,
+    max_range: Optional[float] = None,
+    fields_all: bool = False,
+    crc: Optional[bool] = None,
+    dual_return_threshold: Optional[float] = None,
+    fov: Optional[Tuple[float, float]] = None,
+    integration_ms: Optional[float] = None,
+    read_ahead: bool = False,
 ) -> str: ...
 def cli_main(argv: List[str]) -> int: ...
 def version() -> str: ...

@@ -6,12 +6,18 @@ Each task decodes one capture or bag with one decoding thread and writes, under 
 * ``points/<name>.parquet`` (``parquet=True``): one row per point, columns ``sensor``,
   ``sweep``, ``timestamp_ns`` (the sweep's), ``x``, ``y``, ``z``, ``intensity``, ``t``, ``ring``,
   ``return``; one row group per sweep batch, so memory stays bounded whatever the capture's size;
-* ``mcap/<name>.mcap`` (``mcap=True``): what ``ringscan decode --out`` writes.
+* ``mcap/<name>.mcap`` (``mcap=True``): what ``ringscan decode --out`` writes, with the same
+  decoding options, so it holds the Parquet's points.
+
+``<name>`` is the capture's path relative to the listed directory or prefix (or to the
+captures' common folder), folders kept: ``day1/lidar.pcap`` and ``day2/lidar.pcap`` give
+``points/day1/lidar.pcap.parquet`` and ``points/day2/lidar.pcap.parquet``.
 
 and returns one row of the summary table: the capture, ``status`` (``ok`` or ``error``), the
 error's class and message (the command line's), and the ``--json`` summary's figures (sweeps,
 points, packets decoded / dropped / malformed / missing, duration, sensors). A capture that
-fails is a row with its error: never skipped silently; its partial outputs are removed.
+fails is a row with its error: never skipped silently; none of its outputs is published (they
+are moved under ``out`` only once every one of them is written).
 
 ::
 
@@ -94,6 +100,51 @@ def _name(capture: str) -> str:
     return base if base else "capture"
 
 
+def _components(path: str) -> List[str]:
+    """A capture's path as folder names, its scheme first for a URI (captures of two schemes
+    share no folder)."""
+    if _is_uri(path):
+        scheme, rest = path.split("://", 1)
+        parts = [scheme + ":"] + rest.split("/")
+    else:
+        parts = os.path.abspath(path).split(os.sep)
+    return [p for p in parts if p not in ("", ".")]
+
+
+def output_names(captures: Sequence[str], root: Optional[str] = None) -> Dict[str, str]:
+    """Each capture's output name (``/``-separated): its path relative to ``root`` (the listed
+    directory or prefix), else to the captures' common folder, folders kept. Outputs named by
+    the file name alone would overwrite each other for ``day1/lidar.pcap`` and
+    ``day2/lidar.pcap``. Raises ``ValueError`` when two captures get one name (one capture
+    listed twice)."""
+    parts = [(c, _components(c)) for c in captures]
+    if root is not None:
+        common = _components(root)
+    else:
+        common = None
+        for _c, p in parts:
+            folder = p[:-1]
+            if common is None:
+                common = folder
+            else:
+                n = 0
+                while n < min(len(common), len(folder)) and common[n] == folder[n]:
+                    n += 1
+                common = common[:n]
+        common = common or []
+    names: Dict[str, str] = {}
+    seen: Dict[str, str] = {}
+    for c, p in parts:
+        # A root that is the capture itself (a single file listed) leaves its file name.
+        rel = p[len(common):] if p[: len(common)] == common and len(p) > len(common) else p[-1:]
+        name = "/".join(rel) or "capture"
+        if name in seen:
+            raise ValueError(f"{seen[name]} and {c}: both would be written as {name!r}")
+        seen[name] = c
+        names[c] = name
+    return names
+
+
 def _fetch(capture: str, scratch: str) -> str:
     """A local path of ``capture`` (object-store inputs are copied to ``scratch``)."""
     if not _is_uri(capture):
@@ -120,21 +171,33 @@ def _make_dir_uri(uri: str) -> None:
     fs.create_dir(path, recursive=True)
 
 
-def _publish(local: str, out: str, sub: str) -> str:
-    """Moves a finished output to ``out/sub/`` (uploads when ``out`` is a URI)."""
+def _publish(local: str, out: str, dest: str) -> str:
+    """Moves a finished output to ``out/dest`` (``dest`` ``/``-separated; uploads when
+    ``out`` is a URI)."""
     if _is_uri(out):
         import pyarrow.fs as pafs
 
-        folder = f"{out.rstrip('/')}/{sub}"
-        _make_dir_uri(folder)
-        dest = f"{folder}/{os.path.basename(local)}"
-        pafs.copy_files(local, dest)
-        return dest
-    d = os.path.join(out, sub)
-    os.makedirs(d, exist_ok=True)
-    dest = os.path.join(d, os.path.basename(local))
-    shutil.move(local, dest)
-    return dest
+        uri = f"{out.rstrip('/')}/{dest}"
+        _make_dir_uri(uri.rsplit("/", 1)[0])
+        pafs.copy_files(local, uri)
+        return uri
+    path = os.path.join(out, *dest.split("/"))
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    shutil.move(local, path)
+    return path
+
+
+def _unpublish(out: str, published: str) -> None:
+    try:
+        if _is_uri(out):
+            import pyarrow.fs as pafs
+
+            fs, path = pafs.FileSystem.from_uri(published)
+            fs.delete_file(path)
+        else:
+            os.remove(published)
+    except OSError:
+        pass
 
 
 def _write_parquet(src, path: str) -> None:
@@ -199,11 +262,13 @@ def decode_one(
     parquet: bool = True,
     mcap: bool = False,
     options: Optional[Dict[str, Any]] = None,
+    name: Optional[str] = None,
 ) -> Dict[str, Any]:
-    """Decodes one capture (one task): writes its outputs under ``out``, returns its summary
-    row. Errors of the capture (unreadable, hostile, bad options) are a row with
-    ``status="error"``; anything else (a full disk, a bug) is raised, so the engine retries or
-    reports the task."""
+    """Decodes one capture (one task): writes its outputs under ``out`` as ``name`` (see
+    :func:`output_names`; default: the capture's file name), returns its summary row. Errors
+    of the capture (unreadable, hostile, bad options) are a row with ``status="error"``;
+    anything else (a full disk, a bug) is raised, so the engine retries or reports the task.
+    Either way nothing of the capture is left published unless every output was written."""
     import json
 
     import ringscan
@@ -214,36 +279,38 @@ def decode_one(
     row["capture"] = capture
     started = time.perf_counter()
     scratch = tempfile.mkdtemp(prefix="ringscan-fleet-")
-    name = _name(capture)
+    name = name or _name(capture)
+    published: List[str] = []
     try:
         local = _fetch(capture, scratch)
+        # One core per task: the capture is read on the decoding thread unless asked. The
+        # Source checks the options once, for both outputs.
+        src = ringscan.open(local, **{"read_ahead": False, **options})
         summary = None
+        ready: List[tuple] = []
         if parquet:
-            # One core per task: the capture is read on the decoding thread unless asked.
-            src = ringscan.open(local, **{"read_ahead": False, **options})
-            pq_local = os.path.join(scratch, name + ".parquet")
+            pq_local = os.path.join(scratch, "points.parquet")
             _write_parquet(src, pq_local)
             summary = src.summary
             if summary.get("no_sensor"):
                 # As `ringscan decode` (and the MCAP output below): nothing decoded is an
                 # error of the capture, and nothing is published.
                 raise ringscan.DecodeError(f"{local}: no sensor found: {summary['no_sensor']}")
-            row["parquet"] = _publish(pq_local, out, "points")
+            ready.append(("parquet", pq_local, f"points/{name}.parquet"))
         if mcap:
-            mc_local = os.path.join(scratch, name + ".mcap")
-            summary = json.loads(
-                _ringscan.decode(
-                    local,
-                    mc_local,
-                    options.get("model"),
-                    ringscan._paths(options.get("calib"), "calib"),
-                    ringscan._strings(options.get("topics"), "topics"),
-                    1,
-                )
+            mc_local = os.path.join(scratch, "capture.mcap")
+            mc_summary = json.loads(
+                _ringscan.decode(local, mc_local, threads=1, read_ahead=src._read_ahead, **src._kwargs)
             )
-            row["mcap"] = _publish(mc_local, out, "mcap")
+            # With both outputs the row stays the Parquet's (the same decode, same options).
+            summary = summary or mc_summary
+            ready.append(("mcap", mc_local, f"mcap/{name}.mcap"))
+        for column, local_out, dest in ready:
+            published.append(_publish(local_out, out, dest))
+            row[column] = published[-1]
+        published = []
         if summary is None:
-            summary = ringscan.open(local, **options).info()
+            summary = src.info()
         p = summary["packets"]
         row.update(
             status="ok",
@@ -259,6 +326,9 @@ def decode_one(
     except (ringscan.RingscanError, TypeError, ValueError) as e:
         row.update(status="error", error_type=type(e).__name__, error=str(e), parquet=None, mcap=None)
     finally:
+        # Outputs published before a later one failed to publish (the failure is raised).
+        for p in published:
+            _unpublish(out, p)
         shutil.rmtree(scratch, ignore_errors=True)
     row["decode_s"] = time.perf_counter() - started
     return row
@@ -272,8 +342,8 @@ def _table(rows: Iterable[Dict[str, Any]]):
 
 
 def _pool_task(args) -> Dict[str, Any]:
-    capture, out, parquet, mcap, options = args
-    return decode_one(capture, out, parquet=parquet, mcap=mcap, options=options)
+    capture, name, out, parquet, mcap, options = args
+    return decode_one(capture, out, parquet=parquet, mcap=mcap, options=options, name=name)
 
 
 def decode_pool(
@@ -284,12 +354,15 @@ def decode_pool(
     parquet: bool = True,
     mcap: bool = False,
     options: Optional[Dict[str, Any]] = None,
+    names: Optional[Dict[str, str]] = None,
 ):
     """The fleet on one workstation: a ``multiprocessing`` pool of ``processes`` (spawned)
-    processes, one capture per task. Returns the summary table (``pyarrow.Table``)."""
+    processes, one capture per task. ``names``: each capture's output name (default
+    :func:`output_names`). Returns the summary table (``pyarrow.Table``)."""
     import multiprocessing as mp
 
-    work = [(c, out, parquet, mcap, options) for c in captures]
+    names = names or output_names(captures)
+    work = [(c, names[c], out, parquet, mcap, options) for c in captures]
     with mp.get_context("spawn").Pool(processes or os.cpu_count() or 1, maxtasksperchild=8) as pool:
         rows = list(pool.imap_unordered(_pool_task, work, chunksize=1))
     return _table(rows)
@@ -304,22 +377,27 @@ def decode_ray(
     options: Optional[Dict[str, Any]] = None,
     max_retries: int = 3,
     memory_per_task: Optional[int] = None,
+    names: Optional[Dict[str, str]] = None,
 ):
     """The fleet on Ray Data: one task per capture (``num_cpus=1`` each: one decoding thread),
     as many at once as the cluster has CPUs. Connects to the running Ray instance, or starts a
     local one (``ray.init()`` first to choose). A capture's own errors come back as rows; a
     task lost to a worker crash or a node failure is retried ``max_retries`` times by Ray, then
-    its error is raised. Returns the summary table (``pyarrow.Table``)."""
+    its error is raised. ``names``: each capture's output name (default :func:`output_names`).
+    Returns the summary table (``pyarrow.Table``)."""
     import ray
 
+    names = names or output_names(captures)
     if not ray.is_initialized():
         ray.init()
     ctx = ray.data.DataContext.get_current()
     ctx.enable_progress_bars = False
-    ds = ray.data.from_items([{"capture": c} for c in captures], override_num_blocks=max(1, len(captures)))
+    ds = ray.data.from_items(
+        [{"capture": c, "name": names[c]} for c in captures], override_num_blocks=max(1, len(captures))
+    )
 
     def task(row: Dict[str, Any]) -> Dict[str, Any]:
-        return decode_one(row["capture"], out, parquet=parquet, mcap=mcap, options=options)
+        return decode_one(row["capture"], out, parquet=parquet, mcap=mcap, options=options, name=row["name"])
 
     remote_args: Dict[str, Any] = {"num_cpus": 1, "max_retries": max_retries}
     if memory_per_task:
@@ -330,11 +408,14 @@ def decode_ray(
 
 def decode(captures, out: str, *, engine: str = "pool", workers: Optional[int] = None, **kw):
     """``captures``: a list, or one directory / prefix to list. ``engine``: ``"ray"`` or
-    ``"pool"``. Also writes the table to ``out/summary.parquet`` (``out`` a path or a URI)."""
+    ``"pool"``. Outputs are named by :func:`output_names` (relative to the directory listed).
+    Also writes the table to ``out/summary.parquet`` (``out`` a path or a URI)."""
     import pyarrow.parquet as pq
 
     if isinstance(captures, (str, os.PathLike)):
-        captures = list_captures(os.fspath(captures))
+        root = os.fspath(captures)
+        captures = list_captures(root)
+        kw.setdefault("names", output_names(captures, root))
     if engine == "ray":
         if workers:
             import ray
@@ -370,7 +451,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     for i in a.inputs:
         captures += list_captures(i)
     options = {k: v for k, v in (("calib", a.calib), ("model", a.model)) if v}
-    table = decode(captures, a.out, engine=a.engine, workers=a.workers, parquet=not a.no_parquet, mcap=a.mcap, options=options)
+    # One input: outputs named relative to it, as decode() does; several: to their common folder.
+    inputs = a.inputs[0] if len(a.inputs) == 1 else captures
+    table = decode(inputs, a.out, engine=a.engine, workers=a.workers, parquet=not a.no_parquet, mcap=a.mcap, options=options)
     failed = 0
     for r in table.to_pylist():
         if r["status"] == "ok":

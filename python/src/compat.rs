@@ -9,8 +9,7 @@
 //! the raw one, as velodyne_decoder's `unpackPoint` gives it).
 
 use std::path::PathBuf;
-use std::sync::mpsc::{self, Receiver, SyncSender};
-use std::sync::Mutex;
+use std::sync::mpsc::{self, SyncSender};
 
 use pyo3::exceptions::PyRuntimeError;
 use pyo3::prelude::*;
@@ -25,7 +24,7 @@ use ringscan::sensor::DecodeOptions;
 use ringscan::source::bag::BagOptions;
 use ringscan::time::complete_toh;
 
-use crate::{next_item, to_py_err, Buffer, ErrKind, Msg};
+use crate::{next_item, to_py_err, Buffer, ErrKind, Inbox, Msg};
 
 /// The longest a frame may last (capture time), velodyne_decoder's constant.
 const MAX_FRAME_NS: i64 = 300_000_000;
@@ -550,7 +549,7 @@ fn run(s: &Settings, tx: &SyncSender<Msg<Frame>>) -> Result<(), (ErrKind, String
 /// Frames of a Velodyne pcap, velodyne_decoder's way.
 #[pyclass(module = "ringscan._ringscan")]
 pub struct CompatReader {
-    rx: Mutex<Option<Receiver<Msg<Frame>>>>,
+    inbox: Inbox<Msg<Frame>>,
 }
 
 #[pymethods]
@@ -626,14 +625,14 @@ impl CompatReader {
             })
             .map_err(|e| PyRuntimeError::new_err(format!("starting the decoding thread: {e}")))?;
         Ok(Self {
-            rx: Mutex::new(Some(rx)),
+            inbox: Inbox::new(rx),
         })
     }
 
     /// `(host_s, device_s, Buffer of n x 8 float32, n)`, or `None` at the end.
     #[allow(clippy::type_complexity)]
     fn next(&self, py: Python<'_>) -> PyResult<Option<(f64, f64, Py<Buffer>, usize)>> {
-        match next_item(py, &self.rx, None)? {
+        match next_item(py, &self.inbox, None)? {
             Some(f) => Ok(Some((
                 f.host_s,
                 f.device_s,
@@ -645,9 +644,7 @@ impl CompatReader {
     }
 
     fn close(&self) {
-        if let Ok(mut g) = self.rx.lock() {
-            *g = None;
-        }
+        self.inbox.close();
     }
 }
 

@@ -8,8 +8,9 @@
 //! the next.
 
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, SyncSender};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, TryLockError};
 use std::time::Duration;
 
 use pyo3::create_exception;
@@ -231,38 +232,121 @@ type SweepMsg = Box<(
     Option<ringscan::cli::session::SensorDesc>,
 )>;
 
-/// The next item from a decoding thread: `None` at its end (the summary kept in `summary`),
-/// its error raised; the channel is closed after either.
+/// The receiving end of a thread's channel, shared by the Python threads that hold its
+/// object. `recv` waits with the GIL released but holds the lock, and must re-take the GIL
+/// before it lets go of it: so no other caller may wait for the lock while holding the GIL
+/// (both would hang). A second `next()` is refused, and `close()` only sets a flag when the
+/// lock is busy; the waiting `recv` sees it within its 100 ms poll.
+pub(crate) struct Inbox<T> {
+    rx: Mutex<Option<Receiver<T>>>,
+    closed: AtomicBool,
+    /// Set when Ctrl-C interrupts a wait: a listener's sockets stop with its consumer.
+    stop_on_interrupt: Option<Arc<AtomicBool>>,
+}
+
+/// What [`Inbox::recv`] got.
+pub(crate) enum Recv<T> {
+    Msg(T),
+    /// The inbox was closed, or had already ended.
+    Finished,
+    /// Every sender is gone (the thread ended); the inbox is now finished.
+    Disconnected,
+}
+
+impl<T: Send> Inbox<T> {
+    pub(crate) fn new(rx: Receiver<T>) -> Self {
+        Self {
+            rx: Mutex::new(Some(rx)),
+            closed: AtomicBool::new(false),
+            stop_on_interrupt: None,
+        }
+    }
+
+    pub(crate) fn stopping_on_interrupt(mut self, stop: Arc<AtomicBool>) -> Self {
+        self.stop_on_interrupt = Some(stop);
+        self
+    }
+
+    /// Waits for the next message with the GIL released, waking up to let Ctrl-C through.
+    /// The receiver moves into the wait and back (it is `Send`, not `Sync`).
+    pub(crate) fn recv(&self, py: Python<'_>, what: &str) -> PyResult<Recv<T>> {
+        let mut guard = match self.rx.try_lock() {
+            Ok(g) => g,
+            // Only a panic inside `recv` poisons it, and the slot is still consistent.
+            Err(TryLockError::Poisoned(p)) => p.into_inner(),
+            Err(TryLockError::WouldBlock) => {
+                return Err(PyRuntimeError::new_err(format!(
+                    "{what}: next() is already waiting on another thread; iterate it from one thread at a time"
+                )))
+            }
+        };
+        loop {
+            if self.closed.load(Ordering::Acquire) {
+                *guard = None;
+            }
+            let Some(rx) = guard.take() else {
+                return Ok(Recv::Finished);
+            };
+            let (rx, got) = py.allow_threads(move || {
+                let got = rx.recv_timeout(Duration::from_millis(100));
+                (rx, got)
+            });
+            match got {
+                Ok(m) if !self.closed.load(Ordering::Acquire) => {
+                    *guard = Some(rx);
+                    return Ok(Recv::Msg(m));
+                }
+                Ok(_) => return Ok(Recv::Finished),
+                Err(RecvTimeoutError::Timeout) => {
+                    *guard = Some(rx);
+                    if let Err(e) = py.check_signals() {
+                        if let Some(stop) = &self.stop_on_interrupt {
+                            stop.store(true, Ordering::Relaxed);
+                        }
+                        return Err(e);
+                    }
+                }
+                Err(RecvTimeoutError::Disconnected) => return Ok(Recv::Disconnected),
+            }
+        }
+    }
+
+    /// Ends the inbox without waiting: dropping the receiver tells the thread to stop.
+    pub(crate) fn close(&self) {
+        self.closed.store(true, Ordering::Release);
+        match self.rx.try_lock() {
+            Ok(mut g) => *g = None,
+            Err(TryLockError::Poisoned(p)) => *p.into_inner() = None,
+            // A `recv` in progress drops it at its next poll.
+            Err(TryLockError::WouldBlock) => {}
+        }
+    }
+}
+
+/// The next item from a decoding thread: `None` at its end (the summary kept in `summary`)
+/// or once closed, its error raised; the channel is closed after either.
 pub(crate) fn next_item<T: Send>(
     py: Python<'_>,
-    rx: &Mutex<Option<Receiver<Msg<T>>>>,
+    inbox: &Inbox<Msg<T>>,
     summary: Option<&Mutex<Option<String>>>,
 ) -> PyResult<Option<T>> {
-    let mut guard = rx
-        .lock()
-        .map_err(|_| PyRuntimeError::new_err("the reader is used from two threads"))?;
-    if guard.is_none() {
-        return Ok(None);
-    }
-    match recv(py, &mut guard)? {
-        Some(Msg::Item(t)) => Ok(Some(t)),
-        Some(Msg::End(s)) => {
-            *guard = None;
+    match inbox.recv(py, "the reader")? {
+        Recv::Msg(Msg::Item(t)) => Ok(Some(t)),
+        Recv::Msg(Msg::End(s)) => {
+            inbox.close();
             if let Some(Ok(mut slot)) = summary.map(Mutex::lock) {
                 *slot = Some(s);
             }
             Ok(None)
         }
-        Some(Msg::Error(kind, msg)) => {
-            *guard = None;
+        Recv::Msg(Msg::Error(kind, msg)) => {
+            inbox.close();
             Err(to_py_err(kind, msg))
         }
-        None => {
-            *guard = None;
-            Err(PyRuntimeError::new_err(
-                "the decoding thread stopped without an answer (a bug: please report it)",
-            ))
-        }
+        Recv::Finished => Ok(None),
+        Recv::Disconnected => Err(PyRuntimeError::new_err(
+            "the decoding thread stopped without an answer (a bug: please report it)",
+        )),
     }
 }
 
@@ -365,7 +449,7 @@ pub(crate) fn decode_args(
 /// A capture or bag being decoded on a thread of its own.
 #[pyclass(module = "ringscan._ringscan")]
 pub struct Reader {
-    rx: Mutex<Option<Receiver<Msg<SweepMsg>>>>,
+    inbox: Inbox<Msg<SweepMsg>>,
     summary: Mutex<Option<String>>,
     /// Where the sweeps' arrays go back for the decoding thread to reuse.
     pool: Arc<BufferPool>,
@@ -405,26 +489,6 @@ fn read_thread(args: &DecodeArgs, pool: Arc<BufferPool>, tx: &SyncSender<Msg<Swe
         // A closed channel: the Python side is gone; stop decoding.
         if tx.send(msg).is_err() || stop {
             return;
-        }
-    }
-}
-
-/// Waits for the next message with the GIL released, waking up to let Ctrl-C through. The
-/// receiver moves into the wait and back (it is `Send`, not `Sync`).
-pub(crate) fn recv<T: Send>(py: Python<'_>, slot: &mut Option<Receiver<T>>) -> PyResult<Option<T>> {
-    loop {
-        let Some(rx) = slot.take() else {
-            return Ok(None);
-        };
-        let (rx, got) = py.allow_threads(move || {
-            let got = rx.recv_timeout(Duration::from_millis(100));
-            (rx, got)
-        });
-        *slot = Some(rx);
-        match got {
-            Ok(m) => return Ok(Some(m)),
-            Err(RecvTimeoutError::Timeout) => py.check_signals()?,
-            Err(RecvTimeoutError::Disconnected) => return Ok(None),
         }
     }
 }
@@ -474,7 +538,7 @@ impl Reader {
         args.read_ahead = read_ahead;
         let pool = Arc::new(BufferPool::default());
         Ok(Self {
-            rx: Mutex::new(Some(spawn_reader(args, Arc::clone(&pool))?)),
+            inbox: Inbox::new(spawn_reader(args, Arc::clone(&pool))?),
             summary: Mutex::new(None),
             pool,
         })
@@ -482,7 +546,7 @@ impl Reader {
 
     /// The next sweep, or `None` at the end; raises the decoding error, if any.
     fn next(&self, py: Python<'_>) -> PyResult<Option<RawSweep>> {
-        match next_item(py, &self.rx, Some(&self.summary))? {
+        match next_item(py, &self.inbox, Some(&self.summary))? {
             Some(b) => {
                 let (rs, desc) = *b;
                 Ok(Some(raw_sweep(py, rs, desc, Some(&self.pool))?))
@@ -496,11 +560,10 @@ impl Reader {
         self.summary.lock().ok().and_then(|s| s.clone())
     }
 
-    /// Stops decoding (the thread ends at its next sweep).
+    /// Stops decoding (the thread ends at its next sweep); a `next()` waiting on another
+    /// thread returns `None` within 100 ms.
     fn close(&self) {
-        if let Ok(mut g) = self.rx.lock() {
-            *g = None;
-        }
+        self.inbox.close();
     }
 }
 
@@ -526,9 +589,11 @@ fn info(
 }
 
 /// `ringscan decode --json` of a capture or bag into an MCAP file `out` (or no file), as a
-/// JSON string: the fleet's per-capture output.
+/// JSON string: the fleet's per-capture output. Takes `Reader`'s decoding options, so an MCAP
+/// holds the points a `Reader` with the same options gives.
 #[pyfunction]
-#[pyo3(signature = (path, out=None, model=None, calib=vec![], topics=vec![], threads=1))]
+#[pyo3(signature = (path, out=None, model=None, calib=vec![], topics=vec![], threads=1, start=None, end=None, port=None, cut_angle=0.0, min_range=None, max_range=None, fields_all=false, crc=None, dual_return_threshold=None, fov=None, integration_ms=None, read_ahead=false))]
+#[allow(clippy::too_many_arguments)]
 fn decode(
     py: Python<'_>,
     path: PathBuf,
@@ -537,13 +602,39 @@ fn decode(
     calib: Vec<String>,
     topics: Vec<String>,
     threads: usize,
+    start: Option<f64>,
+    end: Option<f64>,
+    port: Option<u16>,
+    cut_angle: f64,
+    min_range: Option<f32>,
+    max_range: Option<f32>,
+    fields_all: bool,
+    crc: Option<bool>,
+    dual_return_threshold: Option<f32>,
+    fov: Option<(f64, f64)>,
+    integration_ms: Option<f64>,
+    read_ahead: bool,
 ) -> PyResult<String> {
     let mut args = decode_args(
-        path, model, calib, topics, None, None, None, 0.0, None, None, false, None, None, None,
-        None,
+        path,
+        model,
+        calib,
+        topics,
+        start,
+        end,
+        port,
+        cut_angle,
+        min_range,
+        max_range,
+        fields_all,
+        crc,
+        dual_return_threshold,
+        fov,
+        integration_ms,
     );
     args.out = out;
     args.threads = threads.max(1);
+    args.read_ahead = read_ahead;
     run_decode(py, &args)
 }
 

@@ -7,8 +7,8 @@
 use std::net::{Ipv4Addr, SocketAddrV4};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{self, Receiver};
-use std::sync::{Arc, Mutex};
+use std::sync::mpsc;
+use std::sync::{Arc, Mutex, PoisonError};
 
 use pyo3::exceptions::PyRuntimeError;
 use pyo3::prelude::*;
@@ -27,7 +27,7 @@ use ringscan::point::Point;
 use ringscan::registration::odometry::Odometry as CoreOdometry;
 use ringscan::sink::mcap::{create_file, SensorId, SensorInfo, SweepMsg};
 
-use crate::{decode_args, kind_of, raw_sweep, recv, to_py_err, Buffer, ErrKind, RawSweep};
+use crate::{decode_args, kind_of, raw_sweep, to_py_err, Buffer, ErrKind, Inbox, RawSweep, Recv};
 
 /// Points from bytes of 24-byte records (any alignment).
 fn points_of(bytes: &[u8]) -> PyResult<Vec<Point>> {
@@ -141,15 +141,22 @@ impl Decoder {
     }
 }
 
-/// How a listener's thread ended: the summary (JSON) or the error.
-type Outcome = Arc<Mutex<Option<Result<String, (ErrKind, String)>>>>;
+/// How a listener's thread ended: the summary (JSON), or the error (no kind: it panicked).
+type Outcome = Result<String, (Option<ErrKind>, String)>;
+
+/// The largest `queue`: a sync channel allocates all its slots up front, so a huge bound is
+/// memory taken at once (or an abort), not a limit.
+const MAX_QUEUE: usize = 1 << 16;
 
 /// `listen` on a thread of its own, its sweeps through a bounded channel.
 #[pyclass(module = "ringscan._ringscan")]
 pub struct Listener {
-    rx: Mutex<Option<Receiver<TappedSweep>>>,
+    inbox: Inbox<TappedSweep>,
     stop: Arc<AtomicBool>,
-    done: Outcome,
+    done: Arc<Mutex<Option<Outcome>>>,
+    /// Whether the thread's error reached Python: it is raised once, by `next()` or `stop()`.
+    raised: AtomicBool,
+    /// Locked only without the GIL: `finish` holds it while it joins.
     thread: Mutex<Option<std::thread::JoinHandle<()>>>,
 }
 
@@ -183,15 +190,26 @@ impl Listener {
             })
         };
         let duration = match duration {
-            Some(d) if d.is_finite() && d > 0.0 => Some(std::time::Duration::from_secs_f64(d)),
-            Some(d) => {
-                return Err(to_py_err(
-                    ErrKind::Usage,
-                    format!("duration {d}: expected a positive number of seconds"),
-                ))
-            }
             None => None,
+            Some(d) => Some(
+                // NaN, infinities and values past `Duration`'s range are refused here.
+                std::time::Duration::try_from_secs_f64(d)
+                    .ok()
+                    .filter(|d| !d.is_zero())
+                    .ok_or_else(|| {
+                        to_py_err(
+                            ErrKind::Usage,
+                            format!("duration {d}: expected a positive number of seconds"),
+                        )
+                    })?,
+            ),
         };
+        if queue > MAX_QUEUE {
+            return Err(to_py_err(
+                ErrKind::Usage,
+                format!("queue {queue}: expected at most {MAX_QUEUE} sweeps"),
+            ));
+        }
         let d = DecodeArgs {
             session: SessionOptions {
                 model,
@@ -233,56 +251,38 @@ impl Listener {
             .spawn(move || {
                 let r = listen_run(&args)
                     .map(|o| o.json.to_string())
-                    .map_err(|e| (kind_of(&e), e.to_string()));
-                if let Ok(mut g) = done_t.lock() {
-                    *g = Some(r);
-                }
+                    .map_err(|e| (Some(kind_of(&e)), e.to_string()));
+                *done_t.lock().unwrap_or_else(PoisonError::into_inner) = Some(r);
+                // `args` holds the first sender: dropped after `done` is set, so a receiver
+                // that sees the channel disconnected finds the outcome (or a panic).
             })
             .map_err(|e| PyRuntimeError::new_err(format!("starting the listener: {e}")))?;
         Ok(Self {
-            rx: Mutex::new(Some(rx)),
+            inbox: Inbox::new(rx).stopping_on_interrupt(stop.clone()),
             stop,
             done,
+            raised: AtomicBool::new(false),
             thread: Mutex::new(Some(thread)),
         })
     }
 
-    /// The next sweep, or `None` once listening stopped (then `summary()`).
+    /// The next sweep, or `None` once listening stopped (then `summary()`); raises the
+    /// listening thread's error.
     fn next(&self, py: Python<'_>) -> PyResult<Option<RawSweep>> {
-        let mut guard = self
-            .rx
-            .lock()
-            .map_err(|_| PyRuntimeError::new_err("the listener is used from two threads"))?;
-        if guard.is_none() {
-            return Ok(None);
-        }
-        match recv(py, &mut guard) {
-            Ok(Some((rs, desc))) => Ok(Some(raw_sweep(py, rs, desc, None)?)),
-            Ok(None) => {
-                *guard = None;
-                self.join(py);
-                match self.done.lock().ok().and_then(|mut g| g.take()) {
-                    Some(Err((k, m))) => Err(to_py_err(k, m)),
-                    Some(Ok(s)) => {
-                        if let Ok(mut g) = self.done.lock() {
-                            *g = Some(Ok(s));
-                        }
-                        Ok(None)
-                    }
-                    None => Ok(None),
-                }
-            }
-            Err(e) => {
-                // Ctrl-C in the consumer: stop the sockets too.
-                self.stop.store(true, Ordering::Relaxed);
-                Err(e)
+        match self.inbox.recv(py, "the listener")? {
+            Recv::Msg((rs, desc)) => Ok(Some(raw_sweep(py, rs, desc, None)?)),
+            Recv::Disconnected | Recv::Finished => {
+                self.finish(py)?;
+                Ok(None)
             }
         }
     }
 
-    /// Asks the listener to stop (the summary follows once `next()` returned `None`).
-    fn stop(&self) {
+    /// Stops listening and waits for the thread to end, the MCAP file (if any) finished;
+    /// raises the thread's error unless `next()` did. Sweeps still queued stay for `next()`.
+    fn stop(&self, py: Python<'_>) -> PyResult<()> {
         self.stop.store(true, Ordering::Relaxed);
+        self.finish(py)
     }
 
     /// The `listen --json` summary (a JSON string) once stopped, else `None`.
@@ -295,12 +295,41 @@ impl Listener {
 }
 
 impl Listener {
-    fn join(&self, py: Python<'_>) {
-        let handle = self.thread.lock().ok().and_then(|mut g| g.take());
-        if let Some(h) = handle {
-            py.allow_threads(move || {
-                let _ = h.join();
-            });
+    /// Waits for the listening thread to end, then raises its error (once). The GIL is
+    /// released for the whole wait, lock included: a second caller waits for the first's join.
+    fn finish(&self, py: Python<'_>) -> PyResult<()> {
+        py.allow_threads(|| {
+            let mut handle = self.thread.lock().unwrap_or_else(PoisonError::into_inner);
+            if let Some(h) = handle.take() {
+                let panic = h.join().err();
+                let mut done = self.done.lock().unwrap_or_else(PoisonError::into_inner);
+                if done.is_none() {
+                    let why = panic
+                        .as_ref()
+                        .and_then(|p| {
+                            p.downcast_ref::<&str>()
+                                .map(|s| s.to_string())
+                                .or_else(|| p.downcast_ref::<String>().cloned())
+                        })
+                        .unwrap_or_default();
+                    *done = Some(Err((
+                        None,
+                        format!(
+                            "the listening thread stopped without a result ({why}): a bug, please report it"
+                        ),
+                    )));
+                }
+            }
+        });
+        let done = self.done.lock().unwrap_or_else(PoisonError::into_inner);
+        match done.as_ref() {
+            Some(Err((kind, msg))) if !self.raised.swap(true, Ordering::AcqRel) => {
+                Err(match kind {
+                    Some(k) => to_py_err(*k, msg.clone()),
+                    None => PyRuntimeError::new_err(msg.clone()),
+                })
+            }
+            _ => Ok(()),
         }
     }
 }
@@ -439,7 +468,8 @@ impl Odometry {
         stamp_ns: i64,
     ) -> PyResult<Bound<'py, PyDict>> {
         let pts = points_of(points)?;
-        let step = self.inner.register_points(&pts, stamp_ns);
+        let inner = &mut self.inner;
+        let step = py.allow_threads(move || inner.register_points(&pts, stamp_ns));
         let m = step.world_from_sensor.to_homogeneous();
         let rows: Vec<f64> = (0..4)
             .flat_map(|r| (0..4).map(move |c| (r, c)))
@@ -532,6 +562,7 @@ impl McapWriter {
     #[pyo3(signature = (sensor, points, timestamp_ns, log_time_ns=None))]
     fn write_sweep(
         &mut self,
+        py: Python<'_>,
         sensor: usize,
         points: &[u8],
         timestamp_ns: u64,
@@ -543,23 +574,25 @@ impl McapWriter {
             .get(sensor)
             .ok_or_else(|| to_py_err(ErrKind::Usage, format!("sensor {sensor}: not added")))?;
         let sink = self.open()?;
-        sink.write_sweep(
-            id,
-            &SweepMsg {
-                log_time_ns: log_time_ns.unwrap_or(timestamp_ns),
-                timestamp_ns,
-                points: &pts,
-            },
-        )
+        py.allow_threads(move || {
+            sink.write_sweep(
+                id,
+                &SweepMsg {
+                    log_time_ns: log_time_ns.unwrap_or(timestamp_ns),
+                    timestamp_ns,
+                    points: &pts,
+                },
+            )
+        })
         .map_err(|e| to_py_err(ErrKind::Decode, e.to_string()))
     }
 
     /// Finishes the file; returns the messages per topic as a JSON string.
-    fn close(&mut self) -> PyResult<String> {
+    fn close(&mut self, py: Python<'_>) -> PyResult<String> {
         match self.sink.take() {
             Some(s) => {
-                let summary = s
-                    .finish()
+                let summary = py
+                    .allow_threads(move || s.finish())
                     .map_err(|e| to_py_err(ErrKind::Decode, e.to_string()))?;
                 Ok(serde_json::json!({"path": self.path.display().to_string(), "topics": summary.messages}).to_string())
             }

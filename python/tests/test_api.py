@@ -11,6 +11,9 @@
 
 from __future__ import annotations
 
+import json
+import os
+import signal
 import socket
 import struct
 import subprocess
@@ -221,3 +224,124 @@ def test_pandas_and_numpy_views():
     pd = pytest.importorskip("pandas", reason="SKIP: pandas is not installed")
     df = sweep.to_pandas()
     assert list(df.columns) == list(ringscan.POINT_DTYPE.names) and len(df) == len(sweep)
+
+
+def run_child(code: str, timeout: float = 60) -> str:
+    """Runs ``code`` in a child interpreter: a hang there (a deadlock) is a timeout, not a
+    stuck test run."""
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=timeout)
+    assert r.returncode == 0, r.stderr
+    return r.stdout
+
+
+def test_close_from_another_thread_ends_a_waiting_iteration(tmp_path):
+    """A ``Source`` waiting for its first sweep (its calibration a FIFO nobody writes yet) is
+    closed from the main thread: ``close()`` returns at once and the iteration ends.
+    ``next()`` holds the reader's lock while it waits without the GIL, so a ``close()`` that
+    waited for the lock with the GIL held hung both threads."""
+    fifo = tmp_path / "calib.yaml"
+    os.mkfifo(fifo)
+    code = f"""
+import os, threading, time, ringscan
+src = ringscan.open({str(DEMO)!r}, calib={str(fifo)!r})
+got = []
+t = threading.Thread(target=lambda: got.extend(src), daemon=True)
+t.start()
+time.sleep(0.5)
+t0 = time.monotonic()
+src.close()
+closed = time.monotonic() - t0
+t.join(timeout=2)
+print(closed < 1, not t.is_alive(), got == [], src.summary is None)
+# The decoding thread's read of the FIFO returns (empty), so it ends too.
+os.close(os.open({str(fifo)!r}, os.O_WRONLY))
+"""
+    assert run_child(code, timeout=30).split() == ["True"] * 4
+
+
+def test_listener_used_from_two_threads():
+    """A second ``next()`` while one waits is an error (not a hang), and ``stop()`` from
+    another thread ends the waiting iteration."""
+    off = free_port_offset()
+    code = f"""
+import threading, time, ringscan
+live = ringscan.listen(["127.0.0.1:{2368 + off}"])
+got = []
+t = threading.Thread(target=lambda: got.extend(live), daemon=True)
+t.start()
+time.sleep(0.5)
+try:
+    live._native.next()
+    print("no-error")
+except RuntimeError as e:
+    print("another-thread" if "another thread" in str(e) else repr(e))
+t0 = time.monotonic()
+live.stop()
+t.join(timeout=2)
+print(time.monotonic() - t0 < 2, not t.is_alive(), live.summary["stop"] == "stopped by the caller")
+"""
+    assert run_child(code, timeout=30).split() == ["another-thread", "True", "True", "True"]
+
+
+def test_leaving_the_with_block_finishes_the_recording(tmp_path):
+    """``stop()`` (and the end of a ``with`` block) returns once the listening thread has ended:
+    the MCAP file has its footer and summary, and ``summary`` is set, even when the loop is
+    left after the first sweep."""
+    from mcap.reader import make_reader
+
+    off = free_port_offset()
+    out = tmp_path / "live.mcap"
+    replay = subprocess.Popen([sys.executable, "-m", "ringscan", "replay", str(DEMO), "--to", "127.0.0.1", "--port-offset", str(off), "--rate", "1", "--per-source-loopback"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        with ringscan.listen([f"127.0.0.1:{2368 + off}"], out=out, duration=30) as live:
+            for sweep in live:
+                assert len(sweep) > 0
+                break
+        assert live.summary is not None and live.summary["stop"] == "stopped by the caller"
+        assert live.summary["sweeps"] >= 1
+        with open(out, "rb") as f:
+            summary = make_reader(f).get_summary()
+        assert summary is not None
+        assert sum(summary.statistics.channel_message_counts.values()) >= 1
+    finally:
+        replay.kill()
+        replay.wait()
+    # Nothing received: no file (as `listen`), no temporary file left, the summary still set.
+    quiet = tmp_path / "quiet"
+    quiet.mkdir()
+    with ringscan.listen([f"127.0.0.1:{2368 + off}"], out=quiet / "none.mcap") as live:
+        pass
+    assert live.summary is not None and list(quiet.iterdir()) == []
+
+
+@pytest.mark.parametrize("kwargs", [dict(duration=1e20), dict(duration=float("nan")), dict(duration=float("inf")), dict(duration=0), dict(duration=-1), dict(queue=10**9)])
+def test_listen_bad_duration_or_queue_is_a_usage_error(kwargs):
+    with pytest.raises(ringscan.UsageError, match="duration|queue"):
+        ringscan.listen(["127.0.0.1:1"], **kwargs)
+
+
+def test_ctrl_c_ends_the_command_line(tmp_path):
+    """``python -m ringscan`` runs the command line without the GIL: Python's own SIGINT
+    handler would only set a flag nobody reads, so Ctrl-C must end it as it ends ``ringscan``;
+    ``listen`` still catches it and finishes its run."""
+    off = free_port_offset()
+
+    def interrupt(p, timeout):
+        time.sleep(1.5)
+        p.send_signal(signal.SIGINT)
+        try:
+            return p.communicate(timeout=timeout)[0]
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.communicate()
+            pytest.fail(f"{p.args[3]} did not stop on SIGINT")
+
+    lst = subprocess.Popen([sys.executable, "-m", "ringscan", "listen", "--sensor", f"127.0.0.1:{2368 + off}", "--json"], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    # A replay that would take minutes (a tenth of real time, looped).
+    rep = subprocess.Popen([sys.executable, "-m", "ringscan", "replay", str(DEMO), "--to", "127.0.0.1", "--port-offset", str(off), "--rate", "0.1", "--loop", "100"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        out = interrupt(lst, 10)
+        assert lst.returncode == 0 and json.loads(out)["stop"] == "SIGINT"
+    finally:
+        interrupt(rep, 5)
+    assert rep.returncode != 0

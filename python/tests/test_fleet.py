@@ -179,3 +179,78 @@ def test_a_capture_with_no_sensor_is_an_error_row(tmp_path):
         assert "no sensor found: no datagram was read" in row["error"], row
         assert row["parquet"] is None and row["mcap"] is None
         assert not any(p.is_file() for p in out.rglob("*")) if out.exists() else True
+
+
+def test_same_named_captures_in_two_folders_keep_their_own_outputs(tmp_path):
+    """``day1/lidar.pcap`` and ``day2/lidar.pcap``: outputs are named by the path under the
+    listed folder, so neither overwrites the other's Parquet or MCAP."""
+    demo = (REPO / "fixtures" / "demo-vlp16.pcap").read_bytes()
+    root = tmp_path / "drives"
+    (root / "day1").mkdir(parents=True)
+    (root / "day2").mkdir()
+    (root / "day1" / "lidar.pcap").write_bytes(demo)
+    # A different capture of the same name: the first half of the demo's records.
+    recs = [pos for pos, _h, _p in records(demo)]
+    (root / "day2" / "lidar.pcap").write_bytes(demo[: recs[len(recs) // 2]])
+    out = tmp_path / "out"
+    table = fleet.decode(str(root), str(out), engine="pool", workers=2, mcap=True)
+    rows = {r["capture"]: r for r in table.to_pylist()}
+    assert len(rows) == 2
+    for day in ("day1", "day2"):
+        r = rows[str(root / day / "lidar.pcap")]
+        assert r["status"] == "ok", r
+        assert r["parquet"] == str(out / "points" / day / "lidar.pcap.parquet")
+        assert r["mcap"] == str(out / "mcap" / day / "lidar.pcap.mcap")
+        assert pq.read_table(r["parquet"]).num_rows == r["points"]
+        assert sum(len(d) // s for _t, s, d in next(iter(mcap_clouds(r["mcap"]).values()))) == r["points"]
+    assert rows[str(root / "day1" / "lidar.pcap")]["points"] > rows[str(root / "day2" / "lidar.pcap")]["points"]
+    # A list without a root: named under the captures' common folder; a capture listed twice
+    # would overwrite itself and is refused.
+    caps = [str(root / "day1" / "lidar.pcap"), str(root / "day2" / "lidar.pcap")]
+    assert fleet.output_names(caps) == {caps[0]: "day1/lidar.pcap", caps[1]: "day2/lidar.pcap"}
+    assert fleet.output_names(caps[:1]) == {caps[0]: "lidar.pcap"}
+    with pytest.raises(ValueError, match="both would be written"):
+        fleet.output_names([caps[0], caps[0]])
+
+
+def records(data: bytes):
+    import struct
+
+    pos = 24
+    while pos + 16 <= len(data):
+        incl = struct.unpack_from("<I", data, pos + 8)[0]
+        yield pos, data[pos : pos + 16], data[pos + 16 : pos + 16 + incl]
+        pos += 16 + incl
+
+
+def test_a_failed_mcap_publishes_no_parquet(tmp_path, monkeypatch):
+    """Parquet written, then the MCAP step fails: the row is an error and nothing is
+    published under ``out`` (outputs move there only once all of them are written)."""
+    from ringscan import _ringscan
+
+    def failing_decode(*args, **kwargs):
+        raise ringscan.DecodeError("writing the MCAP: no space left on device")
+
+    monkeypatch.setattr(_ringscan, "decode", failing_decode)
+    out = tmp_path / "out"
+    row = fleet.decode_one(str(REPO / "fixtures" / "demo-vlp16.pcap"), str(out), parquet=True, mcap=True)
+    assert (row["status"], row["error_type"]) == ("error", "DecodeError"), row
+    assert row["parquet"] is None and row["mcap"] is None
+    assert not any(p.is_file() for p in out.rglob("*")) if out.exists() else True
+
+
+def test_mcap_output_takes_every_decoding_option(tmp_path):
+    """With ``min_range`` (and the other decoding options), the MCAP holds the Parquet's
+    points: the options reach both decodes."""
+    demo = str(REPO / "fixtures" / "demo-vlp16.pcap")
+    full = fleet.decode_one(demo, str(tmp_path / "full"), parquet=True, mcap=False)
+    row = fleet.decode_one(demo, str(tmp_path / "out"), parquet=True, mcap=True, options={"min_range": 5.0, "cut_angle": 90.0})
+    assert row["status"] == "ok", row
+    assert 0 < row["points"] < full["points"]
+    assert pq.read_table(row["parquet"]).num_rows == row["points"]
+    ((_topic, sweeps),) = mcap_clouds(row["mcap"]).items()
+    assert sum(len(d) // s for _t, s, d in sweeps) == row["points"]
+    assert len(sweeps) == row["sweeps"]
+    # An option the decode refuses is the row's error, for either output.
+    bad = fleet.decode_one(demo, str(tmp_path / "bad"), parquet=False, mcap=True, options={"fields": "some"})
+    assert (bad["status"], bad["error_type"]) == ("error", "ValueError"), bad
