@@ -1,7 +1,9 @@
 //! The Ouster stream on encoded packets: every kind of bad packet is a counted drop (never a
 //! panic), frames are cut on `frame_id` across its wrap, a late packet of the previous frame
 //! is still taken (one-frame reorder window), older ones are counted, invalid columns are
-//! counted as missing, an `init_id` change starts an epoch, IMU packets come out in SI units,
+//! counted as missing, an `init_id` change starts an epoch (a corrupt one is a CRC failure),
+//! a frame counter that starts over restarts the stream, frames lost whole are missing
+//! columns, a far-ahead packet costs no genuine frame, IMU packets come out in SI units,
 //! the real zone-monitor packet's damaged copies are counted drops and its queue is bounded.
 //! Expected numbers come from the packets the test builds, not from the decoder.
 
@@ -414,4 +416,285 @@ fn zone_monitor_packets_are_checked_and_bad_ones_counted() {
     assert_eq!(s.stats().zone_packets, (MAX_ZONE_QUEUE + 44) as u64);
     assert_eq!(s.stats().zone_dropped, 44);
     assert_eq!(zones(&mut s).len(), MAX_ZONE_QUEUE);
+}
+
+/// Pushes `packets` with host times `host[i]`, then finishes.
+fn run_at(s: &mut OusterStream, packets: &[(i64, Vec<u8>)]) -> Vec<Sweep> {
+    let mut out = Vec::new();
+    for (host, p) in packets {
+        s.push(*host, p, &mut |sw, _| out.push(sw.clone()));
+    }
+    s.finish(&mut |sw, _| out.push(sw.clone()));
+    out
+}
+
+fn frames_of(g: &Gen, frames: &[u32], init_id: u32) -> Vec<Vec<u8>> {
+    frames
+        .iter()
+        .flat_map(|&f| (0..PER_FRAME).map(move |k| g.packet(f, k, init_id, &[])))
+        .collect()
+}
+
+/// A sensor that reboots without a new init_id (LEGACY packets carry none) counts its frames
+/// from 0 again: the stream starts anew there (one discontinuity), instead of dropping every
+/// packet as late until the counter passes the old frames again. FUSA's 32-bit counter alike.
+#[test]
+fn a_frame_counter_that_starts_over_is_a_restart_not_late_packets() {
+    for (profile, before) in [
+        (Profile::Legacy, 5_000u32),
+        (Profile::Rng19Rfl8Sig16Nir16, 20_000),
+        (Profile::FusaRng15Rfl8Nir8Dual, 1_000_000_000),
+    ] {
+        let mut info = info(profile);
+        if profile == Profile::Legacy {
+            info.init_id = 0;
+        }
+        let g = Gen {
+            enc: OusterEncoder::new(&info),
+            serial: info.serial,
+        };
+        let frames = [before, before + 1, before + 2, 0, 1, 2];
+        let mut s = stream(&info);
+        let sweeps = run(&mut s, &frames_of(&g, &frames, 77));
+        let st = s.stats();
+        assert_eq!(
+            sweeps.iter().map(|s| s.frame_id).collect::<Vec<_>>(),
+            frames,
+            "{profile:?} {st:?}"
+        );
+        assert!(
+            sweeps.iter().all(|s| s.points.len() == W * H),
+            "{profile:?}"
+        );
+        assert_eq!((st.late, st.discontinuities), (0, 1), "{profile:?}");
+        assert_eq!((st.missing_columns, st.epochs), (0, 0), "{profile:?}");
+    }
+}
+
+/// A packet two frames behind is still late (the counter did not start over); three behind is
+/// a restart.
+#[test]
+fn two_frames_behind_is_late_three_is_a_restart() {
+    let info = info(Profile::Rng19Rfl8Sig16Nir16);
+    let g = Gen {
+        enc: OusterEncoder::new(&info),
+        serial: info.serial,
+    };
+    let mut packets = frames_of(&g, &[10, 11, 12], 77);
+    packets.push(g.packet(10, 3, 77, &[])); // two behind 12, frame 10 emitted: late
+    let mut s = stream(&info);
+    let sweeps = run(&mut s, &packets);
+    assert_eq!(sweeps.len(), 3);
+    assert_eq!((s.stats().late, s.stats().discontinuities), (1, 0));
+
+    let mut packets = frames_of(&g, &[10, 11, 12], 77);
+    packets.push(g.packet(9, 3, 77, &[])); // three behind: a restart at frame 9
+    let mut s = stream(&info);
+    let sweeps = run(&mut s, &packets);
+    assert_eq!(
+        sweeps.iter().map(|s| s.frame_id).collect::<Vec<_>>(),
+        [10, 11, 12, 9]
+    );
+    assert_eq!((s.stats().late, s.stats().discontinuities), (0, 1));
+}
+
+/// One packet far ahead (corrupt, spoofed) in the middle of frame 11: the frame it opens is
+/// emitted on its own, frame 11 is not cut, and the frames after it decode (where they were
+/// dropped as late for 30 000 frames, FUSA's for ever).
+#[test]
+fn one_packet_far_ahead_costs_no_genuine_frame() {
+    for (profile, jump) in [
+        (Profile::Rng19Rfl8Sig16Nir16, 30_000u32),
+        (Profile::FusaRng15Rfl8Nir8Dual, 1_000_000_000),
+    ] {
+        let info = info(profile);
+        let g = Gen {
+            enc: OusterEncoder::new(&info),
+            serial: info.serial,
+        };
+        let mut packets = Vec::new();
+        for (f, k) in (10..14u32).flat_map(|f| (0..PER_FRAME).map(move |k| (f, k))) {
+            packets.push(g.packet(f, k, 77, &[]));
+            if (f, k) == (11, 5) {
+                packets.push(g.packet(11 + jump, 9, 77, &[]));
+            }
+        }
+        let mut s = stream(&info);
+        let sweeps = run(&mut s, &packets);
+        let st = s.stats();
+        assert_eq!(
+            sweeps.iter().map(|s| s.frame_id).collect::<Vec<_>>(),
+            [10, 11, 11 + jump, 12, 13],
+            "{profile:?} {st:?}"
+        );
+        for (i, sw) in sweeps.iter().enumerate() {
+            let (points, missing) = if i == 2 {
+                (CPP * H, W - CPP)
+            } else {
+                (W * H, 0)
+            };
+            // Second returns are absent (range 0): one point per pixel, dual or not.
+            assert_eq!(sw.points.len(), points, "{profile:?} sweep {i}");
+            assert_eq!(sw.missing_columns, missing as u64, "{profile:?} sweep {i}");
+        }
+        // The step forward (not a loss of 30 000 frames) and the step back.
+        assert_eq!((st.late, st.discontinuities), (0, 2), "{profile:?}");
+        assert_eq!(st.missing_columns, (W - CPP) as u64, "{profile:?}");
+    }
+}
+
+/// Frames lost whole: the sweep after them carries their columns (of the column window) as
+/// missing; a step of more than a second's frames (10 here) is a discontinuity, no loss.
+#[test]
+fn frames_lost_whole_are_missing_columns_of_the_next_sweep() {
+    for window in [(0usize, W - 1), (100, 299), (500, 9)] {
+        let mut info = info(Profile::Rng19Rfl8Sig16Nir16);
+        info.column_window = window;
+        let in_window = info.columns_in_window() as u64;
+        assert_eq!(info.fps, 10);
+        let g = Gen {
+            enc: OusterEncoder::new(&info),
+            serial: info.serial,
+        };
+        // Out of the window the sensor sends columns invalid (status 0).
+        let out: Vec<usize> = (0..W).filter(|&c| !info.is_column_in_window(c)).collect();
+        let frames = [5u32, 7, 8, 12, 22, 33];
+        let packets: Vec<_> = frames
+            .iter()
+            .flat_map(|&f| (0..PER_FRAME).map(move |k| (f, k)))
+            .map(|(f, k)| g.packet(f, k, 77, &out))
+            .collect();
+        let mut s = stream(&info);
+        let sweeps = run(&mut s, &packets);
+        assert_eq!(
+            sweeps.iter().map(|s| s.frame_id).collect::<Vec<_>>(),
+            frames
+        );
+        // Frame 6 lost before 7, 9–11 before 12, 13–21 before 22; 33 is 11 frames on.
+        let lost = [0u64, 1, 0, 3, 9, 0];
+        for (sw, n) in sweeps.iter().zip(lost) {
+            assert_eq!(
+                sw.missing_columns,
+                n * in_window,
+                "{window:?} {}",
+                sw.frame_id
+            );
+            assert_eq!(
+                sw.missing_packets,
+                n * in_window.div_ceil(CPP as u64),
+                "{window:?} {}",
+                sw.frame_id
+            );
+            assert_eq!(sw.points.len(), in_window as usize * H);
+        }
+        let st = s.stats();
+        assert_eq!(st.missing_columns, 13 * in_window, "{window:?}");
+        assert_eq!((st.discontinuities, st.late), (1, 0), "{window:?}");
+    }
+}
+
+/// A bit flipped in a packet's init_id (CRC checked: FW 2.5) is a CRC failure, not two
+/// epochs cutting the frame in three; one flipped in its serial is not another sensor.
+#[test]
+fn a_corrupt_init_id_is_a_crc_failure_not_an_epoch() {
+    let info = info(Profile::Rng19Rfl8Sig16Nir16);
+    let g = Gen {
+        enc: OusterEncoder::new(&info),
+        serial: info.serial,
+    };
+    let mut packets = frames_of(&g, &[1], 77);
+    packets[10][4] ^= 0x01; // init_id, bytes 4..7
+    packets[20][8] ^= 0x10; // serial, bytes 7..12
+    let mut s = stream(&info);
+    let sweeps = run(&mut s, &packets);
+    let st = s.stats();
+    assert_eq!(
+        (st.epochs, st.crc_failures, st.wrong_sensor),
+        (0, 2, 0),
+        "{st:?}"
+    );
+    assert_eq!(sweeps.len(), 1);
+    assert_eq!(sweeps[0].missing_columns, 2 * CPP as u64);
+    assert_eq!(s.facts().init_id, 77);
+    // A genuine new init_id (its CRC holds) is still an epoch.
+    let mut packets = frames_of(&g, &[1], 77);
+    packets.extend(frames_of(&g, &[0], 78));
+    let mut s = stream(&info);
+    assert_eq!(run(&mut s, &packets).len(), 2);
+    assert_eq!((s.stats().epochs, s.facts().init_id), (1, 78));
+}
+
+/// PTP column timestamps beyond i64 (2^63 ns): saturated, not an overflow (a panic in a debug
+/// build) when the TAI offset is taken off.
+#[test]
+fn ptp_timestamps_beyond_i64_saturate() {
+    let mut info = info(Profile::Rng19Rfl8Sig16Nir16);
+    info.timestamp_mode = ringscan::sensor::ouster::calib::TimestampMode::Ptp1588;
+    let enc = OusterEncoder::new(&info);
+    let cols: Vec<SimColumn> = (0..CPP)
+        .map(|m| SimColumn {
+            timestamp_ns: 0x8000_0000_0000_0000 + m as u64,
+            measurement_id: m as u16,
+            status: 1,
+            pixels: vec![
+                SimPixel {
+                    range_mm: 5000,
+                    ..SimPixel::default()
+                };
+                H
+            ],
+        })
+        .collect();
+    let h = SimHeader {
+        frame_id: 3,
+        init_id: 77,
+        serial: info.serial,
+        ..SimHeader::default()
+    };
+    let mut p = Vec::new();
+    enc.encode(&h, &cols, &mut p).unwrap();
+    let mut s = stream(&info);
+    let sweeps = run(&mut s, &[p]);
+    assert_eq!(sweeps.len(), 1);
+    assert_eq!(sweeps[0].points.len(), CPP * H);
+    assert_eq!(sweeps[0].device_time_ns, i64::MAX);
+    assert_eq!(sweeps[0].timestamp_ns, i64::MAX - 37_000_000_000);
+}
+
+/// A frame none of whose columns is valid has no sensor time: its sweep's times are the host
+/// times of its packets (clock: host), not those of the frame its recycled buffer held.
+#[test]
+fn a_sweep_without_valid_columns_has_its_own_host_times() {
+    let mut info = info(Profile::Rng19Rfl8Sig16Nir16);
+    info.timestamp_mode = ringscan::sensor::ouster::calib::TimestampMode::Ptp1588;
+    let g = Gen {
+        enc: OusterEncoder::new(&info),
+        serial: info.serial,
+    };
+    let all: Vec<usize> = (0..W).collect();
+    let mut packets = Vec::new();
+    for f in 1..=4u32 {
+        for k in 0..PER_FRAME {
+            let host = 1_700_000_000_000_000_000 + i64::from(f) * 100_000_000 + k as i64 * 1000;
+            let invalid: &[usize] = if f == 3 { &all } else { &[] };
+            packets.push((host, g.packet(f, k, 77, invalid)));
+        }
+    }
+    let mut s = stream(&info);
+    let sweeps = run_at(&mut s, &packets);
+    assert_eq!(sweeps.len(), 4);
+    let sw = &sweeps[2];
+    assert_eq!((sw.frame_id, sw.points.len()), (3, 0));
+    let first = 1_700_000_000_000_000_000 + 3 * 100_000_000;
+    assert_eq!(sw.first_host_ns, first);
+    assert_eq!(sw.timestamp_ns, first);
+    assert_eq!(sw.device_time_ns, first);
+    assert_eq!(sw.last_host_ns, first + (PER_FRAME as i64 - 1) * 1000);
+    assert_eq!(sw.clock, ringscan::time::ClockSource::Host);
+    assert_eq!(sw.missing_columns, W as u64);
+    // The others keep the sensor's PTP time (TAI − 37 s).
+    let f4 = &sweeps[3];
+    assert_eq!(f4.clock, ringscan::time::ClockSource::SensorPtp);
+    assert_eq!(f4.device_time_ns, 1_000_000_000 + 4 * 100_000_000);
+    assert_eq!(f4.timestamp_ns, f4.device_time_ns - 37_000_000_000);
 }

@@ -922,7 +922,8 @@ impl<'a> Doc<'a> {
                     .enumerate()
                     .map(|(i, x)| {
                         x.as_i64()
-                            .filter(|s| s.abs() <= limit)
+                            // Not `abs`: i64::MIN has none.
+                            .filter(|s| (-limit..=limit).contains(s))
                             // |s| < w ≤ 4096: fits in i32.
                             .map(|s| s as i32)
                             .ok_or_else(|| CalibError::BadValue {
@@ -1267,5 +1268,43 @@ fn describe(v: &Value) -> String {
         }
         Value::Array(a) => format!("an array of {} entries", a.len()),
         Value::Object(_) => "an object".into(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Legacy-layout metadata of 16 beams at 512 columns, with `shift` as row 3's pixel shift.
+    fn with_shift(shift: serde_json::Value) -> String {
+        let mut rows = vec![serde_json::json!(0); 16];
+        rows[3] = shift;
+        serde_json::json!({
+            "beam_altitude_angles": (0..16).map(|u| 15.0 - 2.0 * f64::from(u)).collect::<Vec<_>>(),
+            "beam_azimuth_angles": vec![0.0; 16],
+            "lidar_mode": "512x10",
+            "data_format": {
+                "pixels_per_column": 16,
+                "columns_per_packet": 16,
+                "columns_per_frame": 512,
+                "pixel_shift_by_row": rows,
+            },
+        })
+        .to_string()
+    }
+
+    #[test]
+    fn a_pixel_shift_of_i64_min_is_refused_not_a_panic() {
+        // The bounds: −(W − 1) and W − 1 are taken, one beyond is refused.
+        let ok = parse(&with_shift(serde_json::json!(-511)), "m.json").unwrap();
+        assert_eq!(ok.pixel_shift_by_row[3], -511);
+        assert!(parse(&with_shift(serde_json::json!(512)), "m.json").is_err());
+        for v in [i64::MIN, i64::MIN + 1, i64::MAX] {
+            let e = parse(&with_shift(serde_json::json!(v)), "m.json").unwrap_err();
+            assert!(
+                matches!(&e, CalibError::BadValue { context, .. } if context == " at row 3"),
+                "{v}: {e:?}"
+            );
+        }
     }
 }

@@ -403,6 +403,23 @@ impl OusterDecoder {
         self.crc_check
     }
 
+    /// The `init_id` [`Self::packet`] expects (0: any).
+    pub fn init_id(&self) -> u32 {
+        self.init_id
+    }
+
+    /// Expects `init_id` from now on: the sensor re-initialised. Nothing else is rebuilt, as no
+    /// table depends on it (a new XYZ table is 4 MiB of trigonometry for a 128 × 1024 sensor).
+    pub fn set_init_id(&mut self, init_id: u32) {
+        self.init_id = init_id;
+    }
+
+    /// Whether both decoders use one XYZ table (not a copy).
+    #[cfg(test)]
+    pub(crate) fn shares_table_with(&self, other: &Self) -> bool {
+        Arc::ptr_eq(&self.lut, &other.lut)
+    }
+
     /// The packet format.
     pub fn format(&self) -> &PacketFormat {
         &self.format

@@ -207,7 +207,7 @@ impl Family for Ouster {
             s["column_window"][1]
         ));
         out.push(format!(
-            "    {} lidar + {} IMU{} packets, {} sweeps, {} points; missing columns {}, malformed {}, CRC failures {}, late {}, other sensor {}, epochs {}",
+            "    {} lidar + {} IMU{} packets, {} sweeps, {} points; missing columns {}, malformed {}, CRC failures {}, late {}, other sensor {}, epochs {}, discontinuities {}",
             g(&s["lidar_packets"]),
             g(&s["imu_packets"]),
             match s["zone_packets"].as_u64() {
@@ -221,7 +221,8 @@ impl Family for Ouster {
             g(&s["crc_failures"]),
             g(&s["late"]),
             g(&s["wrong_sensor"]),
-            g(&s["epochs"])
+            g(&s["epochs"]),
+            g(&s["discontinuities"])
         ));
         out.push(format!("    packets per port: {}", s["packets_per_port"]));
         out.push(format!(
@@ -353,6 +354,7 @@ impl SensorStream for OusterStream {
             "wrong_sensor": st.wrong_sensor,
             "late": st.late,
             "epochs": st.epochs,
+            "discontinuities": st.discontinuities,
             "missing_columns": st.missing_columns,
             "missing": counts.missing,
             "sweeps": st.sweeps,

@@ -4,12 +4,23 @@
 //! Feed it every UDP payload from one sensor with its host receive time; it calls back with
 //! each finished sweep (one sensor frame). A sweep is cut when a packet of a newer `frame_id`
 //! arrives (half-range signed difference, so the 16-bit — FUSA: 32-bit — counter wraps);
-//! one older frame stays open as a reorder window, and packets older than that are counted
-//! as late and dropped, as are duplicates (packets whose columns all arrived already). The sweep's timestamp is its earliest column timestamp; `t` of every
-//! point is measured from it (points already in the sweep are moved if an earlier column
-//! arrives late). Missing columns = columns of the metadata's column window that never
-//! arrived with status bit 0 set. A packet whose `init_id` differs from the metadata's (the
-//! sensor re-initialised) starts a new epoch: counted, warned in the summary, the stream goes on.
+//! one older frame stays open as a reorder window, and packets at most
+//! [`RESTART_BEHIND_FRAMES`] frames behind the newest are counted as late and dropped, as are
+//! duplicates (packets whose columns all arrived already). A packet further behind is a
+//! counter that started over (a reboot the `init_id` does not show, a looped replay, a newest
+//! frame a corrupt packet opened far ahead): the open frames are emitted, a discontinuity is
+//! counted and the stream starts anew from it. The sweep's timestamp is its earliest column
+//! timestamp; `t` of every point is measured from it (points already in the sweep are moved if
+//! an earlier column arrives late). A sweep without any valid column has no sensor time: its
+//! times are the host's, and so is its clock.
+//!
+//! Missing columns = columns of the metadata's column window that never arrived with status
+//! bit 0 set, plus those of whole frames lost: a frame that opens `d` frames after the newest
+//! (`1 < d ≤ fps`, a second's worth) carries the `d − 1` frames before it as missing in its
+//! own sweep; a longer step forward is a discontinuity, not a loss (as the other families'
+//! one-second gap). A packet whose `init_id` differs from the metadata's (the sensor
+//! re-initialised) and whose CRC (if checked) holds starts a new epoch: counted, warned in the
+//! summary, the stream goes on.
 //! Zone-monitor packets (FW 3.2+) become [`ZoneReport`]s, taken with [`OusterStream::drain_zones`].
 
 use crate::point::{half_to_f32, PointExtra};
@@ -20,6 +31,7 @@ use crate::sensor::ouster::decode::OusterDecoder;
 use crate::sensor::ouster::model::HeaderKind;
 use crate::sensor::ouster::wire::ImuPacketLegacy;
 use crate::sensor::ouster::wire::ImuPacketNmea;
+use crate::sensor::ouster::wire::LidarPacket;
 use crate::sensor::ouster::wire::ZonePacket;
 use crate::sensor::ouster::wire::ZoneState;
 use crate::sensor::ouster::wire::PACKET_TYPE_ZONE;
@@ -40,6 +52,11 @@ pub const MAX_IMU_QUEUE: usize = 4096;
 pub const MAX_ZONE_QUEUE: usize = 256;
 /// Standard gravity, m/s² per g (ouster-ros `packet_to_imu_msg`).
 const G: f64 = 9.80665;
+/// A packet of a frame at most this far behind the newest open one is late (the reorder
+/// window every family shares, [`crate::sweep::REORDER_PACKETS`], is well under a frame);
+/// further behind, the frame counter started over. Small, because until then every packet of
+/// the sensor is dropped as late.
+pub const RESTART_BEHIND_FRAMES: i64 = 2;
 
 /// Configuration of one Ouster stream.
 #[derive(Clone, Debug)]
@@ -84,14 +101,19 @@ pub struct OusterStats {
     pub malformed: u64,
     /// Lidar packets whose footer CRC-64 did not match.
     pub crc_failures: u64,
-    /// Packets whose serial number is not the metadata's.
+    /// Packets whose serial number is not the metadata's (and whose CRC, if checked, holds).
     pub wrong_sensor: u64,
     /// Packets of a frame older than the reorder window, and duplicates (every valid column
     /// of the packet already arrived in its open frame).
     pub late: u64,
     /// Times the sensor's `init_id` changed (re-initialisation).
     pub epochs: u64,
-    /// Columns of the column window that never arrived, over all sweeps.
+    /// Frame counter steps no loss explains: back by more than [`RESTART_BEHIND_FRAMES`] (the
+    /// open frames are emitted and the stream starts anew), or forward by more than a
+    /// second's frames (not counted as missing).
+    pub discontinuities: u64,
+    /// Columns of the column window that never arrived, over all sweeps, including those of
+    /// whole frames lost.
     pub missing_columns: u64,
     /// Sweeps emitted.
     pub sweeps: u64,
@@ -176,6 +198,9 @@ struct Open {
     sweep: Sweep,
     seen: Vec<bool>,
     start_ns: u64,
+    /// Columns and packets of the whole frames lost just before this one.
+    lost_columns: u64,
+    lost_packets: u64,
 }
 
 /// An Ouster stream for one sensor.
@@ -478,26 +503,33 @@ impl OusterStream {
                 expected_serial,
                 ..
             }) => {
+                // The footer first: a bit flipped in the header must pass neither for another
+                // sensor nor for a re-initialisation (two epochs, the open frames cut short).
+                if self.decoder.crc_check() {
+                    let d = &self.decoder;
+                    match LidarPacket::with_header(payload, d.format(), d.header_kind()) {
+                        Ok(p) if p.check_crc().is_ok() => {}
+                        Ok(_) => {
+                            self.stats.crc_failures += 1;
+                            return;
+                        }
+                        Err(_) => {
+                            self.stats.malformed += 1;
+                            return;
+                        }
+                    }
+                }
                 if expected_serial != 0 && found_serial != 0 && found_serial != expected_serial {
                     self.stats.wrong_sensor += 1;
                     return;
                 }
-                // Same sensor, new init_id: a new epoch.
-                let mut info = self.cfg.info.clone();
-                info.init_id = found_init_id;
-                match Self::make_decoder(&self.cfg, &info) {
-                    Ok(d) => {
-                        self.finish(on_sweep);
-                        self.decoder = d;
-                        self.cfg.info = info;
-                        self.facts.init_id = found_init_id;
-                        self.stats.epochs += 1;
-                    }
-                    Err(_) => {
-                        self.stats.malformed += 1;
-                        return;
-                    }
-                }
+                // Same sensor, new init_id: a new epoch. The XYZ table stays: it does not
+                // depend on the init_id, and a sender alternating ids must not rebuild it.
+                self.finish(on_sweep);
+                self.decoder.set_init_id(found_init_id);
+                self.cfg.info.init_id = found_init_id;
+                self.facts.init_id = found_init_id;
+                self.stats.epochs += 1;
                 match self.decoder.packet(payload) {
                     Ok(p) => p,
                     Err(_) => {
@@ -533,11 +565,25 @@ impl OusterStream {
                         a
                     }
                 });
+                let mut lost_frames = 0u64;
                 if let Some(n) = newest {
-                    if self.frame_diff(n, fid) < 0 {
+                    let d = self.frame_diff(n, fid);
+                    if d < -RESTART_BEHIND_FRAMES {
+                        // The counter started over: waiting for it to pass the newest frame
+                        // again would drop every packet for up to 2^15 frames (FUSA: ever).
+                        self.stats.discontinuities += 1;
+                        self.finish(on_sweep);
+                    } else if d < 0 {
                         // Older than the newest frame and not open: late.
                         self.stats.late += 1;
                         return;
+                    } else if d > i64::from(self.cfg.info.fps.max(1)) {
+                        // Not counted as frames lost: one corrupt or spoofed packet would
+                        // add up to 2^15 frames of them. The genuine packets that follow,
+                        // far behind it, then start the stream anew.
+                        self.stats.discontinuities += 1;
+                    } else {
+                        lost_frames = (d - 1) as u64;
                     }
                 }
                 if self.open.len() == 2 {
@@ -556,6 +602,8 @@ impl OusterStream {
                     sweep: Sweep::default(),
                     seen: Vec::new(),
                     start_ns: 0,
+                    lost_columns: 0,
+                    lost_packets: 0,
                 });
                 o.frame_id = fid;
                 o.sweep.clear();
@@ -565,6 +613,16 @@ impl OusterStream {
                 o.seen.clear();
                 o.seen.resize(self.cfg.info.columns_per_frame, false);
                 o.start_ns = u64::MAX;
+                // The host's times until a valid column gives the sensor's: a recycled sweep
+                // must not keep those of the frame it held before.
+                o.sweep.device_time_ns = host_ns;
+                o.sweep.first_host_ns = host_ns;
+                o.sweep.last_host_ns = host_ns;
+                let info = &self.cfg.info;
+                let window = info.columns_in_window() as u64;
+                let cpp = info.format.columns_per_packet.max(1) as u64;
+                o.lost_columns = lost_frames.saturating_mul(window);
+                o.lost_packets = lost_frames.saturating_mul(window.div_ceil(cpp));
                 self.open.push(o);
                 self.open.len() - 1
             }
@@ -611,9 +669,11 @@ impl OusterStream {
         let (keep_extras, keep_columns) = (self.cfg.keep_extras, self.cfg.keep_columns);
         let o = &mut self.open[idx];
         if let Some(ts) = first_ts {
+            // Column timestamps are u64 on the wire: one beyond i64 saturates.
+            let device_ns = i64::try_from(ts).unwrap_or(i64::MAX);
             if o.start_ns == u64::MAX {
                 o.start_ns = ts;
-                o.sweep.device_time_ns = ts as i64;
+                o.sweep.device_time_ns = device_ns;
                 o.sweep.first_host_ns = host_ns;
             } else if ts < o.start_ns {
                 let shift = (o.start_ns - ts).min(u64::from(u32::MAX)) as u32;
@@ -621,7 +681,7 @@ impl OusterStream {
                     p.t = p.t.saturating_add(shift);
                 }
                 o.start_ns = ts;
-                o.sweep.device_time_ns = ts as i64;
+                o.sweep.device_time_ns = device_ns;
                 o.sweep.first_host_ns = o.sweep.first_host_ns.min(host_ns);
             }
         }
@@ -696,16 +756,23 @@ impl OusterStream {
             .filter(|&c| o.seen.get(c).copied().unwrap_or(false))
             .count();
         let expected = info.columns_in_window();
-        let missing = expected.saturating_sub(received) as u64;
+        let in_frame = expected.saturating_sub(received) as u64;
         let cpp = info.format.columns_per_packet.max(1) as u64;
+        let missing = in_frame.saturating_add(o.lost_columns);
         o.sweep.missing_columns = missing;
-        o.sweep.missing_packets = missing.div_ceil(cpp);
+        o.sweep.missing_packets = in_frame.div_ceil(cpp).saturating_add(o.lost_packets);
         o.sweep.columns_count = received as u32;
-        o.sweep.clock = self.facts.clock;
-        o.sweep.timestamp_ns = match self.facts.clock {
-            ClockSource::SensorPtp => {
-                o.sweep.device_time_ns - (TAI_MINUS_UTC_S * 1_000_000_000) as i64
-            }
+        // Without a valid column the sweep has no sensor time (see `push_lidar`).
+        o.sweep.clock = if o.start_ns == u64::MAX {
+            ClockSource::Host
+        } else {
+            self.facts.clock
+        };
+        o.sweep.timestamp_ns = match o.sweep.clock {
+            ClockSource::SensorPtp => o
+                .sweep
+                .device_time_ns
+                .saturating_sub((TAI_MINUS_UTC_S * 1_000_000_000) as i64),
             _ => o.sweep.first_host_ns,
         };
         if o.sweep.packets > 0 {
@@ -719,8 +786,80 @@ impl OusterStream {
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+    use crate::sensor::ouster::model::PacketFormat;
+    use crate::sensor::ouster::model::Profile;
+    use crate::sensor::ouster::sim::{OusterEncoder, SimColumn, SimHeader, SimPixel};
+
     #[test]
     fn tai_offset_is_37_seconds() {
         assert_eq!(super::TAI_MINUS_UTC_S, 37);
+    }
+
+    /// A new init_id changes what the decoder accepts, not the XYZ table: a sender
+    /// alternating ids must not cost a new table (4 MiB at 128 × 1024) per packet.
+    #[test]
+    fn a_new_init_id_keeps_the_xyz_table() {
+        let text = serde_json::json!({
+            "beam_altitude_angles": (0..16).map(|u| 15.0 - 2.0 * f64::from(u)).collect::<Vec<_>>(),
+            "beam_azimuth_angles": vec![0.0; 16],
+            "lidar_mode": "512x10",
+            "data_format": {
+                "pixels_per_column": 16,
+                "columns_per_packet": 16,
+                "columns_per_frame": 512,
+            },
+        })
+        .to_string();
+        let mut info = crate::sensor::ouster::calib::parse(&text, "t.json").unwrap();
+        info.format = PacketFormat {
+            profile: Profile::Rng19Rfl8Sig16Nir16,
+            columns_per_packet: 16,
+            pixels_per_column: 16,
+        };
+        info.pixel_shift_by_row = vec![0; 16];
+        info.serial = 992_210_000_957;
+        info.init_id = 77;
+        info.firmware = "v2.5.2".into();
+        let enc = OusterEncoder::new(&info);
+        let mut s = OusterStream::new(OusterStreamConfig {
+            info: info.clone(),
+            metadata_name: "t.json".into(),
+            crc: None,
+            decode: DecodeOptions::default(),
+            keep_extras: false,
+            keep_columns: false,
+        })
+        .unwrap();
+        let before = s.decoder().clone();
+        let cols: Vec<SimColumn> = (0..16)
+            .map(|m| SimColumn {
+                timestamp_ns: 1_000 + m,
+                measurement_id: m as u16,
+                status: 1,
+                pixels: vec![
+                    SimPixel {
+                        range_mm: 5000,
+                        ..SimPixel::default()
+                    };
+                    16
+                ],
+            })
+            .collect();
+        for (frame, init_id) in [(1, 78), (2, 79), (3, 78)] {
+            let h = SimHeader {
+                frame_id: frame,
+                init_id,
+                serial: info.serial,
+                ..SimHeader::default()
+            };
+            let mut p = Vec::new();
+            enc.encode(&h, &cols, &mut p).unwrap();
+            s.push(0, &p, &mut |_, _| {});
+        }
+        assert_eq!((s.stats().epochs, s.stats().lidar_packets), (3, 3));
+        assert_eq!(s.decoder().init_id(), 78);
+        assert!(s.decoder().crc_check());
+        assert!(s.decoder().shares_table_with(&before));
     }
 }
