@@ -243,11 +243,19 @@ fn crc_failures_are_dropped_and_counted() {
 
 /// Packets 1, 2, 3 with packet 2 corrupt. Its body alone failing: the tail CRC vouches for its
 /// sequence number, so it is malformed and not also missing (it was both). Its tail failing:
-/// which packet it was is unknown, and the gap it leaves is counted missing too.
+/// its number is taken only where it is the very next one (2 after 1); a number the corruption
+/// changed (3) says nothing of which packet it was, and the gap it leaves is counted missing
+/// too. A return mode no sensor sends under good CRCs: malformed, its number taken (it was
+/// counted missing as well).
 #[test]
 fn a_corrupt_body_under_a_good_tail_is_not_also_missing() {
     let model = HesaiModel::PandarQt128;
-    for (corrupt, missing) in [("body", 0), ("tail", 1)] {
+    for (corrupt, missing) in [
+        ("body", 0),
+        ("tail", 0),
+        ("tail's number", 1),
+        ("return mode", 0),
+    ] {
         let mut s = stream_for(model);
         let mut on = |_: &mut ringscan::sweep::Sweep, _: &_| {};
         for seq in 1..=3u32 {
@@ -257,15 +265,24 @@ fn a_corrupt_body_under_a_good_tail_is_not_also_missing() {
             let tail = crc32_mpeg2(&b[t..t + 30]);
             b[t + 30..t + 34].copy_from_slice(&tail.to_le_bytes());
             if seq == 2 {
-                let at = if corrupt == "body" { 20 } else { t + 12 };
-                b[at] ^= 1;
+                match corrupt {
+                    "body" => b[20] ^= 1,
+                    "tail" => b[t + 12] ^= 1,
+                    "tail's number" => b[t + 26] ^= 1,
+                    _ => {
+                        b[t + 12] = 0x42;
+                        let tail = crc32_mpeg2(&b[t..t + 30]);
+                        b[t + 30..t + 34].copy_from_slice(&tail.to_le_bytes());
+                    }
+                }
             }
             s.push(i64::from(seq) * 100_000, &b, &mut on).unwrap();
         }
         let st = s.stats();
+        let crc_failures = u64::from(corrupt != "return mode");
         assert_eq!(
             (st.packets, st.crc_failures, st.malformed),
-            (2, 1, 1),
+            (2, crc_failures, 1),
             "{corrupt}"
         );
         assert_eq!(st.missing, missing, "{corrupt}");
@@ -364,6 +381,28 @@ fn host_times_at_the_ends_of_i64_do_not_overflow() {
                 "{model:?} at host time {host}"
             );
         }
+    }
+}
+
+/// `decode_packet` is public: times at the ends of `i64` saturate (a point's `t` then clamps)
+/// instead of overflowing. (Debug builds check overflow: the old code panicked here.)
+#[test]
+fn decode_packet_times_at_the_ends_of_i64_do_not_overflow() {
+    use ringscan::sensor::hesai::{HesaiDecoder, HesaiOptions, HesaiPacket};
+    let model = HesaiModel::PandarXt32;
+    let b = xt32_packet();
+    let p = HesaiPacket::new(&b, model).unwrap();
+    let mut dec = HesaiDecoder::new(
+        model,
+        &harness::hesai_correction(model),
+        HesaiOptions::default(),
+    )
+    .unwrap();
+    for (stamp, t0, t) in [(i64::MAX, i64::MIN, u32::MAX), (i64::MIN, i64::MAX, 0)] {
+        let mut out = Vec::new();
+        let n = dec.decode_packet(&p, stamp, t0, &mut out).unwrap();
+        assert!(n > 0);
+        assert!(out.iter().all(|pt| pt.t == t), "stamp {stamp}, t0 {t0}");
     }
 }
 

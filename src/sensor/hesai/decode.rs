@@ -752,12 +752,13 @@ impl HesaiDecoder {
         let before = out.len();
         let blocks = p.layout().blocks;
         out.reserve(blocks * self.channels.len());
-        let base = stamp_ns - t0_ns;
+        // Both times are the caller's: any i64, so the difference saturates.
+        let base = stamp_ns.saturating_sub(t0_ns);
         let this = &*self;
         let mut g = 0;
         while g < blocks {
             this.decode_group(p, g, n, |d| {
-                let t = base + i64::from(d.firing_ns);
+                let t = base.saturating_add(i64::from(d.firing_ns));
                 let mut pt = d.point;
                 pt.t = t.clamp(0, i64::from(u32::MAX)) as u32;
                 out.push(pt);

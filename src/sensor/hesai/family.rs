@@ -207,7 +207,7 @@ impl Family for Hesai {
             st("detection")
         ));
         out.push(format!(
-            "    {} packets, {} sweeps, {} points; missing {}, malformed {} (CRC failures {}), discontinuities {}, duplicates {}, signed {}",
+            "    {} packets, {} sweeps, {} points; missing {}, malformed {} (CRC failures {}), discontinuities {}, duplicates {}, late dropped {}, signed {}",
             g(&s["data_packets"]),
             g(&s["sweeps"]),
             g(&s["points"]),
@@ -216,6 +216,7 @@ impl Family for Hesai {
             g(&s["crc_failures"]),
             g(&s["discontinuities"]),
             g(&s["duplicates"]),
+            g(&s["late_dropped"]),
             g(&s["signed_packets"])
         ));
         out.push(format!("    packets per port: {}", s["packets_per_port"]));
@@ -347,8 +348,8 @@ impl SensorStream for HesaiStream {
             malformed: st.malformed,
             missing: st.missing,
             position: 0,
-            // A copy is no loss: counted in the sensor's `duplicates` only.
-            dropped: 0,
+            // A copy is no loss (the sensor's `duplicates` only); a late packet dropped is.
+            dropped: st.late_dropped,
         };
         let v = json!({
             "kind": "hesai",
@@ -379,6 +380,7 @@ impl SensorStream for HesaiStream {
             "missing": st.missing,
             "discontinuities": st.discontinuities,
             "duplicates": st.duplicates,
+            "late_dropped": st.late_dropped,
             "sweeps": st.sweeps,
             "points": st.points,
         });

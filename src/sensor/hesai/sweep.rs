@@ -24,7 +24,12 @@
 //!
 //! **Loss.** With a UDP sequence number (QT, XT, AT, OT, Pandar64 with its trailer), missing =
 //! the sequence gap; without, round(Δ tail time / packet period) − 1. A tail time going
-//! backwards or jumping by more than `max_gap_ns` ends the open sweeps (a discontinuity).
+//! backwards or jumping by more than `max_gap_ns` ends the open sweeps (a discontinuity). A
+//! packet up to 10 behind (by number, else by time inside a gap counted missing) came late:
+//! its points join the open sweep they belong to, else it is dropped (`late_dropped`); one
+//! further behind at a time to match is stale, dropped the same way, not a restart. A sweep
+//! longer than `max_sweep_ns` is ended whatever its azimuths or frame bits say (a
+//! discontinuity, as in every family).
 
 use std::collections::VecDeque;
 
@@ -34,6 +39,9 @@ use super::model::{mode_name, returns_of_mode, HesaiModel};
 use super::wire::{CrcPart, FunctionalSafety, HesaiPacket};
 use crate::sweep::{RecentTimes, SeqStep, SeqWindow, Sweep, REORDER_PACKETS};
 use crate::time::ClockSource;
+
+/// The tail's UDP sequence number is 32 bits.
+const SEQ_MASK: u64 = u32::MAX as u64;
 
 /// Configuration of one stream.
 #[derive(Clone, Debug)]
@@ -57,6 +65,11 @@ pub struct HesaiConfig {
     pub check_crc: bool,
     /// A tail-time gap longer than this ends the sweep, ns.
     pub max_gap_ns: i64,
+    /// A sweep longer than this is ended, ns (as the Velodyne stream's): a head whose azimuth
+    /// stands still, or an ATX whose frame bit never changes, would otherwise grow one sweep
+    /// without end. A sweep of more packets than twice this time holds is ended too, for a
+    /// tail clock that stands still.
+    pub max_sweep_ns: i64,
     /// Only inspecting (`ringscan info`): a sensor without its correction is read without
     /// points. Otherwise [`HesaiStream::missing_calibration`] names it, and a caller that
     /// wants points stops there (a run that writes an empty file and succeeds hides it).
@@ -79,6 +92,7 @@ impl HesaiConfig {
             cut_cdeg: None,
             check_crc: true,
             max_gap_ns: 1_000_000_000,
+            max_sweep_ns: 1_000_000_000,
             inspect: false,
         }
     }
@@ -103,6 +117,11 @@ pub struct HesaiStats {
     pub discontinuities: u64,
     /// Packets seen already (their sequence number, else their time): copies, dropped.
     pub duplicates: u64,
+    /// Late packets (reordered on the way) whose points all belong to a sweep already
+    /// emitted, or stale ones (more than the reorder window behind, with a time to match):
+    /// dropped, and counted as a loss here rather than in `missing`. A late packet whose
+    /// points belong to an open sweep joins it instead.
+    pub late_dropped: u64,
     /// Packets carrying a cyber-security signature (skipped, not verified).
     pub signed: u64,
     /// Packets whose functional-safety block reports a state other than normal.
@@ -186,6 +205,29 @@ impl HesaiFacts {
     }
 }
 
+/// Gaps counted missing kept for a late packet to fill: one is at most [`REORDER_PACKETS`]
+/// behind, so it falls in one of the last so many.
+const GAPS_KEPT: usize = REORDER_PACKETS as usize + 1;
+
+/// A packet further behind than the reorder window, at a time to match, is stale (held up on
+/// the way), not a counter that restarted: up to this many numbers behind.
+const STALE_PACKETS: u64 = 1_024;
+
+/// The ATX's time between columns, ns, as the simulator (`sim`) writes them: only the sweep's
+/// packet cap uses it.
+const ATX_COLUMN_NS: i64 = 72_000;
+
+/// A gap counted missing: the numbers (or tail times) either side of it, what is left of it,
+/// and the sweep that counted it.
+#[derive(Clone, Copy, Debug)]
+struct Gap {
+    before: i64,
+    after: i64,
+    by_seq: bool,
+    left: u64,
+    sweep: Option<u64>,
+}
+
 /// A sweep being filled, with its time base.
 #[derive(Debug, Default)]
 struct Open {
@@ -223,6 +265,10 @@ pub struct HesaiStream {
     last_block_udeg: Option<i64>,
     /// Bit 0 of the last packet's frame id (ATX: the sweep ends when it changes).
     last_frame: Option<u8>,
+    /// The last gaps counted missing, the newest first.
+    gaps: [Option<Gap>; GAPS_KEPT],
+    /// Per channel of a late packet's group: the open sweep its point goes to.
+    late_idx: Vec<Option<usize>>,
     packet_no: u64,
     cut_udeg: i64,
 }
@@ -254,6 +300,8 @@ impl HesaiStream {
             thresholds: None,
             last_block_udeg: None,
             last_frame: None,
+            gaps: [None; GAPS_KEPT],
+            late_idx: Vec::new(),
             packet_no: 0,
             cut_udeg: 0,
         }
@@ -366,7 +414,18 @@ impl HesaiStream {
                     self.stats.malformed += 1;
                     // Only the body failed: the tail tells which packet came corrupt, so its
                     // number is not also counted missing (its points are lost, counted above).
-                    if let Some(s) = p.checked_udp_seq().filter(|_| part == CrcPart::Body) {
+                    // The tail failed: its number is taken only where it is the very next one
+                    // (a corrupt number landing exactly there is a chance in 2^32); any other
+                    // leaves its gap counted missing too, as which packet it was is unknown.
+                    let seq = match part {
+                        CrcPart::Body => p.checked_udp_seq(),
+                        CrcPart::Tail => p.udp_seq().filter(|&s| {
+                            self.seq
+                                .latest()
+                                .is_some_and(|l| u64::from(s) == l.wrapping_add(1) & SEQ_MASK)
+                        }),
+                    };
+                    if let Some(s) = seq {
                         self.number_seen(s);
                     }
                     return Ok(());
@@ -376,6 +435,10 @@ impl HesaiStream {
         let mode = p.return_mode();
         let Some(n) = returns_of_mode(mode) else {
             self.stats.malformed += 1;
+            // Its CRCs (where checked) passed: the number is the packet's, not also missing.
+            if let Some(s) = p.udp_seq() {
+                self.number_seen(s);
+            }
             return Ok(());
         };
         if p.has_signature() {
@@ -424,14 +487,41 @@ impl HesaiStream {
         // A packet a little behind the latest (by its sequence number where it has one, else
         // by its time) was reordered on the way: it fills a gap already counted as missing,
         // and the stream goes on from the latest packet, not from it. A copy is a packet whose
-        // sensor time is one of the last packets' (and its number too, where it has one): a
-        // number seen again at a new time is a counter that restarted or stands still.
+        // sensor time is one of the last packets' (and its number too, where it has one).
         let sensor_time = p.stamp_ns().is_some();
         let time_seen = sensor_time && self.recent.contains(stamp);
-        let mut seq = p.udp_seq().map(|s| self.seq.step(u64::from(s)));
-        if let (Some(SeqStep::Duplicate), false, Some(s)) = (seq, time_seen, p.udp_seq()) {
-            self.seq.restart(u64::from(s));
-            seq = Some(SeqStep::Jump);
+        let udp_seq = p.udp_seq();
+        let behind = match (udp_seq, self.seq.latest()) {
+            (Some(s), Some(l)) => l.wrapping_sub(u64::from(s)) & SEQ_MASK,
+            _ => 0,
+        };
+        // Its sensor time behind the latest by about as much as its number is: an old packet
+        // of this very stream, not a counter or a clock that started again.
+        let from_the_past = sensor_time
+            && behind <= STALE_PACKETS
+            && step.is_some_and(|d| {
+                d < 0 && d.unsigned_abs() <= (behind + 1) * 2 * period_ns.max(1) as u64
+            });
+        let mut seq = udp_seq.map(|s| self.seq.step_within(u64::from(s)));
+        let mut stale = false;
+        match (seq, udp_seq) {
+            (Some(SeqStep::Jump), Some(s)) => {
+                if from_the_past {
+                    stale = true;
+                } else {
+                    self.seq.restart(u64::from(s));
+                    self.gaps = [None; GAPS_KEPT];
+                }
+            }
+            // A number seen already is a copy, unless its sensor time says the counter
+            // restarted or stands still: a time neither among the last packets' nor an old
+            // one of this stream. Without a sensor time nothing says so.
+            (Some(SeqStep::Duplicate), Some(s)) if sensor_time && !time_seen && !from_the_past => {
+                self.seq.restart(u64::from(s));
+                self.gaps = [None; GAPS_KEPT];
+                seq = Some(SeqStep::Jump);
+            }
+            _ => {}
         }
         let copy = match seq {
             Some(s) => s == SeqStep::Duplicate,
@@ -441,34 +531,67 @@ impl HesaiStream {
             self.stats.duplicates += 1;
             return Ok(());
         }
-        let late = match seq {
-            Some(s) => matches!(s, SeqStep::Late | SeqStep::Stray),
-            None => step.is_some_and(|d| d < 0 && d >= -i64::from(REORDER_PACKETS) * period_ns),
+        if stale {
+            // Beyond the reorder window its sweep is long gone: dropped, and not also missing
+            // where its gap is still known.
+            if let Some(s) = udp_seq {
+                self.fill_gap(i64::from(s), true);
+            }
+            self.stats.late_dropped += 1;
+            return Ok(());
+        }
+        // A late packet: `Some(the sweep that counted its gap)`.
+        let late = match (seq, udp_seq) {
+            (Some(SeqStep::Late), Some(s)) => {
+                Some(self.fill_gap(i64::from(s), true).unwrap_or_else(|| {
+                    // The window counted its number lost, though the gap is no longer kept.
+                    self.stats.missing = self.stats.missing.saturating_sub(1);
+                    None
+                }))
+            }
+            (Some(SeqStep::Stray), _) => Some(None),
+            (Some(_), _) => None,
+            // Without a number: a little behind, and inside a gap counted missing (a clock
+            // that stepped back fills none, and stays a discontinuity).
+            (None, _) => step
+                .filter(|&d| d < 0 && d >= -i64::from(REORDER_PACKETS) * period_ns)
+                .and_then(|_| self.fill_gap(stamp, false)),
         };
-        let discontinuity = !late && step.is_some_and(|d| d < 0 || d > self.cfg.max_gap_ns);
-        match seq {
-            Some(SeqStep::Stray) => {}
-            _ if late => self.remove_missing(1),
-            Some(SeqStep::Next { lost }) if lost > 0 => self.add_missing(lost),
-            Some(_) => {}
-            None => {
-                if let (Some(d), false) = (step, discontinuity) {
+        if let Some(counted_by) = late {
+            if sensor_time {
+                self.recent.push(stamp);
+            }
+            self.push_late(&p, stamp, n, counted_by);
+            return Ok(());
+        }
+        let discontinuity = step.is_some_and(|d| d < 0 || d > self.cfg.max_gap_ns);
+        match (seq, udp_seq) {
+            (Some(SeqStep::Next { lost }), Some(s)) if lost > 0 => {
+                let before = i64::from(s).wrapping_sub(lost as i64 + 1);
+                self.add_missing(lost, before, i64::from(s), true);
+            }
+            (Some(_), _) => {}
+            (None, _) => {
+                if let (Some(d), Some(prev), false) = (step, self.prev_stamp, discontinuity) {
                     if period_ns > 0 {
                         let m = (d as f64 / period_ns as f64).round() as i64 - 1;
                         if m > 0 {
-                            self.add_missing(m as u64);
+                            self.add_missing(m as u64, prev, stamp, false);
                         }
                     }
                 }
             }
         }
-        if !late {
-            self.prev_stamp = Some(stamp);
-        }
+        self.prev_stamp = Some(stamp);
         if discontinuity {
             self.stats.discontinuities += 1;
             // A clock that restarted (or a capture replayed again) may repeat times.
             self.recent.clear();
+            for g in &mut self.gaps {
+                if g.is_some_and(|g| !g.by_seq) {
+                    *g = None;
+                }
+            }
             self.emit_all(on_sweep);
             self.last_az.iter_mut().for_each(|a| *a = i64::MIN);
             self.last_block_udeg = None;
@@ -477,6 +600,7 @@ impl HesaiStream {
             self.recent.push(stamp);
         }
 
+        // A late packet never gets here: it neither ends a frame nor starts one.
         let frame = p.frame_id().map(|f| f & 1);
         if let (Some(f), Some(last)) = (frame, self.last_frame) {
             if f != last {
@@ -498,11 +622,32 @@ impl HesaiStream {
         let turned_udeg = step
             .filter(|_| !discontinuity)
             .map(|d| crate::sweep::rotation_in(d, rpm, TURN_UDEG));
+        // A sweep holding more packets than twice `max_sweep_ns` does ends too: for a tail
+        // clock that stands still.
+        // The ATX gives no block period (its firing times come with its correction): its
+        // nominal column period then.
+        let cap_period = match period_ns {
+            0 => (blocks / n) as i64 * ATX_COLUMN_NS,
+            p => p,
+        };
+        let max_packets = (self.cfg.max_sweep_ns / cap_period.max(1)).saturating_mul(2) as u64;
         let mut g = 0;
         while g < blocks {
             let block_az = p.azimuth(g);
             let az_cdeg = dec.block_azimuth_cdeg(block_az);
             let azimuths = dec.block_azimuths(block_az);
+            let group_t0 = stamp.saturating_add(dec.group_earliest_ns(g));
+            // A sweep too long is ended whatever the azimuths say (a head standing still, a
+            // frame bit that never changes), and the next starts as after a discontinuity.
+            if self.open.front().is_some_and(|o| {
+                group_t0.saturating_sub(o.t0_ns) > self.cfg.max_sweep_ns
+                    || u64::from(o.sweep.packets) > max_packets
+            }) {
+                self.stats.discontinuities += 1;
+                self.emit_all(on_sweep);
+                self.last_az.iter_mut().for_each(|a| *a = i64::MIN);
+                self.last_block_udeg = None;
+            }
             // Per-channel cut. The first group after a start or a discontinuity may straddle
             // the cut: its channels already past it (within a quarter turn) open the next
             // sweep (nebula's `initialize_state`).
@@ -584,7 +729,6 @@ impl HesaiStream {
                 }
                 self.gens_changed();
             }
-            let group_t0 = stamp.saturating_add(dec.group_earliest_ns(g));
             // Keep at most two sweeps open: a channel two sweeps ahead closes the oldest.
             let (lo, hi) = (self.gen_lo, self.gen_hi);
             while hi >= self.base_gen + 2 {
@@ -672,25 +816,159 @@ impl HesaiStream {
     /// so its gap is not also counted missing.
     fn number_seen(&mut self, seq: u32) {
         match self.seq.step(u64::from(seq)) {
-            SeqStep::Next { lost } if lost > 0 => self.add_missing(lost),
-            SeqStep::Late => self.remove_missing(1),
+            SeqStep::Next { lost } if lost > 0 => {
+                let before = i64::from(seq).wrapping_sub(lost as i64 + 1);
+                self.add_missing(lost, before, i64::from(seq), true);
+            }
+            // Counted malformed instead, in the stream and in its sweep.
+            SeqStep::Late => match self.fill_gap(i64::from(seq), true) {
+                Some(sweep) => self.uncount_in_sweep(sweep),
+                None => self.stats.missing = self.stats.missing.saturating_sub(1),
+            },
+            SeqStep::Jump => self.gaps = [None; GAPS_KEPT],
             _ => {}
         }
     }
 
-    fn add_missing(&mut self, m: u64) {
+    /// Counts `m` packets missing between `before` and `after` (numbers, or tail times), in the
+    /// newest open sweep, and keeps the gap for a late packet to fill.
+    fn add_missing(&mut self, m: u64, before: i64, after: i64, by_seq: bool) {
         self.stats.missing += m;
-        if let Some(o) = self.open.back_mut() {
+        let sweep = self.open.back_mut().map(|o| {
             o.sweep.missing_packets += m;
+            o.sweep.index
+        });
+        self.gaps.rotate_right(1);
+        self.gaps[0] = Some(Gap {
+            before,
+            after,
+            by_seq,
+            left: m,
+            sweep,
+        });
+    }
+
+    /// Whether `key` (a number, or a tail time) falls in a gap counted missing: then one
+    /// fewer is missing in the stream, and `Some(the sweep that counted it)`. That sweep's
+    /// count is the caller's: it goes down only for a packet whose points it gets.
+    fn fill_gap(&mut self, key: i64, by_seq: bool) -> Option<Option<u64>> {
+        let inside = |g: &Gap| {
+            if by_seq {
+                let (k, b, a) = (key as u32, g.before as u32, g.after as u32);
+                k.wrapping_sub(b) > 0 && k.wrapping_sub(b) < a.wrapping_sub(b)
+            } else {
+                g.before < key && key < g.after
+            }
+        };
+        let g = self
+            .gaps
+            .iter_mut()
+            .flatten()
+            .find(|g| g.by_seq == by_seq && g.left > 0 && inside(g))?;
+        g.left -= 1;
+        let sweep = g.sweep;
+        self.stats.missing = self.stats.missing.saturating_sub(1);
+        Some(sweep)
+    }
+
+    /// One packet fewer missing in sweep `index`, if still open (one emitted already did go
+    /// out without it).
+    fn uncount_in_sweep(&mut self, index: Option<u64>) {
+        if let Some(o) = self.open.iter_mut().find(|o| Some(o.sweep.index) == index) {
+            o.sweep.missing_packets = o.sweep.missing_packets.saturating_sub(1);
         }
     }
 
-    /// A late packet came: one fewer missing (in the open sweep that counted it, if open).
-    fn remove_missing(&mut self, m: u64) {
-        self.stats.missing = self.stats.missing.saturating_sub(m);
-        if let Some(o) = self.open.back_mut() {
-            o.sweep.missing_packets = o.sweep.missing_packets.saturating_sub(m);
+    /// A packet reordered on the way (behind the latest) neither moves the cut nor ends a
+    /// frame: the stream goes on from the latest packet. Each of its points joins the open
+    /// sweep it belongs to, after the points so far (arrival order, as the Velodyne stream
+    /// keeps): by its channel's azimuth against that channel's progress past the cut, or
+    /// (ATX) by its frame bit, and the sweep that counted its gap (`counted_by`) counts one
+    /// fewer. A packet with no point for an open sweep is dropped and counted in
+    /// `late_dropped`.
+    fn push_late(&mut self, p: &HesaiPacket<'_>, stamp: i64, n: usize, counted_by: Option<u64>) {
+        let Some(mut dec) = self.decoder.take() else {
+            // Without a correction no sweep is ever open: read, with nothing to place.
+            self.stats.packets += 1;
+            return;
+        };
+        dec.prepare(n, p.tail_flags());
+        let nc = dec.channels();
+        let frame = p.frame_id().map(|f| f & 1);
+        self.packet_no += 1;
+        let packet_no = self.packet_no;
+        let mut idx = std::mem::take(&mut self.late_idx);
+        let mut placed = false;
+        let mut g = 0;
+        while g < p.layout().blocks {
+            let block_az = p.azimuth(g);
+            idx.clear();
+            if frame.is_some() {
+                let open = frame == self.last_frame && !self.open.is_empty();
+                idx.resize(nc, open.then_some(0));
+            } else {
+                let azimuths = dec.block_azimuths(block_az);
+                let block_udeg = i64::from(block_az % 36_000) * 10_000;
+                for c in 0..nc {
+                    let gen = self.late_gen(c, block_udeg, azimuths.channel_udeg(c));
+                    let i = gen.checked_sub(self.base_gen).map(|i| i as usize);
+                    idx.push(i.filter(|&i| i < self.open.len()));
+                }
+            }
+            placed |= idx.iter().any(Option::is_some);
+            let open = &mut self.open;
+            dec.decode_group(p, g, n, |d| {
+                let Some(o) = idx
+                    .get(d.channel)
+                    .copied()
+                    .flatten()
+                    .and_then(|i| open.get_mut(i))
+                else {
+                    return;
+                };
+                let t = stamp
+                    .saturating_add(i64::from(d.firing_ns))
+                    .saturating_sub(o.t0_ns);
+                let mut pt = d.point;
+                pt.t = t.clamp(0, i64::from(u32::MAX)) as u32;
+                o.sweep.points.push(pt);
+                if o.last_packet != packet_no {
+                    o.last_packet = packet_no;
+                    o.sweep.packets += 1;
+                }
+            });
+            g += n;
         }
+        self.late_idx = idx;
+        self.decoder = Some(dec);
+        if placed {
+            self.stats.packets += 1;
+            self.uncount_in_sweep(counted_by);
+        } else {
+            self.stats.late_dropped += 1;
+        }
+    }
+
+    /// The sweep generation a late point of channel `c` belongs to: the channel's own, or the
+    /// one before where the cut lies between the late azimuth and the channel's latest.
+    /// `block_udeg` serves where each channel's cut is a threshold on the block azimuth.
+    fn late_gen(&self, c: usize, block_udeg: i64, channel_udeg: Option<i64>) -> u64 {
+        let gen = self.gen.get(c).copied().unwrap_or(self.base_gen);
+        let (az, last, cut) = match &self.thresholds {
+            Some((th, ..)) => (Some(block_udeg), self.last_block_udeg, th.get(c).copied()),
+            None => (
+                channel_udeg,
+                self.last_az.get(c).copied().filter(|&a| a != i64::MIN),
+                Some(self.cut_udeg),
+            ),
+        };
+        let (Some(az), Some(last), Some(cut)) = (az, last, cut) else {
+            return gen;
+        };
+        // A late packet is a few degrees behind; half a turn "behind" is ahead, not across.
+        let back = (last - az).rem_euclid(TURN_UDEG);
+        let crossed = back < TURN_UDEG / 2 && (cut - az).rem_euclid(TURN_UDEG) < back;
+        gen.saturating_sub(u64::from(crossed))
     }
 
     fn emit_front(&mut self, on_sweep: &mut dyn FnMut(&mut Sweep, &HesaiFacts)) {
