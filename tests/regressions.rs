@@ -27,6 +27,8 @@ const REGRESSIONS: &[(&str, Option<&str>)] = &[
     ("velodyne_packet-vls128-fixed-distance-unit.bin", None),
     ("bag_mcap-mcap-crate-chunk-length-overflow.bin", None),
     ("calib_hesai-atx-one-channel.bin", None),
+    ("family_stream-robosense-difop-counted-twice.bin", None),
+    ("family_stream-hesai-late-packet-time.bin", None),
 ];
 
 fn dir() -> PathBuf {
@@ -62,6 +64,7 @@ fn replay(file: &str) {
         "livox_control" => harness::livox_control(&data),
         "lvx" => harness::lvx(&data),
         "render_messages" => harness::render_messages(&data),
+        "family_stream" => harness::family_stream(&data),
         other => panic!("{file}: no fuzz target named {other:?}"),
     }
 }

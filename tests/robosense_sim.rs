@@ -419,3 +419,21 @@ fn reordered_packets_are_late_not_lost() {
         assert_eq!(copied, in_order, "{model:?}: (points, packets) per sweep");
     }
 }
+
+/// A DIFOP that comes before any MSOP, with no model named, is kept and read again when the
+/// first MSOP tells the model: counted once (found by the `family_stream` fuzz target: it
+/// was counted at each reading).
+#[test]
+fn a_difop_before_the_first_packet_is_counted_once() {
+    let scene = scenes::named("urban").unwrap();
+    let model = RobosenseModel::Helios;
+    let mut sim = RobosenseSim::new(model, synthetic(model), T0);
+    let difop = sim.difop();
+    let (host, msop) = sim.next_packet(&scene, &mut Vec::new());
+    let mut stream = RobosenseStream::new(RobosenseConfig::new(None));
+    stream.push(0, &difop, &mut |_, _| {}).unwrap();
+    stream.push(host, &msop, &mut |_, _| {}).unwrap();
+    stream.finish(&mut |_, _| {});
+    let st = stream.stats();
+    assert_eq!((st.difop, st.malformed, st.packets), (1, 0, 1), "{st:?}");
+}

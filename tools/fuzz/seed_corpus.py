@@ -490,8 +490,24 @@ def main():
             put("ouster_stream", ouster_header(prof, 0, hi, 0) + b"\0" + b"".join(
                 struct.pack("<HBI", 600, k % 3, 50_000_000) + bytes(rng.randrange(256) for _ in range(600)) for k in range(12)), "rand")
 
+    family_stream_seeds()
+
     for t in sorted(os.listdir(CORPUS)):
         print(f"{t}: {len(os.listdir(CORPUS / t))} seeds")
+
+
+def family_stream_seeds():
+    """family_stream builds its packets itself (simulated runs): a seed is the selector byte
+    (model in the low three bits, option bits above) and ops. Each model gets an in-order run
+    over its packets, and one with a reorder, a copy, a patched tail and a host-time step."""
+    for sel in range(8):
+        for bits in (0x00, 0x08, 0x60):
+            ops = bytes([1, 255]) * 3  # three runs of 256 packets in order
+            put("family_stream", bytes([sel | bits]) + ops, f"run{sel}")
+        mixed = bytes([1, 40, 2, 50, 0, 2, 45, 0, 0, 2, 45, 0])  # skip, late, copy
+        mixed += bytes([0x0B, 8, 0, 7, 0x4C, 3, 0, 1]) + bytes([5, 0x10, 0x27])  # patched, nudged, host +0.5 s
+        mixed += bytes([6, 100, 0, 7, 10]) + bytes(10) + bytes([1, 255])
+        put("family_stream", bytes([sel]) + mixed, f"mixed{sel}")
 
 
 def livox_control_seeds():

@@ -15,7 +15,7 @@ set -euo pipefail
 
 SECONDS_PER_TARGET=${1:-20}
 shift || true
-ALL_TARGETS=(pcap reassembly velodyne_packet velodyne_stream calib_velodyne decode_to_mcap calib_ouster ouster_packet ouster_stream pipeline_config tum_poses http_response live_view_requests bag_ros1 bag_mcap bag_messages bag_metadata hesai_packet calib_hesai robosense_packet calib_robosense livox_packet livox_control lvx render_messages)
+ALL_TARGETS=(pcap reassembly velodyne_packet velodyne_stream calib_velodyne decode_to_mcap calib_ouster ouster_packet ouster_stream pipeline_config tum_poses http_response live_view_requests bag_ros1 bag_mcap bag_messages bag_metadata hesai_packet calib_hesai robosense_packet calib_robosense livox_packet livox_control lvx render_messages family_stream)
 if [ $# -gt 0 ]; then TARGETS=("$@"); else TARGETS=("${ALL_TARGETS[@]}"); fi
 SANITIZER=${FUZZ_SANITIZER:-none}
 
@@ -50,6 +50,7 @@ max_len() {
     livox_packet) echo 4096 ;;
     livox_control) echo 1400 ;;
     lvx) echo 16384 ;;
+    family_stream) echo 16384 ;;
     *) echo 4096 ;;
   esac
 }

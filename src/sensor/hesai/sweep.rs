@@ -915,8 +915,8 @@ impl HesaiStream {
                     idx.push(i.filter(|&i| i < self.open.len()));
                 }
             }
-            placed |= idx.iter().any(Option::is_some);
             let open = &mut self.open;
+            let max_sweep_ns = self.cfg.max_sweep_ns;
             dec.decode_group(p, g, n, |d| {
                 let Some(o) = idx
                     .get(d.channel)
@@ -929,6 +929,12 @@ impl HesaiStream {
                 let t = stamp
                     .saturating_add(i64::from(d.firing_ns))
                     .saturating_sub(o.t0_ns);
+                // Late by its number, but timed outside the sweep its azimuth names (a tail
+                // time that lies): no place in it.
+                if !(0..=max_sweep_ns).contains(&t) {
+                    return;
+                }
+                placed = true;
                 let mut pt = d.point;
                 pt.t = t.clamp(0, i64::from(u32::MAX)) as u32;
                 o.sweep.points.push(pt);

@@ -384,7 +384,11 @@ impl RobosenseStream {
             }
             self.held.push_back((host_ns, payload.to_vec()));
             if let Some(d) = self.last_difop.take() {
-                return self.push_difop(&d, on_sweep);
+                // Counted when it came; read again now that a packet can tell the model.
+                let counted = (self.stats.difop, self.stats.malformed);
+                let r = self.push_difop(&d, on_sweep);
+                (self.stats.difop, self.stats.malformed) = counted;
+                return r;
             }
             return Ok(());
         }
