@@ -29,6 +29,7 @@ const REGRESSIONS: &[(&str, Option<&str>)] = &[
     ("calib_hesai-atx-one-channel.bin", None),
     ("family_stream-robosense-difop-counted-twice.bin", None),
     ("family_stream-hesai-late-packet-time.bin", None),
+    ("family_stream-robosense-held-packet-uncounted.bin", None),
 ];
 
 fn dir() -> PathBuf {

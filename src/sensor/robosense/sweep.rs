@@ -384,10 +384,11 @@ impl RobosenseStream {
             }
             self.held.push_back((host_ns, payload.to_vec()));
             if let Some(d) = self.last_difop.take() {
-                // Counted when it came; read again now that a packet can tell the model.
-                let counted = (self.stats.difop, self.stats.malformed);
+                // Read again now that a packet can tell the model (which may also decode the
+                // packets held). It was counted a DIFOP when it came: the second reading
+                // counts it for good, as a DIFOP or malformed.
                 let r = self.push_difop(&d, on_sweep);
-                (self.stats.difop, self.stats.malformed) = counted;
+                self.stats.difop = self.stats.difop.saturating_sub(1);
                 return r;
             }
             return Ok(());
