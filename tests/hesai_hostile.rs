@@ -289,6 +289,27 @@ fn a_corrupt_body_under_a_good_tail_is_not_also_missing() {
     }
 }
 
+/// A packet of an unknown return mode (malformed, good CRCs) whose number is far behind the
+/// latest does not restart the count: the next good packet counts no loss. It restarted the
+/// window at its number, and the next packet counted the 500 numbers back to it as missing.
+#[test]
+fn a_malformed_packet_far_behind_does_not_restart_the_count() {
+    let mut s = stream_for(HesaiModel::PandarQt128);
+    let mut on = |_: &mut ringscan::sweep::Sweep, _: &_| {};
+    for (k, seq) in [1000u32, 1001, 500, 1002].into_iter().enumerate() {
+        let (mut b, t) = qt128_with_crcs(seq);
+        b[t + 21..t + 25].copy_from_slice(&(k as u32 * 100).to_le_bytes());
+        if seq == 500 {
+            b[t + 12] = 0x42;
+        }
+        let tail = crc32_mpeg2(&b[t..t + 30]);
+        b[t + 30..t + 34].copy_from_slice(&tail.to_le_bytes());
+        s.push(k as i64 * 100_000, &b, &mut on).unwrap();
+    }
+    let st = s.stats();
+    assert_eq!((st.packets, st.malformed, st.missing), (3, 1, 0), "{st:?}");
+}
+
 /// A QT128 packet (protocol 3.2) with UDP sequence number `seq` and both CRCs right; the
 /// tail's start.
 fn qt128_with_crcs(seq: u32) -> (Vec<u8>, usize) {

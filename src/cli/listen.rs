@@ -1064,12 +1064,12 @@ fn ports_for(args: &ListenArgs, calibs: &[Calibration]) -> BTreeSet<u16> {
     ports
 }
 
-/// A thread that writes the status lines it is given to stderr; `None` if it cannot start
-/// (the run goes on without a status line). Write errors are ignored: a terminal that went
-/// away (SIGHUP) fails with EIO, and `eprint!` would panic on it.
-fn status_writer() -> Option<SyncSender<String>> {
+/// A thread that writes the status lines it is given to stderr, and its handle; `None` if it
+/// cannot start (the run goes on without a status line). Write errors are ignored: a terminal
+/// that went away (SIGHUP) fails with EIO, and `eprint!` would panic on it.
+fn status_writer() -> Option<(SyncSender<String>, std::thread::JoinHandle<()>)> {
     let (tx, rx) = std::sync::mpsc::sync_channel::<String>(1);
-    std::thread::Builder::new()
+    let handle = std::thread::Builder::new()
         .name("ringscan-status".into())
         .spawn(move || {
             for line in rx {
@@ -1079,20 +1079,22 @@ fn status_writer() -> Option<SyncSender<String>> {
             }
         })
         .ok()?;
-    Some(tx)
+    Some((tx, handle))
 }
 
 /// After SIGHUP the terminal is gone and every write to it fails (EIO), so the standard
-/// output and error that were the terminal are pointed at /dev/null: the run finishes its
-/// file and its summary goes nowhere, instead of a print panicking half-way.
-fn detach_from_terminal() {
+/// output and error that were the terminal (`tty`: as found when the run started; by the
+/// time the signal comes the kernel has already cut the terminal off, and `isatty` fails on
+/// it) are pointed at /dev/null: the run finishes its file and its summary goes nowhere,
+/// instead of a print failing or panicking half-way.
+fn detach_from_terminal(tty: (bool, bool)) {
     let Ok(null) = std::fs::OpenOptions::new().write(true).open("/dev/null") else {
         return;
     };
-    if std::io::stdout().is_terminal() {
+    if tty.0 {
         let _ = nix::unistd::dup2_stdout(&null);
     }
-    if std::io::stderr().is_terminal() {
+    if tty.1 {
         let _ = nix::unistd::dup2_stderr(&null);
     }
 }
@@ -1510,6 +1512,7 @@ pub fn listen_run_with(
     // stop it in the write while the kernel drops datagrams. A line the writer has not taken
     // by the next second is skipped.
     let status = terminal.then(status_writer).flatten();
+    let tty = (std::io::stdout().is_terminal(), terminal);
     let reason = rt.block_on(async {
         let mut tasks = Vec::new();
         for s in &sockets {
@@ -1553,7 +1556,7 @@ pub fn listen_run_with(
                 _ = tokio::signal::ctrl_c(), if stop.is_none() => break "SIGINT",
                 _ = async { match sigterm.as_mut() { Some(s) => { s.recv().await; } None => std::future::pending().await } } => break "SIGTERM",
                 _ = async { match sighup.as_mut() { Some(s) => { s.recv().await; } None => std::future::pending().await } } => {
-                    detach_from_terminal();
+                    detach_from_terminal(tty);
                     break "SIGHUP";
                 }
                 _ = stop_tick.tick(), if stop.is_some() => {
@@ -1578,7 +1581,7 @@ pub fn listen_run_with(
                     Some(Event::Failed) | None => break "decode thread stopped",
                 },
                 _ = tick.tick() => {
-                    if let Some(status) = &status {
+                    if let Some((status, _)) = &status {
                         let serve = live_stats.as_deref().map(super::serve::status).unwrap_or_default();
                         let line = format!("{}{serve}", status_line(&live, &stats, kernel_drops(&sockets), &mut prev));
                         let _ = status.try_send(line);
@@ -1595,10 +1598,12 @@ pub fn listen_run_with(
         Ok(reason)
     });
     drop(rt);
-    if status.is_some() && std::io::stderr().is_terminal() {
+    // The last status line is out before the newline that ends it (and the summary after).
+    if let Some((tx, writer)) = status {
+        drop(tx);
+        let _ = writer.join();
         let _ = writeln!(std::io::stderr());
     }
-    drop(status);
     let control = configured.map(super::livox_ctl::Configured::finish);
     // With the runtime gone, no sender of datagrams is left: the decode thread finishes its
     // file and ends. Wait for it even when the loop failed, so the process never exits with

@@ -815,7 +815,10 @@ impl HesaiStream {
     /// A packet counted malformed whose sequence number can be trusted: the window takes it,
     /// so its gap is not also counted missing.
     fn number_seen(&mut self, seq: u32) {
-        match self.seq.step(u64::from(seq)) {
+        // A packet that is not decoded never restarts the count: a number out of reach leaves
+        // the window as it was (a restart would make the next good packet count the distance
+        // back to it as lost).
+        match self.seq.step_within(u64::from(seq)) {
             SeqStep::Next { lost } if lost > 0 => {
                 let before = i64::from(seq).wrapping_sub(lost as i64 + 1);
                 self.add_missing(lost, before, i64::from(seq), true);
@@ -825,7 +828,6 @@ impl HesaiStream {
                 Some(sweep) => self.uncount_in_sweep(sweep),
                 None => self.stats.missing = self.stats.missing.saturating_sub(1),
             },
-            SeqStep::Jump => self.gaps = [None; GAPS_KEPT],
             _ => {}
         }
     }
