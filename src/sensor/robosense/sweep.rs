@@ -116,7 +116,8 @@ pub struct RobosenseStats {
     pub duplicates: u64,
     /// Late MSOP packets (reordered on the way) whose firings all belong to a sweep already
     /// emitted: dropped, and counted as a loss (a packet counted missing before it came
-    /// moves from `missing` to here).
+    /// moves from `missing` to here, where the stream can tell: up to [`REORDER_PACKETS`]
+    /// behind; an M1 packet further behind in its own frame stays counted in both).
     pub late_dropped: u64,
     /// Sweeps emitted.
     pub sweeps: u64,
