@@ -236,6 +236,20 @@ struct Open {
     last_packet: u64,
 }
 
+impl Open {
+    /// Adds `point` at `t` ns after the sweep's start (clamped to the point's field), counting
+    /// packet `packet_no` once in the sweep's packets.
+    #[inline]
+    fn push(&mut self, mut point: crate::point::Point, t: i64, packet_no: u64) {
+        point.t = t.clamp(0, i64::from(u32::MAX)) as u32;
+        self.sweep.points.push(point);
+        if self.last_packet != packet_no {
+            self.last_packet = packet_no;
+            self.sweep.packets += 1;
+        }
+    }
+}
+
 /// A Hesai stream for one sensor.
 #[derive(Debug)]
 pub struct HesaiStream {
@@ -784,13 +798,7 @@ impl HesaiStream {
                         let t = stamp
                             .saturating_add(i64::from(d.firing_ns))
                             .saturating_sub(o.t0_ns);
-                        let mut pt = d.point;
-                        pt.t = t.clamp(0, i64::from(u32::MAX)) as u32;
-                        o.sweep.points.push(pt);
-                        if o.last_packet != packet_no {
-                            o.last_packet = packet_no;
-                            o.sweep.packets += 1;
-                        }
+                        o.push(d.point, t, packet_no);
                     }
                 });
             }
@@ -937,13 +945,7 @@ impl HesaiStream {
                     return;
                 }
                 placed = true;
-                let mut pt = d.point;
-                pt.t = t.clamp(0, i64::from(u32::MAX)) as u32;
-                o.sweep.points.push(pt);
-                if o.last_packet != packet_no {
-                    o.last_packet = packet_no;
-                    o.sweep.packets += 1;
-                }
+                o.push(d.point, t, packet_no);
             });
             g += n;
         }
