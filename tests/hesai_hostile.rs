@@ -543,3 +543,152 @@ fn walk(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
     out.sort();
     out
 }
+
+/// CRC-32/MPEG-2 bit by bit (poly 0x04C11DB7, init and no final xor 0xFFFFFFFF / 0, not
+/// reflected), written here apart from the crate's table-driven one.
+fn crc_mpeg2_bitwise(bytes: &[u8]) -> u32 {
+    let mut c = 0xFFFF_FFFFu32;
+    for &b in bytes {
+        c ^= u32::from(b) << 24;
+        for _ in 0..8 {
+            c = if c & 0x8000_0000 != 0 {
+                (c << 1) ^ 0x04C1_1DB7
+            } else {
+                c << 1
+            };
+        }
+    }
+    c
+}
+
+/// The functional-safety block (17 bytes after the QT128's body CRC: version, state,
+/// code counts, fault code u16, 8 reserved, CRC u32 LE "from the Lidar State field to the
+/// Reserved field", QT128 manual) is believed only when its own CRC checks. The real QT128
+/// capture: every block checks (1,800 packets) and says state 0, "Init" (bits 7–5), which is
+/// not normal; a block changed to state 2 ("report fault") without its CRC is ignored and
+/// counted, the points decode as before; the same change with the CRC recomputed (by the
+/// bit-by-bit CRC above) is believed.
+#[test]
+fn functional_safety_blocks_are_believed_only_under_their_own_crc() {
+    let Some(root) = common::captures() else {
+        return;
+    };
+    let model = HesaiModel::PandarQt128;
+    let pcap = root
+        .join(GT)
+        .join("qt128/1730273789074637152/1730273789074637152_0.pcap");
+    let packets: Vec<(i64, Vec<u8>)> = common::datagrams(&pcap)
+        .into_iter()
+        .map(|(t, _, p)| (t, p))
+        .filter(|(_, p)| p.len() == 1127)
+        .collect();
+    assert_eq!(packets.len(), 1800);
+    // Header 12 + 2 blocks of (2 + 128 × 4) + body CRC 4.
+    let fs = 12 + 2 * (2 + 128 * 4) + 4;
+    let state = |p: &[u8]| p[fs + 1] >> 5;
+    for (_, p) in &packets {
+        let stored = u32::from_le_bytes(p[fs + 13..fs + 17].try_into().unwrap());
+        assert_eq!(crc_mpeg2_bitwise(&p[fs + 1..fs + 13]), stored);
+    }
+    let not_normal = packets.iter().filter(|(_, p)| state(p) != 1).count() as u64;
+    assert_eq!(not_normal, 1800, "the capture's blocks all say Init");
+    let run = |packets: &[(i64, Vec<u8>)]| {
+        let mut s = stream_for(model);
+        let mut points = Vec::new();
+        let mut on = |sw: &mut ringscan::sweep::Sweep, _: &_| {
+            points.extend(sw.points.iter().map(|p| (p.x, p.y, p.z, p.t)))
+        };
+        for (t, p) in packets {
+            s.push(*t, p, &mut on).unwrap();
+        }
+        s.finish(&mut on);
+        (s.stats().clone(), s.facts().safety, points)
+    };
+    let (st, safety, points) = run(&packets);
+    assert_eq!(
+        (st.safety_crc_failures, st.safety_not_normal),
+        (0, not_normal),
+        "{st:?}"
+    );
+    assert_eq!(safety.map(|s| s.lidar_state), Some(0));
+
+    // Every tenth block says "report fault" (2), its CRC left as it was: 180 ignored.
+    let fault = |p: &mut Vec<u8>| p[fs + 1] = (p[fs + 1] & 0x1F) | (2 << 5);
+    let mut lying = packets.clone();
+    for (_, p) in lying.iter_mut().step_by(10) {
+        fault(p);
+    }
+    let (st2, safety2, points2) = run(&lying);
+    assert_eq!(
+        (st2.safety_crc_failures, st2.safety_not_normal),
+        (180, not_normal - 180),
+        "{st2:?}"
+    );
+    assert_eq!((st2.packets, st2.malformed), (st.packets, st.malformed));
+    assert_eq!(safety2.map(|s| s.lidar_state), Some(0));
+    assert_eq!(points2, points);
+
+    // The same faults under a CRC that checks: believed, the last of them the last state.
+    let mut faulted = lying;
+    for (_, p) in faulted.iter_mut().step_by(10) {
+        let crc = crc_mpeg2_bitwise(&p[fs + 1..fs + 13]);
+        p[fs + 13..fs + 17].copy_from_slice(&crc.to_le_bytes());
+    }
+    faulted.truncate(1791);
+    let (st3, safety3, _) = run(&faulted);
+    assert_eq!(
+        (st3.safety_crc_failures, st3.safety_not_normal),
+        (0, 1791),
+        "{st3:?}"
+    );
+    assert_eq!(safety3.map(|s| s.lidar_state), Some(2));
+}
+
+/// The tail's µs field is the fraction of its date's second; one of a second or more is a
+/// corrupt tail, no sensor time (it moved the packet by up to 71 minutes): the host's time
+/// stands in and is no evidence of a synchronised clock. Which bytes hold the µs is found by
+/// their value, not taken from the layout the decoder uses.
+#[test]
+fn a_tail_microsecond_field_of_a_second_or_more_is_no_sensor_time() {
+    use ringscan::sensor::hesai::model::ALL_MODELS;
+    use ringscan::sensor::hesai::HesaiPacket;
+    let mut tried = Vec::new();
+    for model in ALL_MODELS {
+        let packets = sim_packets(model, 40);
+        // The packet whose µs is largest: its four bytes are the least likely elsewhere.
+        let (good, stamp, us) = packets
+            .iter()
+            .filter_map(|b| {
+                let s = HesaiPacket::new(b, model).ok()?.stamp_ns()?;
+                Some((b, s, (s.rem_euclid(1_000_000_000) / 1_000) as u32))
+            })
+            .max_by_key(|&(_, _, us)| us)
+            .expect("the simulator writes valid times");
+        assert!(us > 0x100, "{model:?}: µs {us}");
+        let at: Vec<usize> = (good.len().saturating_sub(128)..good.len() - 3)
+            .filter(|&i| good[i..i + 4] == us.to_le_bytes())
+            .collect();
+        let [i] = at[..] else {
+            panic!("{model:?}: µs {us} found at {at:?}");
+        };
+        for bad_us in [1_000_000u32, u32::MAX] {
+            let mut bad = good.clone();
+            bad[i..i + 4].copy_from_slice(&bad_us.to_le_bytes());
+            let p = HesaiPacket::new(&bad, model).unwrap();
+            assert_eq!(p.stamp_ns(), None, "{model:?}: µs {bad_us}");
+            let mut cfg = HesaiConfig::new(Some(harness::hesai_correction(model)), "test");
+            cfg.model = Some(model);
+            cfg.check_crc = false;
+            let mut stream = HesaiStream::new(cfg);
+            stream.push(stamp, &bad, &mut |_, _| {}).unwrap();
+            assert_eq!(stream.stats().packets, 1, "{model:?}");
+            assert_eq!(
+                stream.facts().clock_synchronised,
+                Some(false),
+                "{model:?}: µs {bad_us} called a synchronised clock"
+            );
+        }
+        tried.push(model);
+    }
+    assert_eq!(tried.len(), ALL_MODELS.len());
+}

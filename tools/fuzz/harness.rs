@@ -2536,7 +2536,15 @@ pub fn hesai_packet(data: &[u8]) {
             p.udp_seq(),
             p.functional_safety(),
             p.check_crc(),
+            p.check_safety_crc(),
         );
+        // A time the tail gives is a date's second plus less than a second of µs.
+        if let (Some(ns), Some(s)) = (p.stamp_ns(), p.unix_seconds()) {
+            assert!(
+                (0..1_000_000_000).contains(&ns.saturating_sub(s.saturating_mul(1_000_000_000)))
+                    || s.unsigned_abs() > 9_000_000_000
+            );
+        }
         let _ = (
             p.protocol(),
             p.tail_flags(),

@@ -226,10 +226,17 @@ impl Family for Hesai {
             st("clock_state"),
             st("clock"),
             st("crc"),
-            if s["functional_safety"].is_null() {
-                "none in these packets".to_string()
-            } else {
-                s["functional_safety"].to_string()
+            match (
+                s["functional_safety"].is_null(),
+                g(&s["safety_crc_failures"])
+            ) {
+                (true, 0) => "none in these packets".to_string(),
+                (true, n) => format!("all {n} blocks failed their CRC (ignored)"),
+                (false, 0) => format!("{} (CRC ok)", s["functional_safety"]),
+                (false, n) => format!(
+                    "{}; {n} blocks failed their CRC (ignored)",
+                    s["functional_safety"]
+                ),
             }
         ));
         out
@@ -374,6 +381,7 @@ impl SensorStream for HesaiStream {
             "signed_packets": st.signed,
             "functional_safety": safety_json(f),
             "safety_not_normal": st.safety_not_normal,
+            "safety_crc_failures": st.safety_crc_failures,
             "data_packets": st.packets,
             "position_packets": 0,
             "malformed": st.malformed,

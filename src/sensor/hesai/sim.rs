@@ -155,6 +155,9 @@ pub fn encode_packet(model: HesaiModel, blocks: &[BlockData], tail: &TailData) -
         let o = l.safety_start();
         b[o] = 1;
         b[o + 1] = 1 << 5; // normal
+        let c = o + l.safety_len - 4;
+        let crc = crc32_mpeg2(&b[o + 1..c]);
+        b[c..c + 4].copy_from_slice(&crc.to_le_bytes());
     }
     let t = l.tail_start();
     let tl = &l.tail;

@@ -126,6 +126,10 @@ pub struct HesaiStats {
     pub signed: u64,
     /// Packets whose functional-safety block reports a state other than normal.
     pub safety_not_normal: u64,
+    /// Packets whose functional-safety block failed its own CRC: the block is ignored (not
+    /// in `safety_not_normal`, not the last state); the points, under their body CRC, are
+    /// decoded.
+    pub safety_crc_failures: u64,
     /// Sweeps emitted.
     pub sweeps: u64,
     /// Points emitted.
@@ -458,11 +462,17 @@ impl HesaiStream {
         if p.has_signature() {
             self.stats.signed += 1;
         }
+        // A health report that fails its own CRC is not believed (neither counted as not
+        // normal nor kept as the last state); the points are still good, their body CRC says.
         if let Some(fs) = p.functional_safety() {
-            if fs.lidar_state != 1 {
-                self.stats.safety_not_normal += 1;
+            if p.check_safety_crc().is_err() {
+                self.stats.safety_crc_failures += 1;
+            } else {
+                if fs.lidar_state != 1 {
+                    self.stats.safety_not_normal += 1;
+                }
+                self.facts.safety = Some(fs);
             }
-            self.facts.safety = Some(fs);
         }
         self.facts.shutdown_flag = p.shutdown_flag();
         self.facts.protocol = p.protocol();

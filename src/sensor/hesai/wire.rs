@@ -49,9 +49,10 @@ pub enum CrcPart {
 pub struct FunctionalSafety {
     /// Version of the block.
     pub version: u8,
-    /// Lidar state (bits 7–5): 0 initialising, 1 normal, 2 warning, 3/4 performance degraded
-    /// (OT128: 3 pre-degradation, 4 degraded, 5 pre-shutdown, 6 shutdown / output untrusted,
-    /// 7 standby).
+    /// Lidar state (bits 7–5): 0 init, 1 normal, 2 warning (QT128: "report fault"), 3
+    /// pre-performance degradation, 4 performance degradation, 5 pre-shutdown, 6 shutdown,
+    /// 7 standby (QT128 and Pandar128E3X manuals). The shared QT128 capture says 0 in every
+    /// packet.
     pub lidar_state: u8,
     /// Fault code type (bits 4–3): 0 none, 1 current fault, 2 past fault.
     pub fault_code_type: u8,
@@ -299,9 +300,14 @@ impl<'a> HesaiPacket<'a> {
         }
     }
 
-    /// The packet's time stamp (tail date + µs), ns since the Unix epoch.
+    /// The packet's time stamp (tail date + µs), ns since the Unix epoch, or `None` for an
+    /// impossible date or a µs field of a second or more (the field is the fraction of the
+    /// date's second in every layout; a corrupt one would move the packet by up to 71 min).
     pub fn stamp_ns(&self) -> Option<i64> {
         let s = self.unix_seconds()?;
+        if self.timestamp_us() >= 1_000_000 {
+            return None;
+        }
         Some(
             s.saturating_mul(1_000_000_000)
                 .saturating_add(i64::from(self.timestamp_us()) * 1_000),
@@ -381,6 +387,35 @@ impl<'a> HesaiPacket<'a> {
             total_fault_codes: b2 >> 4,
             fault_code_id: b2 & 0x0F,
             fault_code: le_u16(self.bytes, o + 3),
+        })
+    }
+
+    /// Checks the functional-safety block's own CRC-32/MPEG-2 (its last four bytes,
+    /// little-endian), where the packet has the block. The QT128 manual (3.2): over "the
+    /// Lidar State field to the Reserved field", the 12 bytes between the version and the
+    /// CRC; every one of the 1,800 packets of the shared QT128 capture (six distinct blocks)
+    /// checks so, and none over the 13 bytes with the version. The Pandar128E3X manual (the
+    /// OT128's 1.4 protocol) says "from the Lidar State field to the Fault Code field" (4
+    /// bytes) for the same 17-byte block; with no real OT128 capture to tell a misprint from a
+    /// difference, an OT128 block checks under either range (a corrupt block passes one of
+    /// two 32-bit CRCs about once in 2^31).
+    pub fn check_safety_crc(&self) -> Result<(), WireError> {
+        let l = &self.layout;
+        if l.safety_len < 5 {
+            return Ok(());
+        }
+        let o = l.safety_start();
+        let c = o + l.safety_len - 4;
+        let stored = le_u32(self.bytes, c);
+        let over = |end: usize| self.bytes.get(o + 1..end).map_or(!stored, crc32_mpeg2);
+        let computed = over(c);
+        if stored == computed || (self.model == HesaiModel::PandarOt128 && stored == over(o + 5)) {
+            return Ok(());
+        }
+        Err(WireError::Crc {
+            what: "Hesai functional safety",
+            stored: u64::from(stored),
+            computed: u64::from(computed),
         })
     }
 
