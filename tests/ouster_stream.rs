@@ -2,8 +2,8 @@
 //! panic), frames are cut on `frame_id` across its wrap, a late packet of the previous frame
 //! is still taken (one-frame reorder window), older ones are counted, invalid columns are
 //! counted as missing, an `init_id` change starts an epoch (a corrupt one is a CRC failure),
-//! a frame counter that starts over restarts the stream, frames lost whole are missing
-//! columns, a far-ahead packet costs no genuine frame, IMU packets come out in SI units,
+//! a frame counter that starts over restarts the stream (one stale packet far behind does
+//! not: it is late), frames lost whole are missing columns, a far-ahead packet costs no genuine frame, IMU packets come out in SI units,
 //! the real zone-monitor packet's damaged copies are counted drops and its queue is bounded.
 //! Expected numbers come from the packets the test builds, not from the decoder.
 
@@ -17,6 +17,7 @@ use ringscan::sensor::ouster::sim::SimColumn;
 use ringscan::sensor::ouster::sim::SimHeader;
 use ringscan::sensor::ouster::sim::SimPixel;
 use ringscan::sensor::ouster::sweep::MAX_ZONE_QUEUE;
+use ringscan::sensor::ouster::sweep::RESTART_CONFIRM_PACKETS;
 use ringscan::sensor::ouster::OusterStream;
 use ringscan::sensor::ouster::OusterStreamConfig;
 use ringscan::sensor::DecodeOptions;
@@ -487,15 +488,178 @@ fn two_frames_behind_is_late_three_is_a_restart() {
     assert_eq!(sweeps.len(), 3);
     assert_eq!((s.stats().late, s.stats().discontinuities), (1, 0));
 
+    // Three behind, and the stream goes on from there: a restart at frame 9, whose first
+    // packets (held until the stream showed it) are decoded too.
     let mut packets = frames_of(&g, &[10, 11, 12], 77);
-    packets.push(g.packet(9, 3, 77, &[])); // three behind: a restart at frame 9
+    packets.extend((3..PER_FRAME).map(|k| g.packet(9, k, 77, &[])));
     let mut s = stream(&info);
     let sweeps = run(&mut s, &packets);
     assert_eq!(
         sweeps.iter().map(|s| s.frame_id).collect::<Vec<_>>(),
         [10, 11, 12, 9]
     );
+    assert_eq!(sweeps[3].points.len(), (PER_FRAME - 3) * CPP * H);
     assert_eq!((s.stats().late, s.stats().discontinuities), (0, 1));
+    assert_eq!(s.stats().lidar_packets, packets.len() as u64);
+
+    // A restart is RESTART_CONFIRM_PACKETS packets in a row; the stream ending one short of
+    // that leaves them late (nothing showed a restart).
+    for (run_len, restart) in [
+        (1, false),
+        (RESTART_CONFIRM_PACKETS - 1, false),
+        (RESTART_CONFIRM_PACKETS, true),
+    ] {
+        let mut packets = frames_of(&g, &[10, 11, 12], 77);
+        packets.extend((3..3 + run_len).map(|k| g.packet(9, k, 77, &[])));
+        let mut s = stream(&info);
+        let sweeps = run(&mut s, &packets);
+        let st = s.stats();
+        let frames: &[u32] = if restart {
+            &[10, 11, 12, 9]
+        } else {
+            &[10, 11, 12]
+        };
+        assert_eq!(
+            sweeps.iter().map(|s| s.frame_id).collect::<Vec<_>>(),
+            frames,
+            "{run_len} {st:?}"
+        );
+        let late = if restart { 0 } else { run_len as u64 };
+        assert_eq!(
+            (st.late, st.discontinuities),
+            (late, u64::from(restart)),
+            "{run_len}"
+        );
+        assert_eq!(
+            st.lidar_packets + st.late,
+            packets.len() as u64,
+            "{run_len}"
+        );
+    }
+}
+
+/// The sweeps of `packets` and the stream's counters.
+fn sweeps_and_stats(
+    info: &OusterInfo,
+    packets: &[Vec<u8>],
+) -> (Vec<Sweep>, ringscan::sensor::ouster::OusterStats) {
+    let mut s = stream(info);
+    let sweeps = run(&mut s, packets);
+    (sweeps, s.stats().clone())
+}
+
+/// Whether two runs gave the same sweeps: frames, points, loss and time.
+fn assert_same_sweeps(got: &[Sweep], want: &[Sweep], what: &str) {
+    assert_eq!(
+        got.iter().map(|s| s.frame_id).collect::<Vec<_>>(),
+        want.iter().map(|s| s.frame_id).collect::<Vec<_>>(),
+        "{what}"
+    );
+    for (g, w) in got.iter().zip(want) {
+        assert!(
+            g.points == w.points,
+            "{what}: points of frame {}",
+            g.frame_id
+        );
+        assert_eq!(
+            (g.missing_columns, g.missing_packets, g.packets),
+            (w.missing_columns, w.missing_packets, w.packets),
+            "{what}: frame {}",
+            g.frame_id
+        );
+        assert_eq!(
+            (g.device_time_ns, g.timestamp_ns),
+            (w.device_time_ns, w.timestamp_ns),
+            "{what}"
+        );
+    }
+}
+
+/// One packet 3 or 100 frames late (delayed, re-sent) in the middle of frame 12, the stream
+/// going on with frame 12 right after it: counted late once, and the sweeps are those of the
+/// stream without it (it was a restart: frame 12 cut in two, a discontinuity, and the frames
+/// from it back to 12 counted lost). 100 behind frame 12 is across the wrap of the counter:
+/// 16 bits for LEGACY and RNG19, 32 for FUSA.
+#[test]
+fn one_packet_far_late_is_late_not_a_restart() {
+    for profile in [
+        Profile::Legacy,
+        Profile::Rng19Rfl8Sig16Nir16,
+        Profile::FusaRng15Rfl8Nir8Dual,
+    ] {
+        let mut info = info(profile);
+        if profile == Profile::Legacy {
+            info.init_id = 0;
+        }
+        let g = Gen {
+            enc: OusterEncoder::new(&info),
+            serial: info.serial,
+        };
+        let bits = if profile == Profile::FusaRng15Rfl8Nir8Dual {
+            32
+        } else {
+            16
+        };
+        let clean = frames_of(&g, &[10, 11, 12, 13], 77);
+        let (want, want_st) = sweeps_and_stats(&info, &clean);
+        assert_eq!((want.len(), want_st.late), (4, 0), "{profile:?}");
+        for lag in [3u64, 100] {
+            let stale = ((12 + (1u64 << bits) - lag) % (1u64 << bits)) as u32;
+            let mut packets = clean.clone();
+            // After packet 5 of frame 12 (frames 10 and 11 take 64 packets).
+            packets.insert(2 * PER_FRAME + 6, g.packet(stale, 7, 77, &[]));
+            let (got, st) = sweeps_and_stats(&info, &packets);
+            let what = format!("{profile:?}, {lag} late (frame {stale})");
+            assert_same_sweeps(&got, &want, &what);
+            assert_eq!(
+                (st.late, st.discontinuities, st.missing_columns),
+                (1, 0, 0),
+                "{what}: {st:?}"
+            );
+            assert_eq!(
+                (st.lidar_packets, st.sweeps, st.points),
+                (want_st.lidar_packets, want_st.sweeps, want_st.points),
+                "{what}"
+            );
+        }
+    }
+}
+
+/// A few stale packets in a row (fewer than a restart takes), and one stale packet the
+/// network repeated more often than that: each counted late once, the sweeps unchanged.
+#[test]
+fn a_short_stale_run_and_a_repeated_stale_packet_are_late() {
+    for profile in [Profile::Legacy, Profile::FusaRng15Rfl8Nir8Dual] {
+        let mut info = info(profile);
+        if profile == Profile::Legacy {
+            info.init_id = 0;
+        }
+        let g = Gen {
+            enc: OusterEncoder::new(&info),
+            serial: info.serial,
+        };
+        let clean = frames_of(&g, &[10, 11, 12, 13], 77);
+        let (want, _) = sweeps_and_stats(&info, &clean);
+        let run_of = (0..RESTART_CONFIRM_PACKETS - 1).map(|k| g.packet(5, k, 77, &[]));
+        let copies = std::iter::repeat_n(g.packet(5, 9, 77, &[]), 2 * RESTART_CONFIRM_PACKETS);
+        for (what, stale) in [
+            ("a short run", run_of.collect::<Vec<_>>()),
+            ("copies", copies.collect()),
+        ] {
+            let mut packets = clean.clone();
+            let at = 2 * PER_FRAME + 6;
+            let n = stale.len() as u64;
+            packets.splice(at..at, stale);
+            let (got, st) = sweeps_and_stats(&info, &packets);
+            let what = format!("{profile:?}, {what}");
+            assert_same_sweeps(&got, &want, &what);
+            assert_eq!(
+                (st.late, st.discontinuities, st.missing_columns),
+                (n, 0, 0),
+                "{what}: {st:?}"
+            );
+        }
+    }
 }
 
 /// One packet far ahead (corrupt, spoofed) in the middle of frame 11: the frame it opens is

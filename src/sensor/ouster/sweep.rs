@@ -6,13 +6,25 @@
 //! arrives (half-range signed difference, so the 16-bit — FUSA: 32-bit — counter wraps);
 //! one older frame stays open as a reorder window, and packets at most
 //! [`RESTART_BEHIND_FRAMES`] frames behind the newest are counted as late and dropped, as are
-//! duplicates (packets whose columns all arrived already). A packet further behind is a
-//! counter that started over (a reboot the `init_id` does not show, a looped replay, a newest
-//! frame a corrupt packet opened far ahead): the open frames are emitted, a discontinuity is
-//! counted and the stream starts anew from it. The sweep's timestamp is its earliest column
-//! timestamp; `t` of every point is measured from it (points already in the sweep are moved if
-//! an earlier column arrives late). A sweep without any valid column has no sensor time: its
-//! times are the host's, and so is its clock.
+//! duplicates (packets whose columns all arrived already).
+//!
+//! A packet further behind is either stale (one delayed or re-sent datagram, the stream going
+//! on with the newest frame right after it) or the first of a counter that started over (a
+//! reboot the `init_id` does not show, a looped replay, a newest frame a corrupt packet opened
+//! far ahead). Its frame id cannot tell which; the packets after it can. So it is held, counted
+//! late for now, and so are the next ones while each continues from the held frames (at most
+//! [`RESTART_BEHIND_FRAMES`] behind the newest held one, at most a second's frames ahead of
+//! it). [`RESTART_CONFIRM_PACKETS`] held in a row are a restart: they leave `late`, the open
+//! frames are emitted, a discontinuity is counted and the held packets are decoded as the new
+//! stream's first. A packet that goes on from the open frames first shows the held ones stale:
+//! they stay counted late, once, and nothing else changes (taken for a restart, one stale
+//! packet cut the open frame in two and counted the frames back to the newest lost). Bit-for-bit
+//! copies of a held packet are late and no evidence. The stream's end or a new epoch leaves the
+//! held packets late: so does a restart fewer than [`RESTART_CONFIRM_PACKETS`] packets long.
+//!
+//! The sweep's timestamp is its earliest column timestamp; `t` of every point is measured from
+//! it (points already in the sweep are moved if an earlier column arrives late). A sweep
+//! without any valid column has no sensor time: its times are the host's, and so is its clock.
 //!
 //! Missing columns = columns of the metadata's column window that never arrived with status
 //! bit 0 set, plus those of whole frames lost: a frame that opens `d` frames after the newest
@@ -57,6 +69,11 @@ const G: f64 = 9.80665;
 /// further behind, the frame counter started over. Small, because until then every packet of
 /// the sensor is dropped as late.
 pub const RESTART_BEHIND_FRAMES: i64 = 2;
+/// Packets in a row, each continuing from the one before, far behind the newest open frame
+/// that make a restart (see the module documentation). A restart goes on for thousands of
+/// packets; stale datagrams come one or a few at a time. Four: a stale run of three is still
+/// late, and the packets held meanwhile stay within four lidar packets (< 100 kB).
+pub const RESTART_CONFIRM_PACKETS: usize = 4;
 
 /// Configuration of one Ouster stream.
 #[derive(Clone, Debug)]
@@ -104,13 +121,14 @@ pub struct OusterStats {
     /// Packets whose serial number is not the metadata's (and whose CRC, if checked, holds).
     pub wrong_sensor: u64,
     /// Packets of a frame older than the reorder window, and duplicates (every valid column
-    /// of the packet already arrived in its open frame).
+    /// of the packet already arrived in its open frame). Packets far behind the newest frame
+    /// are in it while held as a possible restart, and stay when they prove stale.
     pub late: u64,
     /// Times the sensor's `init_id` changed (re-initialisation).
     pub epochs: u64,
-    /// Frame counter steps no loss explains: back by more than [`RESTART_BEHIND_FRAMES`] (the
-    /// open frames are emitted and the stream starts anew), or forward by more than a
-    /// second's frames (not counted as missing).
+    /// Frame counter steps no loss explains: back by more than [`RESTART_BEHIND_FRAMES`] for
+    /// [`RESTART_CONFIRM_PACKETS`] packets in a row (the open frames are emitted and the
+    /// stream starts anew), or forward by more than a second's frames (not counted as missing).
     pub discontinuities: u64,
     /// Columns of the column window that never arrived, over all sweeps, including those of
     /// whole frames lost.
@@ -203,6 +221,18 @@ struct Open {
     lost_packets: u64,
 }
 
+/// Lidar packets far behind the newest open frame, held until the packets after them tell a
+/// restart from stale datagrams (module documentation).
+#[derive(Debug, Default)]
+struct Held {
+    /// Host time and bytes of each held packet; slots past `len` keep their buffers, so that
+    /// holding allocates only the first few times.
+    packets: Vec<(i64, Vec<u8>)>,
+    len: usize,
+    /// The newest frame id among the held packets: the next one must continue from it.
+    newest: u32,
+}
+
 /// An Ouster stream for one sensor.
 #[derive(Debug)]
 pub struct OusterStream {
@@ -210,6 +240,7 @@ pub struct OusterStream {
     decoder: OusterDecoder,
     open: Vec<Open>,
     spare: Vec<Open>,
+    held: Held,
     imu: Vec<ImuSample>,
     zones: Vec<ZoneReport>,
     stats: OusterStats,
@@ -273,6 +304,7 @@ impl OusterStream {
             decoder,
             open: Vec::with_capacity(2),
             spare: Vec::with_capacity(2),
+            held: Held::default(),
             imu: Vec::new(),
             zones: Vec::new(),
             stats: OusterStats::default(),
@@ -424,8 +456,10 @@ impl OusterStream {
         });
     }
 
-    /// Emits the sweeps still open.
+    /// Emits the sweeps still open. Packets held as a possible restart stay counted late:
+    /// nothing after them showed one.
     pub fn finish(&mut self, on_sweep: &mut dyn FnMut(&mut Sweep, &OusterFacts)) {
+        self.held.len = 0;
         self.open.sort_by_key(|o| o.sweep.index);
         while !self.open.is_empty() {
             let o = self.open.remove(0);
@@ -554,27 +588,118 @@ impl OusterStream {
         self.facts.alert_flags_seen |= alerts;
         self.facts.alert_packets += u64::from(alerts != 0);
         let fid = packet.frame_id();
+        let far_behind = !self.open.iter().any(|o| o.frame_id == fid)
+            && self
+                .newest_open()
+                .is_some_and(|n| self.frame_diff(n, fid) < -RESTART_BEHIND_FRAMES);
+        if far_behind {
+            self.hold(host_ns, payload, fid, on_sweep);
+            return;
+        }
+        // The stream goes on from its open frames: what was held was stale, and stays late.
+        self.held.len = 0;
+        self.place(host_ns, &packet, on_sweep);
+    }
+
+    /// The newest open frame's id.
+    fn newest_open(&self) -> Option<u32> {
+        self.open.iter().map(|o| o.frame_id).reduce(
+            |a, b| {
+                if self.frame_diff(a, b) > 0 {
+                    b
+                } else {
+                    a
+                }
+            },
+        )
+    }
+
+    /// Holds a packet far behind the newest open frame (module documentation); the
+    /// [`RESTART_CONFIRM_PACKETS`]th in a row restarts the stream.
+    fn hold(
+        &mut self,
+        host_ns: i64,
+        payload: &[u8],
+        fid: u32,
+        on_sweep: &mut dyn FnMut(&mut Sweep, &OusterFacts),
+    ) {
+        let held = &self.held;
+        let step = self.frame_diff(held.newest, fid);
+        let continues = held.len > 0
+            && step >= -RESTART_BEHIND_FRAMES
+            && step <= i64::from(self.cfg.info.fps.max(1));
+        // Late until the packets after it tell: a restart takes it out of `late` to decode it.
+        self.stats.late += 1;
+        if continues {
+            // A datagram the network repeated says nothing of what the sensor's counter did.
+            if held
+                .packets
+                .iter()
+                .take(held.len)
+                .any(|(_, p)| p.as_slice() == payload)
+            {
+                return;
+            }
+            if step > 0 {
+                self.held.newest = fid;
+            }
+        } else {
+            // A fresh start: what was held before did not go on, so it was stale.
+            self.held.len = 0;
+            self.held.newest = fid;
+        }
+        let held = &mut self.held;
+        match held.packets.get_mut(held.len) {
+            Some((host, bytes)) => {
+                *host = host_ns;
+                bytes.clear();
+                bytes.extend_from_slice(payload);
+            }
+            None => held.packets.push((host_ns, payload.to_vec())),
+        }
+        held.len += 1;
+        if held.len >= RESTART_CONFIRM_PACKETS {
+            self.restart(on_sweep);
+        }
+    }
+
+    /// The held packets were the first of a counter that started over: waiting for it to pass
+    /// the newest frame again would drop every packet for up to 2^15 frames (FUSA: ever).
+    fn restart(&mut self, on_sweep: &mut dyn FnMut(&mut Sweep, &OusterFacts)) {
+        let held = std::mem::take(&mut self.held.packets);
+        let n = std::mem::take(&mut self.held.len);
+        self.stats.late = self.stats.late.saturating_sub(n as u64);
+        self.stats.discontinuities += 1;
+        self.finish(on_sweep);
+        for (host_ns, bytes) in held.iter().take(n) {
+            // The decoder accepted these bytes when they came (a new epoch since would have
+            // let go of them): this cannot fail, but a failure must not lose their count.
+            match self.decoder.packet(bytes) {
+                Ok(p) => self.place(*host_ns, &p, on_sweep),
+                Err(_) => self.stats.malformed += 1,
+            }
+        }
+        self.held.packets = held;
+    }
+
+    /// Puts an accepted lidar packet of an open frame, or of one it opens, into its sweep.
+    fn place(
+        &mut self,
+        host_ns: i64,
+        packet: &LidarPacket<'_>,
+        on_sweep: &mut dyn FnMut(&mut Sweep, &OusterFacts),
+    ) {
+        let fid = packet.frame_id();
         // Find or open the frame's sweep.
         let idx = match self.open.iter().position(|o| o.frame_id == fid) {
             Some(i) => i,
             None => {
-                let newest = self.open.iter().map(|o| o.frame_id).reduce(|a, b| {
-                    if self.frame_diff(a, b) > 0 {
-                        b
-                    } else {
-                        a
-                    }
-                });
                 let mut lost_frames = 0u64;
-                if let Some(n) = newest {
+                if let Some(n) = self.newest_open() {
                     let d = self.frame_diff(n, fid);
-                    if d < -RESTART_BEHIND_FRAMES {
-                        // The counter started over: waiting for it to pass the newest frame
-                        // again would drop every packet for up to 2^15 frames (FUSA: ever).
-                        self.stats.discontinuities += 1;
-                        self.finish(on_sweep);
-                    } else if d < 0 {
-                        // Older than the newest frame and not open: late.
+                    if d < 0 {
+                        // Older than the newest frame and not open: late. (Far behind, it
+                        // was held instead, by `hold`; a restart starts with nothing open.)
                         self.stats.late += 1;
                         return;
                     } else if d > i64::from(self.cfg.info.fps.max(1)) {
@@ -699,13 +824,13 @@ impl OusterStream {
         let result = if opts == DecodeOptions::default() && !keep_extras {
             // Every point is kept: the decoder's own append loop (measured 2× faster).
             if keep_columns {
-                self.decoder.decode_columns(&packet, start, points, columns)
+                self.decoder.decode_columns(packet, start, points, columns)
             } else {
-                self.decoder.decode(&packet, start, points)
+                self.decoder.decode(packet, start, points)
             }
         } else {
             self.decoder
-                .decode_with(&packet, start, |pt, ex, _row, col| {
+                .decode_with(packet, start, |pt, ex, _row, col| {
                     let r = ex.range_mm as f32 * 1e-3;
                     if !(r >= opts.min_range && r <= opts.max_range) {
                         return;
