@@ -30,6 +30,7 @@ const REGRESSIONS: &[(&str, Option<&str>)] = &[
     ("family_stream-robosense-difop-counted-twice.bin", None),
     ("family_stream-hesai-late-packet-time.bin", None),
     ("family_stream-robosense-held-packet-uncounted.bin", None),
+    ("family_stream-robosense-ring-beyond-model.bin", None),
 ];
 
 fn dir() -> PathBuf {

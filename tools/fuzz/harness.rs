@@ -3286,6 +3286,14 @@ pub fn family_stream(data: &[u8]) {
         Some(c) if !(set.family == "robosense" && sel & 0x20 != 0) => vec![c.clone()],
         _ => Vec::new(),
     };
+    // Without an angle file or `--model`, a Robosense stream tells the Helios-16P from the
+    // Helios (32 lasers, same header) by the DIFOP's angle table, which the ops may patch: its
+    // points are then on the Helios's 32 rings, as the DIFOP says.
+    let rings = if set.family == "robosense" && calibs.is_empty() && settings.model.is_none() {
+        set.rings.max(32)
+    } else {
+        set.rings
+    };
     let mut pool = CalibrationPool::new(calibs, settings);
     // As the demultiplexer does: the source's first datagram some family claims makes its
     // stream (and goes into it); datagrams before it are left unclaimed.
@@ -3328,7 +3336,7 @@ pub fn family_stream(data: &[u8]) {
             );
             let r = (p.x * p.x + p.y * p.y + p.z * p.z).sqrt();
             assert!(r <= set.max_range_m, "{p:?} beyond {} m", set.max_range_m);
-            assert!(p.ring < set.rings && p.ret <= set.max_ret, "{p:?}");
+            assert!(p.ring < rings && p.ret <= set.max_ret, "{p:?}");
             assert!((0.0..=255.0).contains(&p.intensity), "{p:?}");
             if check("family-point-time") {
                 assert!(
