@@ -368,3 +368,79 @@ fn a_sweep_is_cut_when_its_counters_or_time_stand_still() {
     assert!(seen.iter().all(|s| s.4 - s.3 < 200_000_000), "{seen:?}");
     assert_eq!(total(&seen), 1300 * 96);
 }
+
+/// A packet late by its `udp_cnt` (within the reorder window) joins the open sweep only where
+/// its time falls inside it (0 ..= two periods after the sweep's start); a time that lies (5 s
+/// ahead or behind), or one from before the sweep (reordered across the period's cut), puts
+/// it in `late_dropped`, not in `missing` too, and the sweeps are those of the stream without
+/// it. (Before: it joined the open sweep at t = u32::MAX or t = 0.) Likewise a packet of the
+/// frame just closed, into its frame's sweep waiting for IMU samples. A frame's first packet
+/// behind its second belongs to the sweep its second began: that sweep starts at it.
+#[test]
+fn a_late_packet_timed_outside_the_open_sweep_is_dropped() {
+    let ps: Vec<Vec<u8>> = (0..300u16)
+        .map(|k| sdk2(k, 0, T0 + u64::from(k) * P))
+        .collect();
+    let strip = |s: &Seen| s.iter().map(|w| (w.0, w.1, w.3, w.4)).collect::<Vec<_>>();
+    // Packet 100 after 101, timed 5 s off; packet 208 after 209, which began the second sweep.
+    for (k, ts) in [
+        (100, T0 + 100 * P + 5_000_000_000),
+        (100, T0 + 100 * P - 5_000_000_000),
+        (208, T0 + 208 * P),
+    ] {
+        let mut without = ps.clone();
+        without.remove(k);
+        let (want, _) = mid360(&without);
+        let mut order = ps.clone();
+        order[k] = sdk2(k as u16, 0, ts);
+        order.swap(k, k + 1);
+        let (got, st) = mid360(&order);
+        assert_eq!(
+            (
+                st.late_dropped,
+                st.missing,
+                st.packets,
+                st.duplicates,
+                st.discontinuities
+            ),
+            (1, 0, 299, 0, 0),
+            "packet {k} at {ts}"
+        );
+        assert_eq!(strip(&got), strip(&want), "packet {k} at {ts}");
+    }
+    // Timed inside the open sweep, though not where its number says: it joins.
+    let mut order = ps.clone();
+    order[100] = sdk2(100, 0, T0 + 100 * P - 1_000_000);
+    order.swap(100, 101);
+    let (got, st) = mid360(&order);
+    assert_eq!((st.late_dropped, st.missing, st.packets), (0, 0, 300));
+    assert_eq!(total(&got), 300 * 96);
+    // A frame's first packet behind its second, which began the frame's sweep: the sweep is
+    // its frame's, and starts at it (its points were at t = 0, the sweep at the second).
+    let fs = frames(5, 100);
+    let base: Vec<Vec<u8>> = fs.iter().map(|(_, b)| b.clone()).collect();
+    let (want, _) = hap(&base);
+    let mut order = base.clone();
+    order.swap(at(&fs, 3, 0), at(&fs, 3, 1));
+    let (got, st) = hap(&order);
+    assert_eq!((st.late_dropped, st.missing, st.packets), (0, 0, 500));
+    assert_eq!(strip(&got), strip(&want));
+
+    // HAP frames, the IMU stopped at the start: frame 1's sweep waits while frame 2 comes.
+    // Frame 1's 96th packet after frame 2's 3rd, timed in frame 0 (before its sweep began).
+    let mut base: Vec<Vec<u8>> = vec![imu(0, T0)];
+    base.extend(fs.iter().map(|(_, b)| b.clone()));
+    let k = 1 + at(&fs, 1, 95);
+    let mut without = base.clone();
+    without.remove(k);
+    let (want, _) = hap(&without);
+    let mut order = without.clone();
+    let ts = T0 + 50_000_000;
+    order.insert(at(&fs, 2, 3), sdk2(95, 1, ts));
+    let (got, st) = hap(&order);
+    assert_eq!(
+        (st.late_dropped, st.missing, st.packets, st.duplicates),
+        (1, 0, 499, 0)
+    );
+    assert_eq!(strip(&got), strip(&want));
+}
