@@ -444,3 +444,34 @@ fn a_late_packet_timed_outside_the_open_sweep_is_dropped() {
     );
     assert_eq!(strip(&got), strip(&want));
 }
+
+/// HAP-like frames of 20 packets (20 ms): a packet three or four frames back, up to two
+/// periods late, is counted once — `late_dropped`, its gap no longer missing — and a loss
+/// of its frame that no packet fills stays missing. (Before: dropped, and still missing.)
+#[test]
+fn a_packet_three_or_more_frames_back_is_counted_once() {
+    let fs = frames(8, 20);
+    let base: Vec<Vec<u8>> = fs.iter().map(|(_, b)| b.clone()).collect();
+    // Frame 0 loses its 12th packet for good; its 11th comes during frame 3, frame 1's 8th
+    // during frame 5.
+    let mut order = base.clone();
+    let late_0 = order[at(&fs, 0, 10)].clone();
+    let late_1 = order[at(&fs, 1, 7)].clone();
+    order.insert(at(&fs, 5, 4), late_1);
+    order.insert(at(&fs, 3, 4), late_0);
+    for k in [at(&fs, 1, 7), at(&fs, 0, 11), at(&fs, 0, 10)] {
+        order.remove(k);
+    }
+    let (seen, st) = hap(&order);
+    assert_eq!(
+        (
+            st.late_dropped,
+            st.missing,
+            st.duplicates,
+            st.discontinuities
+        ),
+        (2, 1, 0, 0)
+    );
+    assert_eq!(st.packets + st.late_dropped, order.len() as u64);
+    assert_eq!(total(&seen), (8 * 20 - 3) * 96);
+}

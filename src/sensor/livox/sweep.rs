@@ -19,8 +19,8 @@
 //! further behind than a reordering explains (more than [`REORDER_PACKETS`] behind the newest
 //! `udp_cnt`, or of a frame whose sweep is gone), but at most two periods behind the newest
 //! packet's time, came late: it is dropped and counted in [`LivoxStats::late_dropped`] (its
-//! gap no longer counted missing, where its frame's numbers are still known: the last two
-//! frames), and changes nothing else. Further
+//! gap no longer counted missing, where its frame's numbers are still known: the open frame
+//! and the 127 before it), and changes nothing else. Further
 //! behind, or with counters and time both jumping, the sensor restarted: one discontinuity. A sweep
 //! is also cut when it spans two periods (of 100 ms at least) or holds four times the
 //! model's dual-return rate over a period in points (2^22 to 2^26), or as many packets,
@@ -55,6 +55,10 @@ pub const DEFAULT_PERIOD_NS: u64 = 100_000_000;
 pub const MAX_IMU_QUEUE: usize = 4096;
 /// A `udp_cnt` jump larger than this is a restart, not loss.
 const MAX_COUNTER_GAP: u64 = 4096;
+/// Where `udp_cnt` restarts with each frame, a packet of a frame up to this many before the
+/// open one (and in time at most two periods late) is late; further back (by `frame_cnt`,
+/// mod 256) it is ahead, not behind.
+const MAX_FRAMES_BACK: u8 = 127;
 /// Fewest and most points a sweep may hold before it is cut (the model's rate sets the cap
 /// between them): memory stays bounded whatever the counters and times say.
 const MIN_POINT_CAP: f64 = (1u64 << 22) as f64;
@@ -126,8 +130,14 @@ pub struct LivoxStats {
     /// frame already handed over (its last packets came after the next frame's first ones,
     /// and no IMU wait held it) or of one before that; or late by their `udp_cnt` but timed
     /// outside the sweep they would join (before its start or more than two periods after
-    /// it: a time that lies, or a packet reordered across the period's cut). Not counted
-    /// missing.
+    /// it: a time that lies, or a packet reordered across the period's cut). Each is counted
+    /// here once and not also missing: the gap it left, counted missing when a later packet
+    /// came, is taken off `missing`. That takes its frame's
+    /// numbers, which the stream holds for the open frame and the 127 before it. A packet of
+    /// a frame it holds none of — from before the stream's first packet, or from before the
+    /// counters last restarted — and one more than 4096 numbers from its frame's newest are
+    /// counted here and `missing` is left as it is: nothing counted missing since is theirs,
+    /// but a loss their frame counted before a restart stays counted too.
     pub late_dropped: u64,
     /// Sweeps cut because they spanned two periods or reached the point cap before the
     /// period or the sensor's frame ended them (a timestamp or `frame_cnt` standing still).
@@ -224,10 +234,11 @@ pub struct LivoxStream {
     udp: UdpLedger,
     imu_udp: SeqWindow,
     last_frame: Option<u8>,
-    /// Sensors that restart `udp_cnt` with their frames: the two frames before the open one
-    /// and their numbers, newest first, for their packets that come after the next frame's
-    /// first.
-    closed: [(Option<u8>, UdpLedger); 2],
+    /// Sensors that restart `udp_cnt` with their frames: the frames before the open one and
+    /// their numbers, newest first, for their packets that come after the next frame's first.
+    /// Every frame such a packet may be of is kept ([`MAX_FRAMES_BACK`], a KiB each), so that
+    /// one counted missing in its frame is taken off `missing` however far back it is.
+    closed: VecDeque<(u8, UdpLedger)>,
     frame_starts: u32,
     sdk1_next_ns: Option<i64>,
     /// SDK1 of no known model: record spacings seen, and the last in-order packet's records.
@@ -286,10 +297,7 @@ impl LivoxStream {
             udp: UdpLedger::new(MAX_COUNTER_GAP),
             imu_udp: SeqWindow::new(16, MAX_COUNTER_GAP),
             last_frame: None,
-            closed: [
-                (None, UdpLedger::new(MAX_COUNTER_GAP)),
-                (None, UdpLedger::new(MAX_COUNTER_GAP)),
-            ],
+            closed: VecDeque::new(),
             frame_starts: 0,
             sdk1_next_ns: None,
             sdk1_steps: LearntSpacing::default(),
@@ -478,10 +486,13 @@ impl LivoxStream {
         // its own frame: however late, counted against the open frame it would read as loss.
         if self.frame_starts > 0 {
             let frames_back = self.last_frame.map_or(0, |f| f.wrapping_sub(frame));
-            if (1..128).contains(&frames_back) && (behind_in_time || !trusted) {
-                if let Some(k) = self.closed.iter().position(|(f, _)| *f == Some(frame)) {
+            if (1..=MAX_FRAMES_BACK).contains(&frames_back) && (behind_in_time || !trusted) {
+                if let Some(k) = self.closed.iter().position(|(f, _)| *f == frame) {
                     return self.push_closed_frame(k, &p, host_ns, ts, damaged);
                 }
+                // A frame the stream holds no numbers of (before its first packet, or before
+                // the counters last restarted): nothing it counted missing is known to be
+                // this packet's.
                 return match damaged {
                     Some(e) => Err(e),
                     None => {
@@ -567,16 +578,23 @@ impl LivoxStream {
                 lost = u64::from(udp);
                 self.stats.missing += lost;
                 self.frame_starts = self.frame_starts.saturating_add(1);
-                // The open frame's numbers become the closed ones'; the oldest are forgotten.
-                self.closed.swap(0, 1);
-                std::mem::swap(&mut self.closed[0].1, &mut self.udp);
-                self.closed[0].0 = self.last_frame;
+                // The open frame's numbers join the closed ones'; the oldest are forgotten
+                // (their ledger is the new open frame's).
+                let oldest = if self.closed.len() >= usize::from(MAX_FRAMES_BACK) {
+                    self.closed.pop_back().map(|(_, numbers)| numbers)
+                } else {
+                    None
+                };
+                let mut numbers = oldest.unwrap_or_else(|| UdpLedger::new(MAX_COUNTER_GAP));
+                std::mem::swap(&mut numbers, &mut self.udp);
+                if let Some(f) = self.last_frame {
+                    self.closed.push_front((f, numbers));
+                }
                 self.udp.start_lost_before(udp);
             }
             Arrival::Restart => {
                 self.udp.restart(udp);
-                self.closed[0].0 = None;
-                self.closed[1].0 = None;
+                self.closed.clear();
                 // A restart at 0 without a frame step: a sensor whose `frame_cnt` means
                 // nothing may restart `udp_cnt` with its frames; nothing is known lost.
                 if udp != 0 {
@@ -738,8 +756,8 @@ impl LivoxStream {
         Ok(())
     }
 
-    /// A point packet of one of the two frames before the open one (`k`: 0 the newest): its
-    /// frame's last packets came after the next frame's first. It is late, never a cut; its number
+    /// A point packet of a frame before the open one (`k`: 0 the newest closed): its frame's
+    /// last packets came after the next frame's first. It is late, never a cut; its number
     /// fills its frame's gap (once: a copy is a copy, however far behind) or tells the frame's
     /// tail lost. Where sweeps follow the frames, its points join its frame's sweep while that
     /// waits for its IMU samples; on the period, a packet of the frame just closed joins the
@@ -753,8 +771,16 @@ impl LivoxStream {
         ts: i64,
         damaged: Option<LivoxWireError>,
     ) -> Result<(), LivoxWireError> {
-        let (frame, ledger) = &mut self.closed[k];
-        let frame = frame.map_or(0, u32::from);
+        let Some((frame, ledger)) = self.closed.get_mut(k) else {
+            return match damaged {
+                Some(e) => Err(e),
+                None => {
+                    self.stats.late_dropped += 1;
+                    Ok(())
+                }
+            };
+        };
+        let frame = u32::from(*frame);
         let udp = p.udp_cnt();
         let (filled, lost) = match ledger.peek(udp) {
             Count::Lost { .. } => (true, 0),
