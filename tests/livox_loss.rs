@@ -475,3 +475,56 @@ fn a_packet_three_or_more_frames_back_is_counted_once() {
     assert_eq!(st.packets + st.late_dropped, order.len() as u64);
     assert_eq!(total(&seen), (8 * 20 - 3) * 96);
 }
+
+/// A copy of a packet already counted late (more than 10 behind, with the time it had) is a
+/// duplicate, never late again and never un-counting another loss: from before the run's
+/// first number, from before a closed frame's first number, three frames back. (Before:
+/// each copy was counted in `late_dropped` again.)
+#[test]
+fn a_copy_of_a_stale_packet_is_a_duplicate() {
+    // The stream starts at 482: 480 comes after 520, and again twice.
+    let ps: Vec<Vec<u8>> = (480..800u16)
+        .map(|k| sdk2(k, 0, T0 + u64::from(k) * P))
+        .collect();
+    let mut order = ps[2..].to_vec();
+    order.insert(38, ps[0].clone());
+    order.insert(39, ps[0].clone());
+    order.insert(90, ps[0].clone());
+    let (seen, st) = mid360(&order);
+    assert_eq!(
+        (
+            st.late_dropped,
+            st.duplicates,
+            st.missing,
+            st.discontinuities
+        ),
+        (1, 2, 0, 0)
+    );
+    assert_eq!(total(&seen), 318 * 96);
+
+    // HAP frames of 20 packets, the first frame seen from its 6th: its 3rd comes during
+    // frame 1 (its frame closed), its 8th three frames late, each with a copy later; frame
+    // 0 lost its 10th for good.
+    let fs = frames(8, 20);
+    let base: Vec<Vec<u8>> = fs.iter().map(|(_, b)| b.clone()).collect();
+    let (third, eighth) = (base[at(&fs, 0, 2)].clone(), base[at(&fs, 0, 7)].clone());
+    let mut order = base.clone();
+    order.insert(at(&fs, 4, 15), eighth.clone());
+    order.insert(at(&fs, 3, 10), eighth.clone());
+    order.insert(at(&fs, 3, 4), eighth);
+    order.insert(at(&fs, 1, 19), third.clone());
+    order.insert(at(&fs, 1, 5), third);
+    order.remove(at(&fs, 0, 9));
+    order.remove(at(&fs, 0, 7));
+    order.drain(..5);
+    let (_, st) = hap(&order);
+    assert_eq!(
+        (
+            st.late_dropped,
+            st.duplicates,
+            st.missing,
+            st.discontinuities
+        ),
+        (2, 3, 1, 0)
+    );
+}

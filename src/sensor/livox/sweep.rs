@@ -20,7 +20,7 @@
 //! `udp_cnt`, or of a frame whose sweep is gone), but at most two periods behind the newest
 //! packet's time, came late: it is dropped and counted in [`LivoxStats::late_dropped`] (its
 //! gap no longer counted missing, where its frame's numbers are still known: the open frame
-//! and the 127 before it), and changes nothing else. Further
+//! and the 127 before it; a copy of it is a duplicate), and changes nothing else. Further
 //! behind, or with counters and time both jumping, the sensor restarted: one discontinuity. A sweep
 //! is also cut when it spans two periods (of 100 ms at least) or holds four times the
 //! model's dual-return rate over a period in points (2^22 to 2^26), or as many packets,
@@ -132,12 +132,13 @@ pub struct LivoxStats {
     /// outside the sweep they would join (before its start or more than two periods after
     /// it: a time that lies, or a packet reordered across the period's cut). Each is counted
     /// here once and not also missing: the gap it left, counted missing when a later packet
-    /// came, is taken off `missing`. That takes its frame's
+    /// came, is taken off `missing`, and a copy of it is a duplicate. That takes its frame's
     /// numbers, which the stream holds for the open frame and the 127 before it. A packet of
     /// a frame it holds none of — from before the stream's first packet, or from before the
     /// counters last restarted — and one more than 4096 numbers from its frame's newest are
     /// counted here and `missing` is left as it is: nothing counted missing since is theirs,
-    /// but a loss their frame counted before a restart stays counted too.
+    /// but a loss their frame counted before a restart stays counted too, and each copy of
+    /// one is counted here again.
     pub late_dropped: u64,
     /// Sweeps cut because they spanned two periods or reached the point cap before the
     /// period or the sensor's frame ended them (a timestamp or `frame_cnt` standing still).
@@ -551,6 +552,9 @@ impl LivoxStream {
                 if filled {
                     self.udp.take(udp);
                     self.stats.missing = self.stats.missing.saturating_sub(1);
+                } else {
+                    // From before the run's first number: kept, so that a copy is a copy.
+                    self.udp.take_before(udp);
                 }
                 return match damaged {
                     Some(e) => Err(e),
@@ -796,7 +800,9 @@ impl LivoxStream {
                 };
             }
             // Far ahead of the frame's numbers or before them: nothing to tell of its loss.
+            // Kept where the ledger reaches it, so that a copy is a copy.
             Count::Far => {
+                ledger.take_before(udp);
                 return match damaged {
                     Some(e) => Err(e),
                     None => {
