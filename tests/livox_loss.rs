@@ -368,3 +368,163 @@ fn a_sweep_is_cut_when_its_counters_or_time_stand_still() {
     assert!(seen.iter().all(|s| s.4 - s.3 < 200_000_000), "{seen:?}");
     assert_eq!(total(&seen), 1300 * 96);
 }
+
+/// A packet late by its `udp_cnt` (within the reorder window) joins the open sweep only where
+/// its time falls inside it (0 ..= two periods after the sweep's start); a time that lies (5 s
+/// ahead or behind), or one from before the sweep (reordered across the period's cut), puts
+/// it in `late_dropped`, not in `missing` too, and the sweeps are those of the stream without
+/// it. (Before: it joined the open sweep at t = u32::MAX or t = 0.) Likewise a packet of the
+/// frame just closed, into its frame's sweep waiting for IMU samples. A frame's first packet
+/// behind its second belongs to the sweep its second began: that sweep starts at it.
+#[test]
+fn a_late_packet_timed_outside_the_open_sweep_is_dropped() {
+    let ps: Vec<Vec<u8>> = (0..300u16)
+        .map(|k| sdk2(k, 0, T0 + u64::from(k) * P))
+        .collect();
+    let strip = |s: &Seen| s.iter().map(|w| (w.0, w.1, w.3, w.4)).collect::<Vec<_>>();
+    // Packet 100 after 101, timed 5 s off; packet 208 after 209, which began the second sweep.
+    for (k, ts) in [
+        (100, T0 + 100 * P + 5_000_000_000),
+        (100, T0 + 100 * P - 5_000_000_000),
+        (208, T0 + 208 * P),
+    ] {
+        let mut without = ps.clone();
+        without.remove(k);
+        let (want, _) = mid360(&without);
+        let mut order = ps.clone();
+        order[k] = sdk2(k as u16, 0, ts);
+        order.swap(k, k + 1);
+        let (got, st) = mid360(&order);
+        assert_eq!(
+            (
+                st.late_dropped,
+                st.missing,
+                st.packets,
+                st.duplicates,
+                st.discontinuities
+            ),
+            (1, 0, 299, 0, 0),
+            "packet {k} at {ts}"
+        );
+        assert_eq!(strip(&got), strip(&want), "packet {k} at {ts}");
+    }
+    // Timed inside the open sweep, though not where its number says: it joins.
+    let mut order = ps.clone();
+    order[100] = sdk2(100, 0, T0 + 100 * P - 1_000_000);
+    order.swap(100, 101);
+    let (got, st) = mid360(&order);
+    assert_eq!((st.late_dropped, st.missing, st.packets), (0, 0, 300));
+    assert_eq!(total(&got), 300 * 96);
+    // A frame's first packet behind its second, which began the frame's sweep: the sweep is
+    // its frame's, and starts at it (its points were at t = 0, the sweep at the second).
+    let fs = frames(5, 100);
+    let base: Vec<Vec<u8>> = fs.iter().map(|(_, b)| b.clone()).collect();
+    let (want, _) = hap(&base);
+    let mut order = base.clone();
+    order.swap(at(&fs, 3, 0), at(&fs, 3, 1));
+    let (got, st) = hap(&order);
+    assert_eq!((st.late_dropped, st.missing, st.packets), (0, 0, 500));
+    assert_eq!(strip(&got), strip(&want));
+
+    // HAP frames, the IMU stopped at the start: frame 1's sweep waits while frame 2 comes.
+    // Frame 1's 96th packet after frame 2's 3rd, timed in frame 0 (before its sweep began).
+    let mut base: Vec<Vec<u8>> = vec![imu(0, T0)];
+    base.extend(fs.iter().map(|(_, b)| b.clone()));
+    let k = 1 + at(&fs, 1, 95);
+    let mut without = base.clone();
+    without.remove(k);
+    let (want, _) = hap(&without);
+    let mut order = without.clone();
+    let ts = T0 + 50_000_000;
+    order.insert(at(&fs, 2, 3), sdk2(95, 1, ts));
+    let (got, st) = hap(&order);
+    assert_eq!(
+        (st.late_dropped, st.missing, st.packets, st.duplicates),
+        (1, 0, 499, 0)
+    );
+    assert_eq!(strip(&got), strip(&want));
+}
+
+/// HAP-like frames of 20 packets (20 ms): a packet three or four frames back, up to two
+/// periods late, is counted once — `late_dropped`, its gap no longer missing — and a loss
+/// of its frame that no packet fills stays missing. (Before: dropped, and still missing.)
+#[test]
+fn a_packet_three_or_more_frames_back_is_counted_once() {
+    let fs = frames(8, 20);
+    let base: Vec<Vec<u8>> = fs.iter().map(|(_, b)| b.clone()).collect();
+    // Frame 0 loses its 12th packet for good; its 11th comes during frame 3, frame 1's 8th
+    // during frame 5.
+    let mut order = base.clone();
+    let late_0 = order[at(&fs, 0, 10)].clone();
+    let late_1 = order[at(&fs, 1, 7)].clone();
+    order.insert(at(&fs, 5, 4), late_1);
+    order.insert(at(&fs, 3, 4), late_0);
+    for k in [at(&fs, 1, 7), at(&fs, 0, 11), at(&fs, 0, 10)] {
+        order.remove(k);
+    }
+    let (seen, st) = hap(&order);
+    assert_eq!(
+        (
+            st.late_dropped,
+            st.missing,
+            st.duplicates,
+            st.discontinuities
+        ),
+        (2, 1, 0, 0)
+    );
+    assert_eq!(st.packets + st.late_dropped, order.len() as u64);
+    assert_eq!(total(&seen), (8 * 20 - 3) * 96);
+}
+
+/// A copy of a packet already counted late (more than 10 behind, with the time it had) is a
+/// duplicate, never late again and never un-counting another loss: from before the run's
+/// first number, from before a closed frame's first number, three frames back. (Before:
+/// each copy was counted in `late_dropped` again.)
+#[test]
+fn a_copy_of_a_stale_packet_is_a_duplicate() {
+    // The stream starts at 482: 480 comes after 520, and again twice.
+    let ps: Vec<Vec<u8>> = (480..800u16)
+        .map(|k| sdk2(k, 0, T0 + u64::from(k) * P))
+        .collect();
+    let mut order = ps[2..].to_vec();
+    order.insert(38, ps[0].clone());
+    order.insert(39, ps[0].clone());
+    order.insert(90, ps[0].clone());
+    let (seen, st) = mid360(&order);
+    assert_eq!(
+        (
+            st.late_dropped,
+            st.duplicates,
+            st.missing,
+            st.discontinuities
+        ),
+        (1, 2, 0, 0)
+    );
+    assert_eq!(total(&seen), 318 * 96);
+
+    // HAP frames of 20 packets, the first frame seen from its 6th: its 3rd comes during
+    // frame 1 (its frame closed), its 8th three frames late, each with a copy later; frame
+    // 0 lost its 10th for good.
+    let fs = frames(8, 20);
+    let base: Vec<Vec<u8>> = fs.iter().map(|(_, b)| b.clone()).collect();
+    let (third, eighth) = (base[at(&fs, 0, 2)].clone(), base[at(&fs, 0, 7)].clone());
+    let mut order = base.clone();
+    order.insert(at(&fs, 4, 15), eighth.clone());
+    order.insert(at(&fs, 3, 10), eighth.clone());
+    order.insert(at(&fs, 3, 4), eighth);
+    order.insert(at(&fs, 1, 19), third.clone());
+    order.insert(at(&fs, 1, 5), third);
+    order.remove(at(&fs, 0, 9));
+    order.remove(at(&fs, 0, 7));
+    order.drain(..5);
+    let (_, st) = hap(&order);
+    assert_eq!(
+        (
+            st.late_dropped,
+            st.duplicates,
+            st.missing,
+            st.discontinuities
+        ),
+        (2, 3, 1, 0)
+    );
+}

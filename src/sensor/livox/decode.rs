@@ -33,6 +33,9 @@ pub struct PacketPoints {
     pub points: usize,
     /// Time of the last record, ns (device clock).
     pub last_ns: i64,
+    /// Records timed inside the window ([`LivoxDecoder::decode_within`]; without one, every
+    /// record).
+    pub in_window: usize,
 }
 
 impl LivoxDecoder {
@@ -66,7 +69,7 @@ impl LivoxDecoder {
 
     /// Appends the points of `records` records read by `rec(i)` of layout `kind`; record `i`
     /// is at `first_ns + spacing`'s `i`-th offset (device ns), and `t` is measured from
-    /// `sweep_start_ns`.
+    /// `sweep_start_ns` (clamped to `0..=u32::MAX`).
     #[allow(clippy::too_many_arguments)]
     pub fn decode<'a>(
         &self,
@@ -78,14 +81,50 @@ impl LivoxDecoder {
         sweep_start_ns: i64,
         out: &mut Vec<Point>,
     ) -> PacketPoints {
-        // The Cartesian single-return layouts (every MID-360 / HAP / Avia default) get loops of
-        // their own: fixed offsets, no per-record dispatch on the layout.
         let run = Run {
             records,
             first_ns,
             spacing,
             sweep_start_ns,
+            max_t_ns: None,
         };
+        self.decode_run(kind, run, rec, out)
+    }
+
+    /// As [`Self::decode`], but only the records timed `0..=max_t_ns` after `sweep_start_ns`
+    /// give points: a late packet joins a sweep already begun only where its time falls inside
+    /// it (a clamped time would put a point at the sweep's start or at `u32::MAX`).
+    #[allow(clippy::too_many_arguments)]
+    pub fn decode_within<'a>(
+        &self,
+        kind: Record,
+        records: usize,
+        rec: impl Fn(usize) -> &'a [u8],
+        first_ns: i64,
+        spacing: Spacing,
+        sweep_start_ns: i64,
+        max_t_ns: i64,
+        out: &mut Vec<Point>,
+    ) -> PacketPoints {
+        let run = Run {
+            records,
+            first_ns,
+            spacing,
+            sweep_start_ns,
+            max_t_ns: Some(max_t_ns),
+        };
+        self.decode_run(kind, run, rec, out)
+    }
+
+    fn decode_run<'a>(
+        &self,
+        kind: Record,
+        run: Run,
+        rec: impl Fn(usize) -> &'a [u8],
+        out: &mut Vec<Point>,
+    ) -> PacketPoints {
+        // The Cartesian single-return layouts (every MID-360 / HAP / Avia default) get loops of
+        // their own: fixed offsets, no per-record dispatch on the layout.
         match kind {
             Record::CartesianMmTag => self.cartesian(run, rec, out, |r| {
                 Some((
@@ -119,6 +158,7 @@ impl LivoxDecoder {
         let mut times = run.spacing.offsets();
         let mut ring = 0u16;
         let mut last = run.first_ns;
+        let mut in_window = 0;
         for i in 0..run.records {
             let at = run.first_ns.saturating_add(times.next_offset());
             last = at;
@@ -127,6 +167,10 @@ impl LivoxDecoder {
             if ring == self.lines {
                 ring = 0;
             }
+            if !run.in_window(at) {
+                continue;
+            }
+            in_window += 1;
             let Some((xyz, scale, reflectivity, tag)) = read(rec(i)) else {
                 continue;
             };
@@ -156,6 +200,7 @@ impl LivoxDecoder {
         PacketPoints {
             points: out.len() - before,
             last_ns: last,
+            in_window,
         }
     }
 
@@ -185,10 +230,15 @@ impl LivoxDecoder {
         let (min2, max2) = self.range2();
         let mut times = run.spacing.offsets();
         let mut last = run.first_ns;
+        let mut in_window = 0;
         for i in 0..run.records {
             let r = rec(i);
             let at = run.first_ns.saturating_add(times.next_offset());
             last = at;
+            if !run.in_window(at) {
+                continue;
+            }
+            in_window += 1;
             let t = rel_t(at, run.sweep_start_ns);
             let ring = (i % usize::from(self.lines)) as u16;
             let (st, ct, sp, cp) = if spherical {
@@ -236,17 +286,29 @@ impl LivoxDecoder {
         PacketPoints {
             points: out.len() - before,
             last_ns: last,
+            in_window,
         }
     }
 }
 
-/// One packet's records: how many, the first one's time, their spacing, the sweep's start.
+/// One packet's records: how many, the first one's time, their spacing, the sweep's start,
+/// and the latest `t` a record may have (`None`: any, clamped).
 #[derive(Clone, Copy)]
 struct Run {
     records: usize,
     first_ns: i64,
     spacing: Spacing,
     sweep_start_ns: i64,
+    max_t_ns: Option<i64>,
+}
+
+impl Run {
+    /// Whether a record at device time `at` gives a point.
+    #[inline(always)]
+    fn in_window(&self, at: i64) -> bool {
+        self.max_t_ns
+            .is_none_or(|max| (0..=max).contains(&at.saturating_sub(self.sweep_start_ns)))
+    }
 }
 
 /// `t` of a point at device time `at` in a sweep that started at `start` (clamped to u32).
@@ -361,6 +423,31 @@ mod tests {
         for i in 0..100 {
             assert_eq!(o.next_offset(), 4_167 * i);
         }
+    }
+
+    #[test]
+    fn a_window_keeps_the_records_timed_inside_it() {
+        // Five records 10 ns apart, the first 15 ns before the sweep's start: at -15, -5, 5,
+        // 15, 25 ns after it.
+        let rec: Vec<u8> = [1000i32, 0, 0]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .chain([7, 0])
+            .collect();
+        let d = LivoxDecoder::new(1, DecodeOptions::default());
+        let mut out = Vec::new();
+        let (kind, step) = (Record::CartesianMmTag, Spacing::step(10));
+        let got = d.decode_within(kind, 5, |_| &rec, 100, step, 115, 20, &mut out);
+        assert_eq!((got.points, got.in_window, got.last_ns), (2, 2, 140));
+        assert_eq!(out.iter().map(|p| p.t).collect::<Vec<_>>(), [5, 15]);
+        // Without a window: every record, times clamped at the sweep's start.
+        out.clear();
+        let got = d.decode(kind, 5, |_| &rec, 100, step, 115, &mut out);
+        assert_eq!((got.points, got.in_window), (5, 5));
+        assert_eq!(
+            out.iter().map(|p| p.t).collect::<Vec<_>>(),
+            [0, 0, 5, 15, 25]
+        );
     }
 
     #[test]

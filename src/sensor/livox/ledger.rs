@@ -121,22 +121,41 @@ impl UdpLedger {
             },
             Count::Seen { .. } => {}
             Count::Lost { .. } => self.mark(n, true),
-            Count::Stray => {
-                let behind = self.latest.map_or(0, |l| l.wrapping_sub(n));
-                // The numbers between the run's first and this one never came and were never
-                // counted: neither bit.
-                while self.len <= behind {
-                    let k = self.latest.unwrap_or(0).wrapping_sub(self.len);
-                    let (w, b) = bit(k);
-                    self.seen[w] &= !b;
-                    self.lost[w] &= !b;
-                    self.len += 1;
-                }
-                self.mark(n, true);
-            }
+            Count::Stray => self.widen_to(n),
             Count::Far => self.restart(n),
         }
         c
+    }
+
+    /// Records `n`, a number from before the run's first ([`Count::Far`]) that came all the
+    /// same (a late packet), as come: the run is widened back to it, so a copy of it is
+    /// [`Count::Seen`]. Returns `false`, recording nothing, where `n` is not far or is further
+    /// behind the latest than the ledger holds.
+    pub fn take_before(&mut self, n: u16) -> bool {
+        let Some(latest) = self.latest else {
+            return false;
+        };
+        if self.peek(n) != Count::Far || latest.wrapping_sub(n) >= LEDGER_NUMBERS {
+            return false;
+        }
+        self.widen_to(n);
+        true
+    }
+
+    /// Widens the run back to `n` (at most [`LEDGER_NUMBERS`] behind the latest) and marks it
+    /// come.
+    fn widen_to(&mut self, n: u16) {
+        let behind = self.latest.map_or(0, |l| l.wrapping_sub(n));
+        // The numbers between the run's first and this one never came and were never
+        // counted: neither bit.
+        while self.len <= behind {
+            let k = self.latest.unwrap_or(0).wrapping_sub(self.len);
+            let (w, b) = bit(k);
+            self.seen[w] &= !b;
+            self.lost[w] &= !b;
+            self.len += 1;
+        }
+        self.mark(n, true);
     }
 
     /// Starts a run at `n`, as a first number.
@@ -246,5 +265,22 @@ mod tests {
         // Never more than the ledger holds: nothing before 5000 counted lost.
         l.start_lost_before(5_000);
         assert_eq!(l.peek(4_999), Stray);
+    }
+
+    #[test]
+    fn a_number_from_before_the_run_is_kept_once_taken() {
+        use Count::*;
+        let mut l = UdpLedger::new(4096);
+        assert_eq!(takes(&mut l, &[500, 501, 502]), [Next { lost: 0 }; 3]);
+        assert_eq!(l.peek(450), Far);
+        assert!(l.take_before(450));
+        assert_eq!(l.peek(450), Seen { behind: 52 });
+        // Between it and the run's first: neither come nor counted, far as before.
+        assert_eq!(l.peek(470), Far);
+        assert_eq!(l.take(503), Next { lost: 0 });
+        // Beyond what the ledger holds: nothing recorded.
+        let beyond = 503u16.wrapping_sub(4_096);
+        assert!(!l.take_before(beyond));
+        assert_eq!(l.peek(beyond), Far);
     }
 }

@@ -12,12 +12,16 @@
 //! Mid-40 at 1 ms and a Horizon at 0.4 ms are both counted right; until two packets have
 //! come, no time gap is counted).
 //!
-//! A packet further behind than a reordering explains (more than [`REORDER_PACKETS`] behind
-//! the newest `udp_cnt`, or of a frame whose sweep is gone), but at most two periods behind
-//! the newest packet's time, came late: it is dropped and counted in
-//! [`LivoxStats::late_dropped`] (its gap no longer counted missing, where its frame's
-//! numbers are still known: the last two frames), and changes nothing else. Further behind,
-//! or with counters and time both jumping, the sensor restarted: one discontinuity. A sweep
+//! A packet a little behind the newest `udp_cnt` (at most [`REORDER_PACKETS`]) was reordered
+//! on the way: it joins the open sweep where its time falls inside it (from the sweep's start
+//! to two periods after it; a frame's first packet behind its second starts that frame's
+//! sweep instead), else it is dropped as a late one is, and it cuts nothing. A packet
+//! further behind than a reordering explains (more than [`REORDER_PACKETS`] behind the newest
+//! `udp_cnt`, or of a frame whose sweep is gone), but at most two periods behind the newest
+//! packet's time, came late: it is dropped and counted in [`LivoxStats::late_dropped`] (its
+//! gap no longer counted missing, where its frame's numbers are still known: the open frame
+//! and the 127 before it; a copy of it is a duplicate), and changes nothing else. Further
+//! behind, or with counters and time both jumping, the sensor restarted: one discontinuity. A sweep
 //! is also cut when it spans two periods (of 100 ms at least) or holds four times the
 //! model's dual-return rate over a period in points (2^22 to 2^26), or as many packets,
 //! without the period or the sensor's frame ending it — a timestamp or `frame_cnt` that
@@ -35,7 +39,7 @@
 
 use std::collections::VecDeque;
 
-use super::decode::{LivoxDecoder, Spacing};
+use super::decode::{LivoxDecoder, PacketPoints, Spacing};
 use super::frame::{ImuFrame, PointsFrame};
 use super::ledger::{Count, UdpLedger, LEDGER_NUMBERS};
 use super::model::{LivoxModel, Protocol, STANDARD_GRAVITY};
@@ -51,6 +55,10 @@ pub const DEFAULT_PERIOD_NS: u64 = 100_000_000;
 pub const MAX_IMU_QUEUE: usize = 4096;
 /// A `udp_cnt` jump larger than this is a restart, not loss.
 const MAX_COUNTER_GAP: u64 = 4096;
+/// Where `udp_cnt` restarts with each frame, a packet of a frame up to this many before the
+/// open one (and in time at most two periods late) is late; further back (by `frame_cnt`,
+/// mod 256) it is ahead, not behind.
+const MAX_FRAMES_BACK: u8 = 127;
 /// Fewest and most points a sweep may hold before it is cut (the model's rate sets the cap
 /// between them): memory stays bounded whatever the counters and times say.
 const MIN_POINT_CAP: f64 = (1u64 << 22) as f64;
@@ -117,10 +125,20 @@ pub struct LivoxStats {
     pub discontinuities: u64,
     /// Point or IMU packets whose counter was seen already (copies): dropped.
     pub duplicates: u64,
-    /// Point packets that came too late to join a sweep: of a frame already handed over (its
-    /// last packets came after the next frame's first ones, and no IMU wait held it), of a
-    /// frame before that, or more than [`REORDER_PACKETS`] behind the newest `udp_cnt`
-    /// (within two periods of its time). Dropped; not counted missing.
+    /// Point packets that came too late to join a sweep, dropped: more than
+    /// [`REORDER_PACKETS`] behind the newest `udp_cnt` (within two periods of its time); of a
+    /// frame already handed over (its last packets came after the next frame's first ones,
+    /// and no IMU wait held it) or of one before that; or late by their `udp_cnt` but timed
+    /// outside the sweep they would join (before its start or more than two periods after
+    /// it: a time that lies, or a packet reordered across the period's cut). Each is counted
+    /// here once and not also missing: the gap it left, counted missing when a later packet
+    /// came, is taken off `missing`, and a copy of it is a duplicate. That takes its frame's
+    /// numbers, which the stream holds for the open frame and the 127 before it. A packet of
+    /// a frame it holds none of — from before the stream's first packet, or from before the
+    /// counters last restarted — and one more than 4096 numbers from its frame's newest are
+    /// counted here and `missing` is left as it is: nothing counted missing since is theirs,
+    /// but a loss their frame counted before a restart stays counted too, and each copy of
+    /// one is counted here again.
     pub late_dropped: u64,
     /// Sweeps cut because they spanned two periods or reached the point cap before the
     /// period or the sensor's frame ended them (a timestamp or `frame_cnt` standing still).
@@ -217,10 +235,11 @@ pub struct LivoxStream {
     udp: UdpLedger,
     imu_udp: SeqWindow,
     last_frame: Option<u8>,
-    /// Sensors that restart `udp_cnt` with their frames: the two frames before the open one
-    /// and their numbers, newest first, for their packets that come after the next frame's
-    /// first.
-    closed: [(Option<u8>, UdpLedger); 2],
+    /// Sensors that restart `udp_cnt` with their frames: the frames before the open one and
+    /// their numbers, newest first, for their packets that come after the next frame's first.
+    /// Every frame such a packet may be of is kept ([`MAX_FRAMES_BACK`], a KiB each), so that
+    /// one counted missing in its frame is taken off `missing` however far back it is.
+    closed: VecDeque<(u8, UdpLedger)>,
     frame_starts: u32,
     sdk1_next_ns: Option<i64>,
     /// SDK1 of no known model: record spacings seen, and the last in-order packet's records.
@@ -279,10 +298,7 @@ impl LivoxStream {
             udp: UdpLedger::new(MAX_COUNTER_GAP),
             imu_udp: SeqWindow::new(16, MAX_COUNTER_GAP),
             last_frame: None,
-            closed: [
-                (None, UdpLedger::new(MAX_COUNTER_GAP)),
-                (None, UdpLedger::new(MAX_COUNTER_GAP)),
-            ],
+            closed: VecDeque::new(),
             frame_starts: 0,
             sdk1_next_ns: None,
             sdk1_steps: LearntSpacing::default(),
@@ -471,10 +487,13 @@ impl LivoxStream {
         // its own frame: however late, counted against the open frame it would read as loss.
         if self.frame_starts > 0 {
             let frames_back = self.last_frame.map_or(0, |f| f.wrapping_sub(frame));
-            if (1..128).contains(&frames_back) && (behind_in_time || !trusted) {
-                if let Some(k) = self.closed.iter().position(|(f, _)| *f == Some(frame)) {
+            if (1..=MAX_FRAMES_BACK).contains(&frames_back) && (behind_in_time || !trusted) {
+                if let Some(k) = self.closed.iter().position(|(f, _)| *f == frame) {
                     return self.push_closed_frame(k, &p, host_ns, ts, damaged);
                 }
+                // A frame the stream holds no numbers of (before its first packet, or before
+                // the counters last restarted): nothing it counted missing is known to be
+                // this packet's.
                 return match damaged {
                     Some(e) => Err(e),
                     None => {
@@ -515,8 +534,9 @@ impl LivoxStream {
         };
         let mut lost = 0;
         // A packet a little behind the latest was reordered on the way: it fills the gap its
-        // successor counted, cuts nothing, and the stream goes on from the latest.
-        let mut late = false;
+        // successor counted (`Some(whether it did)`), cuts nothing, and the stream goes on from
+        // the latest.
+        let mut late = None;
         let mut frame_start = false;
         match arrival {
             Arrival::Copy => {
@@ -532,6 +552,9 @@ impl LivoxStream {
                 if filled {
                     self.udp.take(udp);
                     self.stats.missing = self.stats.missing.saturating_sub(1);
+                } else {
+                    // From before the run's first number: kept, so that a copy is a copy.
+                    self.udp.take_before(udp);
                 }
                 return match damaged {
                     Some(e) => Err(e),
@@ -542,10 +565,11 @@ impl LivoxStream {
                 };
             }
             Arrival::Late { filled } => {
-                late = true;
+                late = Some(filled);
                 self.udp.take(udp);
+                // It came: off `missing` whether it joins the open sweep or is dropped.
                 if filled {
-                    self.unmiss();
+                    self.stats.missing = self.stats.missing.saturating_sub(1);
                 }
             }
             Arrival::Next { lost: l } => {
@@ -558,16 +582,23 @@ impl LivoxStream {
                 lost = u64::from(udp);
                 self.stats.missing += lost;
                 self.frame_starts = self.frame_starts.saturating_add(1);
-                // The open frame's numbers become the closed ones'; the oldest are forgotten.
-                self.closed.swap(0, 1);
-                std::mem::swap(&mut self.closed[0].1, &mut self.udp);
-                self.closed[0].0 = self.last_frame;
+                // The open frame's numbers join the closed ones'; the oldest are forgotten
+                // (their ledger is the new open frame's).
+                let oldest = if self.closed.len() >= usize::from(MAX_FRAMES_BACK) {
+                    self.closed.pop_back().map(|(_, numbers)| numbers)
+                } else {
+                    None
+                };
+                let mut numbers = oldest.unwrap_or_else(|| UdpLedger::new(MAX_COUNTER_GAP));
+                std::mem::swap(&mut numbers, &mut self.udp);
+                if let Some(f) = self.last_frame {
+                    self.closed.push_front((f, numbers));
+                }
                 self.udp.start_lost_before(udp);
             }
             Arrival::Restart => {
                 self.udp.restart(udp);
-                self.closed[0].0 = None;
-                self.closed[1].0 = None;
+                self.closed.clear();
                 // A restart at 0 without a frame step: a sensor whose `frame_cnt` means
                 // nothing may restart `udp_cnt` with its frames; nothing is known lost.
                 if udp != 0 {
@@ -576,7 +607,7 @@ impl LivoxStream {
             }
         }
         self.recent.push(ts);
-        if !late {
+        if late.is_none() {
             self.last_frame = Some(frame);
         }
         if self.frame_starts >= 2 {
@@ -585,23 +616,34 @@ impl LivoxStream {
         if let Some(e) = damaged {
             if self.open {
                 self.sweep.missing_packets += lost;
+                if late == Some(true) {
+                    self.sweep.missing_packets = self.sweep.missing_packets.saturating_sub(1);
+                }
             }
             return Err(e);
         }
+        if let Some(filled) = late {
+            let its_frame = self.facts.frame_cut && self.sweep.frame_id == u32::from(frame);
+            if self.open && its_frame && p.records() > 0 {
+                self.start_earlier(ts);
+            }
+            if !(self.open && self.join_late(false, &p, host_ns, ts, filled)) {
+                self.stats.late_dropped += 1;
+            }
+            return Ok(());
+        }
         let interval = p.time_interval_ns();
-        let cut = if late {
-            false
-        } else if self.facts.frame_cut {
+        let cut = if self.facts.frame_cut {
             frame_start || (self.open && self.sweep.frame_id != u32::from(frame))
         } else {
             self.time_cut(ts)
         };
         // A restart already counted is one discontinuity, not two.
-        let backwards = !late && self.last_packet_ns.is_some_and(|l| ts < l);
+        let backwards = self.last_packet_ns.is_some_and(|l| ts < l);
         if backwards && !(arrival == Arrival::Restart && udp != 0) {
             self.stats.discontinuities += 1;
         }
-        let forced = !(late || cut || backwards) && self.overfull(ts);
+        let forced = !(cut || backwards) && self.overfull(ts);
         if forced {
             self.stats.forced_cuts += 1;
         }
@@ -610,17 +652,71 @@ impl LivoxStream {
         }
         self.begin(host_ns, ts, u32::from(frame));
         self.sweep.missing_packets += lost;
-        decode_sdk2(&self.decoder, &p, ts, &mut self.sweep);
-        let newest = self.last_packet_ns;
+        decode_sdk2(&self.decoder, &p, ts, None, &mut self.sweep);
         self.after_packet(
             host_ns,
             ts,
             ts.saturating_add(i64::try_from(interval).unwrap_or(i64::MAX)),
         );
-        if late {
-            self.last_packet_ns = newest;
-        }
         Ok(())
+    }
+
+    /// A frame's first packet reordered behind a later one, which began its sweep: the sweep
+    /// is its frame's, so it starts at this packet instead, its points' times moved on by as
+    /// much. Only while the sweep holds no more packets than a reorder spans (every point is
+    /// moved), and never to span more than a sweep may.
+    fn start_earlier(&mut self, ts: i64) {
+        let Ok(by) = u32::try_from(self.sweep.device_time_ns.saturating_sub(ts)) else {
+            return;
+        };
+        if by == 0
+            || self.sweep.packets > u32::from(REORDER_PACKETS)
+            || self.open_end_ns.saturating_sub(ts) > self.max_span_ns()
+        {
+            return;
+        }
+        for p in &mut self.sweep.points {
+            p.t = p.t.saturating_add(by);
+        }
+        self.sweep.device_time_ns = ts;
+        if self.sweep.clock != ClockSource::Host {
+            self.sweep.timestamp_ns = ts;
+        }
+    }
+
+    /// A late point packet into the open sweep (`into_held`: the sweep waiting for its IMU
+    /// samples), which must be begun: its records timed inside the sweep (`0 ..=` the longest
+    /// a sweep may span after its start) join it, one fewer missing there if it fills a gap
+    /// (`filled`) that sweep counted. A packet with no such record — its time lies, or it
+    /// belongs to a sweep already finished — joins nothing: `false`, the caller counts it
+    /// dropped. Late, it moves no cut and leaves the stream's newest packet as it was.
+    fn join_late(
+        &mut self,
+        into_held: bool,
+        p: &Sdk2Packet<'_>,
+        host_ns: i64,
+        ts: i64,
+        filled: bool,
+    ) -> bool {
+        let max_t_ns = self.max_span_ns();
+        let (sweep, end_ns) = if into_held {
+            (&mut self.held, &mut self.held_end_ns)
+        } else {
+            (&mut self.sweep, &mut self.open_end_ns)
+        };
+        if decode_sdk2(&self.decoder, p, ts, Some(max_t_ns), sweep).in_window == 0 {
+            return false;
+        }
+        if filled {
+            sweep.missing_packets = sweep.missing_packets.saturating_sub(1);
+        }
+        sweep.packets = sweep.packets.saturating_add(1);
+        sweep.columns_count = sweep.columns_count.saturating_add(1);
+        sweep.last_host_ns = sweep.last_host_ns.max(host_ns);
+        let end = ts.saturating_add(i64::try_from(p.time_interval_ns()).unwrap_or(i64::MAX));
+        *end_ns = (*end_ns).max(end);
+        self.stats.packets += 1;
+        true
     }
 
     /// An SDK2 IMU packet. A damaged one (`damaged`: its CRC failed) is numbered, so the next
@@ -664,13 +760,13 @@ impl LivoxStream {
         Ok(())
     }
 
-    /// A point packet of one of the two frames before the open one (`k`: 0 the newest):
-    /// its frame's last packets came after the next frame's first. It is late, never a cut;
-    /// its number fills its frame's gap (once: a copy is a copy, however far behind) or
-    /// tells the frame's tail lost. Where sweeps follow the frames, its points join its
-    /// frame's sweep while that waits for its IMU samples; on the period, a packet of the
-    /// frame just closed joins the open sweep as any late packet's do; else it is dropped
-    /// (counted). A damaged one (`damaged`) only does the counting.
+    /// A point packet of a frame before the open one (`k`: 0 the newest closed): its frame's
+    /// last packets came after the next frame's first. It is late, never a cut; its number
+    /// fills its frame's gap (once: a copy is a copy, however far behind) or tells the frame's
+    /// tail lost. Where sweeps follow the frames, its points join its frame's sweep while that
+    /// waits for its IMU samples; on the period, a packet of the frame just closed joins the
+    /// open sweep as any late packet's do (in either, where its time falls inside the sweep);
+    /// else it is dropped (counted). A damaged one (`damaged`) only does the counting.
     fn push_closed_frame(
         &mut self,
         k: usize,
@@ -679,8 +775,16 @@ impl LivoxStream {
         ts: i64,
         damaged: Option<LivoxWireError>,
     ) -> Result<(), LivoxWireError> {
-        let (frame, ledger) = &mut self.closed[k];
-        let frame = frame.map_or(0, u32::from);
+        let Some((frame, ledger)) = self.closed.get_mut(k) else {
+            return match damaged {
+                Some(e) => Err(e),
+                None => {
+                    self.stats.late_dropped += 1;
+                    Ok(())
+                }
+            };
+        };
+        let frame = u32::from(*frame);
         let udp = p.udp_cnt();
         let (filled, lost) = match ledger.peek(udp) {
             Count::Lost { .. } => (true, 0),
@@ -696,7 +800,9 @@ impl LivoxStream {
                 };
             }
             // Far ahead of the frame's numbers or before them: nothing to tell of its loss.
+            // Kept where the ledger reaches it, so that a copy is a copy.
             Count::Far => {
+                ledger.take_before(udp);
                 return match damaged {
                     Some(e) => Err(e),
                     None => {
@@ -726,23 +832,15 @@ impl LivoxStream {
                 }
             };
         };
-        if filled {
-            sweep.missing_packets = sweep.missing_packets.saturating_sub(1);
-        }
         sweep.missing_packets += lost;
         if let Some(e) = damaged {
+            if filled {
+                sweep.missing_packets = sweep.missing_packets.saturating_sub(1);
+            }
             return Err(e);
         }
-        decode_sdk2(&self.decoder, p, ts, sweep);
-        sweep.packets = sweep.packets.saturating_add(1);
-        sweep.columns_count = sweep.columns_count.saturating_add(1);
-        sweep.last_host_ns = sweep.last_host_ns.max(host_ns);
-        self.stats.packets += 1;
-        let end = ts.saturating_add(i64::try_from(p.time_interval_ns()).unwrap_or(i64::MAX));
-        if into_held {
-            self.held_end_ns = self.held_end_ns.max(end);
-        } else {
-            self.open_end_ns = self.open_end_ns.max(end);
+        if !self.join_late(into_held, p, host_ns, ts, filled) {
+            self.stats.late_dropped += 1;
         }
         Ok(())
     }
@@ -892,12 +990,16 @@ impl LivoxStream {
     /// at least, so a frame-cut sensor on a shorter period keeps its frames whole), or the
     /// point cap, or as many packets (those with no points grow nothing else).
     fn overfull(&self, ts: i64) -> bool {
-        let span = self.cfg.period_ns.max(DEFAULT_PERIOD_NS).saturating_mul(2);
         self.open
-            && (ts.saturating_sub(self.sweep.device_time_ns)
-                >= i64::try_from(span).unwrap_or(i64::MAX)
+            && (ts.saturating_sub(self.sweep.device_time_ns) >= self.max_span_ns()
                 || self.sweep.points.len() >= self.max_points
                 || self.sweep.packets as usize >= self.max_points)
+    }
+
+    /// The longest a sweep may span, ns: two periods, of the default at least.
+    fn max_span_ns(&self) -> i64 {
+        let span = self.cfg.period_ns.max(DEFAULT_PERIOD_NS).saturating_mul(2);
+        i64::try_from(span).unwrap_or(i64::MAX)
     }
 
     fn time_cut(&self, ts: i64) -> bool {
@@ -1034,16 +1136,40 @@ impl LearntSpacing {
     }
 }
 
-/// Decodes an SDK2 point packet first timed `ts` into `sweep` (point times from its start).
-fn decode_sdk2(decoder: &LivoxDecoder, p: &Sdk2Packet<'_>, ts: i64, sweep: &mut Sweep) {
+/// Decodes an SDK2 point packet first timed `ts` into `sweep` (point times from its start;
+/// with `max_t_ns`, only the records timed `0..=max_t_ns` after it).
+fn decode_sdk2(
+    decoder: &LivoxDecoder,
+    p: &Sdk2Packet<'_>,
+    ts: i64,
+    max_t_ns: Option<i64>,
+    sweep: &mut Sweep,
+) -> PacketPoints {
     let (n, interval) = (p.records(), p.time_interval_ns());
-    decoder.decode(
+    let (kind, rec, spacing) = (
         p.record(),
-        n,
         |i| p.record_bytes(i),
-        ts,
         Spacing::sdk2(n, interval),
-        sweep.device_time_ns,
-        &mut sweep.points,
     );
+    match max_t_ns {
+        None => decoder.decode(
+            kind,
+            n,
+            rec,
+            ts,
+            spacing,
+            sweep.device_time_ns,
+            &mut sweep.points,
+        ),
+        Some(max) => decoder.decode_within(
+            kind,
+            n,
+            rec,
+            ts,
+            spacing,
+            sweep.device_time_ns,
+            max,
+            &mut sweep.points,
+        ),
+    }
 }
