@@ -320,6 +320,16 @@ def test_listen_bad_duration_or_queue_is_a_usage_error(kwargs):
         ringscan.listen(["127.0.0.1:1"], **kwargs)
 
 
+def test_a_duration_past_the_clock_is_no_limit():
+    """``duration=1e19`` fits a ``Duration``, so it is taken, but not the clock: the deadline's
+    ``Instant + Duration`` panicked on the listening thread (``stop()`` raised RuntimeError).
+    It is no deadline, as ``1e9`` already is in effect."""
+    off = free_port_offset()
+    with ringscan.listen([f"127.0.0.1:{2368 + off}"], duration=1e19) as live:
+        time.sleep(0.3)
+    assert live.summary["stop"] == "stopped by the caller"
+
+
 def test_ctrl_c_ends_the_command_line(tmp_path):
     """``python -m ringscan`` runs the command line without the GIL: Python's own SIGINT
     handler would only set a flag nobody reads, so Ctrl-C must end it as it ends ``ringscan``;
