@@ -330,6 +330,27 @@ def test_a_duration_past_the_clock_is_no_limit():
     assert live.summary["stop"] == "stopped by the caller"
 
 
+def test_a_listening_thread_that_panics_raises(monkeypatch):
+    """A listening thread that ends without a result (it panicked: a bug) raises
+    ``RuntimeError`` with the panic's message, from the iteration or from ``stop()``, once; it
+    must not end as a normal stop would. The panic is a seam of debug builds (the CI's)."""
+    var = getattr(ringscan._ringscan, "_test_listen_panic", None)
+    if var is None:
+        pytest.skip("SKIP: a release build: the listening thread's panic seam is in debug builds only")
+    monkeypatch.setenv(var, "1")
+    off = free_port_offset()
+    why = f"stopped without a result \\({var} is set\\)"
+    live = ringscan.listen([f"127.0.0.1:{2368 + off}"])
+    with pytest.raises(RuntimeError, match=why):
+        list(live)
+    live.stop()
+    assert live.summary is None
+    live = ringscan.listen([f"127.0.0.1:{2368 + off}"])
+    with pytest.raises(RuntimeError, match=why):
+        live.stop()
+    assert list(live) == [] and live.summary is None
+
+
 def test_ctrl_c_ends_the_command_line(tmp_path):
     """``python -m ringscan`` runs the command line without the GIL: Python's own SIGINT
     handler would only set a flag nobody reads, so Ctrl-C must end it as it ends ``ringscan``;
