@@ -15,7 +15,8 @@ captures' common folder), folders kept: ``day1/lidar.pcap`` and ``day2/lidar.pca
 
 and returns one row of the summary table: the capture, ``status`` (``ok`` or ``error``), the
 error's class and message (the command line's), and the ``--json`` summary's figures (sweeps,
-points, packets decoded / dropped / malformed / missing, duration, sensors). A capture that
+points, packets decoded / dropped / malformed / missing, duration, sensors) of the decode with
+the task's options (with neither output, a decode that writes nothing). A capture that
 fails is a row with its error: never skipped silently; none of its outputs is published (they
 are moved under ``out`` only once every one of them is written).
 
@@ -297,20 +298,22 @@ def decode_one(
                 # error of the capture, and nothing is published.
                 raise ringscan.DecodeError(f"{local}: no sensor found: {summary['no_sensor']}")
             ready.append(("parquet", pq_local, f"points/{name}.parquet"))
-        if mcap:
-            mc_local = os.path.join(scratch, "capture.mcap")
-            mc_summary = json.loads(
+        if mcap or summary is None:
+            # The MCAP's decode, or without any output a decode writing nothing: the Source's
+            # options either way, so the row counts what the outputs would hold (`info()`
+            # takes no decoding option).
+            mc_local = os.path.join(scratch, "capture.mcap") if mcap else None
+            decoded = json.loads(
                 _ringscan.decode(local, mc_local, threads=1, read_ahead=src._read_ahead, **src._kwargs)
             )
             # With both outputs the row stays the Parquet's (the same decode, same options).
-            summary = summary or mc_summary
-            ready.append(("mcap", mc_local, f"mcap/{name}.mcap"))
+            summary = summary or decoded
+            if mc_local is not None:
+                ready.append(("mcap", mc_local, f"mcap/{name}.mcap"))
         for column, local_out, dest in ready:
             published.append(_publish(local_out, out, dest))
             row[column] = published[-1]
         published = []
-        if summary is None:
-            summary = src.info()
         p = summary["packets"]
         row.update(
             status="ok",

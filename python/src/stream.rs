@@ -148,6 +148,12 @@ type Outcome = Result<String, (Option<ErrKind>, String)>;
 /// memory taken at once (or an abort), not a limit.
 const MAX_QUEUE: usize = 1 << 16;
 
+/// A seam for the tests, compiled into debug builds only (the test suite's; a wheel is a
+/// release build): with this variable set the listening thread panics at its start, as a bug
+/// in it would, so the tests can see that such an end raises instead of looking like a stop.
+#[cfg(debug_assertions)]
+const TEST_LISTEN_PANIC: &str = "RINGSCAN_TEST_LISTEN_PANIC";
+
 /// `listen` on a thread of its own, its sweeps through a bounded channel.
 #[pyclass(module = "ringscan._ringscan")]
 pub struct Listener {
@@ -249,6 +255,10 @@ impl Listener {
         let thread = std::thread::Builder::new()
             .name("ringscan-listen".into())
             .spawn(move || {
+                #[cfg(debug_assertions)]
+                if std::env::var_os(TEST_LISTEN_PANIC).is_some() {
+                    panic!("{TEST_LISTEN_PANIC} is set");
+                }
                 let r = listen_run(&args)
                     .map(|o| o.json.to_string())
                     .map_err(|e| (Some(kind_of(&e)), e.to_string()));
@@ -618,5 +628,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(segment_ground, m)?)?;
     m.add_function(wrap_pyfunction!(cluster, m)?)?;
     m.add_function(wrap_pyfunction!(deskew, m)?)?;
+    #[cfg(debug_assertions)]
+    m.add("_test_listen_panic", TEST_LISTEN_PANIC)?;
     Ok(())
 }

@@ -6,6 +6,7 @@ the command line's MCAP (``python -m ringscan decode``); Ray and the pool give t
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 
@@ -166,13 +167,13 @@ def test_object_store_uris(tmp_path):
 def test_a_capture_with_no_sensor_is_an_error_row(tmp_path):
     """As ``ringscan decode`` exits 1 when it finds no sensor, a fleet task that decodes
     nothing is an error row (``DecodeError``, the reason given) with nothing published, whether
-    it writes Parquet, MCAP or both."""
+    it writes Parquet, MCAP, both or neither (the row alone was ``ok`` with no sensor)."""
     demo = (REPO / "fixtures" / "demo-vlp16.pcap").read_bytes()
     header_only = tmp_path / "header-only.pcap"
     header_only.write_bytes(demo[:24])
     r = subprocess.run([sys.executable, "-m", "ringscan", "decode", str(header_only)], capture_output=True, text=True)
     assert r.returncode == 1 and "no sensor found: no datagram was read" in r.stderr, r.stderr
-    for parquet, mcap in [(True, False), (False, True), (True, True)]:
+    for parquet, mcap in [(True, False), (False, True), (True, True), (False, False)]:
         out = tmp_path / f"out-{parquet}-{mcap}"
         row = fleet.decode_one(str(header_only), str(out), parquet=parquet, mcap=mcap)
         assert (row["status"], row["error_type"]) == ("error", "DecodeError"), row
@@ -254,3 +255,24 @@ def test_mcap_output_takes_every_decoding_option(tmp_path):
     # An option the decode refuses is the row's error, for either output.
     bad = fleet.decode_one(demo, str(tmp_path / "bad"), parquet=False, mcap=True, options={"fields": "some"})
     assert (bad["status"], bad["error_type"]) == ("error", "ValueError"), bad
+
+
+def test_the_row_without_outputs_takes_the_decoding_options(tmp_path):
+    """With neither Parquet nor MCAP asked, the row still counts what a decode with the task's
+    options gives (``ringscan decode --json`` with the same flags): ``max_range`` cuts points.
+    The row came from ``info()``, which takes no decoding option, so it counted them all."""
+    demo = str(REPO / "fixtures" / "demo-vlp16.pcap")
+    row = fleet.decode_one(demo, str(tmp_path / "out"), parquet=False, mcap=False, options={"max_range": 10.0, "cut_angle": 90.0})
+    assert row["status"] == "ok", row
+    cli = subprocess.run([sys.executable, "-m", "ringscan", "decode", demo, "--max-range", "10", "--cut-angle", "90", "--json"], check=True, capture_output=True, text=True)
+    want = json.loads(cli.stdout)
+    full = fleet.decode_one(demo, str(tmp_path / "full"), parquet=False, mcap=False)
+    assert 0 < row["points"] == want["points"] < full["points"]
+    assert (row["sweeps"], row["packets_decoded"]) == (want["sweeps"], want["packets"]["decoded"])
+    assert row["points"] == sum(len(s) for s in ringscan.open(demo, max_range=10.0, cut_angle=90.0))
+    assert row["parquet"] is None and row["mcap"] is None
+    assert not any(p.is_file() for p in (tmp_path / "out").rglob("*"))
+    # A port no packet went to finds no sensor: the row's error, as with outputs (it was `ok`
+    # with every point).
+    bad = fleet.decode_one(demo, str(tmp_path / "bad"), parquet=False, mcap=False, options={"port": 9})
+    assert (bad["status"], bad["error_type"]) == ("error", "DecodeError") and "--port 9" in bad["error"], bad

@@ -103,7 +103,7 @@ pub struct ListenArgs {
     /// Port of the sensors' HTTP API (Ouster metadata).
     pub api_port: u16,
     pub recv_buffer: usize,
-    /// Stop by itself after this long.
+    /// Stop by itself after this long (one past the clock's range: never).
     pub duration: Option<Duration>,
     pub strict: bool,
     pub json: bool,
@@ -1547,7 +1547,9 @@ pub fn listen_run_with(
             },
         };
         let mut stop_tick = tokio::time::interval(Duration::from_millis(100));
-        let deadline = args.duration.map(|d| tokio::time::Instant::now() + d);
+        // The CLI bounds --duration, the library's callers (Python) need not: `Instant + d`
+        // panicked past the clock's range, which is no deadline anyway.
+        let deadline = args.duration.and_then(|d| tokio::time::Instant::now().checked_add(d));
         let mut tick = tokio::time::interval(Duration::from_secs(1));
         let mut prev = (Instant::now(), 0, 0, 0);
         let api_port = args.api_port;
