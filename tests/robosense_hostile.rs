@@ -473,6 +473,95 @@ fn m1_a_copy_of_an_older_packet_is_a_copy() {
     assert_eq!(run(&[0, 1, 2, 4, 3, 3]), (vec![(20, 20 * 125, 0)], 0, 1, 0));
 }
 
+/// M1 frames 0 and 1 whole and frame 2's first packet (which ends frame 1), `len` packets a
+/// frame, return mode `mode`.
+fn m1_two_frames(len: u16, mode: u8) -> Vec<Vec<u8>> {
+    let mut ps = Vec::new();
+    for f in 0..2 {
+        for q in 0..len {
+            let (c, t) = m1_slot(f, q, len);
+            ps.push(m1_at(c, t, mode));
+        }
+    }
+    let (c, t) = m1_slot(2, 0, len);
+    ps.push(m1_at(c, t, mode));
+    ps
+}
+
+/// (missing, late_dropped, duplicates, discontinuities).
+type M1Counts = (u64, u64, u64, u64);
+
+/// Sweeps (packets, points, missing) and the stream's counts.
+fn m1_tally(ps: &[Vec<u8>]) -> (Vec<(u32, usize, u64)>, M1Counts) {
+    let mut s = RobosenseStream::new(RobosenseConfig::new(None));
+    let sweeps = m1_run(&mut s, ps);
+    let st = s.stats();
+    let c = (
+        st.missing,
+        st.late_dropped,
+        st.duplicates,
+        st.discontinuities,
+    );
+    (sweeps, c)
+}
+
+/// M1, single (630 packets a frame) and dual return (1260): one packet of the open frame
+/// (frame 1's 101st) arriving 15 or 40 packets late, beyond the 10-number window, is counted
+/// once: it joins its frame's sweep (its time is inside it), no longer missing, the sweeps as
+/// if it had come in order. The old code took it for a discontinuity (more than 10 packet
+/// periods behind in time) or, in dual return within that time, dropped it into
+/// `late_dropped` and left it counted missing too. Frame 1's first packet 15 late is before
+/// its sweep's start: dropped, counted once (`late_dropped`, not missing).
+#[test]
+fn m1_a_packet_far_late_in_its_own_frame_is_counted_once() {
+    for (len, mode) in [(630usize, 4u8), (1260, 5)] {
+        let base = m1_two_frames(len as u16, mode);
+        let (in_order, c) = m1_tally(&base);
+        assert_eq!(c, (0, 0, 0, 0));
+        for late in [15usize, 40] {
+            let mut ps = base.clone();
+            let p = ps.remove(len + 100);
+            ps.insert(len + 100 + late, p);
+            assert_eq!(
+                m1_tally(&ps),
+                (in_order.clone(), (0, 0, 0, 0)),
+                "{len} {late}"
+            );
+        }
+        let mut ps = base.clone();
+        let p = ps.remove(len);
+        ps.insert(len + 15, p);
+        let (sweeps, c) = m1_tally(&ps);
+        assert_eq!(c, (0, 1, 0, 0), "{len}");
+        let packets: Vec<u32> = sweeps.iter().map(|w| w.0).collect();
+        assert_eq!(packets, [len as u32, len as u32 - 1], "{len}");
+    }
+}
+
+/// M1: a copy of a packet that came 15 or 40 packets late in its own frame is a duplicate
+/// (right after it, and again 30 packets on), not late again: counted once, the sweeps as
+/// in order. The old code counted each copy in `late_dropped` (or cut a discontinuity).
+#[test]
+fn m1_a_copy_of_a_far_late_packet_is_a_duplicate() {
+    for (len, mode) in [(630usize, 4u8), (1260, 5)] {
+        let base = m1_two_frames(len as u16, mode);
+        let (in_order, _) = m1_tally(&base);
+        for late in [15usize, 40] {
+            let mut ps = base.clone();
+            let p = ps.remove(len + 100);
+            let at = len + 100 + late;
+            ps.insert(at, p.clone());
+            ps.insert(at + 1, p.clone());
+            ps.insert(at + 31, p);
+            assert_eq!(
+                m1_tally(&ps),
+                (in_order.clone(), (0, 0, 2, 0)),
+                "{len} {late}"
+            );
+        }
+    }
+}
+
 /// A Helios-16P packet (the angles of `csv16`) at `t_us` µs after a base time, first block
 /// at `az0`, 0.20° a block.
 fn helios_at(az0: u16, t_us: i64) -> Vec<u8> {

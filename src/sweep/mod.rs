@@ -5,6 +5,7 @@
 //! two consecutive packets = round(Δ device time / packet period) − 1.
 
 pub mod demux;
+pub mod ledger;
 pub mod seq;
 
 use crate::point::Point;

@@ -13,7 +13,6 @@ pub mod control;
 pub mod decode;
 pub mod family;
 pub mod frame;
-mod ledger;
 pub mod lvx;
 pub mod model;
 #[cfg(feature = "sim")]

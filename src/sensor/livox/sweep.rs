@@ -41,11 +41,11 @@ use std::collections::VecDeque;
 
 use super::decode::{LivoxDecoder, PacketPoints, Spacing};
 use super::frame::{ImuFrame, PointsFrame};
-use super::ledger::{Count, UdpLedger, LEDGER_NUMBERS};
 use super::model::{LivoxModel, Protocol, STANDARD_GRAVITY};
 use super::wire::{read_imu, LivoxWireError, Record, Sdk1Packet, Sdk2Packet};
 use crate::point::Point;
 use crate::sensor::{DecodeOptions, ImuSample};
+use crate::sweep::ledger::{Count, UdpLedger, LEDGER_NUMBERS};
 use crate::sweep::{RecentTimes, SeqStep, SeqWindow, Sweep, REORDER_PACKETS};
 use crate::time::ClockSource;
 

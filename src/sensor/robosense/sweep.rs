@@ -37,7 +37,8 @@ use super::m1::{is_m1_difop, M1Decoder, M1Difop, M1Msop, M1_BLOCKS, M1_FRAME_NS}
 use super::model::{RobosenseModel, Shape};
 use super::wire::{is_difop, msop_shape, Difop, Msop};
 use crate::sensor::{DecodeError, DecodeOptions};
-use crate::sweep::{RecentTimes, SeqStep, SeqWindow, Sweep, REORDER_PACKETS};
+use crate::sweep::ledger::{Count, UdpLedger};
+use crate::sweep::{RecentTimes, Sweep, REORDER_PACKETS};
 use crate::time::ClockSource;
 
 /// MSOP packets held while waiting for the angles.
@@ -116,8 +117,11 @@ pub struct RobosenseStats {
     pub duplicates: u64,
     /// Late MSOP packets (reordered on the way) whose firings all belong to a sweep already
     /// emitted: dropped, and counted as a loss (a packet counted missing before it came
-    /// moves from `missing` to here, where the stream can tell: up to [`REORDER_PACKETS`]
-    /// behind; an M1 packet further behind in its own frame stays counted in both).
+    /// moves from `missing` to here, where the stream can tell: a spinning model's up to
+    /// [`REORDER_PACKETS`] behind; an M1 packet of the open frame however far behind, as its
+    /// frame's counters are all kept, one of the frame before by its counters too; a copy of
+    /// either is a duplicate). An M1 packet of the open frame timed inside its sweep joins
+    /// it instead, no longer missing.
     pub late_dropped: u64,
     /// Sweeps emitted.
     pub sweeps: u64,
@@ -201,11 +205,13 @@ pub struct RobosenseStream {
     last_difop: Option<Vec<u8>>,
     /// Gaps counted missing lately, newest first, for a late packet to fill.
     gaps: [Option<Gap>; GAPS_KEPT],
-    /// M1: the decoder (no angles needed) and the packet counters of the open frame.
+    /// M1: the decoder (no angles needed) and the packet counters of the open frame: all of
+    /// them, as a packet of it may come later than the 10-number window reaches.
     m1: Option<M1Decoder>,
-    m1_seq: SeqWindow,
-    /// M1: the counters of the frame before, for its late packets.
-    m1_prev_seq: Option<SeqWindow>,
+    m1_udp: UdpLedger,
+    /// M1: the counters of the frame before (none after a discontinuity), for its late
+    /// packets; swapped with the open frame's, so neither is allocated again.
+    m1_prev_udp: UdpLedger,
     /// M1: the largest counter of the open frame, and of the frame before.
     m1_frame_max: u16,
     m1_last_frame_max: u16,
@@ -248,8 +254,8 @@ impl RobosenseStream {
             last_difop: None,
             gaps: [None; GAPS_KEPT],
             m1: None,
-            m1_seq: SeqWindow::new(16, M1_MAX_COUNTER as u64),
-            m1_prev_seq: None,
+            m1_udp: UdpLedger::new(u64::from(M1_MAX_COUNTER)),
+            m1_prev_udp: UdpLedger::new(u64::from(M1_MAX_COUNTER)),
             m1_frame_max: 0,
             m1_last_frame_max: 0,
             m1_frame_len: None,
@@ -735,8 +741,9 @@ impl RobosenseStream {
     /// more than [`M1_REORDER`] below the last one opens a new sweep; a counter a little
     /// below it is a packet that came late, kept in the open sweep (one whose counter was seen
     /// already at the same time is a copy, dropped). A packet older than the latest whose
-    /// counter is not a little below the open frame's is late from the frame before, emitted
-    /// already: dropped (`late_dropped`). Should the counter stop restarting, a sweep is also
+    /// counter the open frame counted lost, however far below, is late too (up to half a frame
+    /// before the sweep's start; a copy of it is a copy). Any other packet older than the
+    /// latest is late from the frame before, emitted already: dropped (`late_dropped`). Should the counter stop restarting, a sweep is also
     /// cut once it spans [`M1_MAX_SWEEP_NS`]. Loss: the counter's gaps within a frame, its
     /// first packets, and its last ones once the frame length is learned (two frames in a row
     /// ending on the same counter, in one return mode).
@@ -785,68 +792,86 @@ impl RobosenseStream {
         let mut missing = 0u64;
         let mut fills = false;
         let mut cut = false;
-        if d.is_some_and(|d| !(-M1_REORDER_NS..=self.cfg.max_gap_ns).contains(&d)) {
+        let valid_seq = (1..=M1_MAX_COUNTER).contains(&seq);
+        let count = valid_seq.then(|| self.m1_udp.peek(seq));
+        // Behind the latest in time, with a counter the open frame counted lost or had, and no
+        // earlier than its first packets can be (the frame before's are a whole frame back):
+        // a packet of the open frame, however late, not a clock going back.
+        let of_open_frame = d.is_some_and(|d| d < 0)
+            && matches!(count, Some(Count::Lost { .. } | Count::Seen { .. }))
+            && t0.is_some_and(|t0| stamp >= t0.saturating_sub(M1_FRAME_NS / 2));
+        if d.is_some_and(|d| d > self.cfg.max_gap_ns || (d < -M1_REORDER_NS && !of_open_frame)) {
             self.stats.discontinuities += 1;
             cut = true;
             self.recent.clear();
-            self.m1_seq.reset();
-            self.m1_prev_seq = None;
+            self.m1_udp.reset();
+            self.m1_prev_udp.reset();
             self.m1_frame_max = 0;
             self.m1_last_frame_max = 0;
             self.prev_stamp = None;
         }
         let late_in_time = !cut && d.is_some_and(|d| d < 0);
-        if !(1..=M1_MAX_COUNTER).contains(&seq) {
+        // Where the open frame's counters say it is the frame's: the last 10 numbers as
+        // before the ledger, and further back for a packet late in time too.
+        let in_open = count.filter(|c| {
+            !cut && match *c {
+                Count::Lost { behind } | Count::Seen { behind } => {
+                    behind <= REORDER_PACKETS || of_open_frame
+                }
+                Count::Stray => true,
+                Count::Next { .. } | Count::Far => false,
+            }
+        });
+        if !valid_seq {
             // A corrupt counter: its place in the frame is unknown, so it moves no counter
             // state and counts no loss; the points are whole (the decoder checks them).
             if late_in_time && t0.is_some_and(|t0| stamp < t0) {
                 self.stats.late_dropped += 1;
                 return;
             }
-        } else if behind_by_at_most(&self.m1_seq, seq, REORDER_PACKETS) {
-            match self.m1_seq.step_within(u64::from(seq)) {
-                SeqStep::Duplicate if self.recent.contains(stamp) => {
-                    self.stats.duplicates += 1;
-                    return;
-                }
-                step => {
-                    // A counter seen already at a new time (a counter that stands still) has
-                    // no gap to fill.
-                    let filled = step == SeqStep::Late;
-                    if t0.is_some_and(|t0| stamp < t0) {
-                        // Before the open sweep's start (the frame's first packets came after
-                        // a later one): its times there would be negative.
-                        self.drop_late(filled);
-                        self.recent.push(stamp);
-                        return;
-                    }
-                    fills = filled;
-                }
+        } else if let Some(c) = in_open {
+            if matches!(c, Count::Seen { .. }) && (self.recent.contains(stamp) || of_open_frame) {
+                self.stats.duplicates += 1;
+                return;
             }
+            self.m1_udp.take(seq);
+            // A counter seen already at a new time (a counter that stands still) has no gap
+            // to fill.
+            let filled = matches!(c, Count::Lost { .. });
+            if t0.is_some_and(|t0| stamp < t0) {
+                // Before the open sweep's start (the frame's first packets came after a later
+                // one): its times there would be negative.
+                self.drop_late(filled);
+                self.recent.push(stamp);
+                return;
+            }
+            fills = filled;
         } else if late_in_time {
             // Older than the latest packet, whatever its counter says: a packet of the frame
             // before (its last ones may come after the next frame's first), emitted already.
-            let prev = self
-                .m1_prev_seq
-                .as_mut()
-                .filter(|w| behind_by_at_most(w, seq, REORDER_PACKETS));
-            let counted = match prev.map(|w| w.step_within(u64::from(seq))) {
-                Some(SeqStep::Duplicate) if self.recent.contains(stamp) => {
+            let counted = match self.m1_prev_udp.peek(seq) {
+                Count::Seen { behind }
+                    if behind <= REORDER_PACKETS && self.recent.contains(stamp) =>
+                {
                     self.stats.duplicates += 1;
                     return;
                 }
-                step => step == Some(SeqStep::Late),
+                c @ (Count::Lost { .. } | Count::Stray) => {
+                    self.m1_prev_udp.take(seq);
+                    matches!(c, Count::Lost { .. })
+                }
+                Count::Seen { .. } | Count::Next { .. } | Count::Far => false,
             };
             self.drop_late(counted);
             self.recent.push(stamp);
             return;
         } else if self
-            .m1_seq
+            .m1_udp
             .latest()
-            .is_some_and(|l| u64::from(seq) + u64::from(M1_REORDER) < l)
+            .is_some_and(|l| seq.saturating_add(M1_REORDER) < l)
         {
             // The counter restarted: a new frame. Its last packets lost are known only from
-            // the frame length learned; stepping the frame's counters past its last one counts
+            // the frame length learned; taking the frame's counters past its last one counts
             // them and keeps them there for a late one to fill.
             cut = true;
             let frame_max = self.m1_frame_max;
@@ -854,25 +879,21 @@ impl RobosenseStream {
                 self.m1_frame_len = Some(frame_max);
             }
             self.m1_last_frame_max = frame_max;
-            let mut old = self.m1_seq;
             if let Some(len) = self.m1_frame_len.filter(|&len| len > frame_max) {
-                if let SeqStep::Next { lost } = old.step(u64::from(len) + 1) {
+                if let Count::Next { lost } = self.m1_udp.take(len.saturating_add(1)) {
                     self.stats.missing += lost;
                     if let Some((sw, _)) = &mut self.open {
                         sw.missing_packets += lost;
                     }
                 }
             }
-            self.m1_prev_seq = Some(old);
-            // Counted from 0 (no real counter), so that the frame's first packets lost are
-            // counted, and filled should they come late.
-            self.m1_seq.restart(0);
-            if let SeqStep::Next { lost } = self.m1_seq.step(u64::from(seq)) {
-                missing = lost;
-            }
+            std::mem::swap(&mut self.m1_udp, &mut self.m1_prev_udp);
+            // The frame's first packets lost are counted, and filled should they come late.
+            self.m1_udp.start_lost_before(seq);
+            missing = u64::from(seq.saturating_sub(1));
             self.m1_frame_max = seq;
         } else {
-            if let SeqStep::Next { lost } = self.m1_seq.step(u64::from(seq)) {
+            if let Count::Next { lost } = self.m1_udp.take(seq) {
                 missing = lost;
             }
             self.m1_frame_max = self.m1_frame_max.max(seq);
@@ -998,13 +1019,6 @@ impl RobosenseStream {
         self.held.clear();
         self.emit(on_sweep);
     }
-}
-
-/// Whether `n` is at most `k` numbers behind the window's latest (or is it).
-fn behind_by_at_most(w: &SeqWindow, n: u16, k: u16) -> bool {
-    w.latest()
-        .and_then(|l| l.checked_sub(u64::from(n)))
-        .is_some_and(|b| b <= u64::from(k))
 }
 
 /// Whether a Helios DIFOP's 32 angle entries describe a Helios-16P: its 16 lasers are entries

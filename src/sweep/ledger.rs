@@ -1,12 +1,14 @@
-//! Which SDK2 `udp_cnt` numbers of one run (a frame, or the numbers since the counter last
-//! restarted) came and which were counted lost.
+//! Which numbers of one run of a 16-bit packet counter (a frame, or the numbers since the
+//! counter last restarted) came and which were counted lost: Livox's SDK2 `udp_cnt`, the
+//! Robosense M1's `pkt_seq` (one run a frame).
 //!
 //! The shared [`crate::sweep::SeqWindow`] remembers the last [`REORDER_PACKETS`] numbers,
 //! which is enough to tell a reordered packet from a loss but not to account for one that
 //! comes later still: a packet 11 behind, or one of a frame already closed, looked like a
-//! restart, and the gap it left stayed counted lost. The ledger keeps the last
-//! [`LEDGER_NUMBERS`] numbers of the run (about two 100 ms periods of the fastest sensor, the
-//! HAP), so such a packet un-counts its loss exactly once and a copy of it is a copy.
+//! restart (or a copy), and the gap it left stayed counted lost. The ledger keeps the last
+//! [`LEDGER_NUMBERS`] numbers of the run (about two 100 ms periods of the fastest Livox, the
+//! HAP; three M1 frames in dual return), so such a packet un-counts its loss exactly once
+//! and a copy of it is a copy.
 
 use crate::sweep::REORDER_PACKETS;
 
@@ -67,6 +69,11 @@ impl UdpLedger {
             seen: [0; WORDS],
             lost: [0; WORDS],
         }
+    }
+
+    /// The latest number (the largest, modulo the wrap), if any came.
+    pub fn latest(&self) -> Option<u16> {
+        self.latest
     }
 
     /// Forgets every number.
