@@ -14,21 +14,7 @@ use ringscan::sensor::hesai::{HesaiDecoder, HesaiModel, HesaiOptions, HesaiPacke
 
 const CALIB: &str = "tier4__nebula/src/nebula_hesai/nebula_hesai_decoders/calibration";
 
-/// CRC-32/MPEG-2, written out bit by bit (independent of the library's table).
-fn crc32_mpeg2(data: &[u8]) -> u32 {
-    let mut c = 0xFFFF_FFFFu32;
-    for &b in data {
-        c ^= u32::from(b) << 24;
-        for _ in 0..8 {
-            c = if c & 0x8000_0000 != 0 {
-                (c << 1) ^ 0x04C1_1DB7
-            } else {
-                c << 1
-            };
-        }
-    }
-    c
-}
+use common::crc32_mpeg2_bitwise as crc32_mpeg2;
 
 fn put16(b: &mut [u8], o: usize, v: u16) {
     b[o..o + 2].copy_from_slice(&v.to_le_bytes());

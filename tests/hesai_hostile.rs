@@ -544,23 +544,6 @@ fn walk(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
     out
 }
 
-/// CRC-32/MPEG-2 bit by bit (poly 0x04C11DB7, init and no final xor 0xFFFFFFFF / 0, not
-/// reflected), written here apart from the crate's table-driven one.
-fn crc_mpeg2_bitwise(bytes: &[u8]) -> u32 {
-    let mut c = 0xFFFF_FFFFu32;
-    for &b in bytes {
-        c ^= u32::from(b) << 24;
-        for _ in 0..8 {
-            c = if c & 0x8000_0000 != 0 {
-                (c << 1) ^ 0x04C1_1DB7
-            } else {
-                c << 1
-            };
-        }
-    }
-    c
-}
-
 /// The functional-safety block (17 bytes after the QT128's body CRC: version, state,
 /// code counts, fault code u16, 8 reserved, CRC u32 LE "from the Lidar State field to the
 /// Reserved field", QT128 manual) is believed only when its own CRC checks. The real QT128
@@ -588,7 +571,7 @@ fn functional_safety_blocks_are_believed_only_under_their_own_crc() {
     let state = |p: &[u8]| p[fs + 1] >> 5;
     for (_, p) in &packets {
         let stored = u32::from_le_bytes(p[fs + 13..fs + 17].try_into().unwrap());
-        assert_eq!(crc_mpeg2_bitwise(&p[fs + 1..fs + 13]), stored);
+        assert_eq!(common::crc32_mpeg2_bitwise(&p[fs + 1..fs + 13]), stored);
     }
     let not_normal = packets.iter().filter(|(_, p)| state(p) != 1).count() as u64;
     assert_eq!(not_normal, 1800, "the capture's blocks all say Init");
@@ -631,7 +614,7 @@ fn functional_safety_blocks_are_believed_only_under_their_own_crc() {
     // The same faults under a CRC that checks: believed, the last of them the last state.
     let mut faulted = lying;
     for (_, p) in faulted.iter_mut().step_by(10) {
-        let crc = crc_mpeg2_bitwise(&p[fs + 1..fs + 13]);
+        let crc = common::crc32_mpeg2_bitwise(&p[fs + 1..fs + 13]);
         p[fs + 13..fs + 17].copy_from_slice(&crc.to_le_bytes());
     }
     faulted.truncate(1791);

@@ -436,7 +436,6 @@ fn parse_name(s: &str) -> Result<String, String> {
     }
 }
 
-/// `--threads`: a positive number.
 /// The longest `--duration` or `--timeout` taken, s (about 31 years): a longer one would
 /// overflow the clock's deadline (`Instant + Duration` panics), and means "no limit" anyway.
 const MAX_SECONDS: f64 = 1e9;
@@ -452,6 +451,7 @@ fn seconds(flag: &str, s: f64) -> Result<std::time::Duration, String> {
     }
 }
 
+/// `--threads`: a number of threads, 1 to 1024.
 fn parse_threads(s: &str) -> Result<usize, String> {
     match s.parse::<usize>() {
         Ok(n) if (1..=1024).contains(&n) => Ok(n),

@@ -3,6 +3,23 @@
 
 use std::path::{Path, PathBuf};
 
+/// CRC-32/MPEG-2 (poly 0x04C11DB7, init 0xFFFFFFFF, not reflected, no final xor) bit by bit:
+/// the tests' own, apart from the library's table-driven one.
+pub fn crc32_mpeg2_bitwise(data: &[u8]) -> u32 {
+    let mut c = 0xFFFF_FFFFu32;
+    for &b in data {
+        c ^= u32::from(b) << 24;
+        for _ in 0..8 {
+            c = if c & 0x8000_0000 != 0 {
+                (c << 1) ^ 0x04C1_1DB7
+            } else {
+                c << 1
+            };
+        }
+    }
+    c
+}
+
 /// `../shared/captures` beside the repository, if present.
 pub fn captures() -> Option<PathBuf> {
     let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/captures");

@@ -81,13 +81,7 @@ impl LivoxDecoder {
         sweep_start_ns: i64,
         out: &mut Vec<Point>,
     ) -> PacketPoints {
-        let run = Run {
-            records,
-            first_ns,
-            spacing,
-            sweep_start_ns,
-            max_t_ns: None,
-        };
+        let run = Run::new(records, first_ns, spacing, sweep_start_ns, None);
         self.decode_run(kind, run, rec, out)
     }
 
@@ -106,13 +100,7 @@ impl LivoxDecoder {
         max_t_ns: i64,
         out: &mut Vec<Point>,
     ) -> PacketPoints {
-        let run = Run {
-            records,
-            first_ns,
-            spacing,
-            sweep_start_ns,
-            max_t_ns: Some(max_t_ns),
-        };
+        let run = Run::new(records, first_ns, spacing, sweep_start_ns, Some(max_t_ns));
         self.decode_run(kind, run, rec, out)
     }
 
@@ -303,6 +291,22 @@ struct Run {
 }
 
 impl Run {
+    fn new(
+        records: usize,
+        first_ns: i64,
+        spacing: Spacing,
+        sweep_start_ns: i64,
+        max_t_ns: Option<i64>,
+    ) -> Self {
+        Self {
+            records,
+            first_ns,
+            spacing,
+            sweep_start_ns,
+            max_t_ns,
+        }
+    }
+
     /// Whether a record at device time `at` gives a point.
     #[inline(always)]
     fn in_window(&self, at: i64) -> bool {

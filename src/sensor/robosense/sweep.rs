@@ -743,8 +743,8 @@ impl RobosenseStream {
     /// already at the same time is a copy, dropped). A packet older than the latest whose
     /// counter the open frame counted lost, however far below, is late too (up to half a frame
     /// before the sweep's start; a copy of it is a copy). Any other packet older than the
-    /// latest is late from the frame before, emitted already: dropped (`late_dropped`). Should the counter stop restarting, a sweep is also
-    /// cut once it spans [`M1_MAX_SWEEP_NS`]. Loss: the counter's gaps within a frame, its
+    /// latest is late from the frame before, emitted already: dropped (`late_dropped`).
+    /// Should the counter stop restarting, a sweep is also cut once it spans [`M1_MAX_SWEEP_NS`]. Loss: the counter's gaps within a frame, its
     /// first packets, and its last ones once the frame length is learned (two frames in a row
     /// ending on the same counter, in one return mode).
     fn decode_m1(
