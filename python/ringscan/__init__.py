@@ -343,6 +343,23 @@ class Source:
             fov=fov,
             integration_ms=_number(integration_ms, "integration_ms"),
         )
+        # `ringscan info` has no flag for these (it reports the capture as read, every point,
+        # every port): info() refuses them rather than report a decode they did not shape.
+        self._not_info = [
+            f"{name}={value!r}"
+            for name, value, default in (
+                ("port", port, None),
+                ("cut_angle", cut_angle, 0.0),
+                ("min_range", min_range, None),
+                ("max_range", max_range, None),
+                ("fields", fields, "default"),
+                ("crc", crc, None),
+                ("dual_return_threshold", dual_return_threshold, None),
+                ("fov", fov, None),
+                ("integration_ms", integration_ms, None),
+            )
+            if value != default
+        ]
         self._read_ahead = read_ahead
         self._readers: List[Any] = []
         self._summary: Optional[dict] = None
@@ -366,7 +383,18 @@ class Source:
 
     def info(self) -> dict:
         """What ``ringscan info --json`` says of the input (a full decode without output):
-        sensors, models, return modes, ports, duration, sweeps, packet loss."""
+        sensors, models, return modes, ports, duration, sweeps, packet loss.
+
+        Takes the options ``ringscan info`` has flags for (``model``, ``calib``, ``topics``,
+        ``start``, ``end``); a Source opened with any other decoding option (``max_range``,
+        ``port``, ``cut_angle``...) raises ``TypeError``: iterate it and read :attr:`summary`
+        for the counts with them (``ringscan decode --json``'s)."""
+        if self._not_info:
+            raise TypeError(
+                f"info() takes no {', '.join(self._not_info)}: `ringscan info` has no such flag "
+                "(only --model, --calib, --topic, --start, --end); for the counts of a decode "
+                "with them, iterate ringscan.open(...) and read its .summary"
+            )
         k = self._kwargs
         return json.loads(
             _ringscan.info(self.path, k["model"], k["calib"], k["topics"], k["start"], k["end"])
@@ -408,7 +436,10 @@ def open(path: PathLike, calib=None, model=None, topics=None, **options: Any) ->
 
 
 def info(path: PathLike, calib=None, model=None, topics=None, **options: Any) -> dict:
-    """``ringscan info --json`` as a dict: shorthand for ``open(...).info()``."""
+    """``ringscan info --json`` as a dict: shorthand for ``open(...).info()``, so with the
+    options of ``ringscan info`` only (``start``, ``end`` besides these); any other decoding
+    option raises ``TypeError``, as the CLI refuses the flag. (``read_ahead``, which changes no
+    count, is taken and unused: info reads the input on its decoding thread.)"""
     return Source(path, calib=calib, model=model, topics=topics, **options).info()
 
 

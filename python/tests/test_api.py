@@ -471,3 +471,38 @@ def test_mcap_writer_write_sweep_releases_the_gil(tmp_path):
     finally:
         for w in writers:
             w.close()
+
+
+def test_mcap_writer_close_releases_the_gil(tmp_path):
+    """A Python thread runs while ``McapWriter.close`` compresses the chunk still open (the
+    demo's sweeps written again and again, under one 4 MiB chunk, at zstd's slowest level,
+    one writing thread) and writes the file's summary."""
+    sweeps = [ringscan._records(s.points) for s in ringscan.open(DEMO)]
+    writers = []
+
+    class CloseNext:
+        """``close()`` of the next of three writers filled beforehand: a writer closes once,
+        and the helper may call again."""
+
+        def __init__(self, mib):
+            self.ready = []
+            for k in range(3):
+                w = ringscan.McapWriter(tmp_path / f"close{mib}-{k}.mcap", compression="zstd:19", threads=1)
+                writers.append(w)
+                sid = w.add_sensor("big")
+                written, i = 0, 0
+                while written < mib * 2**20:
+                    records = sweeps[i % len(sweeps)]
+                    w._native.write_sweep(sid, records, 1_000_000 * (i + 1), None)
+                    written, i = written + len(records), i + 1
+                self.ready.append(w)
+
+        def __call__(self):
+            # The native call alone, as for the other calls.
+            self.ready.pop()._native.close()
+
+    try:
+        assert_releases_the_gil(CloseNext(mib) for mib in (0.5, 1, 2, 3))
+    finally:
+        for w in writers:
+            w.close()

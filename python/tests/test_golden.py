@@ -116,3 +116,40 @@ def test_info_is_the_cli_info(captures):
         d.pop("elapsed_s")
     assert py == cli
     assert py["capture"]["bag"]["kind"] and py["sensors"][0]["kind"] == "ouster"
+
+
+@pytest.mark.skipif(CAPTURES is None, reason="SKIP: ../shared/captures is missing")
+def test_info_refuses_the_options_the_cli_info_has_no_flag_for(captures):
+    """``ringscan info`` has no ``--max-range``, ``--port``... (exit 2), and ``max_range`` does
+    change the counts (``decode --json --max-range 5`` has fewer points than ``info``): so
+    ``info(..., max_range=5)`` raises, as does ``open(..., max_range=5).info()``. They returned
+    the capture's full counts, as if the option had not been given."""
+    path = abspath("jerry73204__rust-lidar-utils/test_files/hdl32_example.pcap")
+
+    def cli(*args, check=True):
+        r = subprocess.run([sys.executable, "-m", "ringscan", *args], capture_output=True, text=True, check=check)
+        return r if not check else json.loads(r.stdout)
+
+    for flags in (["--max-range", "5"], ["--port", "2368"], ["--cut-angle", "90"]):
+        r = cli("info", "--json", path, *flags, check=False)
+        assert r.returncode == 2 and "unexpected argument" in r.stderr, (flags, r.stderr)
+    full = cli("info", "--json", path)
+    cut = cli("decode", "--json", "--max-range", "5", path)
+    assert 0 < cut["points"] < full["points"] == 252057
+    refused = [
+        {"max_range": 5.0}, {"min_range": 1.0}, {"port": 2368}, {"cut_angle": 90.0},
+        {"fields": "all"}, {"crc": True}, {"dual_return_threshold": 0.1}, {"fov": (30, 150)},
+        {"integration_ms": 50.0}, {"max_range": 5.0, "port": 9},
+    ]
+    for opts in refused:
+        for call in (lambda: ringscan.info(path, **opts), lambda: ringscan.open(path, **opts).info()):
+            with pytest.raises(TypeError, match=r"info\(\) takes no ") as e:
+                call()
+            assert all(f"{k}=" in str(e.value) for k in opts), e.value
+    # info's own options still apply, as on the CLI; a decoding option at its default changes
+    # nothing and is taken.
+    want = cli("info", "--json", "--model", "hdl32e", path)
+    for got in (ringscan.info(path, model="hdl32e"), ringscan.info(path, model="hdl32e", cut_angle=0.0, read_ahead=False)):
+        for d in (want, got):
+            d.pop("elapsed_s", None)
+        assert got == want
