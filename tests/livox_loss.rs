@@ -528,3 +528,49 @@ fn a_copy_of_a_stale_packet_is_a_duplicate() {
         (2, 3, 1, 0)
     );
 }
+
+/// HAP-like frames of at most 11 packets, the stream seen from the middle of its first
+/// frame: the next frame's first packet (`udp_cnt` 0, at most 10 behind the newest, before
+/// any number the stream holds) starts that frame. Every packet is decoded, none missing,
+/// and after the second frame start the sweeps are the frames. (Before: the next frame's
+/// first packets were taken for reordered ones of the open frame, and the first its ledger
+/// had seen started the frame with those before it counted missing: 2 for 5-packet frames.)
+#[test]
+fn a_frame_shorter_than_the_reorder_window_starts_the_next_frame() {
+    for (per, skip) in [(5u16, 2usize), (3, 1), (11, 2), (11, 1)] {
+        let fs = frames(6, per);
+        let order: Vec<Vec<u8>> = fs[skip..].iter().map(|(_, b)| b.clone()).collect();
+        let (seen, st) = hap(&order);
+        let pushed = order.len() as u64;
+        assert_eq!(
+            (
+                st.missing,
+                st.late_dropped,
+                st.duplicates,
+                st.discontinuities,
+                st.packets
+            ),
+            (0, 0, 0, 0, pushed),
+            "frames of {per}, from {skip}"
+        );
+        // Frames 0 and 1 in one sweep (the frame cut is taken at the second frame start),
+        // then one sweep a frame, each from its first packet (1 ms apart).
+        let per_ = usize::from(per);
+        let mut want = vec![(
+            (2 * per_ - skip) * 96,
+            (2 * per_ - skip) as u32,
+            0u64,
+            (T0 + skip as u64 * 1_000_000) as i64,
+        )];
+        for f in 2..6 {
+            want.push((
+                per_ * 96,
+                u32::from(per),
+                0,
+                (T0 + (f * per_) as u64 * 1_000_000) as i64,
+            ));
+        }
+        let got: Vec<_> = seen.iter().map(|w| (w.0, w.1, w.2, w.3)).collect();
+        assert_eq!(got, want, "frames of {per}, from {skip}");
+    }
+}

@@ -15,7 +15,9 @@
 //! A packet a little behind the newest `udp_cnt` (at most [`REORDER_PACKETS`]) was reordered
 //! on the way: it joins the open sweep where its time falls inside it (from the sweep's start
 //! to two periods after it; a frame's first packet behind its second starts that frame's
-//! sweep instead), else it is dropped as a late one is, and it cuts nothing. A packet
+//! sweep instead), else it is dropped as a late one is, and it cuts nothing. A packet of the
+//! next `frame_cnt` whose `udp_cnt` is not ahead of the open frame's starts that frame,
+//! however short the frames (the next one's 0 may be within the window of the newest). A packet
 //! further behind than a reordering explains (more than [`REORDER_PACKETS`] behind the newest
 //! `udp_cnt`, or of a frame whose sweep is gone), but at most two periods behind the newest
 //! packet's time, came late: it is dropped and counted in [`LivoxStats::late_dropped`] (its
@@ -506,12 +508,13 @@ impl LivoxStream {
         let count = self.udp.peek(udp);
         let reorder = REORDER_PACKETS;
         let arrival = match count {
-            // A frame's first packets lost: the next one's number is how many.
-            _ if self.frame_starts > 0
-                && next_frame
-                && udp < LEDGER_NUMBERS
-                && !matches!(count, Count::Next { .. }) =>
-            {
+            // The next frame's number, not ahead of the open frame's: `udp_cnt` restarted with
+            // the frame, its first packets lost where the number is not 0. No packet of the
+            // open frame carries the next frame's number, so this holds before the stream has
+            // seen a frame start too: a frame of at most 11 packets puts the next one's 0
+            // within the reorder window of its newest, where, from before the numbers the
+            // stream holds (it began mid-frame), it read as a stray of the open frame.
+            _ if next_frame && udp < LEDGER_NUMBERS && !matches!(count, Count::Next { .. }) => {
                 Arrival::FrameStart
             }
             Count::Next { lost } => Arrival::Next { lost },
@@ -525,9 +528,6 @@ impl LivoxStream {
             Count::Seen { .. } if behind_in_time || !trusted => Arrival::Copy,
             Count::Lost { .. } if behind_in_time || !trusted => Arrival::Stale { filled: true },
             Count::Far if behind_in_time => Arrival::Stale { filled: false },
-            // The number again at a new time (the counter restarted: a frame of fewer than 11
-            // packets, a sensor restarted; or it stands still), or a jump.
-            _ if next_frame && udp < LEDGER_NUMBERS => Arrival::FrameStart,
             // A damaged packet's counters never restart the count: the next good one decides.
             _ if !trusted => Arrival::Copy,
             _ => Arrival::Restart,
