@@ -574,3 +574,65 @@ fn a_frame_shorter_than_the_reorder_window_starts_the_next_frame() {
         assert_eq!(got, want, "frames of {per}, from {skip}");
     }
 }
+
+/// A copy of the newest packet that comes after more than 11 other packets (here frame 0's
+/// last 15, reordered after frame 1's 6th and dropped late: the copy's time has left the
+/// 11 kept) is a duplicate: the ledger has its number and its time is the newest's. (Before:
+/// a counter restart, one discontinuity, the copy decoded twice and the closed frames'
+/// numbers forgotten.) A sensor whose counter goes back to numbers it sent and goes on from
+/// there, its time going on, still restarted: one discontinuity, every packet decoded.
+#[test]
+fn a_copy_of_the_newest_packet_is_a_duplicate_however_many_came_since() {
+    let fs = frames(3, 100);
+    let base: Vec<Vec<u8>> = fs.iter().map(|(_, b)| b.clone()).collect();
+    let (first, last) = (at(&fs, 0, 85), at(&fs, 0, 99));
+    let without: Vec<Vec<u8>> = base
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| !(first..=last).contains(k))
+        .map(|(_, b)| b.clone())
+        .collect();
+    let (want, _) = hap(&without);
+    let mut order = without.clone();
+    let newest = order
+        .iter()
+        .position(|b| *b == base[at(&fs, 1, 5)])
+        .unwrap();
+    order.splice(newest + 1..newest + 1, base[first..=last].iter().cloned());
+    order.insert(newest + 16, base[at(&fs, 1, 5)].clone());
+    let (got, st) = hap(&order);
+    assert_eq!(
+        (
+            st.duplicates,
+            st.discontinuities,
+            st.late_dropped,
+            st.missing,
+            st.packets
+        ),
+        (1, 0, 15, 0, 285)
+    );
+    assert_eq!(
+        st.packets + st.duplicates + st.late_dropped,
+        order.len() as u64
+    );
+    let strip = |s: &Seen| s.iter().map(|w| (w.0, w.1, w.2, w.3)).collect::<Vec<_>>();
+    assert_eq!(strip(&got), strip(&want));
+
+    // Restarted at 140, 10 numbers back, the time going on.
+    let mut ps: Vec<Vec<u8>> = (0..150u16)
+        .map(|k| sdk2(k, 0, T0 + u64::from(k) * P))
+        .collect();
+    ps.extend((0..150u16).map(|k| sdk2(140 + k, 0, T0 + u64::from(150 + k) * P)));
+    let (seen, st) = mid360(&ps);
+    assert_eq!(
+        (
+            st.discontinuities,
+            st.duplicates,
+            st.late_dropped,
+            st.missing,
+            st.packets
+        ),
+        (1, 0, 0, 0, 300)
+    );
+    assert_eq!(total(&seen), 300 * 96);
+}

@@ -125,7 +125,11 @@ pub struct LivoxStats {
     pub imu_missing: u64,
     /// Restarts of the counter or device time (too large or backwards).
     pub discontinuities: u64,
-    /// Point or IMU packets whose counter was seen already (copies): dropped.
+    /// Point or IMU packets whose counter was seen already (copies): dropped. An SDK2 point
+    /// packet's number is looked up in its frame's ledger, so a copy is one however many
+    /// packets came since, where it is timed at the newest packet's time or up to two
+    /// periods before it (a number seen again at a later time is a restart); SDK1 packets
+    /// carry no counter: a copy repeats one of the last 11 packets' times.
     pub duplicates: u64,
     /// Point packets that came too late to join a sweep, dropped: more than
     /// [`REORDER_PACKETS`] behind the newest `udp_cnt` (within two periods of its time); of a
@@ -525,7 +529,12 @@ impl LivoxStream {
             {
                 Arrival::Copy
             }
-            Count::Seen { .. } if behind_in_time || !trusted => Arrival::Copy,
+            // The newest packet's time, or up to two periods before it, however many packets
+            // came since (only the last 11 times are kept, and late packets and a closed
+            // frame's push them out): a copy. A restart's time goes on, or back by seconds.
+            Count::Seen { .. } if behind_in_time || self.last_packet_ns == Some(ts) || !trusted => {
+                Arrival::Copy
+            }
             Count::Lost { .. } if behind_in_time || !trusted => Arrival::Stale { filled: true },
             Count::Far if behind_in_time => Arrival::Stale { filled: false },
             // A damaged packet's counters never restart the count: the next good one decides.
