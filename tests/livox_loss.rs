@@ -636,3 +636,40 @@ fn a_copy_of_the_newest_packet_is_a_duplicate_however_many_came_since() {
     );
     assert_eq!(total(&seen), 300 * 96);
 }
+
+/// SDK1 (Mid-40: 100 records 10 µs apart, 1 ms a packet): a packet reordered behind the one
+/// that began the next sweep (packet 99 after 100, the period's cut between them) is timed
+/// before that sweep: dropped, counted once in `late_dropped`, not missing, the sweeps those
+/// of the stream without it; one reordered inside the open sweep joins it. (Before: its
+/// points went into the open sweep at t = 0.)
+#[test]
+fn an_sdk1_late_packet_timed_outside_the_open_sweep_is_dropped() {
+    let mid40_ = |ps: &[Vec<u8>]| run(Some(LivoxModel::Mid40), Protocol::Sdk1, ps);
+    let strip = |s: &Seen| s.iter().map(|w| (w.0, w.1, w.3, w.4)).collect::<Vec<_>>();
+    let ps = mid40(300, &[]);
+    let (want, _) = mid40_(&mid40(300, &[99]));
+    let mut order = ps.clone();
+    order.swap(99, 100);
+    let (got, st) = mid40_(&order);
+    assert_eq!(
+        (
+            st.late_dropped,
+            st.missing,
+            st.packets,
+            st.duplicates,
+            st.discontinuities
+        ),
+        (1, 0, 299, 0, 0)
+    );
+    assert_eq!(st.packets + st.late_dropped, order.len() as u64);
+    assert_eq!(strip(&got), strip(&want));
+    assert!(got.iter().all(|w| w.2 == 0), "{got:?}");
+
+    // Packet 150 after 151, inside the sweep begun at 100: it joins.
+    let mut order = ps.clone();
+    order.swap(150, 151);
+    let (got, st) = mid40_(&order);
+    assert_eq!((st.late_dropped, st.missing, st.packets), (0, 0, 300));
+    let (want, _) = mid40_(&ps);
+    assert_eq!(strip(&got), strip(&want));
+}
