@@ -528,3 +528,148 @@ fn a_copy_of_a_stale_packet_is_a_duplicate() {
         (2, 3, 1, 0)
     );
 }
+
+/// HAP-like frames of at most 11 packets, the stream seen from the middle of its first
+/// frame: the next frame's first packet (`udp_cnt` 0, at most 10 behind the newest, before
+/// any number the stream holds) starts that frame. Every packet is decoded, none missing,
+/// and after the second frame start the sweeps are the frames. (Before: the next frame's
+/// first packets were taken for reordered ones of the open frame, and the first its ledger
+/// had seen started the frame with those before it counted missing: 2 for 5-packet frames.)
+#[test]
+fn a_frame_shorter_than_the_reorder_window_starts_the_next_frame() {
+    for (per, skip) in [(5u16, 2usize), (3, 1), (11, 2), (11, 1)] {
+        let fs = frames(6, per);
+        let order: Vec<Vec<u8>> = fs[skip..].iter().map(|(_, b)| b.clone()).collect();
+        let (seen, st) = hap(&order);
+        let pushed = order.len() as u64;
+        assert_eq!(
+            (
+                st.missing,
+                st.late_dropped,
+                st.duplicates,
+                st.discontinuities,
+                st.packets
+            ),
+            (0, 0, 0, 0, pushed),
+            "frames of {per}, from {skip}"
+        );
+        // Frames 0 and 1 in one sweep (the frame cut is taken at the second frame start),
+        // then one sweep a frame, each from its first packet (1 ms apart).
+        let per_ = usize::from(per);
+        let mut want = vec![(
+            (2 * per_ - skip) * 96,
+            (2 * per_ - skip) as u32,
+            0u64,
+            (T0 + skip as u64 * 1_000_000) as i64,
+        )];
+        for f in 2..6 {
+            want.push((
+                per_ * 96,
+                u32::from(per),
+                0,
+                (T0 + (f * per_) as u64 * 1_000_000) as i64,
+            ));
+        }
+        let got: Vec<_> = seen.iter().map(|w| (w.0, w.1, w.2, w.3)).collect();
+        assert_eq!(got, want, "frames of {per}, from {skip}");
+    }
+}
+
+/// A copy of the newest packet that comes after more than 11 other packets (here frame 0's
+/// last 15, reordered after frame 1's 6th and dropped late: the copy's time has left the
+/// 11 kept) is a duplicate: the ledger has its number and its time is the newest's. (Before:
+/// a counter restart, one discontinuity, the copy decoded twice and the closed frames'
+/// numbers forgotten.) A sensor whose counter goes back to numbers it sent and goes on from
+/// there, its time going on, still restarted: one discontinuity, every packet decoded.
+#[test]
+fn a_copy_of_the_newest_packet_is_a_duplicate_however_many_came_since() {
+    let fs = frames(3, 100);
+    let base: Vec<Vec<u8>> = fs.iter().map(|(_, b)| b.clone()).collect();
+    let (first, last) = (at(&fs, 0, 85), at(&fs, 0, 99));
+    let without: Vec<Vec<u8>> = base
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| !(first..=last).contains(k))
+        .map(|(_, b)| b.clone())
+        .collect();
+    let (want, _) = hap(&without);
+    let mut order = without.clone();
+    let newest = order
+        .iter()
+        .position(|b| *b == base[at(&fs, 1, 5)])
+        .unwrap();
+    order.splice(newest + 1..newest + 1, base[first..=last].iter().cloned());
+    order.insert(newest + 16, base[at(&fs, 1, 5)].clone());
+    let (got, st) = hap(&order);
+    assert_eq!(
+        (
+            st.duplicates,
+            st.discontinuities,
+            st.late_dropped,
+            st.missing,
+            st.packets
+        ),
+        (1, 0, 15, 0, 285)
+    );
+    assert_eq!(
+        st.packets + st.duplicates + st.late_dropped,
+        order.len() as u64
+    );
+    let strip = |s: &Seen| s.iter().map(|w| (w.0, w.1, w.2, w.3)).collect::<Vec<_>>();
+    assert_eq!(strip(&got), strip(&want));
+
+    // Restarted at 140, 10 numbers back, the time going on.
+    let mut ps: Vec<Vec<u8>> = (0..150u16)
+        .map(|k| sdk2(k, 0, T0 + u64::from(k) * P))
+        .collect();
+    ps.extend((0..150u16).map(|k| sdk2(140 + k, 0, T0 + u64::from(150 + k) * P)));
+    let (seen, st) = mid360(&ps);
+    assert_eq!(
+        (
+            st.discontinuities,
+            st.duplicates,
+            st.late_dropped,
+            st.missing,
+            st.packets
+        ),
+        (1, 0, 0, 0, 300)
+    );
+    assert_eq!(total(&seen), 300 * 96);
+}
+
+/// SDK1 (Mid-40: 100 records 10 µs apart, 1 ms a packet): a packet reordered behind the one
+/// that began the next sweep (packet 99 after 100, the period's cut between them) is timed
+/// before that sweep: dropped, counted once in `late_dropped`, not missing, the sweeps those
+/// of the stream without it; one reordered inside the open sweep joins it. (Before: its
+/// points went into the open sweep at t = 0.)
+#[test]
+fn an_sdk1_late_packet_timed_outside_the_open_sweep_is_dropped() {
+    let mid40_ = |ps: &[Vec<u8>]| run(Some(LivoxModel::Mid40), Protocol::Sdk1, ps);
+    let strip = |s: &Seen| s.iter().map(|w| (w.0, w.1, w.3, w.4)).collect::<Vec<_>>();
+    let ps = mid40(300, &[]);
+    let (want, _) = mid40_(&mid40(300, &[99]));
+    let mut order = ps.clone();
+    order.swap(99, 100);
+    let (got, st) = mid40_(&order);
+    assert_eq!(
+        (
+            st.late_dropped,
+            st.missing,
+            st.packets,
+            st.duplicates,
+            st.discontinuities
+        ),
+        (1, 0, 299, 0, 0)
+    );
+    assert_eq!(st.packets + st.late_dropped, order.len() as u64);
+    assert_eq!(strip(&got), strip(&want));
+    assert!(got.iter().all(|w| w.2 == 0), "{got:?}");
+
+    // Packet 150 after 151, inside the sweep begun at 100: it joins.
+    let mut order = ps.clone();
+    order.swap(150, 151);
+    let (got, st) = mid40_(&order);
+    assert_eq!((st.late_dropped, st.missing, st.packets), (0, 0, 300));
+    let (want, _) = mid40_(&ps);
+    assert_eq!(strip(&got), strip(&want));
+}

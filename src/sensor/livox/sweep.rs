@@ -12,10 +12,13 @@
 //! Mid-40 at 1 ms and a Horizon at 0.4 ms are both counted right; until two packets have
 //! come, no time gap is counted).
 //!
-//! A packet a little behind the newest `udp_cnt` (at most [`REORDER_PACKETS`]) was reordered
-//! on the way: it joins the open sweep where its time falls inside it (from the sweep's start
-//! to two periods after it; a frame's first packet behind its second starts that frame's
-//! sweep instead), else it is dropped as a late one is, and it cuts nothing. A packet
+//! A packet a little behind the newest `udp_cnt` (at most [`REORDER_PACKETS`]; SDK1: behind
+//! the newest packet's time by at most as many packets) was reordered on the way: it joins
+//! the open sweep where its time falls inside it (from the sweep's start to two periods after
+//! it; a frame's first packet behind its second starts that frame's sweep instead), else it
+//! is dropped as a late one is, and it cuts nothing. A packet of the next `frame_cnt` whose
+//! `udp_cnt` is not ahead of the open frame's starts that frame, however short the frames
+//! (the next one's 0 may be within the window of the newest). A packet
 //! further behind than a reordering explains (more than [`REORDER_PACKETS`] behind the newest
 //! `udp_cnt`, or of a frame whose sweep is gone), but at most two periods behind the newest
 //! packet's time, came late: it is dropped and counted in [`LivoxStats::late_dropped`] (its
@@ -123,14 +126,19 @@ pub struct LivoxStats {
     pub imu_missing: u64,
     /// Restarts of the counter or device time (too large or backwards).
     pub discontinuities: u64,
-    /// Point or IMU packets whose counter was seen already (copies): dropped.
+    /// Point or IMU packets whose counter was seen already (copies): dropped. An SDK2 point
+    /// packet's number is looked up in its frame's ledger, so a copy is one however many
+    /// packets came since, where it is timed at the newest packet's time or up to two
+    /// periods before it (a number seen again at a later time is a restart); SDK1 packets
+    /// carry no counter: a copy repeats one of the last 11 packets' times.
     pub duplicates: u64,
     /// Point packets that came too late to join a sweep, dropped: more than
     /// [`REORDER_PACKETS`] behind the newest `udp_cnt` (within two periods of its time); of a
     /// frame already handed over (its last packets came after the next frame's first ones,
     /// and no IMU wait held it) or of one before that; or late by their `udp_cnt` but timed
     /// outside the sweep they would join (before its start or more than two periods after
-    /// it: a time that lies, or a packet reordered across the period's cut). Each is counted
+    /// it: a time that lies, or a packet reordered across the period's cut; SDK1: late by its
+    /// time, reordered behind the packet that began the open sweep). Each is counted
     /// here once and not also missing: the gap it left, counted missing when a later packet
     /// came, is taken off `missing`, and a copy of it is a duplicate. That takes its frame's
     /// numbers, which the stream holds for the open frame and the 127 before it. A packet of
@@ -506,12 +514,13 @@ impl LivoxStream {
         let count = self.udp.peek(udp);
         let reorder = REORDER_PACKETS;
         let arrival = match count {
-            // A frame's first packets lost: the next one's number is how many.
-            _ if self.frame_starts > 0
-                && next_frame
-                && udp < LEDGER_NUMBERS
-                && !matches!(count, Count::Next { .. }) =>
-            {
+            // The next frame's number, not ahead of the open frame's: `udp_cnt` restarted with
+            // the frame, its first packets lost where the number is not 0. No packet of the
+            // open frame carries the next frame's number, so this holds before the stream has
+            // seen a frame start too: a frame of at most 11 packets puts the next one's 0
+            // within the reorder window of its newest, where, from before the numbers the
+            // stream holds (it began mid-frame), it read as a stray of the open frame.
+            _ if next_frame && udp < LEDGER_NUMBERS && !matches!(count, Count::Next { .. }) => {
                 Arrival::FrameStart
             }
             Count::Next { lost } => Arrival::Next { lost },
@@ -522,12 +531,14 @@ impl LivoxStream {
             {
                 Arrival::Copy
             }
-            Count::Seen { .. } if behind_in_time || !trusted => Arrival::Copy,
+            // The newest packet's time, or up to two periods before it, however many packets
+            // came since (only the last 11 times are kept, and late packets and a closed
+            // frame's push them out): a copy. A restart's time goes on, or back by seconds.
+            Count::Seen { .. } if behind_in_time || self.last_packet_ns == Some(ts) || !trusted => {
+                Arrival::Copy
+            }
             Count::Lost { .. } if behind_in_time || !trusted => Arrival::Stale { filled: true },
             Count::Far if behind_in_time => Arrival::Stale { filled: false },
-            // The number again at a new time (the counter restarted: a frame of fewer than 11
-            // packets, a sensor restarted; or it stands still), or a jump.
-            _ if next_frame && udp < LEDGER_NUMBERS => Arrival::FrameStart,
             // A damaged packet's counters never restart the count: the next good one decides.
             _ if !trusted => Arrival::Copy,
             _ => Arrival::Restart,
@@ -684,12 +695,8 @@ impl LivoxStream {
         }
     }
 
-    /// A late point packet into the open sweep (`into_held`: the sweep waiting for its IMU
-    /// samples), which must be begun: its records timed inside the sweep (`0 ..=` the longest
-    /// a sweep may span after its start) join it, one fewer missing there if it fills a gap
-    /// (`filled`) that sweep counted. A packet with no such record — its time lies, or it
-    /// belongs to a sweep already finished — joins nothing: `false`, the caller counts it
-    /// dropped. Late, it moves no cut and leaves the stream's newest packet as it was.
+    /// A late SDK2 point packet into the open sweep (`into_held`: the sweep waiting for its
+    /// IMU samples), which must be begun, as [`Self::join_decoded`] tells.
     fn join_late(
         &mut self,
         into_held: bool,
@@ -698,13 +705,38 @@ impl LivoxStream {
         ts: i64,
         filled: bool,
     ) -> bool {
+        let end = ts.saturating_add(i64::try_from(p.time_interval_ns()).unwrap_or(i64::MAX));
+        self.join_decoded(
+            into_held,
+            host_ns,
+            end,
+            filled,
+            |decoder, max_t_ns, sweep| decode_sdk2(decoder, p, ts, Some(max_t_ns), sweep),
+        )
+    }
+
+    /// A late point packet, its last record timed `end_ns`, into the open or the held sweep
+    /// (`into_held`): `decode` appends its records timed inside the sweep (`0 ..=` the longest
+    /// a sweep may span after its start, the bound it is given), and if there are any the
+    /// packet joins, one fewer missing there if it fills a gap (`filled`) that sweep counted.
+    /// A packet with no such record — its time lies, or it belongs to a sweep already
+    /// finished — joins nothing: `false`, the caller counts it dropped. Late, it moves no cut
+    /// and leaves the stream's newest packet as it was.
+    fn join_decoded(
+        &mut self,
+        into_held: bool,
+        host_ns: i64,
+        end_ns: i64,
+        filled: bool,
+        decode: impl FnOnce(&LivoxDecoder, i64, &mut Sweep) -> PacketPoints,
+    ) -> bool {
         let max_t_ns = self.max_span_ns();
-        let (sweep, end_ns) = if into_held {
+        let (sweep, sweep_end_ns) = if into_held {
             (&mut self.held, &mut self.held_end_ns)
         } else {
             (&mut self.sweep, &mut self.open_end_ns)
         };
-        if decode_sdk2(&self.decoder, p, ts, Some(max_t_ns), sweep).in_window == 0 {
+        if decode(&self.decoder, max_t_ns, sweep).in_window == 0 {
             return false;
         }
         if filled {
@@ -713,8 +745,7 @@ impl LivoxStream {
         sweep.packets = sweep.packets.saturating_add(1);
         sweep.columns_count = sweep.columns_count.saturating_add(1);
         sweep.last_host_ns = sweep.last_host_ns.max(host_ns);
-        let end = ts.saturating_add(i64::try_from(p.time_interval_ns()).unwrap_or(i64::MAX));
-        *end_ns = (*end_ns).max(end);
+        *sweep_end_ns = (*sweep_end_ns).max(end_ns);
         self.stats.packets += 1;
         true
     }
@@ -889,9 +920,34 @@ impl LivoxStream {
         let late = self
             .last_packet_ns
             .is_some_and(|l| ts < l && ts >= l.saturating_sub(i64::from(REORDER_PACKETS) * period));
+        let spacing = Spacing::step(u64::try_from(step).unwrap_or(0));
+        let last = ts.saturating_add(step.saturating_mul(n.saturating_sub(1) as i64));
         if late {
+            // It came: off `missing` whether it joins the open sweep or is dropped. Only its
+            // records timed inside the sweep join it, as an SDK2 packet late by its counter
+            // does: one reordered behind the packet that began the sweep is timed before it
+            // (its points went in clamped to t = 0).
             self.unmiss();
-        } else if let Some(next) = self.sdk1_next_ns {
+            self.recent.push(ts);
+            let joined = self.open
+                && self.join_decoded(false, host_ns, last, false, |decoder, max_t_ns, sweep| {
+                    decoder.decode_within(
+                        p.record(),
+                        n,
+                        |i| p.record_bytes(i),
+                        ts,
+                        spacing,
+                        sweep.device_time_ns,
+                        max_t_ns,
+                        &mut sweep.points,
+                    )
+                });
+            if !joined {
+                self.stats.late_dropped += 1;
+            }
+            return Ok(());
+        }
+        if let Some(next) = self.sdk1_next_ns {
             let gap = ts - next;
             if gap < 0 {
                 if ts < next - period {
@@ -907,16 +963,14 @@ impl LivoxStream {
                 }
             }
         }
-        if !late {
-            // Where the next packet is due is not known before the spacing is.
-            self.sdk1_next_ns = known.map(|step| ts.saturating_add(step * n as i64));
-        }
-        let backwards = !late && self.last_packet_ns.is_some_and(|l| ts < l);
+        // Where the next packet is due is not known before the spacing is.
+        self.sdk1_next_ns = known.map(|step| ts.saturating_add(step * n as i64));
+        let backwards = self.last_packet_ns.is_some_and(|l| ts < l);
         if backwards {
             // A clock that restarted (or a capture replayed again) may repeat times.
             self.recent.clear();
         }
-        if self.cfg.model.is_none() && !late {
+        if self.cfg.model.is_none() {
             // Consecutive packets are a packet's records apart; over a loss, a multiple of
             // that, which the median outvotes.
             if let Some(prev) = self.last_packet_ns.filter(|&l| ts > l) {
@@ -928,15 +982,14 @@ impl LivoxStream {
             self.sdk1_last_records = n;
         }
         self.recent.push(ts);
-        let cut = !late && (self.time_cut(ts) || backwards);
-        let forced = !late && !cut && self.overfull(ts);
+        let cut = self.time_cut(ts) || backwards;
+        let forced = !cut && self.overfull(ts);
         if forced {
             self.stats.forced_cuts += 1;
         }
         if cut || forced {
             self.emit(on_sweep);
         }
-        let newest = self.last_packet_ns;
         self.begin(host_ns, ts, 0);
         self.sweep.missing_packets += lost;
         let start = self.sweep.device_time_ns;
@@ -945,15 +998,11 @@ impl LivoxStream {
             n,
             |i| p.record_bytes(i),
             ts,
-            Spacing::step(u64::try_from(step).unwrap_or(0)),
+            spacing,
             start,
             &mut self.sweep.points,
         );
-        let last = ts.saturating_add(step.saturating_mul(n.saturating_sub(1) as i64));
         self.after_packet(host_ns, ts, last);
-        if late {
-            self.last_packet_ns = newest;
-        }
         Ok(())
     }
 
