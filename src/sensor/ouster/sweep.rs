@@ -841,17 +841,17 @@ impl OusterStream {
                 return;
             }
         }
-        // The earliest valid column of this packet.
-        let first_ts = packet
+        // The earliest and latest valid columns of this packet.
+        let mut first_ts = None::<u64>;
+        let mut last_ts = None::<u64>;
+        for c in packet
             .columns()
             .filter(|c| c.valid() && usize::from(c.measurement_id()) < w)
-            .map(|c| c.timestamp_ns())
-            .min();
-        let last_ts = packet
-            .columns()
-            .filter(|c| c.valid() && usize::from(c.measurement_id()) < w)
-            .map(|c| c.timestamp_ns())
-            .max();
+        {
+            let t = c.timestamp_ns();
+            first_ts = Some(first_ts.map_or(t, |f| f.min(t)));
+            last_ts = Some(last_ts.map_or(t, |l| l.max(t)));
+        }
         // The time between the packet's first and last valid columns, per column stepped: a
         // packet whose columns go back in time or span more than a second (a clock jump) says
         // nothing of the rate.
