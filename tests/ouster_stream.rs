@@ -3,7 +3,7 @@
 //! is still taken (one-frame reorder window), older ones are counted, invalid columns are
 //! counted as missing, an `init_id` change starts an epoch (a corrupt one is a CRC failure),
 //! a frame counter that starts over restarts the stream (one stale packet far behind does
-//! not: it is late), frames lost whole are missing columns, a far-ahead packet costs no genuine frame, IMU packets come out in SI units,
+//! not, nor a long run of stale packets of frames emitted lately: they are late), frames lost whole are missing columns, a far-ahead packet costs no genuine frame, IMU packets come out in SI units,
 //! the real zone-monitor packet's damaged copies are counted drops and its queue is bounded.
 //! Expected numbers come from the packets the test builds, not from the decoder.
 
@@ -59,11 +59,23 @@ impl Gen {
     /// Packet `k` (0-based within its frame) of `frame`: columns 16k..16k+15, every pixel at
     /// 5 m (range 5000 mm), column timestamps 1 s + frame · 100 ms + column · 100 ms / W.
     fn packet(&self, frame: u32, k: usize, init_id: u32, invalid_cols: &[usize]) -> Vec<u8> {
+        self.packet_at(1_000_000_000, frame, k, init_id, invalid_cols)
+    }
+
+    /// [`Self::packet`] with frame 0 at `base_ns` instead of 1 s (another boot of the sensor).
+    fn packet_at(
+        &self,
+        base_ns: u64,
+        frame: u32,
+        k: usize,
+        init_id: u32,
+        invalid_cols: &[usize],
+    ) -> Vec<u8> {
         let cols: Vec<SimColumn> = (0..CPP)
             .map(|i| {
                 let m = k * CPP + i;
                 SimColumn {
-                    timestamp_ns: 1_000_000_000
+                    timestamp_ns: base_ns
                         + u64::from(frame) * 100_000_000
                         + (m as u64) * 100_000_000 / W as u64,
                     measurement_id: m as u16,
@@ -659,6 +671,145 @@ fn a_short_stale_run_and_a_repeated_stale_packet_are_late() {
                 "{what}: {st:?}"
             );
         }
+    }
+}
+
+/// A long stale run: 4, 8 or 64 packets in a row of frames the stream emitted 3 to 5 frames
+/// before (a switch buffer flushing datagrams the sensor sent then), in the middle of frame
+/// 15: each counted late once, the sweeps those of the stream without them. Copies of packets
+/// that arrived, and packets delayed there from frames 11 and 12 (the stream without them at
+/// all is the truth: their columns missing once, in their frames). They continue from one another as a restart's would: their frame ids are of
+/// frames emitted and their column times those frames' (it was a restart: frame 15 cut in
+/// two, a discontinuity, the held packets emitted as sweeps of their own).
+#[test]
+fn a_long_stale_run_of_emitted_frames_is_late_not_a_restart() {
+    for profile in [
+        Profile::Legacy,
+        Profile::Rng19Rfl8Sig16Nir16,
+        Profile::FusaRng15Rfl8Nir8Dual,
+    ] {
+        let mut info = info(profile);
+        if profile == Profile::Legacy {
+            info.init_id = 0;
+        }
+        let g = Gen {
+            enc: OusterEncoder::new(&info),
+            serial: info.serial,
+        };
+        let clean = frames_of(&g, &[10, 11, 12, 13, 14, 15, 16], 77);
+        // After packet 5 of frame 15 (frames 10 to 14 take 160 packets).
+        let at = 5 * PER_FRAME + 6;
+        for n in [4usize, 8, 64] {
+            assert!(n >= RESTART_CONFIRM_PACKETS);
+            // Copies: packets 0.. of frames 11 and 12, already decoded.
+            let stale: Vec<Vec<u8>> = frames_of(&g, &[11, 12], 77).into_iter().take(n).collect();
+            let (want, want_st) = sweeps_and_stats(&info, &clean);
+            let mut packets = clean.clone();
+            packets.splice(at..at, stale.clone());
+            let mut s = stream(&info);
+            let got = run(&mut s, &packets);
+            let st = s.stats().clone();
+            let what = format!("{profile:?}, {n} copies");
+            assert_same_sweeps(&got, &want, &what);
+            assert_eq!(
+                (st.late, st.discontinuities, st.missing_columns),
+                (n as u64, 0, 0),
+                "{what}: {st:?}"
+            );
+            assert_eq!(
+                (st.lidar_packets, st.sweeps, st.points),
+                (want_st.lidar_packets, want_st.sweeps, want_st.points),
+                "{what}"
+            );
+            assert_eq!(st.lidar_packets + st.late, packets.len() as u64, "{what}");
+
+            // Delayed: the first n of packets 1.. of frames 11 and 12 (62 for 64: each frame
+            // keeps its packet 0, so both were emitted) taken out of their place.
+            let delayed: Vec<usize> = [PER_FRAME, 2 * PER_FRAME]
+                .iter()
+                .flat_map(|&f| f + 1..f + PER_FRAME)
+                .take(n)
+                .collect();
+            let moved: Vec<Vec<u8>> = delayed.iter().map(|&i| clean[i].clone()).collect();
+            let without: Vec<Vec<u8>> = (0..clean.len())
+                .filter(|i| !delayed.contains(i))
+                .map(|i| clean[i].clone())
+                .collect();
+            let (want, want_st) = sweeps_and_stats(&info, &without);
+            let mut packets = without.clone();
+            let at = at - moved.len();
+            packets.splice(at..at, moved.clone());
+            let mut s = stream(&info);
+            let got = run(&mut s, &packets);
+            let st = s.stats().clone();
+            let what = format!("{profile:?}, {} delayed", moved.len());
+            assert_same_sweeps(&got, &want, &what);
+            assert_eq!(
+                (st.late, st.discontinuities),
+                (moved.len() as u64, 0),
+                "{what}: {st:?}"
+            );
+            assert_eq!(st.missing_columns, want_st.missing_columns, "{what}");
+            assert_eq!(
+                st.missing_columns,
+                (moved.len() * CPP) as u64,
+                "{what}: the delayed columns are missing once, no frame is"
+            );
+            assert_eq!(st.lidar_packets + st.late, packets.len() as u64, "{what}");
+        }
+    }
+}
+
+/// A frame counter that starts over on frames the stream emitted is still a restart: a reboot
+/// (its clock 40 s ahead of the first boot's for the same frame ids; coming at once, so that
+/// only the column times tell) and a capture replayed in a loop (the same packets, after a
+/// 2 s pause: their frames' last packets more than `STALE_WITHIN_NS` before) are told from
+/// stale datagrams by their times.
+#[test]
+fn a_counter_over_emitted_frames_again_is_still_a_restart() {
+    let info = info(Profile::Rng19Rfl8Sig16Nir16);
+    let g = Gen {
+        enc: OusterEncoder::new(&info),
+        serial: info.serial,
+    };
+    let first: Vec<Vec<u8>> = frames_of(&g, &[0, 1, 2, 3, 4, 5], 77);
+    // 1 ms of host time per packet: 0.19 s for the six frames.
+    let host = |i: usize| i as i64 * 1_000_000;
+    for (what, pause_ns, again) in [
+        (
+            "a reboot",
+            0,
+            [0u32, 1, 2]
+                .iter()
+                .flat_map(|&f| (0..PER_FRAME).map(move |k| (f, k)))
+                .map(|(f, k)| g.packet_at(41_000_000_000, f, k, 77, &[]))
+                .collect::<Vec<_>>(),
+        ),
+        ("a loop", 2_000_000_000, frames_of(&g, &[0, 1, 2], 77)),
+    ] {
+        let mut packets: Vec<(i64, Vec<u8>)> = first
+            .iter()
+            .enumerate()
+            .map(|(i, p)| (host(i), p.clone()))
+            .collect();
+        let after = host(first.len()) + pause_ns;
+        packets.extend(
+            again
+                .into_iter()
+                .enumerate()
+                .map(|(i, p)| (after + host(i), p)),
+        );
+        let mut s = stream(&info);
+        let sweeps = run_at(&mut s, &packets);
+        let st = s.stats();
+        assert_eq!(
+            sweeps.iter().map(|s| s.frame_id).collect::<Vec<_>>(),
+            [0, 1, 2, 3, 4, 5, 0, 1, 2],
+            "{what} {st:?}"
+        );
+        assert!(sweeps.iter().all(|s| s.points.len() == W * H), "{what}");
+        assert_eq!((st.late, st.discontinuities), (0, 1), "{what}");
+        assert_eq!(st.lidar_packets, packets.len() as u64, "{what}");
     }
 }
 

@@ -8,10 +8,16 @@
 //! [`RESTART_BEHIND_FRAMES`] frames behind the newest are counted as late and dropped, as are
 //! duplicates (packets whose columns all arrived already).
 //!
-//! A packet further behind is either stale (one delayed or re-sent datagram, the stream going
-//! on with the newest frame right after it) or the first of a counter that started over (a
-//! reboot the `init_id` does not show, a looped replay, a newest frame a corrupt packet opened
-//! far ahead). Its frame id cannot tell which; the packets after it can. So it is held, counted
+//! A packet further behind is either stale (a datagram delayed or re-sent, alone or in a run a
+//! switch buffer flushes, the stream going on with the newest frame after it) or the first of
+//! a counter that started over (a reboot the `init_id` does not show, a looped replay, a
+//! newest frame a corrupt packet opened far ahead). One of a frame among the last
+//! [`RECENT_FRAMES`] emitted, whose valid columns lie within that frame's column times (give
+//! or take a frame period) and which comes at most [`STALE_WITHIN_NS`] after the frame's last
+//! packet, is stale: late, however long the run (a counter that started over reuses frame
+//! ids, not their times: a reboot's clock starts again at its own boot or, PTP, goes on; a
+//! loop comes a loop later). Otherwise its frame id cannot tell which; the packets after it
+//! can. So it is held, counted
 //! late for now, and so are the next ones while each continues from the held frames (at most
 //! [`RESTART_BEHIND_FRAMES`] behind the newest held one, at most a second's frames ahead of
 //! it). [`RESTART_CONFIRM_PACKETS`] held in a row are a restart: they leave `late`, the open
@@ -71,9 +77,19 @@ const G: f64 = 9.80665;
 pub const RESTART_BEHIND_FRAMES: i64 = 2;
 /// Packets in a row, each continuing from the one before, far behind the newest open frame
 /// that make a restart (see the module documentation). A restart goes on for thousands of
-/// packets; stale datagrams come one or a few at a time. Four: a stale run of three is still
-/// late, and the packets held meanwhile stay within four lidar packets (< 100 kB).
+/// packets; stale datagrams of a frame not emitted lately (the others are known stale by
+/// their times) come one or a few at a time. Four: a stale run of three is still late, and the
+/// packets held meanwhile stay within four lidar packets (< 100 kB).
 pub const RESTART_CONFIRM_PACKETS: usize = 4;
+/// Frames whose id and column times the stream keeps after emitting them, so that a run of
+/// stale datagrams of one of them is known for what it is, however long (module
+/// documentation). 32: at 20 Hz over 1.5 s, well past [`STALE_WITHIN_NS`]; a fixed table.
+pub const RECENT_FRAMES: usize = 32;
+/// A datagram of an emitted frame arriving later than this after that frame's last packet
+/// (host time) is no stale copy but the sensor's counter going over the same frames again (a
+/// capture replayed in a loop): a switch buffer or a re-send delays a datagram by
+/// milliseconds, a loop by its length.
+pub const STALE_WITHIN_NS: i64 = 1_000_000_000;
 
 /// Configuration of one Ouster stream.
 #[derive(Clone, Debug)]
@@ -122,7 +138,8 @@ pub struct OusterStats {
     pub wrong_sensor: u64,
     /// Packets of a frame older than the reorder window, and duplicates (every valid column
     /// of the packet already arrived in its open frame). Packets far behind the newest frame
-    /// are in it while held as a possible restart, and stay when they prove stale.
+    /// are in it when of a frame emitted lately, in its time, or while held as a possible
+    /// restart, and stay when they prove stale.
     pub late: u64,
     /// Times the sensor's `init_id` changed (re-initialisation).
     pub epochs: u64,
@@ -216,9 +233,22 @@ struct Open {
     sweep: Sweep,
     seen: Vec<bool>,
     start_ns: u64,
+    /// The latest valid column timestamp (0 before one).
+    end_ns: u64,
     /// Columns and packets of the whole frames lost just before this one.
     lost_columns: u64,
     lost_packets: u64,
+}
+
+/// An emitted frame's id and span of column times, and when its last packet came (host time).
+#[derive(Clone, Copy, Debug, Default)]
+struct Emitted {
+    frame_id: u32,
+    first_ns: u64,
+    last_ns: u64,
+    last_host_ns: i64,
+    /// Whether the slot holds a frame (the table starts empty).
+    used: bool,
 }
 
 /// Lidar packets far behind the newest open frame, held until the packets after them tell a
@@ -241,6 +271,9 @@ pub struct OusterStream {
     open: Vec<Open>,
     spare: Vec<Open>,
     held: Held,
+    /// The last [`RECENT_FRAMES`] frames emitted, a ring written at `recent_next`.
+    recent: [Emitted; RECENT_FRAMES],
+    recent_next: usize,
     imu: Vec<ImuSample>,
     zones: Vec<ZoneReport>,
     stats: OusterStats,
@@ -305,6 +338,8 @@ impl OusterStream {
             open: Vec::with_capacity(2),
             spare: Vec::with_capacity(2),
             held: Held::default(),
+            recent: [Emitted::default(); RECENT_FRAMES],
+            recent_next: 0,
             imu: Vec::new(),
             zones: Vec::new(),
             stats: OusterStats::default(),
@@ -592,6 +627,11 @@ impl OusterStream {
             && self
                 .newest_open()
                 .is_some_and(|n| self.frame_diff(n, fid) < -RESTART_BEHIND_FRAMES);
+        if far_behind && self.was_emitted(host_ns, &packet) {
+            // Stale, whatever comes next: no evidence of a restart, nor against one held.
+            self.stats.late += 1;
+            return;
+        }
         if far_behind {
             self.hold(host_ns, payload, fid, on_sweep);
             return;
@@ -612,6 +652,36 @@ impl OusterStream {
                 }
             },
         )
+    }
+
+    /// Whether the packet is of a frame emitted lately, in time too: its valid columns lie
+    /// within that frame's column times give or take a frame period, and it came at most
+    /// [`STALE_WITHIN_NS`] after the frame's last packet. A sensor that started over reuses
+    /// frame ids, not their times: a reboot's clock starts again from its own boot (seconds
+    /// apart at least) or, PTP, goes on forward; a looped replay has the times but comes a
+    /// loop later. A packet without a valid column shows no time: it is not known stale.
+    fn was_emitted(&self, host_ns: i64, packet: &LidarPacket<'_>) -> bool {
+        let w = self.cfg.info.columns_per_frame;
+        let mut span = None::<(u64, u64)>;
+        for c in packet
+            .columns()
+            .filter(|c| c.valid() && usize::from(c.measurement_id()) < w)
+        {
+            let t = c.timestamp_ns();
+            span = Some(span.map_or((t, t), |(lo, hi)| (lo.min(t), hi.max(t))));
+        }
+        let Some((lo, hi)) = span else {
+            return false;
+        };
+        let period_ns = 1_000_000_000 / u64::from(self.cfg.info.fps.max(1));
+        let fid = packet.frame_id();
+        self.recent.iter().any(|e| {
+            e.used
+                && e.frame_id == fid
+                && lo >= e.first_ns.saturating_sub(period_ns)
+                && hi <= e.last_ns.saturating_add(period_ns)
+                && host_ns.saturating_sub(e.last_host_ns) <= STALE_WITHIN_NS
+        })
     }
 
     /// Holds a packet far behind the newest open frame (module documentation); the
@@ -727,6 +797,7 @@ impl OusterStream {
                     sweep: Sweep::default(),
                     seen: Vec::new(),
                     start_ns: 0,
+                    end_ns: 0,
                     lost_columns: 0,
                     lost_packets: 0,
                 });
@@ -738,6 +809,7 @@ impl OusterStream {
                 o.seen.clear();
                 o.seen.resize(self.cfg.info.columns_per_frame, false);
                 o.start_ns = u64::MAX;
+                o.end_ns = 0;
                 // The host's times until a valid column gives the sensor's: a recycled sweep
                 // must not keep those of the frame it held before.
                 o.sweep.device_time_ns = host_ns;
@@ -769,12 +841,17 @@ impl OusterStream {
                 return;
             }
         }
-        // The earliest valid column of this packet.
-        let first_ts = packet
+        // The earliest and latest valid columns of this packet.
+        let mut first_ts = None::<u64>;
+        let mut last_ts = None::<u64>;
+        for c in packet
             .columns()
             .filter(|c| c.valid() && usize::from(c.measurement_id()) < w)
-            .map(|c| c.timestamp_ns())
-            .min();
+        {
+            let t = c.timestamp_ns();
+            first_ts = Some(first_ts.map_or(t, |f| f.min(t)));
+            last_ts = Some(last_ts.map_or(t, |l| l.max(t)));
+        }
         // The time between the packet's first and last valid columns, per column stepped: a
         // packet whose columns go back in time or span more than a second (a clock jump) says
         // nothing of the rate.
@@ -793,6 +870,9 @@ impl OusterStream {
         let opts = self.cfg.decode;
         let (keep_extras, keep_columns) = (self.cfg.keep_extras, self.cfg.keep_columns);
         let o = &mut self.open[idx];
+        if let Some(ts) = last_ts {
+            o.end_ns = o.end_ns.max(ts);
+        }
         if let Some(ts) = first_ts {
             // Column timestamps are u64 on the wire: one beyond i64 saturates.
             let device_ns = i64::try_from(ts).unwrap_or(i64::MAX);
@@ -900,6 +980,18 @@ impl OusterStream {
                 .saturating_sub((TAI_MINUS_UTC_S * 1_000_000_000) as i64),
             _ => o.sweep.first_host_ns,
         };
+        if o.sweep.packets > 0 && o.start_ns != u64::MAX {
+            if let Some(slot) = self.recent.get_mut(self.recent_next) {
+                *slot = Emitted {
+                    frame_id: o.frame_id,
+                    first_ns: o.start_ns,
+                    last_ns: o.end_ns,
+                    last_host_ns: o.sweep.last_host_ns,
+                    used: true,
+                };
+            }
+            self.recent_next = (self.recent_next + 1) % RECENT_FRAMES;
+        }
         if o.sweep.packets > 0 {
             self.stats.sweeps += 1;
             self.stats.missing_columns += missing;
