@@ -684,3 +684,41 @@ fn a_late_packet_fills_only_a_gap_counted() {
     assert_eq!(sweeps.len(), 1);
     assert_eq!((sweeps[0].0, sweeps[0].2), (4, 1));
 }
+
+/// Every datagram pushed is counted once: decoded, malformed, a DIFOP, dropped from the hold,
+/// a copy or late and dropped.
+fn counted_once(s: &RobosenseStream, pushed: usize) {
+    let st = s.stats();
+    let c = st.packets + st.malformed + st.difop + st.dropped + st.duplicates + st.late_dropped;
+    assert_eq!(c, pushed as u64, "{st:?}");
+}
+
+/// M1, single and dual return: frame 1's first packet arriving 15 packets late, before its
+/// sweep's start, is dropped into `late_dropped` and so is no longer missing, in the stream
+/// nor in its sweep: the sweeps' `missing_packets` add up to the stream's `missing` (0). The
+/// old code left it missing in the sweep (1) while the stream counted it late: twice.
+#[test]
+fn m1_a_late_dropped_first_packet_is_not_missing_in_its_sweep() {
+    for (len, mode) in [(630usize, 4u8), (1260, 5)] {
+        let mut ps = m1_two_frames(len as u16, mode);
+        let p = ps.remove(len);
+        ps.insert(len + 15, p);
+        let mut s = RobosenseStream::new(RobosenseConfig::new(None));
+        let mut sweeps = m1_run(&mut s, &ps);
+        s.finish(&mut |sw, _| sweeps.push((sw.packets, sw.points.len(), sw.missing_packets)));
+        let st = s.stats();
+        assert_eq!(
+            (st.missing, st.late_dropped, st.duplicates),
+            (0, 1, 0),
+            "{len}"
+        );
+        let per_sweep: Vec<(u32, u64)> = sweeps.iter().map(|w| (w.0, w.2)).collect();
+        assert_eq!(
+            per_sweep,
+            [(len as u32, 0), (len as u32 - 1, 0), (1, 0)],
+            "{len}"
+        );
+        assert_eq!(sweeps.iter().map(|w| w.2).sum::<u64>(), st.missing);
+        counted_once(&s, ps.len());
+    }
+}

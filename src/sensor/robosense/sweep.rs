@@ -121,7 +121,9 @@ pub struct RobosenseStats {
     /// [`REORDER_PACKETS`] behind; an M1 packet of the open frame however far behind, as its
     /// frame's counters are all kept, one of the frame before by its counters too; a copy of
     /// either is a duplicate). An M1 packet of the open frame timed inside its sweep joins
-    /// it instead, no longer missing.
+    /// it instead, no longer missing; one timed before its sweep's start (the frame's first
+    /// packets come after a later one) is dropped here, and no longer missing in that
+    /// sweep's `missing_packets` either.
     pub late_dropped: u64,
     /// Sweeps emitted.
     pub sweeps: u64,
@@ -219,6 +221,9 @@ pub struct RobosenseStream {
     /// return mode it holds for.
     m1_frame_len: Option<u16>,
     m1_mode: Option<u8>,
+    /// M1: whether the open sweep began inside the open frame (a frame spanning more than
+    /// [`M1_MAX_SWEEP_NS`]), so that the frame's losses were not all counted in it.
+    m1_sweep_cut_in_frame: bool,
 }
 
 /// Packets counted missing between two header times, `left` of them not yet come late.
@@ -260,6 +265,7 @@ impl RobosenseStream {
             m1_last_frame_max: 0,
             m1_frame_len: None,
             m1_mode: None,
+            m1_sweep_cut_in_frame: false,
         }
     }
 
@@ -808,6 +814,7 @@ impl RobosenseStream {
             self.m1_prev_udp.reset();
             self.m1_frame_max = 0;
             self.m1_last_frame_max = 0;
+            self.m1_sweep_cut_in_frame = false;
             self.prev_stamp = None;
         }
         let late_in_time = !cut && d.is_some_and(|d| d < 0);
@@ -840,8 +847,14 @@ impl RobosenseStream {
             let filled = matches!(c, Count::Lost { .. });
             if t0.is_some_and(|t0| stamp < t0) {
                 // Before the open sweep's start (the frame's first packets came after a later
-                // one): its times there would be negative.
+                // one): its times there would be negative. Its loss was counted in the open
+                // sweep too, unless a cut inside the frame emitted the sweep that counted it.
                 self.drop_late(filled);
+                if filled && !self.m1_sweep_cut_in_frame {
+                    if let Some((sw, _)) = &mut self.open {
+                        sw.missing_packets = sw.missing_packets.saturating_sub(1);
+                    }
+                }
                 self.recent.push(stamp);
                 return;
             }
@@ -892,6 +905,7 @@ impl RobosenseStream {
             self.m1_udp.start_lost_before(seq);
             missing = u64::from(seq.saturating_sub(1));
             self.m1_frame_max = seq;
+            self.m1_sweep_cut_in_frame = false;
         } else {
             if let Count::Next { lost } = self.m1_udp.take(seq) {
                 missing = lost;
@@ -902,8 +916,9 @@ impl RobosenseStream {
         // The latest header time seen: a late packet does not move it back.
         self.prev_stamp = Some(self.prev_stamp.map_or(stamp, |prev| prev.max(stamp)));
         if let Some(t0) = t0 {
-            if stamp.saturating_sub(t0) >= M1_MAX_SWEEP_NS {
+            if !cut && stamp.saturating_sub(t0) >= M1_MAX_SWEEP_NS {
                 cut = true;
+                self.m1_sweep_cut_in_frame = true;
             }
         }
         if cut {
