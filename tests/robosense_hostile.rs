@@ -722,3 +722,52 @@ fn m1_a_late_dropped_first_packet_is_not_missing_in_its_sweep() {
         counted_once(&s, ps.len());
     }
 }
+
+/// M1: a copy of one of the frame before's packets, 15 or 40 counters behind that frame's
+/// last, arriving once the next frame has begun, is a duplicate (it came already), in single
+/// and dual return; a packet of it that really came late there is late (dropped, no longer
+/// missing). The old code counted the copy in `late_dropped` (dual return, within 10 packet
+/// periods in time) or cut a discontinuity (further back in time), and the late packet a
+/// discontinuity too, with a frame's worth of phantom loss after it.
+#[test]
+fn m1_a_copy_from_the_frame_before_far_back_is_a_duplicate() {
+    for (len, mode) in [(630usize, 4u8), (1260, 5)] {
+        let base = m1_two_frames(len as u16, mode);
+        let (in_order, _) = m1_tally(&base);
+        for back in [15usize, 40] {
+            // A copy of frame 1's packet `len − back`, after frame 2's first packet.
+            let mut ps = base.clone();
+            ps.push(base[2 * len - 1 - back].clone());
+            let (_, s_in_order) = m1_tally(&ps[..ps.len() - 1]);
+            assert_eq!(s_in_order, (0, 0, 0, 0));
+            let (sweeps, c) = m1_tally(&ps);
+            assert_eq!(
+                (sweeps, c),
+                (in_order.clone(), (0, 0, 1, 0)),
+                "{len} {back}"
+            );
+            let mut s = RobosenseStream::new(RobosenseConfig::new(None));
+            m1_run(&mut s, &ps);
+            counted_once(&s, ps.len());
+            // That packet came only then: late, of a frame emitted, counted once.
+            let mut ps = base.clone();
+            let p = ps.remove(2 * len - 1 - back);
+            ps.push(p);
+            let mut s = RobosenseStream::new(RobosenseConfig::new(None));
+            let sweeps = m1_run(&mut s, &ps);
+            let st = s.stats();
+            assert_eq!(
+                (
+                    st.missing,
+                    st.late_dropped,
+                    st.duplicates,
+                    st.discontinuities
+                ),
+                (0, 1, 0, 0),
+                "{len} {back}"
+            );
+            assert_eq!(sweeps[1].0, len as u32 - 1, "{len} {back}");
+            counted_once(&s, ps.len());
+        }
+    }
+}

@@ -112,18 +112,18 @@ pub struct RobosenseStats {
     pub dropped: u64,
     /// Discontinuities.
     pub discontinuities: u64,
-    /// MSOP packets seen already (the latest header time again; M1: and its counter): copies,
-    /// dropped.
+    /// MSOP packets seen already (the latest header time again; M1: its counter in its
+    /// frame's, or the frame before's): copies, dropped.
     pub duplicates: u64,
     /// Late MSOP packets (reordered on the way) whose firings all belong to a sweep already
     /// emitted: dropped, and counted as a loss (a packet counted missing before it came
     /// moves from `missing` to here, where the stream can tell: a spinning model's up to
     /// [`REORDER_PACKETS`] behind; an M1 packet of the open frame however far behind, as its
-    /// frame's counters are all kept, one of the frame before by its counters too; a copy of
-    /// either is a duplicate). An M1 packet of the open frame timed inside its sweep joins
-    /// it instead, no longer missing; one timed before its sweep's start (the frame's first
-    /// packets come after a later one) is dropped here, and no longer missing in that
-    /// sweep's `missing_packets` either.
+    /// frame's counters are all kept, one of the frame before by its counters too, however
+    /// far behind; a copy of either is a duplicate). An M1 packet of the open frame timed
+    /// inside its sweep joins it instead, no longer missing; one timed before its sweep's
+    /// start (the frame's first packets come after a later one) is dropped here, and no
+    /// longer missing in that sweep's `missing_packets` either.
     pub late_dropped: u64,
     /// Sweeps emitted.
     pub sweeps: u64,
@@ -749,10 +749,13 @@ impl RobosenseStream {
     /// already at the same time is a copy, dropped). A packet older than the latest whose
     /// counter the open frame counted lost, however far below, is late too (up to half a frame
     /// before the sweep's start; a copy of it is a copy). Any other packet older than the
-    /// latest is late from the frame before, emitted already: dropped (`late_dropped`).
-    /// Should the counter stop restarting, a sweep is also cut once it spans [`M1_MAX_SWEEP_NS`]. Loss: the counter's gaps within a frame, its
-    /// first packets, and its last ones once the frame length is learned (two frames in a row
-    /// ending on the same counter, in one return mode).
+    /// latest is late from the frame before, emitted already: dropped (`late_dropped`), within
+    /// 10 packets in time or, where the frame before's counters had or counted lost its
+    /// counter, however far behind within that frame (a copy of a packet it had is a copy).
+    /// Should the counter stop restarting, a sweep is also cut once it spans
+    /// [`M1_MAX_SWEEP_NS`]. Loss: the counter's gaps within a frame, its first packets, and its
+    /// last ones once the frame length is learned (two frames in a row ending on the same
+    /// counter, in one return mode).
     fn decode_m1(
         &mut self,
         host_ns: i64,
@@ -806,7 +809,21 @@ impl RobosenseStream {
         let of_open_frame = d.is_some_and(|d| d < 0)
             && matches!(count, Some(Count::Lost { .. } | Count::Seen { .. }))
             && t0.is_some_and(|t0| stamp >= t0.saturating_sub(M1_FRAME_NS / 2));
-        if d.is_some_and(|d| d > self.cfg.max_gap_ns || (d < -M1_REORDER_NS && !of_open_frame)) {
+        // Likewise a packet of the frame before, however far behind its last: timed before
+        // the open sweep, no earlier than a frame can last, its counter had or counted lost
+        // there (and neither in the open frame).
+        let of_prev_frame = valid_seq
+            && !of_open_frame
+            && d.is_some_and(|d| d < 0)
+            && !matches!(count, Some(Count::Lost { .. } | Count::Seen { .. }))
+            && matches!(
+                self.m1_prev_udp.peek(seq),
+                Count::Lost { .. } | Count::Seen { .. }
+            )
+            && t0.is_some_and(|t0| stamp < t0 && stamp >= t0.saturating_sub(M1_MAX_SWEEP_NS));
+        if d.is_some_and(|d| {
+            d > self.cfg.max_gap_ns || (d < -M1_REORDER_NS && !of_open_frame && !of_prev_frame)
+        }) {
             self.stats.discontinuities += 1;
             cut = true;
             self.recent.clear();
@@ -862,10 +879,9 @@ impl RobosenseStream {
         } else if late_in_time {
             // Older than the latest packet, whatever its counter says: a packet of the frame
             // before (its last ones may come after the next frame's first), emitted already.
+            // One its counters had came already, however far behind: a copy.
             let counted = match self.m1_prev_udp.peek(seq) {
-                Count::Seen { behind }
-                    if behind <= REORDER_PACKETS && self.recent.contains(stamp) =>
-                {
+                Count::Seen { .. } => {
                     self.stats.duplicates += 1;
                     return;
                 }
@@ -873,7 +889,7 @@ impl RobosenseStream {
                     self.m1_prev_udp.take(seq);
                     matches!(c, Count::Lost { .. })
                 }
-                Count::Seen { .. } | Count::Next { .. } | Count::Far => false,
+                Count::Next { .. } | Count::Far => false,
             };
             self.drop_late(counted);
             self.recent.push(stamp);
