@@ -771,3 +771,54 @@ fn m1_a_copy_from_the_frame_before_far_back_is_a_duplicate() {
         }
     }
 }
+
+/// Spinning (Helios-16P, 150 packets a turn): a packet 15 or 40 packets late, beyond the
+/// 10-packet window, is counted once, as the M1's: in its open sweep it joins it (the sweeps
+/// as in order, nothing missing); of the sweep before, emitted, it is dropped into
+/// `late_dropped` (no longer missing in the stream; the sweep that lost it says so); a copy
+/// of a packet that came, 15 or 40 packets on, is a duplicate. The old code took each for
+/// the clock going back: a discontinuity, the sweep cut there, and the packets between it
+/// and the latest counted missing again.
+#[test]
+fn a_spinning_packet_far_late_is_counted_once() {
+    let all = |o: &[i64]| o.iter().map(|&k| helios_turning(k)).collect::<Vec<_>>();
+    let order: Vec<i64> = (0..300).collect();
+    let in_order = spin_run(&mut helios_stream(), &all(&order));
+    assert_eq!(in_order.len(), 2);
+    let counts = |s: &RobosenseStream| {
+        let st = s.stats();
+        (
+            st.missing,
+            st.late_dropped,
+            st.duplicates,
+            st.discontinuities,
+        )
+    };
+    for late in [15usize, 40] {
+        // Packet 60 of sweep 0, late within it.
+        let mut o = order.clone();
+        let k = o.remove(60);
+        o.insert(60 + late, k);
+        let mut s = helios_stream();
+        let got = spin_run(&mut s, &all(&o));
+        assert_eq!((counts(&s), &got), ((0, 0, 0, 0), &in_order), "{late}");
+        counted_once(&s, o.len());
+        // Packet 140 of sweep 0, come after sweep 1 began (the cut at packet 150).
+        let mut o = order.clone();
+        let k = o.remove(140);
+        o.insert(140 + late, k);
+        let mut s = helios_stream();
+        let got = spin_run(&mut s, &all(&o));
+        assert_eq!(counts(&s), (0, 1, 0, 0), "{late}");
+        assert_eq!(got[1], in_order[1], "{late}");
+        assert_eq!((got[0].0, got[0].2), (in_order[0].0 - 1, 1), "{late}");
+        counted_once(&s, o.len());
+        // A copy of packet 60, `late` packets after it.
+        let mut o = order.clone();
+        o.insert(61 + late, 60);
+        let mut s = helios_stream();
+        let got = spin_run(&mut s, &all(&o));
+        assert_eq!((counts(&s), &got), ((0, 0, 1, 0), &in_order), "{late}");
+        counted_once(&s, o.len());
+    }
+}

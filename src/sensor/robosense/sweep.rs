@@ -24,10 +24,14 @@
 //! **Loss.** Missing packets = round(Δ header time / packet period) − 1; a header time going
 //! backwards or jumping by more than `max_gap_ns` ends the open sweep (a discontinuity), and
 //! so does a sweep spanning more than `max_sweep_ns` (a motor that stalls never reaches the
-//! cut). A packet a little behind the latest came late: it fills the gap it was counted
-//! missing in, if one was, and joins the open sweep with its firings from the sweep's start
-//! on; one with none there belonged to a sweep already emitted and is dropped
-//! (`late_dropped`, a loss).
+//! cut). A packet behind the latest came late: it fills the gap it was counted missing in, if
+//! one was, and joins the open sweep with its firings from the sweep's start on; one with none
+//! there belonged to a sweep already emitted and is dropped (`late_dropped`, a loss). Which
+//! places came and which were counted missing is kept in a [`UdpLedger`] of the packets'
+//! places in time (header time over the packet period), so this holds up to a turn (and at
+//! most [`LEDGER_NUMBERS`] packets) behind, and a copy of a packet that came is a duplicate
+//! however late; further back, or before the stream's first packet by more than 10, the
+//! clock went back (a discontinuity).
 
 use std::collections::VecDeque;
 
@@ -37,7 +41,7 @@ use super::m1::{is_m1_difop, M1Decoder, M1Difop, M1Msop, M1_BLOCKS, M1_FRAME_NS}
 use super::model::{RobosenseModel, Shape};
 use super::wire::{is_difop, msop_shape, Difop, Msop};
 use crate::sensor::{DecodeError, DecodeOptions};
-use crate::sweep::ledger::{Count, UdpLedger};
+use crate::sweep::ledger::{Count, UdpLedger, LEDGER_NUMBERS};
 use crate::sweep::{RecentTimes, Sweep, REORDER_PACKETS};
 use crate::time::ClockSource;
 
@@ -54,9 +58,6 @@ pub const M1_MAX_SWEEP_NS: i64 = M1_FRAME_NS * 3 / 2;
 /// M1: the largest packet counter a frame can have (1260 packets in dual return). A counter
 /// of 0 or beyond is corrupt, and must not stand for a frame's length or a loss.
 pub const M1_MAX_COUNTER: u16 = 2 * super::m1::M1_PACKETS_PER_FRAME;
-/// Gaps counted missing that a late packet may still fill: a late packet is at most
-/// [`REORDER_PACKETS`] behind, so older gaps are out of its reach.
-const GAPS_KEPT: usize = REORDER_PACKETS as usize;
 
 /// Configuration of one stream.
 #[derive(Clone, Debug)]
@@ -112,18 +113,18 @@ pub struct RobosenseStats {
     pub dropped: u64,
     /// Discontinuities.
     pub discontinuities: u64,
-    /// MSOP packets seen already (the latest header time again; M1: its counter in its
-    /// frame's, or the frame before's): copies, dropped.
+    /// MSOP packets seen already (a header time that came, its place in time among those
+    /// kept; M1: its counter in its frame's, or the frame before's): copies, dropped.
     pub duplicates: u64,
     /// Late MSOP packets (reordered on the way) whose firings all belong to a sweep already
     /// emitted: dropped, and counted as a loss (a packet counted missing before it came
-    /// moves from `missing` to here, where the stream can tell: a spinning model's up to
-    /// [`REORDER_PACKETS`] behind; an M1 packet of the open frame however far behind, as its
-    /// frame's counters are all kept, one of the frame before by its counters too, however
-    /// far behind; a copy of either is a duplicate). An M1 packet of the open frame timed
-    /// inside its sweep joins it instead, no longer missing; one timed before its sweep's
-    /// start (the frame's first packets come after a later one) is dropped here, and no
-    /// longer missing in that sweep's `missing_packets` either.
+    /// moves from `missing` to here: a spinning model's up to a turn behind, by its place in
+    /// time; an M1 packet of the open frame however far behind, as its frame's counters are
+    /// all kept, one of the frame before by its counters too; a copy of any is a duplicate).
+    /// A late packet with firings in the open sweep joins it instead, no longer missing; an
+    /// M1 packet of the open frame timed before its sweep's start (the frame's first packets
+    /// come after a later one) is dropped here, and no longer missing in that sweep's
+    /// `missing_packets` either.
     pub late_dropped: u64,
     /// Sweeps emitted.
     pub sweeps: u64,
@@ -205,8 +206,14 @@ pub struct RobosenseStream {
     dual: bool,
     /// The last DIFOP, while the model is unknown (a DIFOP that came before any MSOP).
     last_difop: Option<Vec<u8>>,
-    /// Gaps counted missing lately, newest first, for a late packet to fill.
-    gaps: [Option<Gap>; GAPS_KEPT],
+    /// Spinning models: the packets' places in time (header time over the packet period,
+    /// from the latest's), which came and which were counted missing, as the M1's counters
+    /// are kept: a late packet fills its gap, a copy is a copy, however far behind.
+    spin_udp: UdpLedger,
+    /// Spinning: this packet's place, and the place of the packet that opened the open
+    /// sweep (gaps counted after it were counted in that sweep).
+    spin_slot: u16,
+    spin_sweep_slot: u16,
     /// M1: the decoder (no angles needed) and the packet counters of the open frame: all of
     /// them, as a packet of it may come later than the 10-number window reaches.
     m1: Option<M1Decoder>,
@@ -224,16 +231,6 @@ pub struct RobosenseStream {
     /// M1: whether the open sweep began inside the open frame (a frame spanning more than
     /// [`M1_MAX_SWEEP_NS`]), so that the frame's losses were not all counted in it.
     m1_sweep_cut_in_frame: bool,
-}
-
-/// Packets counted missing between two header times, `left` of them not yet come late.
-#[derive(Clone, Copy, Debug)]
-struct Gap {
-    after: i64,
-    before: i64,
-    left: u64,
-    /// The sweep whose `missing_packets` counted them.
-    sweep: Option<u64>,
 }
 
 impl RobosenseStream {
@@ -257,7 +254,9 @@ impl RobosenseStream {
             recent: RecentTimes::default(),
             dual: false,
             last_difop: None,
-            gaps: [None; GAPS_KEPT],
+            spin_udp: UdpLedger::new(u64::from(LEDGER_NUMBERS - 1)),
+            spin_slot: 0,
+            spin_sweep_slot: 0,
             m1: None,
             m1_udp: UdpLedger::new(u64::from(M1_MAX_COUNTER)),
             m1_prev_udp: UdpLedger::new(u64::from(M1_MAX_COUNTER)),
@@ -513,9 +512,12 @@ impl RobosenseStream {
         let mut discontinuity = false;
         // Time since the last packet, for an azimuth step the azimuths alone cannot tell.
         let mut since_last = None;
-        // A packet a little older than the latest was reordered on the way: it opens no
-        // sweep, and the stream goes on from the latest.
+        // A packet older than the latest was reordered on the way: it opens no sweep, and
+        // the stream goes on from the latest.
         let mut late = false;
+        // It fills a gap counted missing.
+        let mut fills = false;
+        let mut slot = self.spin_udp.latest().unwrap_or(0);
         if let Some(prev) = self.prev_stamp {
             let d = stamp.saturating_sub(prev);
             // Two packets of one sensor never share a header time: a copy.
@@ -524,29 +526,58 @@ impl RobosenseStream {
                 self.decoder = Some(dec);
                 return;
             }
-            if d < 0 && period > 0.0 && d as f64 >= -f64::from(REORDER_PACKETS) * period {
-                late = true;
+            if d < 0 && period > 0.0 {
+                // Its place, in whole packets behind the latest (at least one: it is older).
+                let behind = (-(d as f64) / period).round().max(1.0);
+                // More than a turn behind, or beyond what the ledger keeps: the clock went
+                // back, not a packet late.
+                let turn_ns = 60e9 / crate::sweep::motor_rpm_or_nominal(self.facts.rpm);
+                let count = if behind < f64::from(LEDGER_NUMBERS) && -(d as f64) <= turn_ns {
+                    slot = slot.wrapping_sub(behind as u16);
+                    self.spin_udp.peek(slot)
+                } else {
+                    Count::Far
+                };
+                match count {
+                    Count::Seen { .. } => {
+                        self.stats.duplicates += 1;
+                        self.decoder = Some(dec);
+                        return;
+                    }
+                    Count::Lost { .. } => (late, fills) = (true, true),
+                    // Just before the stream's first: late, with no gap counted to fill.
+                    Count::Stray => late = true,
+                    Count::Next { .. } | Count::Far => discontinuity = true,
+                }
             } else if d < 0 || d > self.cfg.max_gap_ns {
                 discontinuity = true;
             } else if period > 0.0 {
                 since_last = Some(d);
-                let m = (d as f64 / period).round() as i64 - 1;
+                let steps = (d as f64 / period).round() as i64;
+                let m = steps - 1;
                 if m > 0 {
                     self.stats.missing += m as u64;
-                    let sweep = self.open.as_mut().map(|(sw, _)| {
+                    if let Some((sw, _)) = &mut self.open {
                         sw.missing_packets += m as u64;
-                        sw.index
-                    });
-                    self.gaps.rotate_right(1);
-                    self.gaps[0] = Some(Gap {
-                        after: prev,
-                        before: stamp,
-                        left: m as u64,
-                        sweep,
-                    });
+                    }
+                }
+                // A step of less than half a period (a clock's jitter) keeps the place.
+                if steps >= i64::from(LEDGER_NUMBERS) {
+                    slot = slot.wrapping_add(steps as u16);
+                    self.spin_udp.restart(slot);
+                } else if steps > 0 {
+                    slot = slot.wrapping_add(steps as u16);
+                    self.spin_udp.take(slot);
                 }
             }
         }
+        if discontinuity || self.prev_stamp.is_none() {
+            slot = 0;
+            self.spin_udp.restart(slot);
+        } else if late {
+            self.spin_udp.take(slot);
+        }
+        self.spin_slot = slot;
         if !late {
             self.prev_stamp = Some(stamp);
         }
@@ -554,7 +585,6 @@ impl RobosenseStream {
             self.stats.discontinuities += 1;
             // A clock that restarted (or a capture replayed again) may repeat times.
             self.recent.clear();
-            self.gaps = [None; GAPS_KEPT];
             self.emit(on_sweep);
             self.last_block_az = None;
         }
@@ -572,7 +602,9 @@ impl RobosenseStream {
         if late {
             // Only a gap really counted is un-counted (not one before the stream's first
             // packet or a discontinuity), and in the sweep that counted it.
-            let filled = self.fill_gap(stamp);
+            if fills {
+                self.stats.missing = self.stats.missing.saturating_sub(1);
+            }
             // Firings before the open sweep's start belong to a sweep already emitted: their
             // time in this one would be negative (clamped to its start).
             let open = self
@@ -584,7 +616,10 @@ impl RobosenseStream {
                 self.decoder = Some(dec);
                 return;
             };
-            if filled.is_some_and(|g| g == Some(sw.index)) {
+            // The open sweep counted the gaps found after the packet that opened it (that
+            // packet's own went to the sweep before).
+            let latest = self.spin_udp.latest().unwrap_or(0);
+            if fills && latest.wrapping_sub(slot) < latest.wrapping_sub(self.spin_sweep_slot) {
                 sw.missing_packets = sw.missing_packets.saturating_sub(1);
             }
         }
@@ -711,19 +746,6 @@ impl RobosenseStream {
             sw.columns_count += spec.firings(dual) as u32;
         }
         self.decoder = Some(dec);
-    }
-
-    /// Whether a late packet stamped `t` falls inside one of the last gaps counted missing,
-    /// which then counts one packet fewer: `Some(the sweep that counted it)`.
-    fn fill_gap(&mut self, t: i64) -> Option<Option<u64>> {
-        let g = self
-            .gaps
-            .iter_mut()
-            .flatten()
-            .find(|g| g.left > 0 && g.after < t && t < g.before)?;
-        g.left -= 1;
-        self.stats.missing = self.stats.missing.saturating_sub(1);
-        Some(g.sweep)
     }
 
     /// An M1 DIFOP: device facts only (the M1 needs no angle table).
@@ -1028,6 +1050,7 @@ impl RobosenseStream {
             sw.last_host_ns = host_ns;
             sw.first_azimuth = az;
             self.open = Some((sw, t0));
+            self.spin_sweep_slot = self.spin_slot;
         }
     }
 
