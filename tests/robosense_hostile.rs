@@ -684,3 +684,141 @@ fn a_late_packet_fills_only_a_gap_counted() {
     assert_eq!(sweeps.len(), 1);
     assert_eq!((sweeps[0].0, sweeps[0].2), (4, 1));
 }
+
+/// Every datagram pushed is counted once: decoded, malformed, a DIFOP, dropped from the hold,
+/// a copy or late and dropped.
+fn counted_once(s: &RobosenseStream, pushed: usize) {
+    let st = s.stats();
+    let c = st.packets + st.malformed + st.difop + st.dropped + st.duplicates + st.late_dropped;
+    assert_eq!(c, pushed as u64, "{st:?}");
+}
+
+/// M1, single and dual return: frame 1's first packet arriving 15 packets late, before its
+/// sweep's start, is dropped into `late_dropped` and so is no longer missing, in the stream
+/// nor in its sweep: the sweeps' `missing_packets` add up to the stream's `missing` (0). The
+/// old code left it missing in the sweep (1) while the stream counted it late: twice.
+#[test]
+fn m1_a_late_dropped_first_packet_is_not_missing_in_its_sweep() {
+    for (len, mode) in [(630usize, 4u8), (1260, 5)] {
+        let mut ps = m1_two_frames(len as u16, mode);
+        let p = ps.remove(len);
+        ps.insert(len + 15, p);
+        let mut s = RobosenseStream::new(RobosenseConfig::new(None));
+        let mut sweeps = m1_run(&mut s, &ps);
+        s.finish(&mut |sw, _| sweeps.push((sw.packets, sw.points.len(), sw.missing_packets)));
+        let st = s.stats();
+        assert_eq!(
+            (st.missing, st.late_dropped, st.duplicates),
+            (0, 1, 0),
+            "{len}"
+        );
+        let per_sweep: Vec<(u32, u64)> = sweeps.iter().map(|w| (w.0, w.2)).collect();
+        assert_eq!(
+            per_sweep,
+            [(len as u32, 0), (len as u32 - 1, 0), (1, 0)],
+            "{len}"
+        );
+        assert_eq!(sweeps.iter().map(|w| w.2).sum::<u64>(), st.missing);
+        counted_once(&s, ps.len());
+    }
+}
+
+/// M1: a copy of one of the frame before's packets, 15 or 40 counters behind that frame's
+/// last, arriving once the next frame has begun, is a duplicate (it came already), in single
+/// and dual return; a packet of it that really came late there is late (dropped, no longer
+/// missing). The old code counted the copy in `late_dropped` (dual return, within 10 packet
+/// periods in time) or cut a discontinuity (further back in time), and the late packet a
+/// discontinuity too, with a frame's worth of phantom loss after it.
+#[test]
+fn m1_a_copy_from_the_frame_before_far_back_is_a_duplicate() {
+    for (len, mode) in [(630usize, 4u8), (1260, 5)] {
+        let base = m1_two_frames(len as u16, mode);
+        let (in_order, _) = m1_tally(&base);
+        for back in [15usize, 40] {
+            // A copy of frame 1's packet `len − back`, after frame 2's first packet.
+            let mut ps = base.clone();
+            ps.push(base[2 * len - 1 - back].clone());
+            let (_, s_in_order) = m1_tally(&ps[..ps.len() - 1]);
+            assert_eq!(s_in_order, (0, 0, 0, 0));
+            let (sweeps, c) = m1_tally(&ps);
+            assert_eq!(
+                (sweeps, c),
+                (in_order.clone(), (0, 0, 1, 0)),
+                "{len} {back}"
+            );
+            let mut s = RobosenseStream::new(RobosenseConfig::new(None));
+            m1_run(&mut s, &ps);
+            counted_once(&s, ps.len());
+            // That packet came only then: late, of a frame emitted, counted once.
+            let mut ps = base.clone();
+            let p = ps.remove(2 * len - 1 - back);
+            ps.push(p);
+            let mut s = RobosenseStream::new(RobosenseConfig::new(None));
+            let sweeps = m1_run(&mut s, &ps);
+            let st = s.stats();
+            assert_eq!(
+                (
+                    st.missing,
+                    st.late_dropped,
+                    st.duplicates,
+                    st.discontinuities
+                ),
+                (0, 1, 0, 0),
+                "{len} {back}"
+            );
+            assert_eq!(sweeps[1].0, len as u32 - 1, "{len} {back}");
+            counted_once(&s, ps.len());
+        }
+    }
+}
+
+/// Spinning (Helios-16P, 150 packets a turn): a packet 15 or 40 packets late, beyond the
+/// 10-packet window, is counted once, as the M1's: in its open sweep it joins it (the sweeps
+/// as in order, nothing missing); of the sweep before, emitted, it is dropped into
+/// `late_dropped` (no longer missing in the stream; the sweep that lost it says so); a copy
+/// of a packet that came, 15 or 40 packets on, is a duplicate. The old code took each for
+/// the clock going back: a discontinuity, the sweep cut there, and the packets between it
+/// and the latest counted missing again.
+#[test]
+fn a_spinning_packet_far_late_is_counted_once() {
+    let all = |o: &[i64]| o.iter().map(|&k| helios_turning(k)).collect::<Vec<_>>();
+    let order: Vec<i64> = (0..300).collect();
+    let in_order = spin_run(&mut helios_stream(), &all(&order));
+    assert_eq!(in_order.len(), 2);
+    let counts = |s: &RobosenseStream| {
+        let st = s.stats();
+        (
+            st.missing,
+            st.late_dropped,
+            st.duplicates,
+            st.discontinuities,
+        )
+    };
+    for late in [15usize, 40] {
+        // Packet 60 of sweep 0, late within it.
+        let mut o = order.clone();
+        let k = o.remove(60);
+        o.insert(60 + late, k);
+        let mut s = helios_stream();
+        let got = spin_run(&mut s, &all(&o));
+        assert_eq!((counts(&s), &got), ((0, 0, 0, 0), &in_order), "{late}");
+        counted_once(&s, o.len());
+        // Packet 140 of sweep 0, come after sweep 1 began (the cut at packet 150).
+        let mut o = order.clone();
+        let k = o.remove(140);
+        o.insert(140 + late, k);
+        let mut s = helios_stream();
+        let got = spin_run(&mut s, &all(&o));
+        assert_eq!(counts(&s), (0, 1, 0, 0), "{late}");
+        assert_eq!(got[1], in_order[1], "{late}");
+        assert_eq!((got[0].0, got[0].2), (in_order[0].0 - 1, 1), "{late}");
+        counted_once(&s, o.len());
+        // A copy of packet 60, `late` packets after it.
+        let mut o = order.clone();
+        o.insert(61 + late, 60);
+        let mut s = helios_stream();
+        let got = spin_run(&mut s, &all(&o));
+        assert_eq!((counts(&s), &got), ((0, 0, 1, 0), &in_order), "{late}");
+        counted_once(&s, o.len());
+    }
+}

@@ -1,6 +1,7 @@
 //! Which numbers of one run of a 16-bit packet counter (a frame, or the numbers since the
 //! counter last restarted) came and which were counted lost: Livox's SDK2 `udp_cnt`, the
-//! Robosense M1's `pkt_seq` (one run a frame).
+//! Robosense M1's `pkt_seq` (one run a frame), a spinning Robosense's packet places in time
+//! (header time over the packet period: it sends no counter).
 //!
 //! The shared [`crate::sweep::SeqWindow`] remembers the last [`REORDER_PACKETS`] numbers,
 //! which is enough to tell a reordered packet from a loss but not to account for one that

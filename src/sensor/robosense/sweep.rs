@@ -24,10 +24,14 @@
 //! **Loss.** Missing packets = round(Δ header time / packet period) − 1; a header time going
 //! backwards or jumping by more than `max_gap_ns` ends the open sweep (a discontinuity), and
 //! so does a sweep spanning more than `max_sweep_ns` (a motor that stalls never reaches the
-//! cut). A packet a little behind the latest came late: it fills the gap it was counted
-//! missing in, if one was, and joins the open sweep with its firings from the sweep's start
-//! on; one with none there belonged to a sweep already emitted and is dropped
-//! (`late_dropped`, a loss).
+//! cut). A packet behind the latest came late: it fills the gap it was counted missing in, if
+//! one was, and joins the open sweep with its firings from the sweep's start on; one with none
+//! there belonged to a sweep already emitted and is dropped (`late_dropped`, a loss). Which
+//! places came and which were counted missing is kept in a [`UdpLedger`] of the packets'
+//! places in time (header time over the packet period), so this holds up to a turn (and at
+//! most [`LEDGER_NUMBERS`] packets) behind, and a copy of a packet that came is a duplicate
+//! however late; further back, or before the stream's first packet by more than 10, the
+//! clock went back (a discontinuity).
 
 use std::collections::VecDeque;
 
@@ -37,7 +41,7 @@ use super::m1::{is_m1_difop, M1Decoder, M1Difop, M1Msop, M1_BLOCKS, M1_FRAME_NS}
 use super::model::{RobosenseModel, Shape};
 use super::wire::{is_difop, msop_shape, Difop, Msop};
 use crate::sensor::{DecodeError, DecodeOptions};
-use crate::sweep::ledger::{Count, UdpLedger};
+use crate::sweep::ledger::{Count, UdpLedger, LEDGER_NUMBERS};
 use crate::sweep::{RecentTimes, Sweep, REORDER_PACKETS};
 use crate::time::ClockSource;
 
@@ -54,9 +58,6 @@ pub const M1_MAX_SWEEP_NS: i64 = M1_FRAME_NS * 3 / 2;
 /// M1: the largest packet counter a frame can have (1260 packets in dual return). A counter
 /// of 0 or beyond is corrupt, and must not stand for a frame's length or a loss.
 pub const M1_MAX_COUNTER: u16 = 2 * super::m1::M1_PACKETS_PER_FRAME;
-/// Gaps counted missing that a late packet may still fill: a late packet is at most
-/// [`REORDER_PACKETS`] behind, so older gaps are out of its reach.
-const GAPS_KEPT: usize = REORDER_PACKETS as usize;
 
 /// Configuration of one stream.
 #[derive(Clone, Debug)]
@@ -112,16 +113,18 @@ pub struct RobosenseStats {
     pub dropped: u64,
     /// Discontinuities.
     pub discontinuities: u64,
-    /// MSOP packets seen already (the latest header time again; M1: and its counter): copies,
-    /// dropped.
+    /// MSOP packets seen already (a header time that came, its place in time among those
+    /// kept; M1: its counter in its frame's, or the frame before's): copies, dropped.
     pub duplicates: u64,
     /// Late MSOP packets (reordered on the way) whose firings all belong to a sweep already
     /// emitted: dropped, and counted as a loss (a packet counted missing before it came
-    /// moves from `missing` to here, where the stream can tell: a spinning model's up to
-    /// [`REORDER_PACKETS`] behind; an M1 packet of the open frame however far behind, as its
-    /// frame's counters are all kept, one of the frame before by its counters too; a copy of
-    /// either is a duplicate). An M1 packet of the open frame timed inside its sweep joins
-    /// it instead, no longer missing.
+    /// moves from `missing` to here: a spinning model's up to a turn behind, by its place in
+    /// time; an M1 packet of the open frame however far behind, as its frame's counters are
+    /// all kept, one of the frame before by its counters too; a copy of any is a duplicate).
+    /// A late packet with firings in the open sweep joins it instead, no longer missing; an
+    /// M1 packet of the open frame timed before its sweep's start (the frame's first packets
+    /// come after a later one) is dropped here, and no longer missing in that sweep's
+    /// `missing_packets` either.
     pub late_dropped: u64,
     /// Sweeps emitted.
     pub sweeps: u64,
@@ -203,8 +206,14 @@ pub struct RobosenseStream {
     dual: bool,
     /// The last DIFOP, while the model is unknown (a DIFOP that came before any MSOP).
     last_difop: Option<Vec<u8>>,
-    /// Gaps counted missing lately, newest first, for a late packet to fill.
-    gaps: [Option<Gap>; GAPS_KEPT],
+    /// Spinning models: the packets' places in time (header time over the packet period,
+    /// from the latest's), which came and which were counted missing, as the M1's counters
+    /// are kept: a late packet fills its gap, a copy is a copy, however far behind.
+    spin_udp: UdpLedger,
+    /// Spinning: this packet's place, and the place of the packet that opened the open
+    /// sweep (gaps counted after it were counted in that sweep).
+    spin_slot: u16,
+    spin_sweep_slot: u16,
     /// M1: the decoder (no angles needed) and the packet counters of the open frame: all of
     /// them, as a packet of it may come later than the 10-number window reaches.
     m1: Option<M1Decoder>,
@@ -219,16 +228,9 @@ pub struct RobosenseStream {
     /// return mode it holds for.
     m1_frame_len: Option<u16>,
     m1_mode: Option<u8>,
-}
-
-/// Packets counted missing between two header times, `left` of them not yet come late.
-#[derive(Clone, Copy, Debug)]
-struct Gap {
-    after: i64,
-    before: i64,
-    left: u64,
-    /// The sweep whose `missing_packets` counted them.
-    sweep: Option<u64>,
+    /// M1: whether the open sweep began inside the open frame (a frame spanning more than
+    /// [`M1_MAX_SWEEP_NS`]), so that the frame's losses were not all counted in it.
+    m1_sweep_cut_in_frame: bool,
 }
 
 impl RobosenseStream {
@@ -252,7 +254,9 @@ impl RobosenseStream {
             recent: RecentTimes::default(),
             dual: false,
             last_difop: None,
-            gaps: [None; GAPS_KEPT],
+            spin_udp: UdpLedger::new(u64::from(LEDGER_NUMBERS - 1)),
+            spin_slot: 0,
+            spin_sweep_slot: 0,
             m1: None,
             m1_udp: UdpLedger::new(u64::from(M1_MAX_COUNTER)),
             m1_prev_udp: UdpLedger::new(u64::from(M1_MAX_COUNTER)),
@@ -260,6 +264,7 @@ impl RobosenseStream {
             m1_last_frame_max: 0,
             m1_frame_len: None,
             m1_mode: None,
+            m1_sweep_cut_in_frame: false,
         }
     }
 
@@ -507,9 +512,12 @@ impl RobosenseStream {
         let mut discontinuity = false;
         // Time since the last packet, for an azimuth step the azimuths alone cannot tell.
         let mut since_last = None;
-        // A packet a little older than the latest was reordered on the way: it opens no
-        // sweep, and the stream goes on from the latest.
+        // A packet older than the latest was reordered on the way: it opens no sweep, and
+        // the stream goes on from the latest.
         let mut late = false;
+        // It fills a gap counted missing.
+        let mut fills = false;
+        let mut slot = self.spin_udp.latest().unwrap_or(0);
         if let Some(prev) = self.prev_stamp {
             let d = stamp.saturating_sub(prev);
             // Two packets of one sensor never share a header time: a copy.
@@ -518,29 +526,58 @@ impl RobosenseStream {
                 self.decoder = Some(dec);
                 return;
             }
-            if d < 0 && period > 0.0 && d as f64 >= -f64::from(REORDER_PACKETS) * period {
-                late = true;
+            if d < 0 && period > 0.0 {
+                // Its place, in whole packets behind the latest (at least one: it is older).
+                let behind = (-(d as f64) / period).round().max(1.0);
+                // More than a turn behind, or beyond what the ledger keeps: the clock went
+                // back, not a packet late.
+                let turn_ns = 60e9 / crate::sweep::motor_rpm_or_nominal(self.facts.rpm);
+                let count = if behind < f64::from(LEDGER_NUMBERS) && -(d as f64) <= turn_ns {
+                    slot = slot.wrapping_sub(behind as u16);
+                    self.spin_udp.peek(slot)
+                } else {
+                    Count::Far
+                };
+                match count {
+                    Count::Seen { .. } => {
+                        self.stats.duplicates += 1;
+                        self.decoder = Some(dec);
+                        return;
+                    }
+                    Count::Lost { .. } => (late, fills) = (true, true),
+                    // Just before the stream's first: late, with no gap counted to fill.
+                    Count::Stray => late = true,
+                    Count::Next { .. } | Count::Far => discontinuity = true,
+                }
             } else if d < 0 || d > self.cfg.max_gap_ns {
                 discontinuity = true;
             } else if period > 0.0 {
                 since_last = Some(d);
-                let m = (d as f64 / period).round() as i64 - 1;
+                let steps = (d as f64 / period).round() as i64;
+                let m = steps - 1;
                 if m > 0 {
                     self.stats.missing += m as u64;
-                    let sweep = self.open.as_mut().map(|(sw, _)| {
+                    if let Some((sw, _)) = &mut self.open {
                         sw.missing_packets += m as u64;
-                        sw.index
-                    });
-                    self.gaps.rotate_right(1);
-                    self.gaps[0] = Some(Gap {
-                        after: prev,
-                        before: stamp,
-                        left: m as u64,
-                        sweep,
-                    });
+                    }
+                }
+                // A step of less than half a period (a clock's jitter) keeps the place.
+                if steps >= i64::from(LEDGER_NUMBERS) {
+                    slot = slot.wrapping_add(steps as u16);
+                    self.spin_udp.restart(slot);
+                } else if steps > 0 {
+                    slot = slot.wrapping_add(steps as u16);
+                    self.spin_udp.take(slot);
                 }
             }
         }
+        if discontinuity || self.prev_stamp.is_none() {
+            slot = 0;
+            self.spin_udp.restart(slot);
+        } else if late {
+            self.spin_udp.take(slot);
+        }
+        self.spin_slot = slot;
         if !late {
             self.prev_stamp = Some(stamp);
         }
@@ -548,7 +585,6 @@ impl RobosenseStream {
             self.stats.discontinuities += 1;
             // A clock that restarted (or a capture replayed again) may repeat times.
             self.recent.clear();
-            self.gaps = [None; GAPS_KEPT];
             self.emit(on_sweep);
             self.last_block_az = None;
         }
@@ -566,7 +602,9 @@ impl RobosenseStream {
         if late {
             // Only a gap really counted is un-counted (not one before the stream's first
             // packet or a discontinuity), and in the sweep that counted it.
-            let filled = self.fill_gap(stamp);
+            if fills {
+                self.stats.missing = self.stats.missing.saturating_sub(1);
+            }
             // Firings before the open sweep's start belong to a sweep already emitted: their
             // time in this one would be negative (clamped to its start).
             let open = self
@@ -578,7 +616,10 @@ impl RobosenseStream {
                 self.decoder = Some(dec);
                 return;
             };
-            if filled.is_some_and(|g| g == Some(sw.index)) {
+            // The open sweep counted the gaps found after the packet that opened it (that
+            // packet's own went to the sweep before).
+            let latest = self.spin_udp.latest().unwrap_or(0);
+            if fills && latest.wrapping_sub(slot) < latest.wrapping_sub(self.spin_sweep_slot) {
                 sw.missing_packets = sw.missing_packets.saturating_sub(1);
             }
         }
@@ -707,19 +748,6 @@ impl RobosenseStream {
         self.decoder = Some(dec);
     }
 
-    /// Whether a late packet stamped `t` falls inside one of the last gaps counted missing,
-    /// which then counts one packet fewer: `Some(the sweep that counted it)`.
-    fn fill_gap(&mut self, t: i64) -> Option<Option<u64>> {
-        let g = self
-            .gaps
-            .iter_mut()
-            .flatten()
-            .find(|g| g.left > 0 && g.after < t && t < g.before)?;
-        g.left -= 1;
-        self.stats.missing = self.stats.missing.saturating_sub(1);
-        Some(g.sweep)
-    }
-
     /// An M1 DIFOP: device facts only (the M1 needs no angle table).
     fn push_m1_difop(&mut self, payload: &[u8]) {
         let Ok(d) = M1Difop::new(payload) else {
@@ -743,10 +771,13 @@ impl RobosenseStream {
     /// already at the same time is a copy, dropped). A packet older than the latest whose
     /// counter the open frame counted lost, however far below, is late too (up to half a frame
     /// before the sweep's start; a copy of it is a copy). Any other packet older than the
-    /// latest is late from the frame before, emitted already: dropped (`late_dropped`).
-    /// Should the counter stop restarting, a sweep is also cut once it spans [`M1_MAX_SWEEP_NS`]. Loss: the counter's gaps within a frame, its
-    /// first packets, and its last ones once the frame length is learned (two frames in a row
-    /// ending on the same counter, in one return mode).
+    /// latest is late from the frame before, emitted already: dropped (`late_dropped`), within
+    /// 10 packets in time or, where the frame before's counters had or counted lost its
+    /// counter, however far behind within that frame (a copy of a packet it had is a copy).
+    /// Should the counter stop restarting, a sweep is also cut once it spans
+    /// [`M1_MAX_SWEEP_NS`]. Loss: the counter's gaps within a frame, its first packets, and its
+    /// last ones once the frame length is learned (two frames in a row ending on the same
+    /// counter, in one return mode).
     fn decode_m1(
         &mut self,
         host_ns: i64,
@@ -800,7 +831,21 @@ impl RobosenseStream {
         let of_open_frame = d.is_some_and(|d| d < 0)
             && matches!(count, Some(Count::Lost { .. } | Count::Seen { .. }))
             && t0.is_some_and(|t0| stamp >= t0.saturating_sub(M1_FRAME_NS / 2));
-        if d.is_some_and(|d| d > self.cfg.max_gap_ns || (d < -M1_REORDER_NS && !of_open_frame)) {
+        // Likewise a packet of the frame before, however far behind its last: timed before
+        // the open sweep, no earlier than a frame can last, its counter had or counted lost
+        // there (and neither in the open frame).
+        let of_prev_frame = valid_seq
+            && !of_open_frame
+            && d.is_some_and(|d| d < 0)
+            && !matches!(count, Some(Count::Lost { .. } | Count::Seen { .. }))
+            && matches!(
+                self.m1_prev_udp.peek(seq),
+                Count::Lost { .. } | Count::Seen { .. }
+            )
+            && t0.is_some_and(|t0| stamp < t0 && stamp >= t0.saturating_sub(M1_MAX_SWEEP_NS));
+        if d.is_some_and(|d| {
+            d > self.cfg.max_gap_ns || (d < -M1_REORDER_NS && !of_open_frame && !of_prev_frame)
+        }) {
             self.stats.discontinuities += 1;
             cut = true;
             self.recent.clear();
@@ -808,6 +853,7 @@ impl RobosenseStream {
             self.m1_prev_udp.reset();
             self.m1_frame_max = 0;
             self.m1_last_frame_max = 0;
+            self.m1_sweep_cut_in_frame = false;
             self.prev_stamp = None;
         }
         let late_in_time = !cut && d.is_some_and(|d| d < 0);
@@ -840,8 +886,14 @@ impl RobosenseStream {
             let filled = matches!(c, Count::Lost { .. });
             if t0.is_some_and(|t0| stamp < t0) {
                 // Before the open sweep's start (the frame's first packets came after a later
-                // one): its times there would be negative.
+                // one): its times there would be negative. Its loss was counted in the open
+                // sweep too, unless a cut inside the frame emitted the sweep that counted it.
                 self.drop_late(filled);
+                if filled && !self.m1_sweep_cut_in_frame {
+                    if let Some((sw, _)) = &mut self.open {
+                        sw.missing_packets = sw.missing_packets.saturating_sub(1);
+                    }
+                }
                 self.recent.push(stamp);
                 return;
             }
@@ -849,10 +901,9 @@ impl RobosenseStream {
         } else if late_in_time {
             // Older than the latest packet, whatever its counter says: a packet of the frame
             // before (its last ones may come after the next frame's first), emitted already.
+            // One its counters had came already, however far behind: a copy.
             let counted = match self.m1_prev_udp.peek(seq) {
-                Count::Seen { behind }
-                    if behind <= REORDER_PACKETS && self.recent.contains(stamp) =>
-                {
+                Count::Seen { .. } => {
                     self.stats.duplicates += 1;
                     return;
                 }
@@ -860,7 +911,7 @@ impl RobosenseStream {
                     self.m1_prev_udp.take(seq);
                     matches!(c, Count::Lost { .. })
                 }
-                Count::Seen { .. } | Count::Next { .. } | Count::Far => false,
+                Count::Next { .. } | Count::Far => false,
             };
             self.drop_late(counted);
             self.recent.push(stamp);
@@ -892,6 +943,7 @@ impl RobosenseStream {
             self.m1_udp.start_lost_before(seq);
             missing = u64::from(seq.saturating_sub(1));
             self.m1_frame_max = seq;
+            self.m1_sweep_cut_in_frame = false;
         } else {
             if let Count::Next { lost } = self.m1_udp.take(seq) {
                 missing = lost;
@@ -902,8 +954,9 @@ impl RobosenseStream {
         // The latest header time seen: a late packet does not move it back.
         self.prev_stamp = Some(self.prev_stamp.map_or(stamp, |prev| prev.max(stamp)));
         if let Some(t0) = t0 {
-            if stamp.saturating_sub(t0) >= M1_MAX_SWEEP_NS {
+            if !cut && stamp.saturating_sub(t0) >= M1_MAX_SWEEP_NS {
                 cut = true;
+                self.m1_sweep_cut_in_frame = true;
             }
         }
         if cut {
@@ -997,6 +1050,7 @@ impl RobosenseStream {
             sw.last_host_ns = host_ns;
             sw.first_azimuth = az;
             self.open = Some((sw, t0));
+            self.spin_sweep_slot = self.spin_slot;
         }
     }
 
