@@ -822,3 +822,44 @@ fn a_spinning_packet_far_late_is_counted_once() {
         counted_once(&s, o.len());
     }
 }
+
+/// A spinning model whose header clock steps back by less than a turn (5, 40 and 140
+/// packets) while the rotor turns on: the packets after the step land on places in time that
+/// came already, but their azimuths continue from the latest packet's, where a late packet's
+/// or a copy's lie as far behind as their time. The rotor tells them apart: one
+/// discontinuity, every packet decoded, none a duplicate or late. Taking them by their time
+/// alone dropped up to a turn of data as copies.
+#[test]
+fn a_spinning_clock_stepping_back_is_a_discontinuity_not_copies() {
+    let period_us = RobosenseModel::Helios16P.spec().packet_period_ns(false) / 1_000.0;
+    for back in [5i64, 40, 140] {
+        let packets: Vec<Vec<u8>> = (0..300i64)
+            .map(|k| {
+                let t = if k < 100 { k } else { k - back };
+                helios_at(
+                    ((k * 240).rem_euclid(36_000)) as u16,
+                    (t as f64 * period_us).round() as i64,
+                )
+            })
+            .collect();
+        let mut s = helios_stream();
+        let sweeps = spin_run(&mut s, &packets);
+        let st = s.stats();
+        assert_eq!(
+            (
+                st.discontinuities,
+                st.duplicates,
+                st.late_dropped,
+                st.packets
+            ),
+            (1, 0, 0, 300),
+            "{back}: {st:?}"
+        );
+        assert_eq!(
+            sweeps.iter().map(|s| u64::from(s.0)).sum::<u64>(),
+            300,
+            "{back}"
+        );
+        counted_once(&s, packets.len());
+    }
+}

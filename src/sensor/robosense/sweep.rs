@@ -520,24 +520,47 @@ impl RobosenseStream {
         let mut slot = self.spin_udp.latest().unwrap_or(0);
         if let Some(prev) = self.prev_stamp {
             let d = stamp.saturating_sub(prev);
-            // Two packets of one sensor never share a header time: a copy.
-            if self.recent.contains(stamp) {
+            let turn_ns = 60e9 / crate::sweep::motor_rpm_or_nominal(self.facts.rpm);
+            // The rotor tells a copy or a late packet from a clock that stepped back: the
+            // azimuth of a packet `behind` places in time lies as far behind the latest's, one
+            // of a clock gone back continues on from the latest. Tolerance: three packets'
+            // turn and a twentieth of the way back (the motor's speed varies).
+            let blocks = spec.shape.blocks();
+            let rotor_agrees = |behind: f64| match self.last_block_az {
+                Some(latest_az) if blocks > 0 && period > 0.0 => {
+                    let step = 36_000.0 * period / turn_ns;
+                    let expected = f64::from(latest_az) - behind * step;
+                    let off = (f64::from(p.azimuth(blocks - 1)) - expected).rem_euclid(36_000.0);
+                    off.min(36_000.0 - off) <= 3.0 * step + 0.05 * behind * step
+                }
+                _ => true,
+            };
+            let places_behind = if period > 0.0 {
+                (-(d as f64) / period).round().max(0.0)
+            } else {
+                0.0
+            };
+            // Two packets of one sensor never share a header time: a copy, where the rotor
+            // agrees.
+            if self.recent.contains(stamp) && rotor_agrees(places_behind) {
                 self.stats.duplicates += 1;
                 self.decoder = Some(dec);
                 return;
             }
             if d < 0 && period > 0.0 {
                 // Its place, in whole packets behind the latest (at least one: it is older).
-                let behind = (-(d as f64) / period).round().max(1.0);
-                // More than a turn behind, or beyond what the ledger keeps: the clock went
-                // back, not a packet late.
-                let turn_ns = 60e9 / crate::sweep::motor_rpm_or_nominal(self.facts.rpm);
-                let count = if behind < f64::from(LEDGER_NUMBERS) && -(d as f64) <= turn_ns {
-                    slot = slot.wrapping_sub(behind as u16);
-                    self.spin_udp.peek(slot)
-                } else {
-                    Count::Far
-                };
+                let behind = places_behind.max(1.0);
+                // More than a turn behind, beyond what the ledger keeps, or a rotor that went
+                // on: the clock went back, not a packet late.
+                let rotor_agrees = rotor_agrees(behind);
+                let count =
+                    if behind < f64::from(LEDGER_NUMBERS) && -(d as f64) <= turn_ns && rotor_agrees
+                    {
+                        slot = slot.wrapping_sub(behind as u16);
+                        self.spin_udp.peek(slot)
+                    } else {
+                        Count::Far
+                    };
                 match count {
                     Count::Seen { .. } => {
                         self.stats.duplicates += 1;
