@@ -673,3 +673,34 @@ fn an_sdk1_late_packet_timed_outside_the_open_sweep_is_dropped() {
     let (want, _) = mid40_(&ps);
     assert_eq!(strip(&got), strip(&want));
 }
+
+/// IMU packets 5 ms apart: 0–9, 20 (10–19 lost), then 10–19 late, then 21; the late ones
+/// push 20's time out of the 11 kept. A copy of 20 (now second newest) and a copy of 21
+/// after them are copies: every packet counted once, nothing missing. (Before: the copy of
+/// 20 restarted the counter, counted an IMU packet, and 22 after it counted 21 missing.) A
+/// counter that goes back to numbers it sent, its time going on, still restarted.
+#[test]
+fn an_imu_copy_is_a_duplicate_once_its_time_is_pushed_out() {
+    let t = |k: u64| T0 + k * 5_000_000;
+    let mut ps: Vec<Vec<u8>> = (0..10u16).map(|k| imu(k, t(u64::from(k)))).collect();
+    ps.push(imu(20, t(20)));
+    ps.extend((10..20u16).map(|k| imu(k, t(u64::from(k)))));
+    ps.push(imu(21, t(21)));
+    // Point packets between do not change it.
+    ps.extend((0..30u16).map(|k| sdk2(k, 0, t(21) + u64::from(k) * P)));
+    ps.push(imu(20, t(20)));
+    ps.push(imu(21, t(21)));
+    ps.push(imu(22, t(22)));
+    let (_, st) = mid360(&ps);
+    assert_eq!(
+        (st.imu_packets, st.duplicates, st.imu_missing, st.packets),
+        (23, 2, 0, 30)
+    );
+    assert_eq!(st.imu_packets + st.duplicates + st.packets, ps.len() as u64);
+
+    // Back 5 numbers at 50, the time going on: a restart, every packet an IMU packet.
+    let mut ps: Vec<Vec<u8>> = (0..50u16).map(|k| imu(k, t(u64::from(k)))).collect();
+    ps.extend((0..50u16).map(|k| imu(45 + k, t(50 + u64::from(k)))));
+    let (_, st) = mid360(&ps);
+    assert_eq!((st.imu_packets, st.duplicates, st.imu_missing), (100, 0, 0));
+}

@@ -129,8 +129,10 @@ pub struct LivoxStats {
     /// Point or IMU packets whose counter was seen already (copies): dropped. An SDK2 point
     /// packet's number is looked up in its frame's ledger, so a copy is one however many
     /// packets came since, where it is timed at the newest packet's time or up to two
-    /// periods before it (a number seen again at a later time is a restart); SDK1 packets
-    /// carry no counter: a copy repeats one of the last 11 packets' times.
+    /// periods before it (a number seen again at a later time is a restart); an SDK2 IMU
+    /// packet's number seen in the last 11, at one of the last 11 IMU packets' times or at
+    /// most two periods before the newest's, likewise; SDK1 packets carry no counter: a copy
+    /// repeats one of the last 11 packets' times.
     pub duplicates: u64,
     /// Point packets that came too late to join a sweep, dropped: more than
     /// [`REORDER_PACKETS`] behind the newest `udp_cnt` (within two periods of its time); of a
@@ -242,6 +244,10 @@ pub struct LivoxStream {
     /// SDK2 `udp_cnt` of the point packets of the open run (frame) and of the IMU packets.
     udp: UdpLedger,
     imu_udp: SeqWindow,
+    /// Time of the SDK2 IMU packet whose number is `imu_udp`'s latest: a number seen again,
+    /// at that time or a little before it, is a copy however many times were pushed out of
+    /// `imu_recent` since; at a later time, the counter restarted.
+    imu_latest_ns: Option<i64>,
     last_frame: Option<u8>,
     /// Sensors that restart `udp_cnt` with their frames: the frames before the open one and
     /// their numbers, newest first, for their packets that come after the next frame's first.
@@ -302,6 +308,7 @@ impl LivoxStream {
             held_waiting: false,
             held_end_ns: 0,
             newest_imu_ns: None,
+            imu_latest_ns: None,
             last_packet_ns: None,
             udp: UdpLedger::new(MAX_COUNTER_GAP),
             imu_udp: SeqWindow::new(16, MAX_COUNTER_GAP),
@@ -767,17 +774,32 @@ impl LivoxStream {
         } else {
             self.imu_udp.step_within(udp)
         };
+        // Only the last 11 times are kept, and late packets push them out: a number seen
+        // again at the newest packet's time, or up to two periods before it, is a copy too.
+        let period = i64::try_from(self.cfg.period_ns).unwrap_or(i64::MAX);
+        let not_after_newest = self
+            .imu_latest_ns
+            .is_some_and(|l| ts <= l && l.saturating_sub(ts) <= period.saturating_mul(2));
         match step {
             SeqStep::Duplicate if !trusted => {}
-            SeqStep::Duplicate if self.imu_recent.contains(ts) => {
+            SeqStep::Duplicate if self.imu_recent.contains(ts) || not_after_newest => {
                 self.stats.duplicates += 1;
                 return Ok(());
             }
             // The number again at a new time: the counter restarted or stands still.
-            SeqStep::Duplicate => self.imu_udp.restart(udp),
-            SeqStep::Next { lost } => self.stats.imu_missing += lost,
+            SeqStep::Duplicate => {
+                self.imu_udp.restart(udp);
+                self.imu_latest_ns = Some(ts);
+            }
+            SeqStep::Next { lost } => {
+                self.stats.imu_missing += lost;
+                if trusted {
+                    self.imu_latest_ns = Some(ts);
+                }
+            }
             SeqStep::Late => self.stats.imu_missing = self.stats.imu_missing.saturating_sub(1),
             // A restart (the counter may restart at 0 with each frame): no loss known.
+            SeqStep::Jump if trusted => self.imu_latest_ns = Some(ts),
             SeqStep::Jump | SeqStep::Stray => {}
         }
         if let Some(e) = damaged {
