@@ -704,3 +704,38 @@ fn an_imu_copy_is_a_duplicate_once_its_time_is_pushed_out() {
     let (_, st) = mid360(&ps);
     assert_eq!((st.imu_packets, st.duplicates, st.imu_missing), (100, 0, 0));
 }
+
+/// A late packet dropped (timed before the sweep it would join) is taken off the count of
+/// the sweep that counted it missing, as off the stream's: the sweeps' `missing_packets`
+/// sum to the stream's `missing`. Packet 208 after 209, which began the second sweep (its
+/// gap that sweep's); packet 207 after 209, with an IMU stopped at the start so that the
+/// first sweep (whose 208 counted 207 missing) waits; packet 150 more than 10 behind (30
+/// late, within two periods). (Before: each sweep kept its 1.)
+#[test]
+fn a_dropped_late_packet_is_off_its_sweep_s_missing_too() {
+    let ps: Vec<Vec<u8>> = (0..300u16)
+        .map(|k| sdk2(k, 0, T0 + u64::from(k) * P))
+        .collect();
+    for (k, by, with_imu) in [(208, 1, false), (207, 2, true), (150, 30, false)] {
+        let mut order = if with_imu {
+            vec![imu(0, T0)]
+        } else {
+            Vec::new()
+        };
+        let mut rest = ps.clone();
+        let late = rest.remove(k);
+        rest.insert(k + by, late);
+        order.extend(rest);
+        let (seen, st) = mid360(&order);
+        assert_eq!(
+            (st.late_dropped, st.missing, st.packets, st.discontinuities),
+            (1, 0, 299, 0),
+            "packet {k}"
+        );
+        assert_eq!(
+            seen.iter().map(|s| s.2).sum::<u64>(),
+            st.missing,
+            "packet {k}: {seen:?}"
+        );
+    }
+}
