@@ -673,3 +673,69 @@ fn an_sdk1_late_packet_timed_outside_the_open_sweep_is_dropped() {
     let (want, _) = mid40_(&ps);
     assert_eq!(strip(&got), strip(&want));
 }
+
+/// IMU packets 5 ms apart: 0–9, 20 (10–19 lost), then 10–19 late, then 21; the late ones
+/// push 20's time out of the 11 kept. A copy of 20 (now second newest) and a copy of 21
+/// after them are copies: every packet counted once, nothing missing. (Before: the copy of
+/// 20 restarted the counter, counted an IMU packet, and 22 after it counted 21 missing.) A
+/// counter that goes back to numbers it sent, its time going on, still restarted.
+#[test]
+fn an_imu_copy_is_a_duplicate_once_its_time_is_pushed_out() {
+    let t = |k: u64| T0 + k * 5_000_000;
+    let mut ps: Vec<Vec<u8>> = (0..10u16).map(|k| imu(k, t(u64::from(k)))).collect();
+    ps.push(imu(20, t(20)));
+    ps.extend((10..20u16).map(|k| imu(k, t(u64::from(k)))));
+    ps.push(imu(21, t(21)));
+    // Point packets between do not change it.
+    ps.extend((0..30u16).map(|k| sdk2(k, 0, t(21) + u64::from(k) * P)));
+    ps.push(imu(20, t(20)));
+    ps.push(imu(21, t(21)));
+    ps.push(imu(22, t(22)));
+    let (_, st) = mid360(&ps);
+    assert_eq!(
+        (st.imu_packets, st.duplicates, st.imu_missing, st.packets),
+        (23, 2, 0, 30)
+    );
+    assert_eq!(st.imu_packets + st.duplicates + st.packets, ps.len() as u64);
+
+    // Back 5 numbers at 50, the time going on: a restart, every packet an IMU packet.
+    let mut ps: Vec<Vec<u8>> = (0..50u16).map(|k| imu(k, t(u64::from(k)))).collect();
+    ps.extend((0..50u16).map(|k| imu(45 + k, t(50 + u64::from(k)))));
+    let (_, st) = mid360(&ps);
+    assert_eq!((st.imu_packets, st.duplicates, st.imu_missing), (100, 0, 0));
+}
+
+/// A late packet dropped (timed before the sweep it would join) is taken off the count of
+/// the sweep that counted it missing, as off the stream's: the sweeps' `missing_packets`
+/// sum to the stream's `missing`. Packet 208 after 209, which began the second sweep (its
+/// gap that sweep's); packet 207 after 209, with an IMU stopped at the start so that the
+/// first sweep (whose 208 counted 207 missing) waits; packet 150 more than 10 behind (30
+/// late, within two periods). (Before: each sweep kept its 1.)
+#[test]
+fn a_dropped_late_packet_is_off_its_sweep_s_missing_too() {
+    let ps: Vec<Vec<u8>> = (0..300u16)
+        .map(|k| sdk2(k, 0, T0 + u64::from(k) * P))
+        .collect();
+    for (k, by, with_imu) in [(208, 1, false), (207, 2, true), (150, 30, false)] {
+        let mut order = if with_imu {
+            vec![imu(0, T0)]
+        } else {
+            Vec::new()
+        };
+        let mut rest = ps.clone();
+        let late = rest.remove(k);
+        rest.insert(k + by, late);
+        order.extend(rest);
+        let (seen, st) = mid360(&order);
+        assert_eq!(
+            (st.late_dropped, st.missing, st.packets, st.discontinuities),
+            (1, 0, 299, 0),
+            "packet {k}"
+        );
+        assert_eq!(
+            seen.iter().map(|s| s.2).sum::<u64>(),
+            st.missing,
+            "packet {k}: {seen:?}"
+        );
+    }
+}

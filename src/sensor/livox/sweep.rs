@@ -129,8 +129,10 @@ pub struct LivoxStats {
     /// Point or IMU packets whose counter was seen already (copies): dropped. An SDK2 point
     /// packet's number is looked up in its frame's ledger, so a copy is one however many
     /// packets came since, where it is timed at the newest packet's time or up to two
-    /// periods before it (a number seen again at a later time is a restart); SDK1 packets
-    /// carry no counter: a copy repeats one of the last 11 packets' times.
+    /// periods before it (a number seen again at a later time is a restart); an SDK2 IMU
+    /// packet's number seen in the last 11, at one of the last 11 IMU packets' times or at
+    /// most two periods before the newest's, likewise; SDK1 packets carry no counter: a copy
+    /// repeats one of the last 11 packets' times.
     pub duplicates: u64,
     /// Point packets that came too late to join a sweep, dropped: more than
     /// [`REORDER_PACKETS`] behind the newest `udp_cnt` (within two periods of its time); of a
@@ -140,7 +142,9 @@ pub struct LivoxStats {
     /// it: a time that lies, or a packet reordered across the period's cut; SDK1: late by its
     /// time, reordered behind the packet that began the open sweep). Each is counted
     /// here once and not also missing: the gap it left, counted missing when a later packet
-    /// came, is taken off `missing`, and a copy of it is a duplicate. That takes its frame's
+    /// came, is taken off `missing` (and off the `missing_packets` of the sweep that counted
+    /// it, while that sweep is open or waiting for its IMU samples; one handed over keeps
+    /// it), and a copy of it is a duplicate. That takes its frame's
     /// numbers, which the stream holds for the open frame and the 127 before it. A packet of
     /// a frame it holds none of — from before the stream's first packet, or from before the
     /// counters last restarted — and one more than 4096 numbers from its frame's newest are
@@ -233,6 +237,12 @@ pub struct LivoxStream {
     held: Sweep,
     held_waiting: bool,
     held_end_ns: i64,
+    /// SDK2: the first number of the open run whose gap the open sweep counted (the first
+    /// its first packet skipped), and the held sweep's: a late packet of the run fills the
+    /// gap of the sweep whose numbers it is among. `None` for the held sweep where the run
+    /// began since (its numbers are a closed frame's, or forgotten).
+    open_gaps_from: Option<u16>,
+    held_gaps_from: Option<u16>,
     /// Device time of the newest IMU sample decoded.
     newest_imu_ns: Option<i64>,
     /// First-record time of the last point packet: a later packet earlier than it is a
@@ -242,6 +252,10 @@ pub struct LivoxStream {
     /// SDK2 `udp_cnt` of the point packets of the open run (frame) and of the IMU packets.
     udp: UdpLedger,
     imu_udp: SeqWindow,
+    /// Time of the SDK2 IMU packet whose number is `imu_udp`'s latest: a number seen again,
+    /// at that time or a little before it, is a copy however many times were pushed out of
+    /// `imu_recent` since; at a later time, the counter restarted.
+    imu_latest_ns: Option<i64>,
     last_frame: Option<u8>,
     /// Sensors that restart `udp_cnt` with their frames: the frames before the open one and
     /// their numbers, newest first, for their packets that come after the next frame's first.
@@ -301,7 +315,10 @@ impl LivoxStream {
             held: Sweep::default(),
             held_waiting: false,
             held_end_ns: 0,
+            open_gaps_from: None,
+            held_gaps_from: None,
             newest_imu_ns: None,
+            imu_latest_ns: None,
             last_packet_ns: None,
             udp: UdpLedger::new(MAX_COUNTER_GAP),
             imu_udp: SeqWindow::new(16, MAX_COUNTER_GAP),
@@ -562,7 +579,7 @@ impl LivoxStream {
             Arrival::Stale { filled } => {
                 if filled {
                     self.udp.take(udp);
-                    self.stats.missing = self.stats.missing.saturating_sub(1);
+                    self.unmiss_sdk2(udp);
                 } else {
                     // From before the run's first number: kept, so that a copy is a copy.
                     self.udp.take_before(udp);
@@ -578,9 +595,10 @@ impl LivoxStream {
             Arrival::Late { filled } => {
                 late = Some(filled);
                 self.udp.take(udp);
-                // It came: off `missing` whether it joins the open sweep or is dropped.
+                // It came: off `missing` whether it joins the open sweep or is dropped (in
+                // its own sweep's count too, a damaged one as well).
                 if filled {
-                    self.stats.missing = self.stats.missing.saturating_sub(1);
+                    self.unmiss_sdk2(udp);
                 }
             }
             Arrival::Next { lost: l } => {
@@ -627,18 +645,15 @@ impl LivoxStream {
         if let Some(e) = damaged {
             if self.open {
                 self.sweep.missing_packets += lost;
-                if late == Some(true) {
-                    self.sweep.missing_packets = self.sweep.missing_packets.saturating_sub(1);
-                }
             }
             return Err(e);
         }
-        if let Some(filled) = late {
+        if late.is_some() {
             let its_frame = self.facts.frame_cut && self.sweep.frame_id == u32::from(frame);
             if self.open && its_frame && p.records() > 0 {
                 self.start_earlier(ts);
             }
-            if !(self.open && self.join_late(false, &p, host_ns, ts, filled)) {
+            if !(self.open && self.join_late(false, &p, host_ns, ts)) {
                 self.stats.late_dropped += 1;
             }
             return Ok(());
@@ -661,7 +676,15 @@ impl LivoxStream {
         if cut || backwards || forced {
             self.emit(on_sweep);
         }
+        let fresh = !self.open;
         self.begin(host_ns, ts, u32::from(frame));
+        let new_run = matches!(arrival, Arrival::FrameStart | Arrival::Restart);
+        if new_run {
+            self.held_gaps_from = None;
+        }
+        if fresh || new_run {
+            self.open_gaps_from = Some(udp.wrapping_sub(u16::try_from(lost).unwrap_or(u16::MAX)));
+        }
         self.sweep.missing_packets += lost;
         decode_sdk2(&self.decoder, &p, ts, None, &mut self.sweep);
         self.after_packet(
@@ -697,28 +720,17 @@ impl LivoxStream {
 
     /// A late SDK2 point packet into the open sweep (`into_held`: the sweep waiting for its
     /// IMU samples), which must be begun, as [`Self::join_decoded`] tells.
-    fn join_late(
-        &mut self,
-        into_held: bool,
-        p: &Sdk2Packet<'_>,
-        host_ns: i64,
-        ts: i64,
-        filled: bool,
-    ) -> bool {
+    fn join_late(&mut self, into_held: bool, p: &Sdk2Packet<'_>, host_ns: i64, ts: i64) -> bool {
         let end = ts.saturating_add(i64::try_from(p.time_interval_ns()).unwrap_or(i64::MAX));
-        self.join_decoded(
-            into_held,
-            host_ns,
-            end,
-            filled,
-            |decoder, max_t_ns, sweep| decode_sdk2(decoder, p, ts, Some(max_t_ns), sweep),
-        )
+        self.join_decoded(into_held, host_ns, end, |decoder, max_t_ns, sweep| {
+            decode_sdk2(decoder, p, ts, Some(max_t_ns), sweep)
+        })
     }
 
     /// A late point packet, its last record timed `end_ns`, into the open or the held sweep
     /// (`into_held`): `decode` appends its records timed inside the sweep (`0 ..=` the longest
     /// a sweep may span after its start, the bound it is given), and if there are any the
-    /// packet joins, one fewer missing there if it fills a gap (`filled`) that sweep counted.
+    /// packet joins (the gap it fills the caller has taken off, joined or not).
     /// A packet with no such record — its time lies, or it belongs to a sweep already
     /// finished — joins nothing: `false`, the caller counts it dropped. Late, it moves no cut
     /// and leaves the stream's newest packet as it was.
@@ -727,7 +739,6 @@ impl LivoxStream {
         into_held: bool,
         host_ns: i64,
         end_ns: i64,
-        filled: bool,
         decode: impl FnOnce(&LivoxDecoder, i64, &mut Sweep) -> PacketPoints,
     ) -> bool {
         let max_t_ns = self.max_span_ns();
@@ -738,9 +749,6 @@ impl LivoxStream {
         };
         if decode(&self.decoder, max_t_ns, sweep).in_window == 0 {
             return false;
-        }
-        if filled {
-            sweep.missing_packets = sweep.missing_packets.saturating_sub(1);
         }
         sweep.packets = sweep.packets.saturating_add(1);
         sweep.columns_count = sweep.columns_count.saturating_add(1);
@@ -767,17 +775,32 @@ impl LivoxStream {
         } else {
             self.imu_udp.step_within(udp)
         };
+        // Only the last 11 times are kept, and late packets push them out: a number seen
+        // again at the newest packet's time, or up to two periods before it, is a copy too.
+        let period = i64::try_from(self.cfg.period_ns).unwrap_or(i64::MAX);
+        let not_after_newest = self
+            .imu_latest_ns
+            .is_some_and(|l| ts <= l && l.saturating_sub(ts) <= period.saturating_mul(2));
         match step {
             SeqStep::Duplicate if !trusted => {}
-            SeqStep::Duplicate if self.imu_recent.contains(ts) => {
+            SeqStep::Duplicate if self.imu_recent.contains(ts) || not_after_newest => {
                 self.stats.duplicates += 1;
                 return Ok(());
             }
             // The number again at a new time: the counter restarted or stands still.
-            SeqStep::Duplicate => self.imu_udp.restart(udp),
-            SeqStep::Next { lost } => self.stats.imu_missing += lost,
+            SeqStep::Duplicate => {
+                self.imu_udp.restart(udp);
+                self.imu_latest_ns = Some(ts);
+            }
+            SeqStep::Next { lost } => {
+                self.stats.imu_missing += lost;
+                if trusted {
+                    self.imu_latest_ns = Some(ts);
+                }
+            }
             SeqStep::Late => self.stats.imu_missing = self.stats.imu_missing.saturating_sub(1),
             // A restart (the counter may restart at 0 with each frame): no loss known.
+            SeqStep::Jump if trusted => self.imu_latest_ns = Some(ts),
             SeqStep::Jump | SeqStep::Stray => {}
         }
         if let Some(e) = damaged {
@@ -863,14 +886,15 @@ impl LivoxStream {
                 }
             };
         };
+        // The gap it fills is taken off the sweep it would join, joined or not.
         sweep.missing_packets += lost;
+        if filled {
+            sweep.missing_packets = sweep.missing_packets.saturating_sub(1);
+        }
         if let Some(e) = damaged {
-            if filled {
-                sweep.missing_packets = sweep.missing_packets.saturating_sub(1);
-            }
             return Err(e);
         }
-        if !self.join_late(into_held, p, host_ns, ts, filled) {
+        if !self.join_late(into_held, p, host_ns, ts) {
             self.stats.late_dropped += 1;
         }
         Ok(())
@@ -930,7 +954,7 @@ impl LivoxStream {
             self.unmiss();
             self.recent.push(ts);
             let joined = self.open
-                && self.join_decoded(false, host_ns, last, false, |decoder, max_t_ns, sweep| {
+                && self.join_decoded(false, host_ns, last, |decoder, max_t_ns, sweep| {
                     decoder.decode_within(
                         p.record(),
                         n,
@@ -1088,6 +1112,27 @@ impl LivoxStream {
         }
     }
 
+    /// A late SDK2 packet of the open run came, number `udp` counted lost: one fewer missing,
+    /// in the sweep that counted it too where that is still open or held (the open sweep
+    /// counted the run's numbers from `open_gaps_from` on, the held one those from
+    /// `held_gaps_from`); a sweep handed over keeps its count.
+    fn unmiss_sdk2(&mut self, udp: u16) {
+        self.stats.missing = self.stats.missing.saturating_sub(1);
+        let Some(latest) = self.udp.latest() else {
+            return;
+        };
+        let among =
+            |from: Option<u16>| from.is_some_and(|f| udp.wrapping_sub(f) <= latest.wrapping_sub(f));
+        let sweep = if self.open && among(self.open_gaps_from) {
+            &mut self.sweep
+        } else if self.held_waiting && among(self.held_gaps_from) {
+            &mut self.held
+        } else {
+            return;
+        };
+        sweep.missing_packets = sweep.missing_packets.saturating_sub(1);
+    }
+
     fn after_packet(&mut self, host_ns: i64, first_ns: i64, last_ns: i64) {
         self.open_end_ns = self.open_end_ns.max(last_ns);
         self.stats.packets += 1;
@@ -1108,6 +1153,7 @@ impl LivoxStream {
             self.stats.imu_uncovered_sweeps += 1;
             self.release(on_sweep);
         }
+        self.held_gaps_from = self.open_gaps_from.take();
         // The buffers trade places: no allocation per sweep.
         std::mem::swap(&mut self.sweep, &mut self.held);
         self.held_waiting = true;
