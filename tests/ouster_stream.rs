@@ -678,9 +678,10 @@ fn a_short_stale_run_and_a_repeated_stale_packet_are_late() {
 /// before (a switch buffer flushing datagrams the sensor sent then), in the middle of frame
 /// 15: each counted late once, the sweeps those of the stream without them. Copies of packets
 /// that arrived, and packets delayed there from frames 11 and 12 (the stream without them at
-/// all is the truth: their columns missing once, in their frames). They continue from one another as a restart's would: their frame ids are of
-/// frames emitted and their column times those frames' (it was a restart: frame 15 cut in
-/// two, a discontinuity, the held packets emitted as sweeps of their own).
+/// all is the truth: their columns missing once, in their frames). They continue from one
+/// another as a restart's would: their frame ids are of frames emitted and their column times
+/// those frames' (it was a restart: frame 15 cut in two, a discontinuity, the held packets
+/// emitted as sweeps of their own).
 #[test]
 fn a_long_stale_run_of_emitted_frames_is_late_not_a_restart() {
     for profile in [
