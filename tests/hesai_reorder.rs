@@ -340,3 +340,66 @@ fn a_clock_stepping_back_fills_no_gap() {
     let (_, st) = run(model, &calib, &pick(&packets, &order));
     assert_eq!((st.missing, st.discontinuities, st.late_dropped), (1, 1, 0));
 }
+
+/// XT32 packet 300 held up until after 330, or after 500, then a copy of it, and a copy of
+/// packet 325 (which came in order) 60 packets after it; in the second stream every tenth
+/// packet from 310 to 490 is lost too, so more gaps came after 300's than the stream keeps.
+/// Each datagram is counted once: the stale 300 in `late_dropped`, its gap off `missing`,
+/// the copies in `duplicates`; `missing` is the packets never sent (none, or the 19 lost);
+/// and the stream with the copies gives the sweeps and counters of the stream without them
+/// but for `duplicates`. Before, each copy was a second `late_dropped`, and 300's gap stayed
+/// counted missing where no longer kept (20 missing).
+#[test]
+fn a_copy_of_a_stale_packet_is_a_duplicate() {
+    let model = HesaiModel::PandarXt32;
+    let calib = xt32_on_the_block();
+    let packets = sim_packets(model, &calib, 700);
+    for (late, lossy) in [(30, false), (200, true)] {
+        let lost: Vec<usize> = if lossy {
+            (310..500).step_by(10).collect()
+        } else {
+            Vec::new()
+        };
+        let sent: Vec<usize> = (0..700)
+            .filter(|i| *i != 300 && !lost.contains(i))
+            .collect();
+        let mut without_copies = sent.clone();
+        let at = without_copies
+            .iter()
+            .position(|&i| i == 300 + late)
+            .unwrap();
+        without_copies.insert(at + 1, 300);
+        let mut with_copies = without_copies.clone();
+        with_copies.insert(at + 2, 300);
+        let at = with_copies.iter().position(|&i| i == 385).unwrap();
+        with_copies.insert(at + 1, 325);
+        let what = format!("{late} late, {} lost", lost.len());
+
+        let (got, st) = run(model, &calib, &pick(&packets, &with_copies));
+        assert_eq!(
+            (st.packets, st.late_dropped, st.duplicates, st.missing),
+            (sent.len() as u64, 1, 2, lost.len() as u64),
+            "{what}"
+        );
+        assert_eq!(st.discontinuities, 0, "{what}");
+        assert_eq!(
+            st.packets + st.late_dropped + st.duplicates + st.malformed,
+            with_copies.len() as u64,
+            "{what}: every datagram counted once"
+        );
+        let (want, ref_st) = run(model, &calib, &pick(&packets, &without_copies));
+        assert_eq!(
+            HesaiStats {
+                duplicates: ref_st.duplicates + 2,
+                ..ref_st
+            },
+            st,
+            "{what}: the copies change nothing but `duplicates`"
+        );
+        assert_eq!(got.len(), want.len(), "{what}: sweeps");
+        for (i, (g, w)) in got.iter().zip(&want).enumerate() {
+            assert_eq!((g.0, g.1), (w.0, w.1), "{what}, sweep {i}: time, missing");
+            assert!(g.2 == w.2, "{what}, sweep {i}: points");
+        }
+    }
+}

@@ -27,9 +27,11 @@
 //! backwards or jumping by more than `max_gap_ns` ends the open sweeps (a discontinuity). A
 //! packet up to 10 behind (by number, else by time inside a gap counted missing) came late:
 //! its points join the open sweep they belong to, else it is dropped (`late_dropped`); one
-//! further behind at a time to match is stale, dropped the same way, not a restart. A sweep
-//! longer than `max_sweep_ns` is ended whatever its azimuths or frame bits say (a
-//! discontinuity, as in every family).
+//! further behind at a time to match (up to 1 024 numbers) is stale, dropped the same way,
+//! not a restart. The stream keeps the last [`LEDGER_NUMBERS`] numbers in a [`UdpLedger`], so
+//! a stale packet takes its gap off `missing` once, whatever gaps came since, and a copy of
+//! it (or of any packet that came) is a duplicate. A sweep longer than `max_sweep_ns` is
+//! ended whatever its azimuths or frame bits say (a discontinuity, as in every family).
 
 use std::collections::VecDeque;
 
@@ -37,6 +39,7 @@ use super::calib::HesaiCalibration;
 use super::decode::{HesaiDecoder, HesaiOptions, TURN_UDEG};
 use super::model::{mode_name, returns_of_mode, HesaiModel};
 use super::wire::{CrcPart, FunctionalSafety, HesaiPacket};
+use crate::sweep::ledger::{Count, UdpLedger, LEDGER_NUMBERS};
 use crate::sweep::{RecentTimes, SeqStep, SeqWindow, Sweep, REORDER_PACKETS};
 use crate::time::ClockSource;
 
@@ -120,7 +123,7 @@ pub struct HesaiStats {
     /// Late packets (reordered on the way) whose points all belong to a sweep already
     /// emitted, or stale ones (more than the reorder window behind, with a time to match):
     /// dropped, and counted as a loss here rather than in `missing`. A late packet whose
-    /// points belong to an open sweep joins it instead.
+    /// points belong to an open sweep joins it instead. A copy of either is a duplicate.
     pub late_dropped: u64,
     /// Packets carrying a cyber-security signature (skipped, not verified).
     pub signed: u64,
@@ -274,6 +277,9 @@ pub struct HesaiStream {
     next_index: u64,
     /// The tail's UDP sequence numbers seen lately.
     seq: SeqWindow,
+    /// The same numbers' low 16 bits, further back: which came and which were counted missing,
+    /// for a stale packet (up to [`STALE_PACKETS`] behind), which the window no longer holds.
+    udp: UdpLedger,
     /// The sensor times of the last packets (a copy repeats one).
     recent: RecentTimes,
     prev_stamp: Option<i64>,
@@ -313,6 +319,7 @@ impl HesaiStream {
             spare: Vec::new(),
             next_index: 0,
             seq: SeqWindow::new(32, (1 << 20) - 1),
+            udp: UdpLedger::new(u64::from(LEDGER_NUMBERS - 1)),
             recent: RecentTimes::default(),
             prev_stamp: None,
             thresholds: None,
@@ -533,18 +540,17 @@ impl HesaiStream {
                 if from_the_past {
                     stale = true;
                 } else {
-                    self.seq.restart(u64::from(s));
-                    self.gaps = [None; GAPS_KEPT];
+                    self.restart_numbers(s);
                 }
             }
             // A number seen already is a copy, unless its sensor time says the counter
             // restarted or stands still: a time neither among the last packets' nor an old
             // one of this stream. Without a sensor time nothing says so.
             (Some(SeqStep::Duplicate), Some(s)) if sensor_time && !time_seen && !from_the_past => {
-                self.seq.restart(u64::from(s));
-                self.gaps = [None; GAPS_KEPT];
+                self.restart_numbers(s);
                 seq = Some(SeqStep::Jump);
             }
+            (Some(step), Some(s)) => self.ledger_take(s, step),
             _ => {}
         }
         let copy = match seq {
@@ -555,11 +561,28 @@ impl HesaiStream {
             self.stats.duplicates += 1;
             return Ok(());
         }
-        if stale {
-            // Beyond the reorder window its sweep is long gone: dropped, and not also missing
-            // where its gap is still known.
-            if let Some(s) = udp_seq {
-                self.fill_gap(i64::from(s), true);
+        if let (true, Some(s)) = (stale, udp_seq) {
+            // Beyond the reorder window its sweep is long gone: dropped, and not also missing.
+            // The window no longer holds its number, the ledger does: a copy of a packet that
+            // came (stale or not) is a copy, not a second stale packet.
+            match self.udp.peek(s as u16) {
+                Count::Seen { .. } => {
+                    self.stats.duplicates += 1;
+                    return Ok(());
+                }
+                Count::Lost { .. } => {
+                    self.udp.take(s as u16);
+                    if self.fill_gap(i64::from(s), true).is_none() {
+                        // Counted missing, though the gap is no longer kept.
+                        self.stats.missing = self.stats.missing.saturating_sub(1);
+                    }
+                }
+                // From before the ledger's numbers (a restart, or a gap wider than it keeps):
+                // a gap still kept may hold it, and the ledger keeps it from now on.
+                _ => {
+                    self.udp.take_before(s as u16);
+                    self.fill_gap(i64::from(s), true);
+                }
             }
             self.stats.late_dropped += 1;
             return Ok(());
@@ -836,7 +859,9 @@ impl HesaiStream {
         // A packet that is not decoded never restarts the count: a number out of reach leaves
         // the window as it was (a restart would make the next good packet count the distance
         // back to it as lost).
-        match self.seq.step_within(u64::from(seq)) {
+        let step = self.seq.step_within(u64::from(seq));
+        self.ledger_take(seq, step);
+        match step {
             SeqStep::Next { lost } if lost > 0 => {
                 let before = i64::from(seq).wrapping_sub(lost as i64 + 1);
                 self.add_missing(lost, before, i64::from(seq), true);
@@ -847,6 +872,28 @@ impl HesaiStream {
                 None => self.stats.missing = self.stats.missing.saturating_sub(1),
             },
             _ => {}
+        }
+    }
+
+    /// Starts the numbers again from `s` (the counter restarted): window, ledger and gaps.
+    fn restart_numbers(&mut self, s: u32) {
+        self.seq.restart(u64::from(s));
+        self.udp.restart(s as u16);
+        self.gaps = [None; GAPS_KEPT];
+    }
+
+    /// Keeps number `s` in the ledger as the window took it (`step`): the window tells a step
+    /// ahead on the whole 32-bit counter, the ledger's 16 bits only up to what it holds, so a
+    /// step over that (or a multiple of 2^16 that its bits hide) starts it again at `s`.
+    fn ledger_take(&mut self, s: u32, step: SeqStep) {
+        match step {
+            SeqStep::Next { lost } if lost >= u64::from(LEDGER_NUMBERS - 1) => {
+                self.udp.restart(s as u16)
+            }
+            SeqStep::Next { .. } | SeqStep::Late | SeqStep::Stray => {
+                self.udp.take(s as u16);
+            }
+            SeqStep::Duplicate | SeqStep::Jump => {}
         }
     }
 
